@@ -1,0 +1,216 @@
+"""Object bounding volumes to normalized screen rects, vectorized over all objects.
+
+Two bounds, one contract: ``rects`` is ``(N, 4)`` ``[xmin, ymin, xmax, ymax]`` in ``[0, 1]^2``
+(origin bottom-left), NaN where the object is certainly outside the view frustum.
+
+* ``project_boxes``: the 8 corners of each axis-aligned box. Boxes wholly in front of the
+  near plane take a fast path; boxes crossing it are clipped against the near plane (corners in
+  front plus the crossings of the 12 edges), so their rect is exact for the visible part and
+  never inverted; boxes wholly behind it are invisible.
+* ``project_spheres``: the exact perspective bounds of a sphere (tangent lines, Mara &
+  McGuire 2013); spheres crossing the near plane use their enclosing box's clipped bounds.
+
+Precision: clip coordinates are formed as ``M @ center + M[:, :3] @ (+-half)``. The center
+term is float64, so scenes far from the origin (1e6..1e8 units) keep their precision; the
+small per-corner offsets may be float32 (``dtype``) for speed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# corner sign patterns of a box, (8, 3)
+_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
+# the 12 edges as pairs of corner indices (corners differing in exactly one sign)
+_EDGES = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)
+                   if np.count_nonzero(_SIGNS[i] != _SIGNS[j]) == 1])
+
+
+def _check(view, proj) -> np.ndarray:
+    view = np.asarray(view, dtype=np.float64)
+    proj = np.asarray(proj, dtype=np.float64)
+    if view.shape != (4, 4) or proj.shape != (4, 4):
+        raise ValueError("view and projection must be 4x4 matrices")
+    if not (np.isfinite(view).all() and np.isfinite(proj).all()):
+        raise ValueError("view and projection matrices must be finite")
+    return proj @ view
+
+
+def _write_rects(out, idx, xmin, ymin, xmax, ymax) -> None:
+    """NDC extents to clipped normalized rects in ``out`` (4, N) at columns ``idx`` (an index
+    array or a slice); rects that miss the screen become NaN."""
+    off = (xmax < -1) | (xmin > 1) | (ymax < -1) | (ymin > 1)
+    for row, v in enumerate((xmin, ymin, xmax, ymax)):
+        v = v * 0.5
+        v += 0.5
+        np.clip(v, 0.0, 1.0, out=v)
+        out[row, idx] = v
+    if off.any():
+        cols = np.arange(out.shape[1])[idx][off]
+        out[:, cols] = np.nan
+
+
+def project_boxes(bmin, bmax, view, proj, dtype=np.float32, chunk: int = 1 << 15) -> np.ndarray:
+    """Normalized screen rects of axis-aligned boxes (exact bounds of the 8 projected corners).
+
+    Parameters
+    ----------
+    bmin, bmax : (N, 3) float  box corners in world space.
+    view, proj : (4, 4) float  OpenGL-style view and projection matrices.
+    dtype : float type of the per-corner arithmetic; the box centres are always transformed in
+        float64. Rects are widened by a few units in the last place of ``dtype`` so rounding
+        never makes them smaller than the true bounds.
+    chunk : objects per block (blocks keep the 8-corner temporaries in cache).
+
+    Returns
+    -------
+    rects : (N, 4) float64 (a view of a coordinate-major array).
+    """
+    M = _check(view, proj)
+    bmin = np.asarray(bmin, dtype=np.float64)
+    bmax = np.asarray(bmax, dtype=np.float64)
+    n = bmin.shape[0]
+    out = np.empty((4, n))
+    for s in range(0, n, chunk):  # blocks of objects, not objects
+        e = min(n, s + chunk)
+        _boxes_block(bmin[s:e], bmax[s:e], M, np.dtype(dtype), out[:, s:e])
+    return out.T
+
+
+def _boxes_block(bmin, bmax, M, dtype, out) -> None:
+    center = (bmin + bmax) * 0.5
+    half = (bmax - bmin) * 0.5
+    clip_c = (center @ M[:, :3].T + M[:, 3]).T  # (4, n) float64, camera-relative
+    # the near/far plane distances are affine in the corner: their extremes need no corners
+    near_row, far_row = M[2] + M[3], M[3] - M[2]
+    near_c, far_c = clip_c[2] + clip_c[3], clip_c[3] - clip_c[2]
+    near_r = np.abs(half) @ np.abs(near_row[:3])
+    far_r = np.abs(half) @ np.abs(far_row[:3])
+    all_front = near_c - near_r >= 0
+    invisible = (near_c + near_r < 0) | (far_c + far_r < 0)
+    out[:, invisible] = np.nan
+    fast = all_front & ~invisible
+    if fast.all():
+        fast = slice(None)
+    elif fast.any():
+        fast = np.flatnonzero(fast)
+    else:
+        fast = None
+    if fast is not None:
+        hx, hy, hz = (half[fast, a].astype(dtype) for a in range(3))
+        cx, cy, cw = (_corners(clip_c[r, fast].astype(dtype), hx, hy, hz, M[r, :3].astype(dtype))
+                      for r in (0, 1, 3))
+        x = np.divide(cx, cw, out=cx)
+        y = np.divide(cy, cw, out=cy)
+        eps = float(np.finfo(dtype).eps) * 8
+        ext = [np.minimum.reduce(x), np.minimum.reduce(y), np.maximum.reduce(x), np.maximum.reduce(y)]
+        ext = [v - eps * (1 + np.abs(v)) for v in ext[:2]] + [v + eps * (1 + np.abs(v)) for v in ext[2:]]
+        _write_rects(out, fast, *ext)
+    slow = np.flatnonzero(~all_front & ~invisible)
+    if slow.size:
+        signs = _SIGNS[None, :, :]
+        offs = half[slow, None, :] * signs  # (m, 8, 3) float64: few boxes cross the near plane
+        cx, cy, cz, cw = (clip_c[r, slow, None] + offs @ M[r, :3] for r in range(4))
+        _clipped_rects(cx, cy, cz, cw, out, slow)
+
+
+def _corners(base, hx, hy, hz, row) -> np.ndarray:
+    """(8, m) value of one clip row at the 8 corners: base +- hx*row0 +- hy*row1 +- hz*row2."""
+    ax, ay, az = hx * row[0], hy * row[1], hz * row[2]
+    p = np.stack([base - ax, base + ax])
+    q = np.concatenate([p - ay, p + ay])
+    return np.concatenate([q - az, q + az])
+
+
+def _clipped_rects(cx, cy, cz, cw, out, idx) -> None:
+    """Rects of boxes that cross the near plane: the part in front of it, projected."""
+    cx, cy, cz, cw = (np.asarray(c, dtype=np.float64) for c in (cx, cy, cz, cw))
+    d = cz + cw  # signed distance to the near plane (>= 0 in front)
+    pts_x, pts_y, keep = [cx / np.where(d >= 0, cw, 1)], [cy / np.where(d >= 0, cw, 1)], [d >= 0]
+    i, j = _EDGES[:, 0], _EDGES[:, 1]
+    d0, d1 = d[:, i], d[:, j]
+    crosses = (d0 >= 0) != (d1 >= 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(crosses, d0 / (d0 - d1), 0.0)
+        w = cw[:, i] + t * (cw[:, j] - cw[:, i])
+        ok = crosses & (w > 0)
+        w = np.where(ok, w, 1.0)
+        pts_x.append((cx[:, i] + t * (cx[:, j] - cx[:, i])) / w)
+        pts_y.append((cy[:, i] + t * (cy[:, j] - cy[:, i])) / w)
+    keep.append(ok)
+    px, py, k = np.concatenate(pts_x, 1), np.concatenate(pts_y, 1), np.concatenate(keep, 1)
+    # a point on the near plane has w = near > 0, so its projection is finite; clamp wild
+    # values (a near plane at 1e-7 gives huge NDC) before taking extents
+    px = np.clip(px, -4.0, 4.0)
+    py = np.clip(py, -4.0, 4.0)
+    xmin = np.where(k, px, np.inf).min(1)
+    xmax = np.where(k, px, -np.inf).max(1)
+    ymin = np.where(k, py, np.inf).min(1)
+    ymax = np.where(k, py, -np.inf).max(1)
+    visible = k.any(axis=1)
+    for arr in (xmin, ymin):
+        arr[~visible] = 2.0  # nothing in front: off screen, becomes NaN
+    for arr in (xmax, ymax):
+        arr[~visible] = 3.0
+    _write_rects(out, idx, xmin, ymin, xmax, ymax)
+
+
+def project_spheres(centers, radii, view, proj, chunk: int = 1 << 15) -> np.ndarray:
+    """Normalized screen rects of bounding spheres (exact tangent bounds, float64).
+
+    Assumes a perspective ``proj`` of the usual GL form (``w_clip = -z_view``); ``view`` may be
+    any rigid transform (rotation and translation). Spheres crossing the near plane get the
+    near-clipped bounds of their enclosing box.
+    """
+    view = np.asarray(view, dtype=np.float64)
+    proj = np.asarray(proj, dtype=np.float64)
+    _check(view, proj)
+    centers = np.asarray(centers, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    n = centers.shape[0]
+    out = np.empty((4, n))
+    # frustum planes in view space (Gribb-Hartmann on the projection), normalized
+    planes = np.stack([proj[3] + proj[0], proj[3] - proj[0], proj[3] + proj[1],
+                       proj[3] - proj[1], proj[3] + proj[2], proj[3] - proj[2]])
+    planes /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+    near = _near_distance(proj)
+    for s in range(0, n, chunk):  # blocks of objects, not objects
+        e = min(n, s + chunk)
+        _spheres_block(centers[s:e], radii[s:e], view, proj, planes, near, out[:, s:e])
+    return out.T
+
+
+def _spheres_block(centers, radii, view, proj, planes, near, out) -> None:
+    out[:] = np.nan
+    vc = (centers @ view[:3, :3].T + view[:3, 3]).T  # (3, n) view space
+    dist = planes[:, :3] @ vc + planes[:, 3:]  # (6, n) signed distances
+    invisible = (dist < -radii).any(axis=0)
+    depth = -vc[2]
+    crossing = (depth - radii < near) & ~invisible
+    ok = np.flatnonzero(~invisible & ~crossing)
+    if ok.size:
+        x, y, z, r = vc[0, ok], vc[1, ok], depth[ok], radii[ok]
+        lo_x, hi_x = _tangent_range(x, z, r)
+        lo_y, hi_y = _tangent_range(y, z, r)
+        # ndc = P00 * x/depth - P02 (and likewise for y) for a GL perspective matrix
+        nx0, nx1 = proj[0, 0] * lo_x - proj[0, 2], proj[0, 0] * hi_x - proj[0, 2]
+        ny0, ny1 = proj[1, 1] * lo_y - proj[1, 2], proj[1, 1] * hi_y - proj[1, 2]
+        _write_rects(out, ok, np.minimum(nx0, nx1), np.minimum(ny0, ny1),
+                     np.maximum(nx0, nx1), np.maximum(ny0, ny1))
+    cross = np.flatnonzero(crossing)
+    if cross.size:
+        r = radii[cross, None]
+        out[:, cross] = project_boxes(centers[cross] - r, centers[cross] + r, view, proj, np.float64).T
+
+
+def _tangent_range(x, z, r):
+    """Range of x/z over a circle (center (x, z), radius r, wholly at z > r) seen from 0."""
+    t = np.sqrt(np.maximum(x * x + z * z - r * r, 0.0))
+    xt, rz, zt, rx = x * t, r * z, z * t, r * x
+    return (xt - rz) / (zt + rx), (xt + rz) / (zt - rx)
+
+
+def _near_distance(proj: np.ndarray) -> float:
+    """Near-plane distance of a GL perspective matrix."""
+    a, b = proj[2, 2], proj[2, 3]
+    return float(b / (a - 1.0))

@@ -1,0 +1,102 @@
+"""Integer pixel rectangles: display tiles, object footprints, and the Alg. 3 transfer plan.
+
+Rectangles are half-open ``[x0, y0, x1, y1)`` in pixels, origin bottom-left. An object's
+normalized rect maps to the inclusive pixel span ``[floor(xmin*W), floor(xmax*W)]`` clipped to the
+display, so a rect touching a pixel boundary counts on both sides (conservative) and a
+zero-area rect still lands in exactly one pixel. Everything here is pure numpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def tile_regions(rows: int, cols: int, tw: int, th: int) -> np.ndarray:
+    """(K, 4) int64 display tile of every rank label (column-major, row 0 at the top)."""
+    labels = np.arange(rows * cols)
+    row, col = labels % rows, labels // rows
+    x0 = col * tw
+    y0 = (rows - 1 - row) * th
+    return np.stack([x0, y0, x0 + tw, y0 + th], axis=1).astype(np.int64)
+
+
+def pixel_spans(rects: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Inclusive pixel spans of normalized rects, and which rects are on screen.
+
+    Parameters
+    ----------
+    rects : (N, 4) float  ``[xmin, ymin, xmax, ymax]`` normalized; NaN rows are invisible.
+    size : (W, H) display size in pixels.
+
+    Returns
+    -------
+    spans : (N, 4) int64  ``[cx0, cy0, cx1, cy1]`` inclusive pixel columns/rows (0 where off).
+    onscreen : (N,) bool
+    """
+    W, H = size
+    r = np.asarray(rects, dtype=np.float64)
+    rt = r.T  # work coordinate-major, (4, N), so each coordinate is one contiguous row
+    with np.errstate(invalid="ignore"):
+        onscreen = (rt[2] >= 0.0) & (rt[0] <= 1.0) & (rt[3] >= 0.0) & (rt[1] <= 1.0)
+        # (False for NaN rows: every comparison with NaN is False)
+        c = np.empty((4, r.shape[0]), dtype=np.float64)
+        np.multiply(rt, np.array([[W], [H], [W], [H]], dtype=np.float64), out=c)
+        np.floor(c, out=c)
+        np.clip(c, 0.0, np.array([[W - 1], [H - 1], [W - 1], [H - 1]], dtype=np.float64), out=c)
+        spans_t = c.astype(np.int64)
+    if not onscreen.all():
+        spans_t[:, ~onscreen] = 0
+    spans = spans_t.T  # (N, 4) view of the coordinate-major array
+    return spans, onscreen
+
+
+def overlaps(spans: np.ndarray, region) -> np.ndarray:
+    """(N,) bool: which inclusive pixel spans touch the half-open region ``[x0, y0, x1, y1)``."""
+    x0, y0, x1, y1 = (int(v) for v in region)
+    return (spans[:, 0] < x1) & (spans[:, 2] >= x0) & (spans[:, 1] < y1) & (spans[:, 3] >= y0)
+
+
+def area(rect) -> int:
+    x0, y0, x1, y1 = (int(v) for v in rect)
+    return max(0, x1 - x0) * max(0, y1 - y0)
+
+
+def intersect(a, b) -> np.ndarray:
+    """Intersection of two half-open rects (may be empty: x1 <= x0 or y1 <= y0)."""
+    return np.array([max(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), min(a[3], b[3])], dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class Transfer:
+    """One Alg. 3 message: ``sender`` rendered ``rect`` that ``receiver`` displays."""
+
+    sender: int
+    receiver: int
+    rect: tuple[int, int, int, int]
+
+    @property
+    def pixels(self) -> int:
+        return area(self.rect)
+
+
+def transfers(regions: np.ndarray, tiles: np.ndarray, include_self: bool = False) -> list[Transfer]:
+    """Every non-empty intersection of a rank's render region with a display tile.
+
+    Sorted by (sender, receiver). At most one rect per pair (two rects meet in one rect), so a
+    pair's message needs no sequence number. With ``include_self`` the local copies
+    (sender == receiver) are listed too.
+    """
+    R = np.asarray(regions, dtype=np.int64)[:, None, :]
+    T = np.asarray(tiles, dtype=np.int64)[None, :, :]
+    lo = np.maximum(R[..., :2], T[..., :2])
+    hi = np.minimum(R[..., 2:], T[..., 2:])
+    nonempty = (hi > lo).all(axis=-1)
+    if not include_self:
+        np.fill_diagonal(nonempty, False)
+    out = []
+    for s, r in zip(*np.nonzero(nonempty)):  # K x K pairs, not objects
+        rect = (int(lo[s, r, 0]), int(lo[s, r, 1]), int(hi[s, r, 0]), int(hi[s, r, 1]))
+        out.append(Transfer(int(s), int(r), rect))
+    return out

@@ -1,0 +1,126 @@
+"""Object bounds to normalized screen rects: exactness, conservativeness, near-plane cases."""
+
+import numpy as np
+import pytest
+
+from multigpu.bounds import project_boxes, project_spheres
+from multigpu.camera import look_at, perspective
+
+V = look_at([0, -10, 2], [0, 0, 0], [0, 0, 1])
+P = perspective(60, 1.5, 0.1, 100)
+
+
+def project_points(pts, view=V, proj=P):
+    h = np.c_[pts, np.ones(len(pts))] @ (proj @ view).T
+    return h[:, :2] / h[:, 3:4] * 0.5 + 0.5, h[:, 3]
+
+
+def random_boxes(n, seed=0, spread=4.0):
+    rng = np.random.default_rng(seed)
+    c = rng.normal(0, spread, (n, 3))
+    h = rng.exponential(0.5, (n, 3))
+    return c - h, c + h
+
+
+def dense_samples(bmin, bmax, k=6):
+    t = np.linspace(0, 1, k)
+    g = np.stack(np.meshgrid(t, t, t), -1).reshape(-1, 3)
+    return bmin + g * (bmax - bmin)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_boxes_in_front_contain_samples_and_are_tight(dtype):
+    bmin, bmax = random_boxes(300)
+    rects = project_boxes(bmin, bmax, V, P, dtype=dtype)
+    checked = 0
+    for i in range(len(bmin)):
+        pts = dense_samples(bmin[i], bmax[i])
+        xy, w = project_points(pts)
+        if (w <= 0.1).any():
+            continue  # near-plane cases are tested separately
+        inside = ((xy >= 0) & (xy <= 1)).all(1)
+        if not inside.any():
+            continue
+        checked += 1
+        r = rects[i]
+        assert not np.isnan(r).any()
+        q = xy[inside]
+        assert (q[:, 0] >= r[0] - 1e-9).all() and (q[:, 0] <= r[2] + 1e-9).all()
+        assert (q[:, 1] >= r[1] - 1e-9).all() and (q[:, 1] <= r[3] + 1e-9).all()
+        # tight: the corners themselves reach the rect (when not clipped by the screen)
+        cxy = np.clip(project_points(dense_samples(bmin[i], bmax[i], 2))[0], 0, 1)
+        assert np.allclose([cxy[:, 0].min(), cxy[:, 1].min(), cxy[:, 0].max(), cxy[:, 1].max()], r, atol=1e-5)
+    assert checked > 50
+
+
+def test_outside_frustum_is_nan_and_never_inverted():
+    bmin, bmax = random_boxes(2000, spread=30)
+    rects = project_boxes(bmin, bmax, V, P)
+    ok = ~np.isnan(rects[:, 0])
+    assert ok.any() and (~ok).any()
+    assert (rects[ok, 0] <= rects[ok, 2]).all() and (rects[ok, 1] <= rects[ok, 3]).all()
+    assert ((rects[ok] >= 0) & (rects[ok] <= 1)).all()
+    # a box wholly behind the eye
+    r = project_boxes(np.array([[-1, -20, -1]]), np.array([[1, -15, 1]]), V, P)
+    assert np.isnan(r).all()
+
+
+def test_box_crossing_near_plane_is_conservative():
+    # the eye sits inside this box: it covers the whole screen
+    r = project_boxes(np.array([[-1, -11, 1]]), np.array([[1, -9, 3]]), V, P)[0]
+    assert np.allclose(r, [0, 0, 1, 1])
+    # a long box from behind the eye to far in front, off to the right: clipped, not inverted
+    r = project_boxes(np.array([[1, -20, 1.5]]), np.array([[1.5, 20, 2.5]]), V, P)[0]
+    assert r[0] <= r[2] and r[1] <= r[3] and r[2] == 1.0
+    pts = dense_samples(np.array([1, -20, 1.5]), np.array([1.5, 20, 2.5]), 40)
+    xy, w = project_points(pts)
+    front = w > 0.1
+    q = np.clip(xy[front], 0, 1)
+    assert (q[:, 0] >= r[0] - 1e-9).all() and (q[:, 1] >= r[1] - 1e-9).all() and (q[:, 1] <= r[3] + 1e-9).all()
+
+
+def test_spheres_contain_their_samples():
+    rng = np.random.default_rng(2)
+    c = rng.normal(0, 3, (300, 3))
+    rad = rng.exponential(0.5, 300)
+    rects = project_spheres(c, rad, V, P)
+    u = rng.normal(size=(400, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    for i in range(300):
+        xy, w = project_points(c[i] + rad[i] * u)
+        if (w <= 0.1).any():
+            continue
+        inside = ((xy >= 0) & (xy <= 1)).all(1)
+        if inside.any():
+            r = rects[i]
+            q = xy[inside]
+            assert (q[:, 0] >= r[0] - 1e-9).all() and (q[:, 0] <= r[2] + 1e-9).all()
+            assert (q[:, 1] >= r[1] - 1e-9).all() and (q[:, 1] <= r[3] + 1e-9).all()
+
+
+def test_sphere_rect_within_its_box_rect():
+    rng = np.random.default_rng(3)
+    c = rng.normal(0, 2, (500, 3))
+    rad = rng.uniform(0.05, 0.5, 500)
+    s = project_spheres(c, rad, V, P)
+    b = project_boxes(c - rad[:, None], c + rad[:, None], V, P, dtype=np.float64)
+    ok = ~np.isnan(s[:, 0])
+    assert (~np.isnan(b[ok, 0])).all()
+    assert (s[ok, :2] >= b[ok, :2] - 1e-9).all() and (s[ok, 2:] <= b[ok, 2:] + 1e-9).all()
+
+
+@pytest.mark.parametrize("offset", [1e6, 1e8])
+def test_far_from_origin_keeps_precision(offset):
+    bmin, bmax = random_boxes(200)
+    o = np.array([offset, offset, 0.0])
+    eye, tgt = np.array([0, -10, 2]) + o, o
+    r0 = project_boxes(bmin, bmax, V, P, dtype=np.float64)
+    r1 = project_boxes(bmin + o, bmax + o, look_at(eye, tgt, [0, 0, 1]), P, dtype=np.float64)
+    both = ~np.isnan(r0[:, 0])
+    assert (np.isnan(r1[:, 0]) == ~both).all()
+    assert np.allclose(r0[both], r1[both], atol=1e-6)
+
+
+def test_bad_matrices():
+    with pytest.raises(ValueError):
+        project_boxes(np.zeros((1, 3)), np.ones((1, 3)), np.eye(3), P)
