@@ -224,7 +224,7 @@ def _one_plant(rng, budget: float, origin: np.ndarray) -> list:
         m = int((seg_of == s).sum())
         axis = rng.choice(3, size=m, p=[0.4, 0.4, 0.2])
         r = rng.uniform(0.1, 0.6, m) * (1 + s / 64)
-        length = rng.uniform(2, 25, m)
+        length = np.where(axis == 0, rng.uniform(2, 8, m), rng.uniform(2, 25, m))  # risers are short
         pos = _zone_points(rng, m, 0.85, 14.0, origin)
         parts.append(instance(cylinder(int(s), caps=False), np.c_[r, r, length], _AXES[axis], pos,
                               _palette(rng, m, [0.7, 0.55, 0.2])))

@@ -1,0 +1,7 @@
+"""``python -m multigpu`` (under mpiexec: ``python -m mpi4py -m multigpu walkthrough ...``)."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

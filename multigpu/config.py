@@ -1,0 +1,87 @@
+"""The walkthrough's configuration, validated once at the door (before any MPI collective)."""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .errors import InputError
+from .models import SceneSpec
+from .strategies import REGISTRY
+
+
+def parse_pair(text: str, flag: str, sep: str = "x") -> tuple[int, int]:
+    m = re.fullmatch(rf"\s*(\d+)\s*{sep}\s*(\d+)\s*", str(text))
+    if not m:
+        raise InputError(f"{flag} must look like A{sep}B with positive integers, got '{text}'")
+    a, b = int(m.group(1)), int(m.group(2))
+    if a < 1 or b < 1:
+        raise InputError(f"{flag} must be positive on both sides, got '{text}'")
+    return a, b
+
+
+@dataclass(frozen=True)
+class WalkConfig:
+    """Everything one walkthrough run needs. ``grid`` is (rows, cols), ``tile`` (tw, th)."""
+
+    scene: SceneSpec = field(default_factory=SceneSpec)
+    path: str | None = None
+    path_kind: str = "walkthrough"
+    frames: int | None = None
+    grid: tuple[int, int] = (2, 2)
+    tile: tuple[int, int] = (256, 256)
+    strips: int = 2048
+    balance: str = "strips"
+    bounds: str = "box"
+    out: str = "out"
+    mosaic_every: int = 100
+    overlay: bool = True
+    video: bool = False
+    device: int | None = None
+    timeout: float = 120.0
+    progress: bool = True
+
+    def __post_init__(self):
+        if self.frames is not None and self.frames < 1:
+            raise InputError(f"--frames must be >= 1, got {self.frames}")
+        if self.strips < 2:
+            raise InputError(f"--strips must be >= 2, got {self.strips}")
+        if self.balance not in REGISTRY:
+            raise InputError(f"--balance must be one of {', '.join(REGISTRY)}, got '{self.balance}'")
+        if self.bounds not in ("box", "sphere"):
+            raise InputError(f"--bounds must be 'box' or 'sphere', got '{self.bounds}'")
+        if self.path_kind not in ("walkthrough", "orbit"):
+            raise InputError(f"--path-kind must be 'walkthrough' or 'orbit', got '{self.path_kind}'")
+        if self.mosaic_every < 0:
+            raise InputError(f"--mosaic-every must be >= 0 (0 = never), got {self.mosaic_every}")
+        if self.device is not None and self.device < 0:
+            raise InputError(f"--device must be >= 0, got {self.device}")
+        if not self.timeout > 0:
+            raise InputError(f"--timeout must be > 0 seconds, got {self.timeout}")
+        tw, th = self.tile
+        if tw > 16384 or th > 16384:
+            raise InputError(f"--tile {tw}x{th}: tiles above 16384 pixels per side are not supported")
+        if self.size[0] > 32768 or self.size[1] > 32768:
+            raise InputError(f"--grid/--tile: a {self.size[0]}x{self.size[1]} wall exceeds 32768 pixels per side")
+
+    @property
+    def ranks(self) -> int:
+        return self.grid[0] * self.grid[1]
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.grid[1] * self.tile[0], self.grid[0] * self.tile[1]
+
+    def check_output(self) -> Path:
+        """Create the output directory and prove it writable (rank 0, before the run)."""
+        out = Path(self.out)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            probe = out / f".write-test-{os.getpid()}"
+            probe.write_text("ok")
+            probe.unlink()
+        except OSError as exc:
+            raise InputError(f"--out {out}: not writable ({exc.strerror or exc})") from None
+        return out

@@ -1,0 +1,120 @@
+"""Timing rows to the paper's Table 1 breakdown. Pure numpy: no MPI, no GL.
+
+Figures and what they are:
+* component columns ``*_ms`` are wall-clock times per rank per frame (``time.perf_counter``);
+* ``*_cpu_ms`` are the same phases as process CPU time (``time.process_time``), which stays
+  honest when ranks outnumber cores;
+* ``emulated_frame_ms`` is the emulated parallel frame time: per frame, the slowest rank's CPU
+  time for load balancing + rendering + exchange + display, i.e. the frame time the run would
+  have with one core (GPU) per rank.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
+           "load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms", "frame_ms",
+           "load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
+           "bytes_sent", "objects"]
+COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
+INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects"}
+
+
+class TimingWriter:
+    """Appends rows to timings.csv and flushes every frame, so a crash loses nothing done."""
+
+    def __init__(self, path: Path):
+        self.file = open(path, "w", newline="")
+        self.writer = csv.writer(self.file)
+        self.writer.writerow(COLUMNS)
+        self.file.flush()
+
+    def write(self, rows: np.ndarray) -> None:
+        for row in rows:  # K rows per frame
+            self.writer.writerow([int(v) if c in INT_COLUMNS else f"{v:.4f}" for c, v in zip(COLUMNS, row)])
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def read_timings(path: Path) -> np.ndarray:
+    """timings.csv back to an (R, len(COLUMNS)) float array."""
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return data.reshape(-1, len(COLUMNS))
+
+
+def summarize(rows: np.ndarray, ranks: int) -> dict:
+    """The averaged breakdown of complete frames (all ranks present)."""
+    col = {c: i for i, c in enumerate(COLUMNS)}
+    rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(COLUMNS))
+    frames = np.unique(rows[:, col["frame"]]) if len(rows) else np.zeros(0)
+    counts = np.array([(rows[:, col["frame"]] == f).sum() for f in frames])
+    frames = frames[counts == ranks]
+    if frames.size == 0:
+        return {"frames": 0}
+    rows = rows[np.isin(rows[:, col["frame"]], frames)]
+    rows = rows[np.lexsort((rows[:, col["rank"]], rows[:, col["frame"]]))]
+    per = rows.reshape(frames.size, ranks, len(COLUMNS))  # (F, K, C)
+    get = lambda c: per[:, :, col[c]]
+    frame_ms = get("frame_ms").max(axis=1)
+    cpu = get("load_balancing_cpu_ms") + get("rendering_cpu_ms") + get("frame_exchange_cpu_ms") + get("display_cpu_ms")
+    emulated = cpu.max(axis=1)
+    tri = get("triangles")
+    rend = get("rendering_cpu_ms")
+    ratio = lambda a: float(np.mean(a.max(axis=1) / np.maximum(a.mean(axis=1), 1e-12)))
+    out = {
+        "frames": int(frames.size),
+        "ranks": int(ranks),
+        "wall": {c: float(get(c).mean()) for c in COMPONENTS},
+        "frame_ms": float(frame_ms.mean()),
+        "fps": float(1000.0 / frame_ms.mean()),
+        "cpu": {c: float(get(c).mean()) for c in ("load_balancing_cpu_ms", "rendering_cpu_ms",
+                                                  "frame_exchange_cpu_ms", "display_cpu_ms")},
+        "emulated_frame_ms": float(emulated.mean()),
+        "emulated_fps": float(1000.0 / emulated.mean()),
+        "emulated_frame_ms_median": float(np.median(emulated)),
+        "render_cpu_max_ms": float(rend.max(axis=1).mean()),
+        "imbalance_triangles": ratio(tri),
+        "imbalance_render_cpu": ratio(rend),
+        "triangles_per_frame": float(tri.sum(axis=1).mean()),
+        "bytes_sent_per_frame": float(get("bytes_sent").sum(axis=1).mean()),
+        "per_frame_emulated_ms": emulated.round(3).tolist(),
+        "per_frame_wall_ms": frame_ms.round(3).tolist(),
+    }
+    return out
+
+
+def table(summary: dict, title: str = "") -> str:
+    """The summary as the paper's Table 1 row (plus the emulated parallel figures)."""
+    if not summary.get("frames"):
+        return "no complete frames"
+    w = summary["wall"]
+    head = f"{'Frame(ms)':>10} {'FPS':>7} {'LoadBal':>8} {'Render':>8} {'Sync':>8} {'Exchange':>9} {'Display':>8}"
+    row = (f"{summary['frame_ms']:10.2f} {summary['fps']:7.2f} {w['load_balancing_ms']:8.2f} "
+           f"{w['rendering_ms']:8.2f} {w['synchronization_ms']:8.2f} {w['frame_exchange_ms']:9.2f} {w['display_ms']:8.2f}")
+    c = summary["cpu"]
+    lines = [title] if title else []
+    lines += [f"{summary['frames']} frames x {summary['ranks']} ranks. Wall-clock per-rank means (ms):", head, row,
+              f"Per-rank CPU time (ms): load balancing {c['load_balancing_cpu_ms']:.2f}, rendering "
+              f"{c['rendering_cpu_ms']:.2f} (slowest rank {summary['render_cpu_max_ms']:.2f}), exchange "
+              f"{c['frame_exchange_cpu_ms']:.2f}, display {c['display_cpu_ms']:.2f}",
+              f"Emulated parallel frame (slowest rank's CPU time): {summary['emulated_frame_ms']:.2f} ms = "
+              f"{summary['emulated_fps']:.2f} FPS (median {summary['emulated_frame_ms_median']:.2f} ms)",
+              f"Imbalance max/mean: triangles {summary['imbalance_triangles']:.3f}, render CPU time "
+              f"{summary['imbalance_render_cpu']:.3f}; bytes exchanged per frame {summary['bytes_sent_per_frame']:.0f}"]
+    return "\n".join(lines)
+
+
+def write_json(path: Path, doc: dict) -> None:
+    """Write JSON atomically (temp file, then rename)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(doc, indent=1))
+    tmp.replace(path)
