@@ -121,6 +121,12 @@ def _walkthrough(a) -> int:
     except InputError as exc:  # agreed on every rank before any frame: all exit 2
         if comm.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
+        from .exchange import PeerTimeout, barrier
+
+        try:  # let rank 0 print before any rank's exit ends the job
+            barrier(comm, 10.0)
+        except PeerTimeout:
+            pass
         return 2
     except BaseException as exc:  # one rank failed mid-run: say so once and end the whole job
         print(f"multigpu: rank {comm.Get_rank()}: {exc.__class__.__name__}: {exc}", file=sys.stderr, flush=True)

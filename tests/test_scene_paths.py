@@ -1,0 +1,134 @@
+"""Plant generator, model loading (every format, both splits), cache, camera paths, bad input."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from multigpu.errors import InputError
+from multigpu.models import SceneSpec, load_model, load_scene
+from multigpu.paths import catmull_rom, load_path, orbit, walkthrough
+from multigpu.plant import generate_plant
+
+
+def test_plant_deterministic_and_scales():
+    a, b = generate_plant(30_000, seed=4), generate_plant(30_000, seed=4)
+    for k, v in a._arrays().items():
+        assert np.array_equal(v, getattr(b, k)), k
+    big = generate_plant(300_000, seed=4)
+    assert 5 < big.n_triangles / a.n_triangles < 15
+    tris = big.tris
+    assert tris.max() > 50 * np.median(tris)  # heavy tail
+    two = generate_plant(60_000, copies=2)
+    assert two.bounds[1, 0] - two.bounds[0, 0] > 1.8 * (a.bounds[1, 0] - a.bounds[0, 0])
+    # layout: one indirect command per object, indices within each object's vertices
+    cmd = big.draw_commands()
+    assert cmd.shape == (big.n_objects, 5) and (cmd[:, 4] == np.arange(big.n_objects)).all()
+    assert big.indices.max() < big.vertices.shape[0]
+
+
+def _mesh():
+    parts = [trimesh.creation.box().apply_translation([i * 3.0, 0, 0]) for i in range(4)]
+    return trimesh.util.concatenate(parts + [trimesh.creation.icosphere().apply_translation([0, 5, 0])])
+
+
+@pytest.mark.parametrize("ext", ["obj", "ply", "stl", "off", "glb"])
+def test_loader_round_trip(tmp_path, ext):
+    p = tmp_path / f"m.{ext}"
+    _mesh().export(p)
+    s = load_model(p, "components", merge_below=0)
+    assert s.n_objects == 5 and s.n_triangles == 4 * 12 + 1280
+    assert sorted(s.tris.tolist()) == [12, 12, 12, 12, 1280]
+    assert np.allclose(np.linalg.norm(s.vertices[:, 3:], axis=1), 1, atol=1e-4)
+    assert np.allclose(s.bounds, _mesh().bounds, atol=1e-6)
+    g = load_model(p, "grid:2")
+    assert g.n_triangles == s.n_triangles and g.n_objects >= 2
+
+
+def test_scene_graph_one_object_per_node(tmp_path):
+    sc = trimesh.Scene()
+    for i in range(3):
+        sc.add_geometry(trimesh.creation.box(), transform=trimesh.transformations.translation_matrix([i * 2.0, 0, 0]))
+    p = tmp_path / "s.glb"
+    sc.export(p)
+    s = load_model(p)
+    assert s.n_objects == 3
+    assert sorted(s.bmin[:, 0].round(3).tolist()) == [-0.5, 1.5, 3.5]
+
+
+def test_cache_hit_returns_identical_arrays(tmp_path, monkeypatch):
+    monkeypatch.setenv("MULTIGPU_CACHE", str(tmp_path))
+    a, ia = load_scene(SceneSpec(triangles=20_000, seed=1))
+    b, ib = load_scene(SceneSpec(triangles=20_000, seed=1))
+    assert not ia["cached"] and ib["cached"]
+    for k, v in a._arrays().items():
+        assert np.array_equal(v, getattr(b, k))
+
+
+@pytest.mark.parametrize("content,needle", [
+    (None, "file not found"), (b"\x00\x01garbage", "cannot read"), (b"", "")])
+def test_bad_model_files(tmp_path, content, needle):
+    p = tmp_path / "bad.ply"
+    if content is not None:
+        p.write_bytes(content)
+    with pytest.raises(InputError) as e:
+        load_model(p) if content is not None else load_scene(SceneSpec(model=str(p)))
+    assert "bad.ply" in str(e.value) and needle in str(e.value)
+
+
+def test_unsupported_extension_and_nonfinite(tmp_path):
+    p = tmp_path / "m.xyz"
+    p.write_text("1 2 3")
+    with pytest.raises(InputError, match="unsupported extension"):
+        load_scene(SceneSpec(model=str(p)))
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [np.nan, 0, 0], [5, 5, 5], [6, 5, 5], [5, 6, 5.0]])
+    f = np.array([[0, 1, 2], [3, 1, 2], [4, 5, 6], [4, 4, 5]])
+    q = tmp_path / "n.ply"
+    trimesh.Trimesh(v, f, process=False).export(q)
+    s = load_model(q, merge_below=0)
+    assert s.n_triangles == 2
+    assert any("non-finite" in w for w in s.meta["warnings"]) and any("degenerate" in w for w in s.meta["warnings"])
+
+
+def test_path_interpolation_continuity():
+    pts = np.array([[0, 0, 0], [1, 2, 0], [3, 3, 1], [4, 0, 2.0]])
+    t = np.linspace(0, 3, 3001)
+    c = catmull_rom(pts, t)
+    assert np.allclose(c[::1000], pts)
+    step = np.linalg.norm(np.diff(c, axis=0), axis=1)
+    assert step.max() < 5 * np.median(step)  # no jumps
+    vel = np.diff(c, axis=0)
+    assert np.abs(np.diff(vel, axis=0)).max() < 1e-3  # C1: velocity changes smoothly
+
+
+def test_generated_paths_and_round_trip(tmp_path):
+    scene = generate_plant(20_000)
+    w = walkthrough(scene, frames=1200)
+    assert len(w) == 1200 and np.isfinite(w.position).all()
+    o = orbit(scene, frames=90)
+    d = np.linalg.norm(o.position - o.target, axis=1)
+    assert np.allclose(d, d[0])
+    p = tmp_path / "p.json"
+    w.save(p)
+    back = load_path(p)
+    assert np.allclose(back.position, w.position) and np.allclose(back.fov, w.fov)
+
+
+@pytest.mark.parametrize("doc,needle", [
+    ({"keyframes": [{"target": [0, 0, 0]}]}, "keyframes[0] is missing the field 'position'"),
+    ({"keyframes": [{"position": [0, 0], "target": [1, 1, 1]}]}, "keyframes[0].position must be a list of 3"),
+    ({"keyframes": [{"position": [0, 0, 0], "target": [1, 1, 1], "fov": "wide"}]}, "keyframes[0].fov"),
+    ({"cameras": []}, "'cameras' must be a non-empty list"),
+    ({"frames": -3, "keyframes": [{"position": [0, 0, 0], "target": [1, 1, 1]}]}, "'frames'"),
+    ({"foo": 1}, "needs a field 'keyframes' or 'cameras'"),
+])
+def test_bad_path_files(tmp_path, doc, needle):
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises(InputError) as e:
+        load_path(p)
+    assert "bad.json" in str(e.value) and needle in str(e.value)
+    p.write_text("{not json")
+    with pytest.raises(InputError, match="not valid JSON"):
+        load_path(p)

@@ -1,0 +1,100 @@
+"""The parallel renderer under mpiexec (1 to 4 ranks, each run under a hard timeout)."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from multigpu.report import COLUMNS
+from mpirun import SMALL, read_png, run_mpi
+
+pytestmark = pytest.mark.mpi
+W, H = 120, 96
+FRAMES = 5
+BG = np.array([20, 23, 31])
+
+
+def walk(tmp_path, name, grid, extra=(), n=None):
+    rows, cols = grid
+    out = tmp_path / name
+    args = ["walkthrough", *SMALL, "--frames", str(FRAMES), "--grid", f"{rows}x{cols}",
+            "--tile", f"{W // cols}x{H // rows}", "--mosaic-every", "1", "--no-overlay", "--out", str(out), *extra]
+    res = run_mpi(n or rows * cols, args)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return out
+
+
+def frames_of(out):
+    return [read_png(out / "mosaic" / f"frame_{f:05d}.png") for f in range(FRAMES)]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The one-rank render of the full display."""
+    return frames_of(walk(tmp_path_factory.mktemp("ref"), "ref", (1, 1)))
+
+
+@pytest.mark.parametrize("grid", [(1, 2), (2, 1), (1, 3), (2, 2)])
+def test_composite_equals_one_rank_render(tmp_path, reference, grid):
+    out = walk(tmp_path, "k", grid)
+    for f, (got, ref) in enumerate(zip(frames_of(out), reference)):
+        assert got.shape == (H, W, 3)
+        assert (got == ref).all(), f"frame {f}: {(got != ref).any(axis=2).sum()} pixels differ"
+
+
+def test_none_and_strips_give_same_images_and_schema(tmp_path, reference):
+    out = walk(tmp_path, "none", (2, 2), ["--balance", "none"])
+    for got, ref in zip(frames_of(out), reference):
+        assert (got == ref).all()
+    with open(out / "timings.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0].keys()) == COLUMNS
+    assert len(rows) == FRAMES * 4
+    assert {(int(r["frame"]), int(r["rank"])) for r in rows} == {(f, k) for f in range(FRAMES) for k in range(4)}
+    for r in rows:  # no exchange without balancing: every region is its own tile
+        assert int(r["bytes_sent"]) == 0
+        assert (int(r["x1"]) - int(r["x0"]), int(r["y1"]) - int(r["y0"])) == (W // 2, H // 2)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is True and s["frames"] == FRAMES and s["ranks"] == 4
+    for key in ("load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"):
+        assert s["wall"][key] >= 0
+    assert s["fps"] > 0 and s["emulated_frame_ms"] > 0 and s["imbalance_triangles"] >= 1
+
+
+def test_strips_regions_tile_display_and_exchange_bytes(tmp_path):
+    out = walk(tmp_path, "strips", (2, 2))
+    with open(out / "timings.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    for f in range(FRAMES):
+        cover = np.zeros((H, W), int)
+        for r in rows:
+            if int(r["frame"]) == f:
+                cover[int(r["y0"]):int(r["y1"]), int(r["x0"]):int(r["x1"])] += 1
+        assert (cover == 1).all()
+    assert sum(int(r["bytes_sent"]) for r in rows) > 0
+
+
+def test_rank_count_mismatch_is_a_clear_error(tmp_path):
+    res = run_mpi(3, ["walkthrough", *SMALL, "--grid", "2x2", "--frames", "2", "--out", str(tmp_path / "x")], timeout=60)
+    assert res.returncode != 0
+    assert "--grid 2x2 needs 4 ranks but the job has 3" in res.stderr
+    assert res.stderr.count("needs 4 ranks") == 1 and "Traceback" not in res.stderr
+
+
+def test_empty_region_renders_background(tmp_path):
+    # look at the plant from far away, low: the top row of tiles sees only sky
+    path = tmp_path / "sky.json"
+    path.write_text(json.dumps({"version": 1, "cameras": [
+        {"position": [100, -900, 5], "target": [100, 60, 200], "fov": 30, "near": 1, "far": 3000}] * 3}))
+    for balance in ("none", "strips"):
+        out = tmp_path / balance
+        res = run_mpi(4, ["walkthrough", *SMALL, "--path", str(path), "--grid", "2x2", "--tile", "60x48",
+                          "--balance", balance, "--mosaic-every", "1", "--no-overlay", "--out", str(out)])
+        assert res.returncode == 0, res.stderr[-2000:]
+        with open(out / "timings.csv") as fh:
+            rows = list(csv.DictReader(fh))
+        if balance == "none":
+            assert any(int(r["objects"]) == 0 for r in rows)
+        img = read_png(out / "mosaic" / "frame_00000.png")
+        assert (img[:20] == BG).all()
