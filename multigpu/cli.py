@@ -130,6 +130,10 @@ def _walkthrough(a) -> int:
         return 2
     except BaseException as exc:  # one rank failed mid-run: say so once and end the whole job
         print(f"multigpu: rank {comm.Get_rank()}: {exc.__class__.__name__}: {exc}", file=sys.stderr, flush=True)
+        if comm.Get_rank() != 0:
+            import time
+
+            time.sleep(1.0)  # grace: rank 0 writes the last completed frame's rows before the abort
         comm.Abort(1)
     return 0
 
