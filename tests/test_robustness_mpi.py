@@ -57,3 +57,65 @@ def test_exception_on_one_rank_ends_job_and_keeps_frames(tmp_path):
     assert set(range(6)) <= frames and len(rows) >= 6 * 3
     s = json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else None
     assert s is None or s["complete"] is False
+
+
+def _start(args, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from mpirun import MPIEXEC, ROOT
+
+    cmd = [MPIEXEC, "-n", "2", sys.executable, "-m", "mpi4py", "-m", "multigpu", "walkthrough", *SMALL,
+           "--grid", "1x2", "--mosaic-every", "0", "--out", str(tmp_path / "o"), *args]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, env={**os.environ, "LP_NUM_THREADS": "1"})
+    return proc, lambda: os.killpg(proc.pid, signal.SIGKILL)
+
+
+def _wait_for_frames(path, n, limit=60):
+    t = time.monotonic()
+    while time.monotonic() - t < limit:
+        if path.exists() and sum(1 for _ in open(path)) > n:
+            return
+        time.sleep(0.2)
+    raise AssertionError("the run produced no frames")
+
+
+def test_sigterm_stops_cleanly_with_complete_outputs(tmp_path):
+    import signal
+
+    proc, kill = _start([], tmp_path)
+    try:
+        _wait_for_frames(tmp_path / "o" / "timings.csv", 10)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            kill()
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["complete"] is False and 0 < s["frames"] < 1200
+    with open(tmp_path / "o" / "timings.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 2 * s["frames"]  # every written frame is complete
+    assert "stopped after" in out
+
+
+def test_sigkill_of_one_rank_ends_the_job(tmp_path):
+    import os
+    import signal
+    import subprocess
+
+    proc, kill = _start(["--timeout", "10"], tmp_path)
+    try:
+        _wait_for_frames(tmp_path / "o" / "timings.csv", 6)
+        pids = subprocess.run(["pgrep", "-f", "-s", str(proc.pid), "mpi4py -m multigpu"], capture_output=True,
+                              text=True).stdout.split()
+        assert pids
+        os.kill(int(pids[-1]), signal.SIGKILL)
+        proc.communicate(timeout=40)
+    finally:
+        if proc.poll() is None:
+            kill()
+    assert proc.returncode != 0
