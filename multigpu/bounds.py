@@ -115,11 +115,22 @@ def _boxes_block(bmin, bmax, M, dtype, out) -> None:
 
 
 def _corners(base, hx, hy, hz, row) -> np.ndarray:
-    """(8, m) value of one clip row at the 8 corners: base +- hx*row0 +- hy*row1 +- hz*row2."""
+    """(8, m) value of one clip row at the 8 corners: base +- hx*row0 +- hy*row1 +- hz*row2.
+
+    Corner k has signs (bit 2: x, bit 1: y, bit 0: z), the same for every row. In place, no
+    temporaries beyond the three (m,) offsets.
+    """
     ax, ay, az = hx * row[0], hy * row[1], hz * row[2]
-    p = np.stack([base - ax, base + ax])
-    q = np.concatenate([p - ay, p + ay])
-    return np.concatenate([q - az, q + az])
+    out = np.empty((8, base.shape[0]), dtype=base.dtype)
+    np.subtract(base, ax, out=out[0])
+    np.add(base, ax, out=out[4])
+    np.add(out[0], ay, out=out[2])
+    np.add(out[4], ay, out=out[6])
+    out[0] -= ay
+    out[4] -= ay
+    np.add(out[0::2], az, out=out[1::2])
+    out[0::2] -= az
+    return out
 
 
 def _clipped_rects(cx, cy, cz, cw, out, idx) -> None:
