@@ -63,11 +63,6 @@ def area(rect) -> int:
     return max(0, x1 - x0) * max(0, y1 - y0)
 
 
-def intersect(a, b) -> np.ndarray:
-    """Intersection of two half-open rects (may be empty: x1 <= x0 or y1 <= y0)."""
-    return np.array([max(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), min(a[3], b[3])], dtype=np.int64)
-
-
 @dataclass(frozen=True)
 class Transfer:
     """One Alg. 3 message: ``sender`` rendered ``rect`` that ``receiver`` displays."""
