@@ -143,15 +143,20 @@ def _clean_faces(verts, faces, path, warnings) -> np.ndarray:
     if bad.any():
         warnings.append(f"dropped {int(bad.sum())} faces with non-finite vertices")
     f = faces[~bad]
-    tri = verts[f]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    degenerate = ~(area2 > 0)
+    degenerate = _degenerate(verts, f)
     if degenerate.any():
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
     f = f[~degenerate]
     if len(f) == 0:
         raise InputError(f"--model {path}: no valid triangles (all faces degenerate or non-finite)")
     return f
+
+
+def _degenerate(verts, faces) -> np.ndarray:
+    """(F,) True for faces of zero (or non-finite) area."""
+    tri = verts[faces]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    return ~(area2 > 0)
 
 
 def _component_labels(faces: np.ndarray, verts: np.ndarray) -> np.ndarray:
@@ -262,10 +267,9 @@ def _from_meshes(meshes, path, warnings) -> Scene:
         faces, labels = faces[keep], labels[keep]
         if len(faces) == 0:
             raise InputError(f"--model {path}: every object has non-finite vertices")
-    tri = verts[faces]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    if not (area2 > 0).all():
-        warnings.append(f"dropped {int((~(area2 > 0)).sum())} degenerate faces")
-        faces, labels = faces[area2 > 0], labels[area2 > 0]
+    degenerate = _degenerate(verts, faces)
+    if degenerate.any():
+        warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
+        faces, labels = faces[~degenerate], labels[~degenerate]
     labels = np.unique(labels, return_inverse=True)[1].ravel()
     return _from_labels(verts, faces, labels, path, warnings, {"split": "nodes"})
