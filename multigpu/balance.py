@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .regions import overlaps, pixel_spans, tile_regions
+from .regions import MAX_PIXELS, overlaps, pixel_spans, tile_regions
 from .tree import VERTICAL, GpuTree
 
 MAX_TOTAL = 2**62
@@ -60,6 +60,8 @@ def validate_inputs(rects, tris, grid, size, strips) -> tuple[np.ndarray, np.nda
     if not (isinstance(size, (tuple, list)) and len(size) == 2):
         raise ValueError(f"size must be (W, H), got {size!r}")
     W, H = (int(s) for s in size)
+    if W > MAX_PIXELS or H > MAX_PIXELS:
+        raise ValueError(f"display {W}x{H} exceeds {MAX_PIXELS} pixels along an axis")
     if W < cols or H < rows:
         raise ValueError(f"display {W}x{H} is smaller than one pixel per rank for a {rows}x{cols} grid")
     if int(strips) != strips or strips < 2:
@@ -105,6 +107,27 @@ def strip_sums(first: np.ndarray, last: np.ndarray, w: np.ndarray, q: int) -> tu
         l_ = np.bincount(idx, lo, q).astype(np.int64)
         out.append((h << 26) + l_)
     return out[0], out[1]
+
+
+_TABLE_MAX = 1 << 16  # displays up to this many pixels per axis use a lookup table
+
+
+def _strip_index(px: np.ndarray, a: int, length: int, q: int, extent: int) -> np.ndarray:
+    """Strip of each absolute pixel ``px`` for a split of ``[a, a + length)`` into ``q`` strips.
+
+    Offset ``o = px - a`` lies in strip ``((o + 1) * q - 1) // length``, so strip ``i`` holds
+    ``[i*L//q, (i+1)*L//q)``; pixels outside the region clamp to the first / last strip. A
+    table over the display axis is one gather per object; beyond ``_TABLE_MAX`` pixels the
+    same formula is evaluated per object instead, so memory stays O(N) on huge walls.
+    """
+    if extent <= _TABLE_MAX:
+        table = (np.arange(1 - a, extent + 1 - a, dtype=np.int64) * q - 1) // length
+        return np.clip(table, 0, q - 1).astype(np.intp).take(px)
+    o = px.astype(np.int64) - (a - 1)
+    o *= q
+    o -= 1
+    o //= length
+    return np.clip(o, 0, q - 1, out=o)
 
 
 def choose_split(s: np.ndarray, e: np.ndarray, ratio: float, cuts: np.ndarray, valid: np.ndarray, target: int) -> int:
@@ -172,10 +195,11 @@ def partition(rects, tris, grid, size, strips: int = 2048) -> Partition:
 
         lo_px = spans[axis].take(idx)
         hi_px = spans[axis + 2].take(idx)
-        # strip of each pixel offset o in [0, length): strip i holds [i*L//q, (i+1)*L//q)
-        strip_of = ((np.arange(1, length + 1, dtype=np.int64) * q - 1) // length).astype(np.intp)
-        first = strip_of.take(lo_px - a, mode="clip")
-        last = strip_of.take(hi_px - a, mode="clip")
+        # strip of every absolute pixel p: offset o = p - a in [0, L) lies in strip
+        # ((o + 1) * q - 1) // L, i.e. strip i holds [i*L//q, (i+1)*L//q); pixels outside the
+        # region clamp to the first / last strip
+        first, last = _strip_index(lo_px, a, length, q, W if axis == 0 else H), \
+            _strip_index(hi_px, a, length, q, W if axis == 0 else H)
         s, e = strip_sums(first, last, tris[idx], q)
         pick = choose_split(s, e, nl / nr, cuts, valid, target)
         cut = int(cuts[pick]) if pick >= 0 else target

@@ -7,6 +7,7 @@ between rows of one run are the meaningful comparison on a shared machine.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -40,28 +41,31 @@ def synthetic_objects(n: int, seed: int = 0):
 
 def bench_balance(quick: bool) -> list[dict]:
     from .balance import partition
-    from .bounds import project_boxes, project_spheres
+    from .bounds import BoxProjector, SphereProjector
     from .camera import look_at, perspective
+    from .memory import keep_heap
 
     sizes = [10_000, 100_000] if quick else [100_000, 1_000_000]
     view = look_at([-40, -60, 40], [100, 60, 0], [0, 0, 1])
     proj = perspective(60, 1.0, 0.1, 1000)
     rows = []
+    heap = os.environ.get("MULTIGPU_MALLOC", "keep") != "default" and keep_heap()
+    print("per-frame wall time, median of 7; bounds prepared once per scene (not timed); "
+          f"allocator: {'heap kept (memory.keep_heap)' if heap else 'glibc default (MULTIGPU_MALLOC=default)'}")
     print(f"{'objects':>9} {'grid':>5} {'bounds':>7} {'project ms':>11} {'partition ms':>13} {'total ms':>9} {'target ms':>10}")
     for n in sizes:
         bmin, bmax, c, r, tris = synthetic_objects(n)
         for grid in [(2, 2), (4, 4)]:
             size = (1024 * grid[1], 1024 * grid[0])
             for kind in ("box", "sphere"):
-                proj_fn = (lambda: project_boxes(bmin, bmax, view, proj)) if kind == "box" else \
-                          (lambda: project_spheres(c, r, view, proj))
-                rects = proj_fn()
-                t_proj = _median_ms(proj_fn, 5)
-                t_part = _median_ms(lambda: partition(rects, tris, grid, size, 2048), 5)
-                t_all = _median_ms(lambda: partition(proj_fn(), tris, grid, size, 2048), 5)
+                project = BoxProjector(bmin, bmax) if kind == "box" else SphereProjector(c, r)
+                rects = project(view, proj)
+                t_proj = _median_ms(lambda: project(view, proj), 7)
+                t_part = _median_ms(lambda: partition(rects, tris, grid, size, 2048), 7)
+                t_all = _median_ms(lambda: partition(project(view, proj), tris, grid, size, 2048), 7)
                 target = 15 * n / 100_000 if grid == (2, 2) else None
                 rows.append({"objects": n, "grid": f"{grid[0]}x{grid[1]}", "bounds": kind, "project_ms": t_proj,
-                             "partition_ms": t_part, "total_ms": t_all, "target_ms": target})
+                             "partition_ms": t_part, "total_ms": t_all, "target_ms": target, "heap_kept": heap})
                 print(f"{n:9d} {grid[0]}x{grid[1]:<3} {kind:>7} {t_proj:11.1f} {t_part:13.1f} {t_all:9.1f} "
                       f"{'' if target is None else f'{target:.0f}':>10}")
     return rows

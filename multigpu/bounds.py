@@ -36,18 +36,56 @@ def _check(view, proj) -> np.ndarray:
     return proj @ view
 
 
-def _write_rects(out, idx, xmin, ymin, xmax, ymax) -> None:
+def _write_rects(out, idx, xmin, ymin, xmax, ymax, widen: float = 0.0) -> None:
     """NDC extents to clipped normalized rects in ``out`` (4, N) at columns ``idx`` (an index
-    array or a slice); rects that miss the screen become NaN."""
-    off = (xmax < -1) | (xmin > 1) | (ymax < -1) | (ymin > 1)
+    array or a slice), each side moved outwards by ``widen`` (NDC units); rects that miss the
+    screen become NaN. The extent arrays are overwritten."""
+    for v, shift in ((xmin, 0.5 - widen * 0.5), (ymin, 0.5 - widen * 0.5),
+                     (xmax, 0.5 + widen * 0.5), (ymax, 0.5 + widen * 0.5)):
+        np.multiply(v, 0.5, out=v)
+        v += shift
+    off = (xmax < 0.0) | (xmin > 1.0) | (ymax < 0.0) | (ymin > 1.0)
     for row, v in enumerate((xmin, ymin, xmax, ymax)):
-        v = v * 0.5
-        v += 0.5
-        np.clip(v, 0.0, 1.0, out=v)
-        out[row, idx] = v
+        if isinstance(idx, slice):
+            np.clip(v, 0.0, 1.0, out=out[row, idx])
+        else:
+            np.clip(v, 0.0, 1.0, out=v)
+            out[row, idx] = v
     if off.any():
         cols = np.arange(out.shape[1])[idx][off]
         out[:, cols] = np.nan
+
+
+class BoxProjector:
+    """Axis-aligned boxes prepared once (centres and half extents, coordinate-major) so that
+    each frame's projection is a handful of contiguous numpy passes.
+
+    ``BoxProjector(bmin, bmax)(view, proj)`` equals ``project_boxes(bmin, bmax, view, proj)``.
+    """
+
+    def __init__(self, bmin, bmax, dtype=np.float32, chunk: int = 1 << 15):
+        bmin = np.asarray(bmin, dtype=np.float64)
+        bmax = np.asarray(bmax, dtype=np.float64)
+        if bmin.ndim != 2 or bmin.shape[1] != 3 or bmax.shape != bmin.shape:
+            raise ValueError(f"bmin and bmax must both have shape (N, 3), got {bmin.shape} and {bmax.shape}")
+        self.dtype = np.dtype(dtype)
+        self.chunk = int(chunk)
+        self.center = np.ascontiguousarray(((bmin + bmax) * 0.5).T)  # (3, N) float64
+        self.half64 = np.ascontiguousarray(np.abs(bmax - bmin).T * 0.5)  # (3, N) float64
+        self.half = self.half64.astype(self.dtype)  # per-corner offsets in ``dtype``
+
+    def __len__(self) -> int:
+        return self.center.shape[1]
+
+    def __call__(self, view, proj) -> np.ndarray:
+        """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen."""
+        M = _check(view, proj)
+        n = len(self)
+        out = np.empty((4, n))
+        for s in range(0, n, self.chunk):  # blocks of objects, not objects
+            e = min(n, s + self.chunk)
+            _boxes_block(self.center[:, s:e], self.half[:, s:e], self.half64[:, s:e], M, self.dtype, out[:, s:e])
+        return out.T
 
 
 def project_boxes(bmin, bmax, view, proj, dtype=np.float32, chunk: int = 1 << 15) -> np.ndarray:
@@ -58,58 +96,49 @@ def project_boxes(bmin, bmax, view, proj, dtype=np.float32, chunk: int = 1 << 15
     bmin, bmax : (N, 3) float  box corners in world space.
     view, proj : (4, 4) float  OpenGL-style view and projection matrices.
     dtype : float type of the per-corner arithmetic; the box centres are always transformed in
-        float64. Rects are widened by a few units in the last place of ``dtype`` so rounding
-        never makes them smaller than the true bounds.
+        float64. Rects are widened by a few units in the last place of ``dtype`` (relative to
+        the screen) so rounding never makes them smaller than the true bounds.
     chunk : objects per block (blocks keep the 8-corner temporaries in cache).
 
     Returns
     -------
     rects : (N, 4) float64 (a view of a coordinate-major array).
+
+    For per-frame use build a ``BoxProjector`` once and call it each frame.
     """
-    M = _check(view, proj)
-    bmin = np.asarray(bmin, dtype=np.float64)
-    bmax = np.asarray(bmax, dtype=np.float64)
-    n = bmin.shape[0]
-    out = np.empty((4, n))
-    for s in range(0, n, chunk):  # blocks of objects, not objects
-        e = min(n, s + chunk)
-        _boxes_block(bmin[s:e], bmax[s:e], M, np.dtype(dtype), out[:, s:e])
-    return out.T
+    return BoxProjector(bmin, bmax, dtype, chunk)(view, proj)
 
 
-def _boxes_block(bmin, bmax, M, dtype, out) -> None:
-    center = (bmin + bmax) * 0.5
-    half = (bmax - bmin) * 0.5
-    clip_c = (center @ M[:, :3].T + M[:, 3]).T  # (4, n) float64, camera-relative
+def _boxes_block(center, half, half64, M, dtype, out) -> None:
+    """Rects of one block: ``center``/``half64`` (3, n) float64, ``half`` (3, n) in ``dtype``."""
+    clip_c = np.dot(M[:, :3], center)  # (4, n) float64, camera-relative
+    clip_c += M[:, 3:]
     # the near/far plane distances are affine in the corner: their extremes need no corners
     near_row, far_row = M[2] + M[3], M[3] - M[2]
     near_c, far_c = clip_c[2] + clip_c[3], clip_c[3] - clip_c[2]
-    near_r = np.abs(half) @ np.abs(near_row[:3])
-    far_r = np.abs(half) @ np.abs(far_row[:3])
-    all_front = near_c - near_r >= 0
+    near_r = np.dot(np.abs(near_row[:3]), half64)
+    far_r = np.dot(np.abs(far_row[:3]), half64)
+    all_front = near_c >= near_r
     invisible = (near_c + near_r < 0) | (far_c + far_r < 0)
-    out[:, invisible] = np.nan
     fast = all_front & ~invisible
     if fast.all():
         fast = slice(None)
-    elif fast.any():
-        fast = np.flatnonzero(fast)
     else:
-        fast = None
+        out[:, invisible] = np.nan
+        fast = np.flatnonzero(fast) if fast.any() else None
     if fast is not None:
-        hx, hy, hz = (half[fast, a].astype(dtype) for a in range(3))
+        hx, hy, hz = half[0, fast], half[1, fast], half[2, fast]
         cx, cy, cw = (_corners(clip_c[r, fast].astype(dtype), hx, hy, hz, M[r, :3].astype(dtype))
                       for r in (0, 1, 3))
         x = np.divide(cx, cw, out=cx)
         y = np.divide(cy, cw, out=cy)
-        eps = float(np.finfo(dtype).eps) * 8
         ext = [np.minimum.reduce(x), np.minimum.reduce(y), np.maximum.reduce(x), np.maximum.reduce(y)]
-        ext = [v - eps * (1 + np.abs(v)) for v in ext[:2]] + [v + eps * (1 + np.abs(v)) for v in ext[2:]]
-        _write_rects(out, fast, *ext)
+        # rounding in ``dtype`` moves a corner by a few ulps of its NDC value; only values
+        # within [-1, 1] matter after clipping, so a fixed widening of 16 ulps of 1 is enough
+        _write_rects(out, fast, *ext, widen=float(np.finfo(dtype).eps) * 16)
     slow = np.flatnonzero(~all_front & ~invisible)
     if slow.size:
-        signs = _SIGNS[None, :, :]
-        offs = half[slow, None, :] * signs  # (m, 8, 3) float64: few boxes cross the near plane
+        offs = half64[:, slow].T[:, None, :] * _SIGNS[None, :, :]  # (m, 8, 3): few boxes cross the near plane
         cx, cy, cz, cw = (clip_c[r, slow, None] + offs @ M[r, :3] for r in range(4))
         _clipped_rects(cx, cy, cz, cw, out, slow)
 
@@ -166,40 +195,69 @@ def _clipped_rects(cx, cy, cz, cw, out, idx) -> None:
     _write_rects(out, idx, xmin, ymin, xmax, ymax)
 
 
+class SphereProjector:
+    """Bounding spheres prepared once (centres coordinate-major) for per-frame projection.
+
+    ``SphereProjector(centers, radii)(view, proj)`` equals ``project_spheres(...)``.
+    """
+
+    def __init__(self, centers, radii, chunk: int = 1 << 15):
+        centers = np.asarray(centers, dtype=np.float64)
+        radii = np.asarray(radii, dtype=np.float64)
+        if centers.ndim != 2 or centers.shape[1] != 3 or radii.shape != centers.shape[:1]:
+            raise ValueError(f"centers must be (N, 3) and radii (N,), got {centers.shape} and {radii.shape}")
+        self.center = np.ascontiguousarray(centers.T)  # (3, N)
+        self.radii = np.abs(radii)
+        self.chunk = int(chunk)
+
+    def __len__(self) -> int:
+        return self.radii.shape[0]
+
+    def __call__(self, view, proj) -> np.ndarray:
+        """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen."""
+        view = np.asarray(view, dtype=np.float64)
+        proj = np.asarray(proj, dtype=np.float64)
+        _check(view, proj)
+        n = len(self)
+        out = np.empty((4, n))
+        # frustum planes in view space (Gribb-Hartmann on the projection), normalized
+        planes = np.stack([proj[3] + proj[0], proj[3] - proj[0], proj[3] + proj[1],
+                           proj[3] - proj[1], proj[3] + proj[2], proj[3] - proj[2]])
+        planes /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+        near = _near_distance(proj)
+        for s in range(0, n, self.chunk):  # blocks of objects, not objects
+            e = min(n, s + self.chunk)
+            _spheres_block(self.center[:, s:e], self.radii[s:e], view, proj, planes, near, out[:, s:e])
+        return out.T
+
+
 def project_spheres(centers, radii, view, proj, chunk: int = 1 << 15) -> np.ndarray:
     """Normalized screen rects of bounding spheres (exact tangent bounds, float64).
 
     Assumes a perspective ``proj`` of the usual GL form (``w_clip = -z_view``); ``view`` may be
     any rigid transform (rotation and translation). Spheres crossing the near plane get the
-    near-clipped bounds of their enclosing box.
+    near-clipped bounds of their enclosing box. For per-frame use build a ``SphereProjector``.
     """
-    view = np.asarray(view, dtype=np.float64)
-    proj = np.asarray(proj, dtype=np.float64)
-    _check(view, proj)
-    centers = np.asarray(centers, dtype=np.float64)
-    radii = np.asarray(radii, dtype=np.float64)
-    n = centers.shape[0]
-    out = np.empty((4, n))
-    # frustum planes in view space (Gribb-Hartmann on the projection), normalized
-    planes = np.stack([proj[3] + proj[0], proj[3] - proj[0], proj[3] + proj[1],
-                       proj[3] - proj[1], proj[3] + proj[2], proj[3] - proj[2]])
-    planes /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
-    near = _near_distance(proj)
-    for s in range(0, n, chunk):  # blocks of objects, not objects
-        e = min(n, s + chunk)
-        _spheres_block(centers[s:e], radii[s:e], view, proj, planes, near, out[:, s:e])
-    return out.T
+    return SphereProjector(centers, radii, chunk)(view, proj)
 
 
-def _spheres_block(centers, radii, view, proj, planes, near, out) -> None:
-    out[:] = np.nan
-    vc = (centers @ view[:3, :3].T + view[:3, 3]).T  # (3, n) view space
-    dist = planes[:, :3] @ vc + planes[:, 3:]  # (6, n) signed distances
-    invisible = (dist < -radii).any(axis=0)
+def _spheres_block(center, radii, view, proj, planes, near, out) -> None:
+    """Rects of one block of spheres: ``center`` (3, n), ``radii`` (n,)."""
+    vc = np.dot(view[:3, :3], center)  # (3, n) view space
+    vc += view[:3, 3:]
+    dist = np.dot(planes[:, :3], vc)  # (6, n) signed distances
+    dist += planes[:, 3:]
+    dist += radii
+    invisible = (dist < 0).any(axis=0)
     depth = -vc[2]
     crossing = (depth - radii < near) & ~invisible
-    ok = np.flatnonzero(~invisible & ~crossing)
-    if ok.size:
+    shown = ~invisible & ~crossing
+    if shown.all():
+        ok = slice(None)
+    else:
+        out[:] = np.nan
+        ok = np.flatnonzero(shown) if shown.any() else None
+    if ok is not None:
         x, y, z, r = vc[0, ok], vc[1, ok], depth[ok], radii[ok]
         lo_x, hi_x = _tangent_range(x, z, r)
         lo_y, hi_y = _tangent_range(y, z, r)
@@ -211,7 +269,8 @@ def _spheres_block(centers, radii, view, proj, planes, near, out) -> None:
     cross = np.flatnonzero(crossing)
     if cross.size:
         r = radii[cross, None]
-        out[:, cross] = project_boxes(centers[cross] - r, centers[cross] + r, view, proj, np.float64).T
+        c = center[:, cross].T
+        out[:, cross] = project_boxes(c - r, c + r, view, proj, np.float64).T
 
 
 def _tangent_range(x, z, r):

@@ -12,9 +12,11 @@ Bad input prints ``multigpu: error: ...`` (one line) and exits 2.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from .errors import InputError
+from .memory import keep_heap
 
 
 def _scene_args(p: argparse.ArgumentParser) -> None:
@@ -84,6 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if os.environ.get("MULTIGPU_MALLOC", "keep") != "default":
+        keep_heap()  # per-frame temporaries stay in the heap (see memory.py)
     try:
         if args.cmd == "walkthrough":
             return _walkthrough(args)

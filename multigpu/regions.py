@@ -12,6 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# pixel coordinates of object spans: int32 halves the memory traffic of the per-frame passes;
+# displays are limited to MAX_PIXELS per axis so every coordinate fits
+SPAN_DTYPE = np.int32
+MAX_PIXELS = 2**30
+
 
 def tile_regions(rows: int, cols: int, tw: int, th: int) -> np.ndarray:
     """(K, 4) int64 display tile of every rank label (column-major, row 0 at the top)."""
@@ -32,7 +37,7 @@ def pixel_spans(rects: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, n
 
     Returns
     -------
-    spans : (N, 4) int64  ``[cx0, cy0, cx1, cy1]`` inclusive pixel columns/rows (0 where off).
+    spans : (N, 4) int32  ``[cx0, cy0, cx1, cy1]`` inclusive pixel columns/rows (0 where off).
     onscreen : (N,) bool
     """
     W, H = size
@@ -41,13 +46,11 @@ def pixel_spans(rects: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, n
     with np.errstate(invalid="ignore"):
         onscreen = (rt[2] >= 0.0) & (rt[0] <= 1.0) & (rt[3] >= 0.0) & (rt[1] <= 1.0)
         # (False for NaN rows: every comparison with NaN is False)
-        c = np.empty((4, r.shape[0]), dtype=np.float64)
-        np.multiply(rt, np.array([[W], [H], [W], [H]], dtype=np.float64), out=c)
-        np.floor(c, out=c)
+        c = np.multiply(rt, np.array([[W], [H], [W], [H]], dtype=np.float64))
         np.clip(c, 0.0, np.array([[W - 1], [H - 1], [W - 1], [H - 1]], dtype=np.float64), out=c)
-        spans_t = c.astype(np.int64)
-    if not onscreen.all():
-        spans_t[:, ~onscreen] = 0
+        if not onscreen.all():
+            c[:, ~onscreen] = 0.0
+        spans_t = c.astype(SPAN_DTYPE)  # truncation is floor: every value is >= 0 here
     spans = spans_t.T  # (N, 4) view of the coordinate-major array
     return spans, onscreen
 

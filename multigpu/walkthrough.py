@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bounds import project_boxes, project_spheres
+from .bounds import BoxProjector, SphereProjector
 from .config import WalkConfig
 from .errors import InputError
 from .exchange import barrier, exchange, wait_all
@@ -58,18 +58,20 @@ def make_path(cfg: WalkConfig, scene) -> CameraPath:
     return gen(scene, frames=cfg.frames or (1200 if cfg.path_kind == "walkthrough" else 300))
 
 
-def project(cfg: WalkConfig, scene, view, proj) -> np.ndarray:
+def projector(cfg: WalkConfig, scene) -> BoxProjector | SphereProjector:
+    """The scene's bounds prepared once for per-frame projection (``--bounds box|sphere``)."""
     if cfg.bounds == "sphere":
-        return project_spheres(scene.centers, scene.radii, view, proj)
-    return project_boxes(scene.bmin, scene.bmax, view, proj)
+        return SphereProjector(scene.centers, scene.radii)
+    return BoxProjector(scene.bmin, scene.bmax)
 
 
 def _check_visible(cfg, scene, path) -> None:
     from .render import frame_matrices
 
+    project = projector(cfg, scene)
     for f in np.linspace(0, len(path) - 1, min(len(path), 12)).astype(int):
         view, proj, _ = frame_matrices(path.camera(int(f)), cfg.size)
-        if (~np.isnan(project(cfg, scene, view, proj)[:, 0])).any():
+        if (~np.isnan(project(view, proj)[:, 0])).any():
             return
     raise InputError(f"the camera path never sees the scene ({scene.name}): no visible triangles")
 
@@ -130,6 +132,7 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
     my_tile = tiles[rank]
     strategy = make_strategy(cfg.balance, cfg.grid, size, cfg.strips)
     tris = scene.tris
+    project = projector(cfg, scene)
     back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
     front = np.zeros_like(back)  # what the rank's monitor shows
     n_frames = len(path)
@@ -160,7 +163,7 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
             w0, c0 = time.perf_counter(), time.process_time()
             _fault(rank, f)
             view, proj, light = frame_matrices(path.camera(f), size)
-            part = strategy.plan(project(cfg, scene, view, proj), tris)
+            part = strategy.plan(project(view, proj), tris)
             w1, c1 = time.perf_counter(), time.process_time()
             region = part.regions[rank]
             mask = part.visible[rank]

@@ -173,7 +173,7 @@ def test_tiny_walls_one_pixel_per_rank():
 @pytest.mark.parametrize("bad", [
     dict(grid=(0, 2)), dict(grid=(2, -1)), dict(strips=1), dict(strips=0),
     dict(rects=np.zeros((5, 3))), dict(tris=np.ones(4, np.int64)), dict(tris=-np.ones(5, np.int64)),
-    dict(size=(1, 64)), dict(tris=np.array(["a"] * 5)),
+    dict(size=(1, 64)), dict(tris=np.array(["a"] * 5)), dict(size=(2**31, 64)),
 ])
 def test_bad_arguments_raise_value_error(bad):
     args = dict(rects=np.zeros((5, 4)), tris=np.ones(5, np.int64), grid=(2, 2), size=(64, 64), strips=16)
@@ -211,3 +211,19 @@ def test_property_tiling_and_recount(objs, grid, strips, tile):
     # every object that is on screen is rendered by at least one rank
     _, on = pixel_spans(rects, (W, H))
     assert (p.visible.any(axis=0) == on).all()
+
+
+def test_huge_wall_balances_within_int32_spans():
+    """A 2**30-pixel-wide wall (the limit) still tiles exactly and recounts."""
+    rects, tris = clustered(2000)
+    W, H = 2**30, 4096
+    p = partition(rects, tris, (1, 4), (W, H), strips=4096)
+    r = p.regions
+    assert ((r[:, 0] < r[:, 2]) & (r[:, 1] < r[:, 3]) & (r[:, 0] >= 0) & (r[:, 1] >= 0) & (r[:, 2] <= W) & (r[:, 3] <= H)).all()
+    areas = (r[:, 2] - r[:, 0]) * (r[:, 3] - r[:, 1])
+    assert int(areas.sum()) == W * H  # inside the display and summing to it: with disjointness, a tiling
+    for i in range(4):
+        for j in range(i + 1, 4):
+            assert max(r[i, 0], r[j, 0]) >= min(r[i, 2], r[j, 2]) or max(r[i, 1], r[j, 1]) >= min(r[i, 3], r[j, 3])
+    _, loads = recount(rects, tris, p.regions, W, H)
+    assert (p.loads == loads).all()

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from multigpu.bounds import project_boxes, project_spheres
+from multigpu.bounds import BoxProjector, SphereProjector, project_boxes, project_spheres
+from multigpu.memory import keep_heap
 from multigpu.camera import look_at, perspective
 
 V = look_at([0, -10, 2], [0, 0, 0], [0, 0, 1])
@@ -124,3 +125,25 @@ def test_far_from_origin_keeps_precision(offset):
 def test_bad_matrices():
     with pytest.raises(ValueError):
         project_boxes(np.zeros((1, 3)), np.ones((1, 3)), np.eye(3), P)
+
+
+def test_prepared_projectors_match_and_are_reusable():
+    bmin, bmax = random_boxes(500, seed=3)
+    boxes = BoxProjector(bmin, bmax, chunk=64)  # several blocks
+    c, r = (bmin + bmax) / 2, np.linalg.norm(bmax - bmin, axis=1) / 2
+    spheres = SphereProjector(c, r, chunk=64)
+    for eye in ([0, -10, 2], [3, -6, 1], [0, 0.5, 0.2]):  # the last one is inside the cloud
+        view = look_at(eye, [0, 0, 0], [0, 0, 1])
+        np.testing.assert_array_equal(boxes(view, P), project_boxes(bmin, bmax, view, P, chunk=1 << 20))
+        np.testing.assert_array_equal(spheres(view, P), project_spheres(c, r, view, P, chunk=1 << 20))
+
+
+def test_projector_shape_errors():
+    with pytest.raises(ValueError, match="bmin and bmax"):
+        BoxProjector(np.zeros((2, 3)), np.ones((3, 3)))
+    with pytest.raises(ValueError, match="centers"):
+        SphereProjector(np.zeros((2, 3)), np.ones(3))
+
+
+def test_keep_heap_is_idempotent():
+    assert keep_heap() == keep_heap()

@@ -1,0 +1,38 @@
+"""Process-wide allocator setting for the per-frame path.
+
+Each frame allocates the same few MB-sized numpy temporaries (rects, spans, index arrays).
+glibc serves blocks above its mmap threshold with fresh ``mmap`` calls and returns them on
+free, so every frame pays the page faults of touching new memory again: at 10^5 objects that
+doubled the balancer's time here (``multigpu bench balance`` prints both). Raising the mmap
+and trim thresholds keeps such blocks in the heap, where they are reused warm.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+
+_M_TRIM_THRESHOLD = -1
+_M_MMAP_THRESHOLD = -3
+# glibc caps the mmap threshold at HEAP_MAX_SIZE / 2 (32 MiB on 64-bit systems)
+_MMAP_THRESHOLD = 32 << 20
+_TRIM_THRESHOLD = 256 << 20
+
+_applied: bool | None = None
+
+
+def keep_heap() -> bool:
+    """Keep large temporaries in the heap (glibc only; elsewhere a no-op). Returns whether the
+    setting is active. Idempotent."""
+    global _applied
+    if _applied is None:
+        try:
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+            mallopt = libc.mallopt
+        except (OSError, AttributeError):  # not glibc (macOS, musl without mallopt)
+            _applied = False
+        else:
+            mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+            _applied = bool(mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD)) and bool(
+                mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
+    return _applied
