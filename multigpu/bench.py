@@ -108,36 +108,55 @@ def bench_scene(quick: bool) -> list[dict]:
     return rows
 
 
-def bench_render(quick: bool) -> list[dict]:
-    """Per-frame overhead independent of object count, and indirect draw vs one bare draw."""
-    from .render import RegionRenderer, create_context
+def _quad_grid_scene(g: int, blocks: int):
+    """The same ``2 g^2`` triangles (a ``g x g`` grid of quads over NDC [-1, 1]^2, depths
+    varying) grouped into ``blocks^2`` objects of ``(g/blocks)^2`` quads each."""
     from .scene import assemble
 
+    b = g // blocks
+    n = blocks * blocks
+    oi, oj = np.divmod(np.arange(n), blocks)  # object block row / column
+    qi, qj = np.divmod(np.arange(b * b), b)  # quad within the block
+    x0 = ((oj[:, None] * b + qj[None, :]) / g * 2 - 1)  # (n, b*b)
+    y0 = ((oi[:, None] * b + qi[None, :]) / g * 2 - 1)
+    d = 2 / g
+    z = 0.5 * np.sin(x0 * 7.0) * np.cos(y0 * 5.0)
+    pos = np.zeros((n, b * b, 4, 3))
+    for k, (dx, dy) in enumerate(((0, 0), (d, 0), (d, d), (0, d))):  # 4 corners, not objects
+        pos[:, :, k, 0], pos[:, :, k, 1], pos[:, :, k, 2] = x0 + dx, y0 + dy, z
+    pos = pos.reshape(n, b * b * 4, 3)
+    nrm = np.zeros_like(pos)
+    nrm[..., 2] = 1
+    quad = np.array([0, 1, 2, 0, 2, 3])
+    idx = (np.arange(b * b)[:, None] * 4 + quad[None, :]).ravel()
+    rng = np.random.default_rng(0)
+    return assemble([(pos, nrm, idx, rng.uniform(0.3, 0.9, (n, 3)))], f"quads-{n}", {})
+
+
+def bench_render(quick: bool) -> list[dict]:
+    """Per-frame cost against object count, and the indirect path against one bare draw.
+
+    The same triangles are drawn as about 10^3 and 10^5 objects, in three frames: everything
+    visible on the whole display; one rank's quarter region with the objects that overlap it
+    (what a 2 x 2 wall's rank draws); and a scattered half of the objects (the worst case for
+    merged runs). Wall time per frame including the region's read-back, median of 7.
+    """
+    from .render import RegionRenderer, create_context
+
     ctx, _ = create_context()
-    total = 200_000 if quick else 1_000_000
+    g = 320 if quick else 640
     size = (512, 512)
+    W, H = size
+    mvp, light = np.eye(4), np.array([0, 0, 1.0])
     rows = []
-    print(f"{'objects':>8} {'triangles':>10} {'indirect ms':>12} {'bare draw ms':>13} {'ratio':>6}")
-    for n in (1_000, 100_000):
-        per = total // n
-        # n objects, each a strip of `per` thin triangles over a grid cell, facing the camera
-        k = int(np.ceil(np.sqrt(n)))
-        i = np.arange(n)
-        cx, cy = (i % k) / k * 2 - 1, (i // k) / k * 2 - 1
-        t = np.arange(per)
-        x = cx[:, None] + (t[None, :] / per) * (2 / k)
-        y = cy[:, None]
-        pos = np.zeros((n, per * 3, 3))
-        pos[:, 0::3, 0], pos[:, 0::3, 1] = x, y
-        pos[:, 1::3, 0], pos[:, 1::3, 1] = x + 2 / k / per, y
-        pos[:, 2::3, 0], pos[:, 2::3, 1] = x, y + 2 / k
-        nrm = np.zeros_like(pos)
-        nrm[..., 2] = 1
-        scene = assemble([(pos, nrm, np.arange(per * 3), np.full((n, 3), 0.7))], "bench", {})
+    print("wall ms per frame, median of 7; 'bare' is one vao.render of every triangle (no culling)")
+    print(f"{'frame':>9} {'objects':>8} {'triangles':>10} {'commands':>9} {'indirect ms':>12} {'bare ms':>8} "
+          f"{'vs bare':>8}")
+    for blocks in (32, 320):  # 1024 and 102400 objects
+        scene = _quad_grid_scene(g, blocks)
+        n = scene.n_objects
         r = RegionRenderer(ctx, scene, size)
-        mvp, light = np.eye(4), np.array([0, 0, 1.0])
-        mask = np.ones(n, dtype=bool)
-        t_ind = _median_ms(lambda: r.render(mvp, light, (0, 0, *size), mask), 7)
+        total = scene.indices.size
 
         def bare():
             r.fbo.use()
@@ -145,15 +164,26 @@ def bench_render(quick: bool) -> list[dict]:
             r.fbo.scissor = (0, 0, *size)
             r.fbo.clear(0, 0, 0, 1, depth=1.0)
             r.prog["mvp"].write(np.eye(4, dtype=np.float32))
-            r.vao.render(vertices=scene.indices.size)
+            r.cbo.bind_to_storage_buffer(0)
+            r.vao.render(vertices=total)
             r.fbo.read(viewport=(0, 0, *size), components=3, alignment=1)
 
-        # the bare draw needs one index list over one vertex range: base vertex 0 for all
-        r.ibo.write((scene.indices.reshape(n, -1) + scene.base_vertex[:, None]).astype(np.uint32).ravel())
         t_bare = _median_ms(bare, 7)
+        quarter = (scene.bmin[:, 0] <= 0) & (scene.bmin[:, 1] <= 0)
+        scattered = np.random.default_rng(1).random(n) < 0.5
+        for frame, region, mask in (("all", (0, 0, W, H), np.ones(n, bool)),
+                                    ("quarter", (0, 0, W // 2, H // 2), quarter),
+                                    ("scattered", (0, 0, W, H), scattered)):
+            t = _median_ms(lambda: r.render(mvp, light, region, mask), 7)
+            rows.append({"frame": frame, "objects": n, "triangles": int(scene.tris[mask].sum()),
+                         "commands": r.last_commands, "indirect_ms": t, "bare_ms": t_bare})
+            print(f"{frame:>9} {n:8d} {rows[-1]['triangles']:10d} {r.last_commands:9d} {t:12.2f} {t_bare:8.2f} "
+                  f"{t / t_bare:8.2f}")
         r.release()
-        rows.append({"objects": n, "triangles": scene.n_triangles, "indirect_ms": t_ind, "bare_ms": t_bare})
-        print(f"{n:8d} {scene.n_triangles:10d} {t_ind:12.2f} {t_bare:13.2f} {t_ind / t_bare:6.2f}")
+    by = {(d["frame"], d["objects"]): d["indirect_ms"] for d in rows}
+    for frame in ("all", "quarter", "scattered"):
+        ratio = by[(frame, 102400)] / by[(frame, 1024)]
+        print(f"{frame}: 10^5 / 10^3 objects frame time {ratio:.2f}")
     return rows
 
 

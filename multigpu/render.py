@@ -1,7 +1,8 @@
 """Headless GL rendering of one rank's screen region (moderngl on EGL). The only GL module.
 
 One context per rank, the whole scene uploaded once. A frame is ONE ``render_indirect`` call
-over the draw commands of the objects in the rank's T' mask (selected with numpy), into a
+over the draw commands of the objects in the rank's T' mask (one command per run of visible
+objects in the spatially ordered index buffer, built with numpy: see ``drawlist.py``), into a
 full-display-sized framebuffer with the full-display viewport and projection, scissored to the
 rank's region. Because viewport and projection are those of a one-rank full render, the pixels
 a rank produces are bit-identical to that render's pixels in its region (the scissor only
@@ -16,6 +17,7 @@ import os
 
 import numpy as np
 
+from .drawlist import DrawList
 from .errors import InputError
 
 EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL drivers "
@@ -24,15 +26,17 @@ EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL dri
 VERTEX = """
 #version 430
 uniform mat4 mvp;
+layout(std430, binding = 0) readonly buffer Colors { float colors[]; };  // 3 per object
 in vec3 in_pos;
 in vec3 in_nrm;
-in vec3 in_col;
+in uint in_obj;
 out vec3 v_nrm;
 out vec3 v_col;
 void main() {
     gl_Position = mvp * vec4(in_pos, 1.0);
     v_nrm = in_nrm;
-    v_col = in_col;
+    uint c = 3u * in_obj;
+    v_col = vec3(colors[c], colors[c + 1u], colors[c + 2u]);
 }
 """
 
@@ -105,14 +109,16 @@ class RegionRenderer:
         self.ctx = ctx
         self.size = W, H = size
         self.prog = ctx.program(vertex_shader=VERTEX, fragment_shader=FRAGMENT)
+        self.draws = DrawList(scene)
         self.vbo = ctx.buffer(np.ascontiguousarray(scene.vertices, dtype=np.float32))
-        self.ibo = ctx.buffer(np.ascontiguousarray(scene.indices, dtype=np.uint32))
-        self.cbo = ctx.buffer(np.ascontiguousarray(scene.colors, dtype=np.float32))
+        self.obo = ctx.buffer(self.draws.vertex_object)
+        self.ibo = ctx.buffer(self.draws.indices)
+        self.cbo = ctx.buffer(np.ascontiguousarray(scene.colors, dtype=np.float32).ravel())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 3f", "in_pos", "in_nrm"),
-                                                (self.cbo, "3f/i", "in_col")],
+                                                (self.obo, "1u", "in_obj")],
                                     index_buffer=self.ibo, index_element_size=4)
-        self.commands = scene.draw_commands()
-        self.indirect = ctx.buffer(reserve=max(self.commands.nbytes, 20))
+        self.indirect = ctx.buffer(reserve=20 * 1024)  # grows when a frame needs more commands
+        self.last_commands = 0  # draw commands of the last frame (runs of visible objects)
         self.fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer((W, H), 4)],
                                    depth_attachment=ctx.depth_renderbuffer((W, H)))
         self.depth_test = moderngl.DEPTH_TEST
@@ -124,7 +130,8 @@ class RegionRenderer:
         """
         x0, y0, x1, y1 = (int(v) for v in region)
         w, h = x1 - x0, y1 - y0
-        cmds = self.commands if mask is None else self.commands[mask]
+        cmds = self.draws.commands(mask)
+        self.last_commands = len(cmds)
         ctx = self.ctx
         self.fbo.use()
         self.fbo.viewport = (0, 0, *self.size)
@@ -132,16 +139,18 @@ class RegionRenderer:
         ctx.enable(self.depth_test)
         self.fbo.clear(*BACKGROUND, 1.0, depth=1.0)
         if len(cmds):
-            self.indirect.orphan(max(cmds.nbytes, 20))
+            if cmds.nbytes > self.indirect.size:
+                self.indirect.orphan(cmds.nbytes)
             self.indirect.write(cmds)
             self.prog["mvp"].write(np.ascontiguousarray(mvp.T, dtype=np.float32))
             self.prog["light"].value = tuple(float(v) for v in light)
+            self.cbo.bind_to_storage_buffer(0)
             self.vao.render_indirect(self.indirect, count=len(cmds))
         data = self.fbo.read(viewport=(x0, y0, w, h), components=3, alignment=1)
         return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)
 
     def release(self) -> None:
-        for obj in (self.vao, self.fbo, self.indirect, self.cbo, self.ibo, self.vbo, self.prog):
+        for obj in (self.vao, self.fbo, self.indirect, self.cbo, self.ibo, self.obo, self.vbo, self.prog):
             obj.release()
 
 

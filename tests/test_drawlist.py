@@ -1,0 +1,61 @@
+"""Run-merged draw commands draw exactly the triangles of the masked objects."""
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from multigpu.drawlist import DrawList, morton_order
+from multigpu.plant import generate_plant
+
+
+def _triangles(scene, mask):
+    """Independent reference: the masked objects' triangles as sorted absolute index triples."""
+    out = []
+    for i in np.flatnonzero(mask):
+        s, c, b = scene.first_index[i], scene.index_count[i], scene.base_vertex[i]
+        out.append(scene.indices[s:s + c].astype(np.int64) + b)
+    tri = np.concatenate(out).reshape(-1, 3) if out else np.zeros((0, 3), np.int64)
+    return tri[np.lexsort(tri.T[::-1])]
+
+
+def _drawn(dl, cmds):
+    parts = [dl.indices[f:f + c].astype(np.int64) for c, _, f, _, _ in cmds]
+    tri = np.concatenate(parts).reshape(-1, 3) if parts else np.zeros((0, 3), np.int64)
+    return tri[np.lexsort(tri.T[::-1])]
+
+
+SCENE = generate_plant(triangles=6000, seed=5)
+DL = DrawList(SCENE)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0, 1))
+def test_commands_cover_exactly_the_masked_objects(seed, density):
+    mask = np.random.default_rng(seed).random(SCENE.n_objects) < density
+    cmds = DL.commands(mask)
+    assert cmds.dtype == np.uint32 and cmds.shape[1] == 5
+    assert (cmds[:, 1] == 1).all() and (cmds[:, 0] > 0).all()
+    np.testing.assert_array_equal(_drawn(DL, cmds), _triangles(SCENE, mask))
+
+
+def test_all_visible_is_one_command_and_none_is_empty():
+    assert len(DL.commands(None)) == 1
+    assert len(DL.commands(np.zeros(SCENE.n_objects, bool))) == 0
+
+
+def test_vertex_object_ids_and_layout():
+    counts = np.bincount(DL.vertex_object, minlength=SCENE.n_objects)
+    for i in (0, SCENE.n_objects // 2, SCENE.n_objects - 1):
+        b = SCENE.base_vertex[i]
+        used = np.unique(SCENE.indices[SCENE.first_index[i]:SCENE.first_index[i] + SCENE.index_count[i]]) + b
+        assert (DL.vertex_object[used] == i).all()
+    assert counts.sum() == SCENE.vertices.shape[0]
+    assert sorted(DL.order) == list(range(SCENE.n_objects))
+
+
+def test_morton_order_keeps_neighbours_together():
+    g = np.stack(np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij"), -1).reshape(-1, 3)
+    order = morton_order(g.astype(float))
+    # each consecutive group of 8 in Z-order is one 2x2x2 cell
+    cells = g[order].reshape(-1, 8, 3) // 2
+    assert (cells == cells[:, :1]).all()
+    assert morton_order(np.zeros((0, 3))).size == 0
