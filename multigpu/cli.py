@@ -5,6 +5,7 @@
     multigpu path make KIND --out FILE         write a camera path file
     multigpu tree RxC                          print the GPU tree and each rank's ParInfo
     multigpu bench balance|scene|render        benchmarks (speed and memory figures)
+    multigpu experiment NAME|all [--quick]     the paper's evaluation: CSV, plots, Markdown
 
 Bad input prints ``multigpu: error: ...`` (one line) and exits 2.
 """
@@ -78,6 +79,11 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
     t.add_argument("grid")
 
+    e = sub.add_parser("experiment", help="the paper's evaluation: tables, plots, Markdown")
+    e.add_argument("name", help="all | gpus | resolution | balance | strips | orbit | overlap")
+    e.add_argument("--quick", action="store_true", help="tiny sizes: the same code in a few minutes")
+    e.add_argument("--out", default="out/experiments", help="output directory")
+    e.add_argument("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
     b.add_argument("what", help="balance | scene | render")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
@@ -97,6 +103,10 @@ def main(argv: list[str] | None = None) -> int:
             return _path_make(args)
         if args.cmd == "tree":
             return _tree(args)
+        if args.cmd == "experiment":
+            from . import experiments
+
+            return experiments.run(args.name, args.out, quick=args.quick, results=args.results)
         if args.cmd == "bench":
             from . import bench
 

@@ -1,0 +1,472 @@
+"""The paper's evaluation (Section 7) as runnable experiments: ``multigpu experiment NAME``.
+
+Each experiment launches walkthrough jobs (``mpiexec -n K ... multigpu walkthrough``, each
+under a hard timeout) or, for ``overlap``, runs the balancer in process, then writes into
+``OUT/NAME/``: ``NAME.csv`` (one row per configuration), PNG plots (matplotlib) and
+``NAME.md``, a Markdown fragment with the table and the plots. ``all`` runs every experiment
+and joins the fragments into one results page.
+
+Figures and what they are (see report.py): component columns are wall-clock means per rank;
+"emulated" figures use each rank's process CPU time and take the slowest rank per frame, the
+frame time the run would have with one core (GPU) per rank. Ranks outnumber cores here, so
+speedups and efficiencies are computed from emulated figures only.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .report import COLUMNS, read_timings
+
+# Dong & Peng 2019, Section 7 (quoted for comparison, not measured here)
+PAPER = {
+    "balance_speedup": 20.95 / 15.95,  # Fig. 7: mean FPS with / without balancing
+    "gpus_frame_ms_1": 52.36,  # Table 1: one GPU, 6 power plants
+    "gpus_frame_ms_4": 31.89,  # Table 1: four GPUs
+    "balancer_share_max": 0.13,  # Fig. 8: balancer at most 13 % of the frame
+    "triangles": 254_000_000,
+}
+
+
+@dataclass
+class Settings:
+    """Sizes of one experiment run; ``quick`` shrinks everything for smoke tests."""
+
+    quick: bool = False
+    triangles: int = 100_000  # one plant (the CLI's default scene)
+    frames: int = 240  # camera path frames per run (the path is resampled, not cut)
+    copies: tuple[int, ...] = (1, 2, 3, 4)
+    resolutions: tuple[int, ...] = (512, 1024, 2048, 4096)
+    res_frames: int = 40
+    strip_frames: int = 120
+    timeout: int = 900  # seconds per mpiexec job
+    strategies: tuple[str, ...] = field(default_factory=tuple)
+
+    @classmethod
+    def make(cls, quick: bool) -> "Settings":
+        from .strategies import REGISTRY
+
+        s = cls(quick=quick, strategies=tuple(REGISTRY))
+        if quick:
+            s.triangles, s.frames, s.copies = 20_000, 12, (1, 2)
+            s.resolutions, s.res_frames, s.strip_frames, s.timeout = (128, 256), 6, 8, 240
+        return s
+
+
+def _mpiexec() -> str:
+    here = Path(sys.executable).parent
+    found = shutil.which("mpiexec", path=f"{here}{os.pathsep}{os.environ.get('PATH', '')}")
+    if not found:
+        raise InputError("mpiexec not found: install MPI (pip install mpich) or put mpiexec on PATH")
+    return found
+
+
+@dataclass
+class Run:
+    """One finished walkthrough job: its summary and its per-(frame, rank) timing rows."""
+
+    summary: dict
+    rows: np.ndarray  # (F, K, C) complete frames only
+    out: Path
+
+    def col(self, name: str) -> np.ndarray:
+        return self.rows[:, :, COLUMNS.index(name)]
+
+    @property
+    def render_max_cpu(self) -> np.ndarray:
+        """Per frame, the slowest rank's rendering CPU time (the emulated render component)."""
+        return self.col("rendering_cpu_ms").max(axis=1)
+
+
+def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str], timeout: int) -> Run:
+    """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``; kill it on timeout."""
+    import json
+
+    k = grid[0] * grid[1]
+    out.mkdir(parents=True, exist_ok=True)
+    cmd = [_mpiexec(), "-n", str(k), sys.executable, "-m", "mpi4py", "-m", "multigpu", "walkthrough",
+           "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
+           "--no-progress", *args]
+    env = {**os.environ, "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", "1")}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                            start_new_session=True)
+    try:
+        log, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise RuntimeError(f"experiment job timed out after {timeout} s: {' '.join(cmd)}") from None
+    (out / "log.txt").write_text(log)
+    if proc.returncode != 0:
+        tail = "\n".join(log.strip().splitlines()[-5:])
+        raise RuntimeError(f"experiment job failed (exit {proc.returncode}): {' '.join(cmd)}\n{tail}")
+    summary = json.loads((out / "summary.json").read_text())
+    rows = read_timings(out / "timings.csv")
+    rows = rows[np.lexsort((rows[:, 1], rows[:, 0]))]
+    frames = rows.shape[0] // k
+    return Run(summary, rows[: frames * k].reshape(frames, k, len(COLUMNS)), out)
+
+
+def _scene_args(s: Settings, copies: int = 1) -> list[str]:
+    """``copies`` plants side by side, each of ``s.triangles`` (so the scene grows with copies)."""
+    return ["--triangles", str(s.triangles * copies), "--copies", str(copies)]
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    keys = list(rows[0])
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()})
+
+
+def _md_table(rows: list[dict], cols: list[tuple[str, str, str]]) -> str:
+    """Markdown table of ``rows`` with ``cols`` = (key, header, format)."""
+    head = "| " + " | ".join(h for _, h, _ in cols) + " |"
+    sep = "|" + "|".join("---:" for _ in cols) + "|"
+    body = ["| " + " | ".join(format(r[k], f) if f else str(r[k]) for k, _, f in cols) + " |" for r in rows]
+    return "\n".join([head, sep, *body])
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _breakdown(run: Run) -> dict:
+    s = run.summary
+    w = s["wall"]
+    return {
+        "lb_ms": w["load_balancing_ms"], "render_ms": w["rendering_ms"], "sync_ms": w["synchronization_ms"],
+        "exchange_ms": w["frame_exchange_ms"], "display_ms": w["display_ms"], "frame_ms": s["frame_ms"],
+        "fps": s["fps"], "lb_cpu_ms": s["cpu"]["load_balancing_cpu_ms"],
+        "render_cpu_max_ms": s["render_cpu_max_ms"], "exchange_cpu_ms": s["cpu"]["frame_exchange_cpu_ms"],
+        "emulated_ms": s["emulated_frame_ms"], "emulated_fps": s["emulated_fps"],
+        "imb_tris": s["imbalance_triangles"], "imb_render": s["imbalance_render_cpu"],
+        "bytes_per_frame": s["bytes_sent_per_frame"],
+    }
+
+
+BREAKDOWN_COLS = [("lb_ms", "LB", ".2f"), ("render_ms", "Render", ".2f"), ("sync_ms", "Sync", ".2f"),
+                  ("exchange_ms", "Exchange", ".2f"), ("display_ms", "Display", ".2f"),
+                  ("frame_ms", "Frame (wall)", ".2f"), ("fps", "FPS (wall)", ".1f"),
+                  ("emulated_ms", "Frame (emulated)", ".2f"), ("emulated_fps", "FPS (emulated)", ".1f")]
+
+
+# --------------------------------------------------------------------------- experiments
+
+def exp_gpus(s: Settings, out: Path) -> str:
+    """Table 1: 1, 2, 3, 4 ranks x scene sizes; per-component breakdown, FPS, render speedup."""
+    grids = [(1, 1), (1, 2), (1, 3), (2, 2)]
+    W, H = (384, 256) if s.quick else (768, 512)  # divisible by 1, 2 and 3 columns
+    rows, runs = [], {}
+    for copies in s.copies:
+        for grid in grids:
+            for bal in (("strips",) if grid == (1, 1) else ("strips", "none")):
+                if bal == "none" and grid != (2, 2):
+                    continue
+                tile = (W // grid[1], H // grid[0])
+                run = walk(out / f"c{copies}-{grid[0]}x{grid[1]}-{bal}", grid, tile,
+                           _scene_args(s, copies) + ["--frames", str(s.frames), "--balance", bal,
+                                                     "--mosaic-every", "0"], s.timeout)
+                runs[(copies, grid, bal)] = run
+                base = runs[(copies, (1, 1), "strips")]
+                speed = float(base.render_max_cpu.mean() / run.render_max_cpu.mean())
+                k = grid[0] * grid[1]
+                rows.append({"copies": copies, "triangles": run.summary["config"]["scene"]["triangles"],
+                             "ranks": k, "grid": f"{grid[0]}x{grid[1]}", "balance": bal, **_breakdown(run),
+                             "render_speedup": speed, "render_efficiency": speed / k})
+    _write_csv(out / "gpus.csv", rows)
+    plt = _plt()
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    for copies in s.copies:
+        r = [x for x in rows if x["copies"] == copies and x["balance"] == "strips"]
+        ax[0].plot([x["ranks"] for x in r], [x["emulated_fps"] for x in r], "o-", label=f"{r[0]['triangles']} tris")
+        ax[1].plot([x["ranks"] for x in r], [x["render_speedup"] for x in r], "o-", label=f"{r[0]['triangles']} tris")
+    ax[1].plot([1, 4], [1, 4], "k:", label="linear")
+    ax[0].set(xlabel="ranks (GPUs)", ylabel="emulated FPS", title="Frame rate (emulated parallel)")
+    ax[1].set(xlabel="ranks (GPUs)", ylabel="speedup over 1 rank", title="Rendering component speedup (CPU time)")
+    for a in ax:
+        a.legend(fontsize=8)
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "gpus.png", dpi=100)
+    plt.close(fig)
+    k4 = [x for x in rows if x["ranks"] == 4]
+    md = [f"Display {W}x{H}; walkthrough path resampled to {s.frames} frames; plant copies {list(s.copies)}.",
+          "Render speedup = mean 1-rank rendering CPU time / mean over frames of the slowest rank's rendering "
+          "CPU time (emulated parallel); efficiency = speedup / ranks.", "",
+          _md_table(rows, [("triangles", "Triangles", ""), ("grid", "Grid", ""), ("balance", "Balance", ""),
+                           *BREAKDOWN_COLS, ("render_speedup", "Render speedup", ".2f"),
+                           ("render_efficiency", "Efficiency", ".0%")]),
+          "", "![gpus](gpus.png)", ""]
+    strips4 = ", ".join(f"{x['render_speedup']:.2f}" for x in k4 if x["balance"] == "strips")
+    none4 = ", ".join(f"{x['render_speedup']:.2f}" for x in k4 if x["balance"] == "none")
+    paper = PAPER["gpus_frame_ms_1"] / PAPER["gpus_frame_ms_4"]
+    md.append(f"4 ranks, rendering-component speedup over 1 rank, by scene size: strips {strips4}; none {none4}. "
+              f"Paper (Table 1, 6 plants): 52.36 ms on one GPU vs 31.89 ms on four = {paper:.2f}x frame speedup.")
+    return "\n".join(md)
+
+
+def exp_resolution(s: Settings, out: Path) -> str:
+    """Table 2: growing walls, strips = pixel width; Frame Exchange grows with the pixels."""
+    rows = []
+    for res in s.resolutions:
+        run = walk(out / f"r{res}", (2, 2), (res // 2, res // 2),
+                   _scene_args(s) + ["--frames", str(s.res_frames), "--strips", str(res), "--mosaic-every", "0"],
+                   s.timeout)
+        rows.append({"display": f"{res}x{res}", "pixels": res * res, **_breakdown(run)})
+    _write_csv(out / "resolution.csv", rows)
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    x = np.arange(len(rows))
+    bottom = np.zeros(len(rows))
+    for key, label in (("lb_ms", "load balancing"), ("render_ms", "rendering"), ("sync_ms", "synchronization"),
+                       ("exchange_ms", "frame exchange"), ("display_ms", "display")):
+        v = np.array([r[key] for r in rows])
+        ax.bar(x, v, bottom=bottom, label=label)
+        bottom += v
+    ax.set_xticks(x, [r["display"] for r in rows])
+    ax.set(ylabel="wall ms per frame (rank mean)", title="Frame breakdown by wall resolution (2x2)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "resolution.png", dpi=100)
+    plt.close(fig)
+    return "\n".join([f"2x2 wall, strips = display width, {s.res_frames} frames.", "",
+                      _md_table(rows, [("display", "Display", ""), *BREAKDOWN_COLS,
+                                       ("exchange_cpu_ms", "Exchange CPU", ".2f"),
+                                       ("bytes_per_frame", "Bytes/frame", ".0f")]),
+                      "", "![resolution](resolution.png)"])
+
+
+def _thumb(run: Run, frame: int) -> Path | None:
+    p = run.out / "mosaic" / f"frame_{frame:05d}_partition.png"
+    return p if p.exists() else None
+
+
+def exp_balance(s: Settings, out: Path) -> str:
+    """Fig. 7: per-frame FPS over the walkthrough for every strategy, with thumbnails."""
+    every = max(1, s.frames // 24)
+    runs = {}
+    for name in s.strategies:
+        runs[name] = walk(out / name, (2, 2), (256, 256), _scene_args(s) + [
+            "--frames", str(s.frames), "--balance", name, "--mosaic-every", str(every)], s.timeout)
+    per = {n: np.array(r.summary["per_frame_emulated_ms"]) for n, r in runs.items()}
+    rows = [{"balance": n, **_breakdown(r), "speedup_vs_none": float(per["none"].mean() / per[n].mean())}
+            for n, r in runs.items()]
+    _write_csv(out / "balance.csv", rows)
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(10, 4))
+    for n, v in per.items():
+        ax.plot(1000.0 / v, label=f"{n} (mean {1000 / v.mean():.0f} FPS)", lw=1)
+    ax.set(xlabel="frame", ylabel="emulated FPS", title="Walkthrough frame rate per strategy (2x2, emulated parallel)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "balance.png", dpi=100)
+    plt.close(fig)
+    # the saved frames where balancing and no balancing differ most
+    saved = np.arange(0, len(per["strips"]), every)
+    gap = per["none"][saved] / per["strips"][saved]
+    md_thumbs = []
+    for f in saved[np.argsort(-gap)[:2]]:
+        pair = [_thumb(runs[n], int(f)) for n in ("strips", "none")]
+        if all(pair):
+            for n, p in zip(("strips", "none"), pair):
+                dst = out / f"thumb_{f:05d}_{n}.png"
+                shutil.copyfile(p, dst)
+            md_thumbs.append(f"Frame {f} (none / strips emulated time {gap[np.flatnonzero(saved == f)[0]]:.2f}x): "
+                             f"strips ![]({f'thumb_{f:05d}_strips.png'}) none ![]({f'thumb_{f:05d}_none.png'})")
+    sp = rows[[r["balance"] for r in rows].index("strips")]["speedup_vs_none"]
+    return "\n".join([f"2x2 wall of 256x256 tiles, walkthrough resampled to {s.frames} frames, plant "
+                      f"{runs['strips'].summary['config']['scene']['triangles']} triangles.", "",
+                      _md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
+                                       ("imb_render", "Imb. render", ".3f"),
+                                       ("speedup_vs_none", "Speedup vs none", ".2f")]),
+                      "", "![balance](balance.png)", "", *md_thumbs, "",
+                      f"Emulated frame-time speedup of strips over none: {sp:.2f}x (paper, Fig. 7: "
+                      f"{PAPER['balance_speedup']:.2f}x)."])
+
+
+def exp_strips(s: Settings, out: Path) -> str:
+    """Fig. 8: frame rate and balancer time against stripNum, 2 .. pixel width."""
+    W = 256 if s.quick else 1024
+    counts = [2, 4, 16, 64, W] if s.quick else [2, 4, 8, 16, 32, 64, 128, 256, 512, W]
+    rows = []
+    for q in counts:
+        run = walk(out / f"s{q}", (2, 2), (W // 2, W // 2), _scene_args(s) + [
+            "--frames", str(s.strip_frames), "--strips", str(q), "--mosaic-every", "0"], s.timeout)
+        b = _breakdown(run)
+        rows.append({"strips": q, **b, "balancer_share": b["lb_cpu_ms"] / b["emulated_ms"]})
+    _write_csv(out / "strips.csv", rows)
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4))
+    q = [r["strips"] for r in rows]
+    ax.semilogx(q, [r["emulated_fps"] for r in rows], "o-", base=2, label="emulated FPS")
+    ax.set(xlabel="stripNum", ylabel="emulated FPS", title=f"Strip count, 2x2 wall of {W}x{W}")
+    ax2 = ax.twinx()
+    ax2.semilogx(q, [100 * r["balancer_share"] for r in rows], "s--", color="C1", base=2, label="balancer % of frame")
+    ax2.set_ylabel("balancer share of the frame (%)")
+    fig.legend(loc="lower center", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "strips.png", dpi=100)
+    plt.close(fig)
+    last = rows[-1]
+    return "\n".join([f"2x2 wall of {W}x{W}, {s.strip_frames} frames per strip count. Balancer share = "
+                      "balancer CPU time / emulated frame time.", "",
+                      _md_table(rows, [("strips", "Strips", ""), ("lb_cpu_ms", "Balancer CPU ms", ".2f"),
+                                       ("balancer_share", "Share", ".1%"), ("imb_tris", "Imb. tris", ".3f"),
+                                       ("emulated_ms", "Frame (emulated)", ".2f"),
+                                       ("emulated_fps", "FPS (emulated)", ".1f"), ("frame_ms", "Frame (wall)", ".2f")]),
+                      "", "![strips](strips.png)", "",
+                      f"At the largest strip count ({last['strips']}) the balancer takes {last['balancer_share']:.1%} "
+                      f"of the emulated frame (paper: at most {PAPER['balancer_share_max']:.0%})."])
+
+
+def exp_orbit(s: Settings, out: Path) -> str:
+    """The circular path keeping the whole scene in view; every strategy side by side."""
+    rows = []
+    for name in s.strategies:
+        run = walk(out / name, (2, 2), (256, 256), _scene_args(s) + [
+            "--path-kind", "orbit", "--frames", str(s.frames), "--balance", name, "--mosaic-every", "0"], s.timeout)
+        rows.append({"balance": name, **_breakdown(run)})
+    _write_csv(out / "orbit.csv", rows)
+    return "\n".join([f"2x2 wall of 256x256 tiles, orbit path ({s.frames} frames) with the whole plant in view.", "",
+                      _md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
+                                       ("imb_render", "Imb. render", ".3f")])])
+
+
+def exp_overlap(s: Settings, out: Path) -> str:
+    """Triangles rendered summed over ranks / visible triangles, against ranks and strips,
+    beside Molnar's O = ((S + sqrt(rho a)) / S)^2. In process: balancer only, no rendering."""
+    from .balance import partition
+    from .bounds import BoxProjector
+    from .models import SceneSpec, load_scene
+    from .paths import walkthrough
+    from .render import frame_matrices
+
+    scene, _ = load_scene(SceneSpec(triangles=s.triangles))
+    path = walkthrough(scene, frames=s.frames)
+    project = BoxProjector(scene.bmin, scene.bmax)
+    size = (1024, 1024)
+    W, H = size
+    grids = [(1, 2), (2, 2), (2, 4), (4, 4)]
+    counts = [4, 16, 64, 256, 1024]
+    tris = scene.tris
+    acc = {(g, q): [] for g in grids for q in counts}
+    molnar = {g: [] for g in grids}
+    for f in range(len(path)):  # frames of the path, not objects
+        view, proj, _ = frame_matrices(path.camera(f), size)
+        rects = project(view, proj)
+        on = ~np.isnan(rects[:, 0])
+        visible = int(tris[on].sum())
+        if visible == 0:
+            continue
+        # triangle-weighted mean object footprint in pixels (Molnar's rho * a at object granularity)
+        wpx = (rects[on, 2] - rects[on, 0]) * W
+        hpx = (rects[on, 3] - rects[on, 1]) * H
+        s_obj = float(np.sqrt(np.average(wpx * hpx, weights=np.maximum(tris[on], 1))))
+        for g in grids:
+            k = g[0] * g[1]
+            S = np.sqrt(W * H / k)
+            molnar[g].append(((S + s_obj) / S) ** 2)
+            for q in counts:
+                p = partition(rects, tris, g, size, q)
+                acc[(g, q)].append(p.loads.sum() / visible)
+    rows = []
+    for g in grids:
+        for q in counts:
+            rows.append({"ranks": g[0] * g[1], "grid": f"{g[0]}x{g[1]}", "strips": q,
+                         "overlap": float(np.mean(acc[(g, q)])), "molnar": float(np.mean(molnar[g]))})
+    _write_csv(out / "overlap.csv", rows)
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ks = [g[0] * g[1] for g in grids]
+    for q in counts:
+        ax.plot(ks, [r["overlap"] for r in rows if r["strips"] == q], "o-", label=f"measured, {q} strips")
+    ax.plot(ks, [float(np.mean(molnar[g])) for g in grids], "k--", label="Molnar, square regions")
+    ax.set(xlabel="ranks", ylabel="overlap O (rendered / visible triangles)", title=f"Overlap, {W}x{H} walkthrough")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "overlap.png", dpi=100)
+    plt.close(fig)
+    return "\n".join([f"Walkthrough ({len(path)} frames) of the {scene.n_triangles}-triangle plant on a {W}x{H} "
+                      "display, balancer only. Molnar's prediction uses S = sqrt(W H / K) and, for sqrt(rho a), the "
+                      "triangle-weighted RMS footprint of the visible objects' screen rects (we cull whole objects, "
+                      "so the object is the primitive).", "",
+                      _md_table(rows, [("grid", "Grid", ""), ("strips", "Strips", ""), ("overlap", "Measured O", ".3f"),
+                                       ("molnar", "Molnar O", ".3f")]), "", "![overlap](overlap.png)"])
+
+
+EXPERIMENTS = {"gpus": exp_gpus, "resolution": exp_resolution, "balance": exp_balance, "strips": exp_strips,
+               "orbit": exp_orbit, "overlap": exp_overlap}
+
+
+def run(name: str, out: Path, quick: bool = False, results: Path | None = None) -> int:
+    """Run one experiment (or ``all``) into ``out``; ``all`` also writes the results page."""
+    if name != "all" and name not in EXPERIMENTS:
+        raise InputError(f"experiment: unknown experiment '{name}' (known: all, {', '.join(EXPERIMENTS)})")
+    s = Settings.make(quick)
+    names = list(EXPERIMENTS) if name == "all" else [name]
+    out = Path(out)
+    sections = []
+    t_all = time.perf_counter()
+    for n in names:
+        d = out / n
+        d.mkdir(parents=True, exist_ok=True)
+        t = time.perf_counter()
+        print(f"experiment {n} ...", flush=True)
+        md = EXPERIMENTS[n](s, d)
+        dt = time.perf_counter() - t
+        md = f"## {n}\n\n{md}\n\n_{dt:.0f} s wall for this experiment._\n"
+        (d / f"{n}.md").write_text(md)
+        sections.append((n, md))
+        print(f"experiment {n}: {dt:.0f} s, outputs in {d}/", flush=True)
+    if name == "all":
+        page = Path(results) if results else out / "RESULTS.md"
+        page.parent.mkdir(parents=True, exist_ok=True)
+        page.write_text(_results_page(sections, out, page, s, time.perf_counter() - t_all))
+        print(f"results page: {page}")
+    return 0
+
+
+def _results_page(sections, out: Path, page: Path, s: Settings, seconds: float) -> str:
+    import platform
+
+    rel = os.path.relpath(out, page.parent)
+    body = []
+    for n, md in sections:
+        # image links in the fragments are relative to OUT/NAME/
+        body.append(md.replace("](", f"]({rel}/{n}/").replace(f"]({rel}/{n}/http", "](http"))
+    cmd = "launch/experiments" + (" --quick" if s.quick else "")
+    return "\n".join([
+        "# Results", "",
+        f"Regenerate with `{cmd}` (runs `multigpu experiment all`, {seconds / 60:.1f} min here).", "",
+        "Machine: " + f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, Mesa "
+        "llvmpipe (no GPU), `LP_NUM_THREADS=1`, MPI ranks emulate GPUs and outnumber cores.", "",
+        "How to read the figures: `LB`, `Render`, `Sync`, `Exchange`, `Display`, `Frame (wall)` are wall-clock "
+        "means per rank per frame (distorted by ranks sharing 2 cores); `Frame (emulated)` is, per frame, the "
+        "slowest rank's CPU time for balancing + rendering + exchange + display (what one core per rank would "
+        "give), averaged over frames. Speedups and efficiencies use emulated figures.", "",
+        f"Scale: the paper rendered {PAPER['triangles'] / 1e6:.0f} M triangles on four GTX 980 Ti; here one plant "
+        f"is {s.triangles} requested triangles (about 85 %% generated) and llvmpipe draws a few M triangles/s per core, "
+        f"so scenes are scaled down by about {PAPER['triangles'] / s.triangles:.0f}x; each experiment keeps the "
+        "paper's shape (ranks, resolutions, strips, balancing on/off).".replace("%%", "%"), "",
+        *body])
