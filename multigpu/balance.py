@@ -130,17 +130,24 @@ def _strip_index(px: np.ndarray, a: int, length: int, q: int, extent: int) -> np
     return np.clip(o, 0, q - 1, out=o)
 
 
-def choose_split(s: np.ndarray, e: np.ndarray, ratio: float, cuts: np.ndarray, valid: np.ndarray, target: int) -> int:
+def choose_split(s: np.ndarray, e: np.ndarray, ratio: float, cuts: np.ndarray, valid: np.ndarray, target: int,
+                 fill: tuple[np.ndarray, float] | None = None) -> int:
     """Alg. 2 lines 8-22: index into ``cuts`` of the chosen strip boundary.
 
     ``s``/``e`` are the Start/End arrays (length Q), ``cuts`` the Q-1 candidate pixel positions
     (boundary i sits between strips i-1 and i), ``valid`` which candidates leave each child
-    enough pixels, ``target`` the area-proportional pixel. Ties, and the case where every Diff
-    is infinite, go to the valid candidate nearest the target (then the lower one).
+    enough pixels, ``target`` the area-proportional pixel. ``fill`` = (fill below each cut,
+    fill of the whole region) adds the cost model's fragment term to each side. Ties, and the
+    case where every Diff is infinite, go to the valid candidate nearest the target (then the
+    lower one).
     """
     S = np.cumsum(s)
     E = np.cumsum(e[::-1])[::-1]
     left, right = S[:-1], E[1:]
+    if fill is not None:
+        below, total = fill
+        left = left + below
+        right = right + (total - below)
     with np.errstate(divide="ignore", invalid="ignore"):
         diff = np.abs(left / right - ratio)
     diff[(left <= 0) | (right <= 0) | ~valid] = np.inf
@@ -152,18 +159,41 @@ def choose_split(s: np.ndarray, e: np.ndarray, ratio: float, cuts: np.ndarray, v
     return int(cand[np.argmin(dist)])
 
 
-def partition(rects, tris, grid, size, strips: int = 2048) -> Partition:
-    """Balance ``tris`` over a ``rows x cols`` wall by splitting the screen along the GPU tree.
+@dataclass(frozen=True)
+class SplitTask:
+    """What a split chooser sees at one internal tree node.
 
-    Parameters
-    ----------
-    rects : (N, 4) float  normalized ``[xmin, ymin, xmax, ymax]`` (may reach outside [0, 1];
-        NaN rows are invisible).
-    tris : (N,) non-negative int  triangles per object (or non-negative float weights).
-    grid : (rows, cols)
-    size : (W, H) full display in pixels.
-    strips : strips per split axis (>= 2); a region narrower than ``strips`` pixels uses one
-        strip per pixel.
+    ``idx`` are the objects visible in the node's region ``reg``; ``lo_px``/``hi_px`` their
+    inclusive pixel spans along ``axis``; the split cuts ``[a, b)`` with ``nl`` ranks on the
+    low side and ``nr`` on the high side; ``valid`` marks which of the candidate ``cuts``
+    leave every descendant tile at least one pixel; ``target`` is the area-proportional cut.
+    """
+
+    n: int
+    node: object
+    reg: np.ndarray
+    axis: int
+    a: int
+    b: int
+    q: int
+    nl: int
+    nr: int
+    idx: np.ndarray
+    lo_px: np.ndarray
+    hi_px: np.ndarray
+    cuts: np.ndarray
+    valid: np.ndarray
+    target: int
+    extent: int  # display pixels along ``axis``
+    weights: np.ndarray  # validated per-object weights (all objects; index with ``idx``)
+
+
+def tree_partition(rects, tris, grid, size, strips: int, choose) -> Partition:
+    """Walk the GPU tree, asking ``choose(task, spans) -> cut pixel`` at every internal node.
+
+    The walk (regions, T' masks, loads, split bookkeeping) is shared by every screen-space
+    strategy; only the choice of the cut differs. ``spans`` is the (4, N) int32 pixel-span
+    array. The returned cut is clamped to the valid range.
     """
     rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, strips)
     strips = int(strips)
@@ -192,17 +222,11 @@ def partition(rects, tris, grid, size, strips: int = 2048) -> Partition:
         cuts = a + (np.arange(1, q, dtype=np.int64) * length) // q
         valid = (cuts - a >= need_lo) & (b - cuts >= need_hi)
         target = a + (length * nl) // (nl + nr)
-
         lo_px = spans[axis].take(idx)
         hi_px = spans[axis + 2].take(idx)
-        # strip of every absolute pixel p: offset o = p - a in [0, L) lies in strip
-        # ((o + 1) * q - 1) // L, i.e. strip i holds [i*L//q, (i+1)*L//q); pixels outside the
-        # region clamp to the first / last strip
-        first, last = _strip_index(lo_px, a, length, q, W if axis == 0 else H), \
-            _strip_index(hi_px, a, length, q, W if axis == 0 else H)
-        s, e = strip_sums(first, last, tris[idx], q)
-        pick = choose_split(s, e, nl / nr, cuts, valid, target)
-        cut = int(cuts[pick]) if pick >= 0 else target
+        task = SplitTask(n, node, reg, axis, a, b, q, nl, nr, idx, lo_px, hi_px, cuts, valid, target,
+                         W if axis == 0 else H, tris)
+        cut = int(np.clip(int(choose(task, spans)), a + need_lo, b - need_hi))
         splits[n] = (cut - a) / length
         split_pixels[n] = cut
 
@@ -221,6 +245,76 @@ def partition(rects, tris, grid, size, strips: int = 2048) -> Partition:
         visible[leaf.label, idx] = True
         loads[leaf.label] = tris[idx].sum()
     return Partition(regions, loads, visible, splits, split_pixels)
+
+
+def fill_prefix(task: SplitTask, spans: np.ndarray, density: np.ndarray) -> tuple[np.ndarray, float]:
+    """Fill cost below every candidate cut, and in the whole node region.
+
+    ``F[j] = sum_i density_i * (pixels of object i's rect inside the node region and below
+    cuts[j] along the split axis)``. Each object's fill is spread evenly over its pixel
+    columns (rows), so a straddling object's fill is divided between the two sides, unlike
+    its triangles, which both sides process. Exact at pixel resolution up to ``_TABLE_MAX``
+    pixels per axis, in equal blocks beyond.
+    """
+    a, b, axis, reg, idx = task.a, task.b, task.axis, task.reg, task.idx
+    other = 1 - axis
+    o0 = np.maximum(spans[other].take(idx), reg[other])
+    o1 = np.minimum(spans[other + 2].take(idx), reg[other + 2] - 1)
+    extent = np.maximum(o1 - o0 + 1, 0).astype(np.float64)  # pixels across the split axis
+    lo = np.maximum(task.lo_px, a) - a
+    hi = np.minimum(task.hi_px, b - 1) - a  # inclusive, offsets into [0, L)
+    L = b - a
+    block = max(1, -(-L // _TABLE_MAX))  # pixels per cell of the cost line
+    cells = -(-L // block)
+    lo_c, hi_c = lo // block, hi // block
+    per_cell = density.take(idx) * extent * ((hi - lo + 1) / (hi_c - lo_c + 1))  # fill per covered cell
+    diff = np.bincount(lo_c, per_cell, cells + 1) - np.bincount(hi_c + 1, per_cell, cells + 1)
+    line = np.zeros(cells + 1)
+    np.cumsum(np.cumsum(diff)[:cells], out=line[1:])  # fill in cells < c
+    return line[np.minimum((task.cuts - a) // block, cells)], float(line[-1])
+
+
+def strip_chooser(density: np.ndarray | None = None):
+    """Alg. 2 as a split chooser: Start/End arrays over the strips, prefix/postfix sums, the
+    candidate whose cost ratio best matches balRatio. With ``density`` (the cost model) each
+    side's cost also counts the fill it renders (``fill_prefix``)."""
+
+    def choose(t: SplitTask, spans: np.ndarray) -> int:
+        length = t.b - t.a
+        first = _strip_index(t.lo_px, t.a, length, t.q, t.extent)
+        last = _strip_index(t.hi_px, t.a, length, t.q, t.extent)
+        s, e = strip_sums(first, last, t.weights[t.idx], t.q)
+        fill = None if density is None else fill_prefix(t, spans, density)
+        pick = choose_split(s, e, t.nl / t.nr, t.cuts, t.valid, t.target, fill)
+        return int(t.cuts[pick]) if pick >= 0 else t.target
+
+    return choose
+
+
+def partition(rects, tris, grid, size, strips: int = 2048, fill=None) -> Partition:
+    """Balance ``tris`` over a ``rows x cols`` wall by splitting the screen along the GPU tree.
+
+    Parameters
+    ----------
+    rects : (N, 4) float  normalized ``[xmin, ymin, xmax, ymax]`` (may reach outside [0, 1];
+        NaN rows are invisible).
+    tris : (N,) non-negative int  triangles per object (or non-negative float weights).
+    grid : (rows, cols)
+    size : (W, H) full display in pixels.
+    strips : strips per split axis (>= 2); a region narrower than ``strips`` pixels uses one
+        strip per pixel.
+    fill : optional (N,) non-negative float, or a scalar: cost per covered pixel of each
+        object's rect (the cost model's fragment term). None balances ``tris`` alone, exactly
+        the paper's Alg. 2.
+    """
+    rects_a = np.asarray(rects)
+    density = None
+    if fill is not None:
+        density = np.broadcast_to(np.asarray(fill, dtype=np.float64), rects_a.shape[:1])
+        if density.size and (not np.isfinite(density).all() or density.min() < 0):
+            raise ValueError("fill must be finite and non-negative")
+        density = np.ascontiguousarray(density)
+    return tree_partition(rects, tris, grid, size, strips, strip_chooser(density))
 
 
 def partition_tiles(rects, tris, grid, size) -> Partition:

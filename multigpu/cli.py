@@ -50,7 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--grid", default="2x2", help="display wall ROWSxCOLS (ranks = rows*cols)")
     w.add_argument("--tile", default="256x256", help="pixels per display tile WxH")
     w.add_argument("--strips", type=int, default=2048, help="strips per split axis (>= 2)")
-    w.add_argument("--balance", default="strips", help="balancing strategy: strips | none")
+    w.add_argument("--balance", default="strips", help="balancing strategy: strips | cost | time | none")
     w.add_argument("--bounds", default="box", help="object bounds: box (8 corners) | sphere")
     w.add_argument("--out", default="out", help="output directory")
     w.add_argument("--mosaic-every", type=int, default=100, help="write the full wall every N frames (0: never)")

@@ -98,7 +98,15 @@ def _plant(spec: SceneSpec) -> Scene:
     return generate_plant(spec.triangles, spec.copies, spec.seed)
 
 
-BUILTIN = {"plant": _plant}
+def _fill(spec: SceneSpec) -> Scene:
+    from .fillscene import generate_fill
+
+    return generate_fill(spec.triangles, panels=24 * spec.copies, seed=spec.seed)
+
+
+# built-in scenes: the plant (triangle-bound, the paper's kind) and a fill-bound contrast;
+# for ``fill``, ``--copies`` multiplies the 24 panels (depth complexity)
+BUILTIN = {"plant": _plant, "fill": _fill}
 
 
 # ---------------------------------------------------------------- model files

@@ -201,7 +201,7 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
                     bar.update(1)
                     bar.set_postfix(fps=f"{1e3 / max(allrows[:, COLUMNS.index('frame_ms')].max(), 1e-9):.1f}")
                 if f % 50 == 49:
-                    _write_summary(out, history, K, config_doc, complete=False)
+                    _write_summary(out, history, K, {**config_doc, "strategy": strategy.report()}, complete=False)
             if allrows[:, -1].any():
                 break
         complete = done == n_frames
@@ -214,7 +214,7 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
             if video is not None:
                 video.close()
             if history:
-                summary = _write_summary(out, history, K, config_doc, complete=complete)
+                summary = _write_summary(out, history, K, {**config_doc, "strategy": strategy.report()}, complete=complete)
         if renderer is not None:
             renderer.release()
     if rank == 0:

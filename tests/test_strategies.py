@@ -1,0 +1,139 @@
+"""Balancing strategies: the fill term, the cost model's term selection, time feedback."""
+
+import numpy as np
+import pytest
+
+from multigpu.balance import partition, tree_partition, fill_prefix, strip_chooser
+from multigpu.strategies import REGISTRY, CostModel, TimeFeedback, make_strategy, rank_pixels
+from multigpu.regions import pixel_spans
+
+
+def workload(n=400, seed=0):
+    rng = np.random.default_rng(seed)
+    lo = rng.random((n, 2)) * 0.9
+    size = rng.exponential(0.05, (n, 2))
+    rects = np.c_[lo, np.minimum(lo + size, 1.0)]
+    tris = rng.integers(10, 500, n)
+    return rects, tris
+
+
+def test_zero_fill_equals_triangle_balancing():
+    rects, tris = workload()
+    a = partition(rects, tris, (2, 2), (256, 256), 64)
+    b = partition(rects, tris, (2, 2), (256, 256), 64, fill=0.0)
+    np.testing.assert_array_equal(a.regions, b.regions)
+
+
+def test_fill_prefix_matches_brute_force_raster():
+    rects, tris = workload(60, seed=2)
+    W, H = 64, 48
+    density = np.random.default_rng(3).random(60)
+    seen = {}
+
+    def spy(t, spans):
+        if t.n == 0:
+            seen["f"] = fill_prefix(t, spans, density)
+            seen["t"] = t
+        return strip_chooser()(t, spans)
+
+    tree_partition(rects, tris, (1, 2), (W, H), 16, spy)
+    spans, on = pixel_spans(rects, (W, H))
+    grid = np.zeros((H, W))
+    for i in np.flatnonzero(on):
+        x0, y0, x1, y1 = spans[i]
+        grid[y0:y1 + 1, x0:x1 + 1] += density[i] / (x1 - x0 + 1) * (x1 - x0 + 1)
+    below, total = seen["f"]
+    cols = grid.sum(axis=0)
+    expect = np.array([cols[:c].sum() for c in seen["t"].cuts])
+    np.testing.assert_allclose(below, expect, rtol=1e-9)
+    assert total == pytest.approx(cols.sum())
+
+
+def test_fill_term_moves_split_towards_pixels():
+    # left: one huge object with 10 triangles; right: 100 tiny objects with 100 triangles each
+    rects = np.array([[0.0, 0.0, 0.5, 1.0]] + [[0.9, 0.5, 0.901, 0.501]] * 100)
+    tris = np.array([10] + [100] * 100)
+    tri_only = partition(rects, tris, (1, 2), (1000, 100), 1000)
+    with_fill = partition(rects, tris, (1, 2), (1000, 100), 1000, fill=10000 / 50000)
+    assert tri_only.split_pixels[0] > 890  # triangles pull the cut onto the cluster
+    assert with_fill.split_pixels[0] < tri_only.split_pixels[0] - 300
+
+
+def test_bad_fill_raises():
+    rects, tris = workload(10)
+    with pytest.raises(ValueError, match="fill"):
+        partition(rects, tris, (2, 2), (64, 64), 16, fill=-1.0)
+
+
+def test_rank_pixels_counts_clipped_rect_areas():
+    rects = np.array([[0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 0.25, 0.25]])
+    vis = np.array([[True, True], [True, False]])
+    regions = np.array([[0, 0, 4, 8], [4, 0, 8, 8]])
+    px = rank_pixels(rects, vis, regions, (8, 8))
+    assert px.tolist() == [32 + 9, 32]  # inclusive spans: a rect touching pixel 2 covers columns 0..2
+
+
+def simulate(strategy, rects, tris, time_of, frames=30):
+    parts = []
+    for _ in range(frames):
+        p = strategy.plan(rects, tris)
+        strategy.observe(p, time_of(p))
+        parts.append(p)
+    return parts
+
+
+def _times(rects, tris, a, b, c, size):
+    def time_of(p):
+        px = rank_pixels(rects, p.visible, p.regions, size)
+        return a * (p.visible @ tris) + b * px + c
+    return time_of
+
+
+def test_cost_model_learns_a_fill_bound_scene_and_beats_triangles():
+    # fill-bound synthetic: big low-poly rects on the left, a dense high-poly cluster on the right
+    rng = np.random.default_rng(0)
+    big = np.c_[rng.uniform(0, 0.2, 20), rng.uniform(0, 0.2, 20), rng.uniform(0.3, 0.5, 20), rng.uniform(0.8, 1, 20)]
+    lo = rng.uniform(0.6, 0.95, (300, 2))
+    small = np.c_[lo, lo + 0.01]
+    rects = np.r_[big, small]
+    tris = np.r_[np.full(20, 12), np.full(300, 400)]
+    size = (512, 512)
+    time_of = _times(rects, tris, 1e-4, 2e-5, 1.0, size)
+    cost = CostModel((2, 2), size, 512)
+    parts = simulate(cost, rects, tris, time_of)
+    strips = make_strategy("strips", (2, 2), size, 512).plan(rects, tris)
+    imb = lambda t: t.max() / t.mean()
+    assert "pixels" in cost.report()["terms"]
+    assert imb(time_of(parts[-1])) < imb(time_of(strips)) / 1.5
+
+
+def test_cost_model_drops_pixels_on_a_triangle_bound_scene():
+    rects, tris = workload(500, seed=4)
+    size = (512, 512)
+    time_of = _times(rects, tris, 1e-3, 0.0, 0.5, size)
+    cost = CostModel((2, 2), size, 512)
+    parts = simulate(cost, rects, tris, time_of)
+    assert cost.report()["terms"] == ["triangles"]
+    strips = partition(rects, tris, (2, 2), size, 512)
+    np.testing.assert_array_equal(parts[-1].regions, strips.regions)
+
+
+def test_time_feedback_converges_and_tiles():
+    rects, tris = workload(500, seed=5)
+    size = (256, 256)
+    # a hidden cost: the right half of the screen costs 4x per object
+    heavy = (rects[:, 0] > 0.5).astype(float) * 3 + 1
+    time_of = lambda p: p.visible.astype(float) @ (tris * heavy) * 1e-3
+    parts = simulate(TimeFeedback((2, 2), size, 256), rects, tris, time_of, frames=25)
+    strips = partition(rects, tris, (2, 2), size, 256)
+    imb = lambda t: t.max() / t.mean()
+    assert imb(time_of(parts[-1])) < imb(time_of(strips))
+    for p in parts:
+        r = p.regions
+        assert ((r[:, 2] - r[:, 0]) * (r[:, 3] - r[:, 1])).sum() == 256 * 256
+
+
+def test_registry_and_unknown_name():
+    assert set(REGISTRY) == {"strips", "cost", "time", "none"}
+    with pytest.raises(ValueError, match="unknown balancing strategy"):
+        make_strategy("magic", (2, 2), (64, 64), 16)
