@@ -415,8 +415,69 @@ def exp_overlap(s: Settings, out: Path) -> str:
                                        ("molnar", "Molnar O", ".3f")]), "", "![overlap](overlap.png)"])
 
 
+def exp_cost(s: Settings, out: Path) -> str:
+    """Issue 8: every strategy on the triangle-bound plant and the fill-bound scene: measured
+    render-time imbalance, emulated frame time, the cost model's kept terms, balancer cost."""
+    import json
+
+    from . import depth
+    from .models import SceneSpec, load_scene
+    from .paths import orbit, walkthrough
+
+    cases = [("plant", "walkthrough", _scene_args(s)),
+             ("fill", "orbit", ["--scene", "fill", "--triangles", str(s.triangles)])]
+    tile = (128, 128) if s.quick else (512, 512)
+    rows, md_depth = [], []
+    for scene_name, path_kind, args in cases:
+        base = None
+        for name in s.strategies:
+            run = walk(out / f"{scene_name}-{name}", (2, 2), tile, args + [
+                "--path-kind", path_kind, "--frames", str(s.frames), "--balance", name, "--mosaic-every", "0"], s.timeout)
+            b = _breakdown(run)
+            strat = run.summary["config"].get("strategy", {})
+            if name == "strips":
+                base = b
+            rows.append({"scene": scene_name, "balance": name, **b,
+                         "terms": "+".join(strat.get("terms", [])) or "-",
+                         "pixel_frames": strat.get("pixel_term_frames_share", float("nan"))})
+        for r in rows:
+            if r["scene"] == scene_name and base is not None:
+                r["imb_vs_strips"] = r["imb_render"] / base["imb_render"]
+                r["lb_extra_ms"] = r["lb_cpu_ms"] - base["lb_cpu_ms"]
+        # depth complexity of a representative frame
+        sc, _ = load_scene(SceneSpec(scene=scene_name, triangles=s.triangles))
+        path = (walkthrough if path_kind == "walkthrough" else orbit)(sc, frames=s.frames)
+        st = depth.run(sc, path.camera(len(path) // 2), (tile[0] * 2, tile[1] * 2), out / f"depth-{scene_name}")
+        for img in ("depth_complexity", "overdraw"):
+            shutil.copyfile(out / f"depth-{scene_name}" / f"{img}.png", out / f"{scene_name}_{img}.png")
+        md_depth.append(f"| {scene_name} | {st.get('coverage', 0):.1%} | {st['mean_d']:.2f} | {st['max_d']} | "
+                        f"{st['mean_o']:.2f} | {st['model_o']:.2f} | ![]({scene_name}_depth_complexity.png) |")
+        (out / f"depth-{scene_name}.json").write_text(json.dumps(st))
+    _write_csv(out / "cost.csv", rows)
+    fill = {r["balance"]: r for r in rows if r["scene"] == "fill"}
+    plant = {r["balance"]: r for r in rows if r["scene"] == "plant"}
+    return "\n".join([
+        f"2x2 wall of {tile[0]}x{tile[1]} tiles, {s.frames} frames: the plant on its walkthrough (triangle-bound) "
+        "and the fill scene (24 screen-filling panels beside a dense sphere cluster) on its orbit. "
+        "`Imb. render` is max/mean of the measured per-rank rendering CPU time, averaged over frames; "
+        "`vs strips` divides it by strips' on the same scene; `LB extra` is the extra balancer CPU ms per frame.", "",
+        _md_table(rows, [("scene", "Scene", ""), ("balance", "Balance", ""), ("imb_tris", "Imb. tris", ".3f"),
+                         ("imb_render", "Imb. render", ".3f"), ("imb_vs_strips", "vs strips", ".2f"),
+                         ("render_cpu_max_ms", "Slowest render CPU", ".2f"),
+                         ("emulated_ms", "Frame (emulated)", ".2f"), ("lb_cpu_ms", "LB CPU", ".2f"),
+                         ("lb_extra_ms", "LB extra", "+.2f"), ("terms", "Cost terms kept", ""),
+                         ("pixel_frames", "Frames with pixel term", ".0%")]), "",
+        f"Fill scene: cost model render imbalance {fill['cost']['imb_render']:.3f} vs strips "
+        f"{fill['strips']['imb_render']:.3f} (target: at most half of strips' excess over 1 would be "
+        f"{1 + (fill['strips']['imb_render'] - 1) / 2:.3f}); plant: cost {plant['cost']['imb_render']:.3f} vs strips "
+        f"{plant['strips']['imb_render']:.3f} ({plant['cost']['imb_render'] / plant['strips']['imb_render'] - 1:+.1%}).",
+        "", "Depth complexity of the middle frame (`multigpu depth`):", "",
+        "| Scene | Coverage | mean d | max d | measured o | model o(d) = 1 + 1/2 + ... + 1/d | d image |",
+        "|---:|---:|---:|---:|---:|---:|---:|", *md_depth])
+
+
 EXPERIMENTS = {"gpus": exp_gpus, "resolution": exp_resolution, "balance": exp_balance, "strips": exp_strips,
-               "orbit": exp_orbit, "overlap": exp_overlap}
+               "orbit": exp_orbit, "overlap": exp_overlap, "cost": exp_cost}
 
 
 def run(name: str, out: Path, quick: bool = False, results: Path | None = None) -> int:

@@ -1,0 +1,43 @@
+"""Smoke test: every experiment at --quick size runs and writes parseable outputs."""
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+
+from PIL import Image
+
+from multigpu.experiments import EXPERIMENTS
+
+
+def test_all_experiments_quick(tmp_path):
+    out = tmp_path / "exp"
+    page = tmp_path / "RESULTS.md"
+    proc = subprocess.Popen([sys.executable, "-m", "multigpu", "experiment", "all", "--quick", "--out", str(out),
+                             "--results", str(page)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True, env={**os.environ, "LP_NUM_THREADS": "1"})
+    try:
+        log, _ = proc.communicate(timeout=420)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise AssertionError("experiment all --quick did not finish within 420 s")
+    assert proc.returncode == 0, log[-3000:]
+    text = page.read_text()
+    for name in EXPERIMENTS:
+        d = out / name
+        rows = list(csv.DictReader(open(d / f"{name}.csv")))
+        assert rows, name
+        for r in rows:  # every figure parses as a number or is a label
+            for k, v in r.items():
+                assert v != "", (name, k)
+        md = (d / f"{name}.md").read_text()
+        assert md.startswith(f"## {name}") and "|" in md
+        assert f"## {name}" in text
+        for png in d.glob("*.png"):
+            with Image.open(png) as im:
+                assert im.size[0] > 10
+    for name in ("gpus", "resolution", "balance", "strips", "overlap"):
+        assert (out / name / f"{name}.png").exists()
+    assert float(next(csv.DictReader(open(out / "gpus" / "gpus.csv")))["render_speedup"]) == 1.0
