@@ -77,15 +77,41 @@ class BoxProjector:
     def __len__(self) -> int:
         return self.center.shape[1]
 
-    def __call__(self, view, proj) -> np.ndarray:
-        """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen."""
+    def __call__(self, view, proj, coverage: np.ndarray | None = None) -> np.ndarray:
+        """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen.
+
+        With ``coverage`` (an (N,) float array) also writes each box's projected silhouette
+        area as a fraction of its rect's area (1 for boxes crossing the near plane, 0 unseen):
+        the cost model's estimate of the fragments an object generates per rect pixel.
+        """
         M = _check(view, proj)
         n = len(self)
         out = np.empty((4, n))
         for s in range(0, n, self.chunk):  # blocks of objects, not objects
             e = min(n, s + self.chunk)
-            _boxes_block(self.center[:, s:e], self.half[:, s:e], self.half64[:, s:e], M, self.dtype, out[:, s:e])
+            _boxes_block(self.center[:, s:e], self.half[:, s:e], self.half64[:, s:e], M, self.dtype, out[:, s:e],
+                         None if coverage is None else coverage[s:e])
         return out.T
+
+
+# the 6 faces of a box as corner cycles (corner k: bit 2 = x, bit 1 = y, bit 0 = z)
+_FACES = np.array([[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]])
+
+
+def _silhouette_fraction(x: np.ndarray, y: np.ndarray, ext) -> np.ndarray:
+    """Projected area of a box (half the summed |area| of its 6 projected faces: front and
+    back faces each cover the silhouette once) over the area of its bounding rect."""
+    area = np.zeros(x.shape[1], dtype=np.float64)
+    for f in _FACES:  # 6 faces, not objects
+        a = np.zeros(x.shape[1], dtype=np.float64)
+        for i in range(4):
+            j, k = f[i], f[(i + 1) % 4]
+            a += x[j] * y[k] - x[k] * y[j]
+        area += np.abs(a)
+    area *= 0.25  # 1/2 for the shoelace, 1/2 for front + back
+    rect = (ext[2] - ext[0]).astype(np.float64) * (ext[3] - ext[1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.clip(np.where(rect > 0, area / rect, 1.0), 0.0, 1.0)
 
 
 def project_boxes(bmin, bmax, view, proj, dtype=np.float32, chunk: int = 1 << 15) -> np.ndarray:
@@ -109,8 +135,11 @@ def project_boxes(bmin, bmax, view, proj, dtype=np.float32, chunk: int = 1 << 15
     return BoxProjector(bmin, bmax, dtype, chunk)(view, proj)
 
 
-def _boxes_block(center, half, half64, M, dtype, out) -> None:
-    """Rects of one block: ``center``/``half64`` (3, n) float64, ``half`` (3, n) in ``dtype``."""
+def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
+    """Rects of one block: ``center``/``half64`` (3, n) float64, ``half`` (3, n) in ``dtype``;
+    silhouette fractions into ``coverage`` when given."""
+    if coverage is not None:
+        coverage[:] = 1.0
     clip_c = np.dot(M[:, :3], center)  # (4, n) float64, camera-relative
     clip_c += M[:, 3:]
     # the near/far plane distances are affine in the corner: their extremes need no corners
@@ -133,6 +162,8 @@ def _boxes_block(center, half, half64, M, dtype, out) -> None:
         x = np.divide(cx, cw, out=cx)
         y = np.divide(cy, cw, out=cy)
         ext = [np.minimum.reduce(x), np.minimum.reduce(y), np.maximum.reduce(x), np.maximum.reduce(y)]
+        if coverage is not None:
+            coverage[fast] = _silhouette_fraction(x, y, ext)
         # rounding in ``dtype`` moves a corner by a few ulps of its NDC value; only values
         # within [-1, 1] matter after clipping, so a fixed widening of 16 ulps of 1 is enough
         _write_rects(out, fast, *ext, widen=float(np.finfo(dtype).eps) * 16)
@@ -213,8 +244,12 @@ class SphereProjector:
     def __len__(self) -> int:
         return self.radii.shape[0]
 
-    def __call__(self, view, proj) -> np.ndarray:
-        """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen."""
+    def __call__(self, view, proj, coverage: np.ndarray | None = None) -> np.ndarray:
+        """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen.
+        ``coverage`` receives pi/4 per sphere (a disc in its square; the ellipse of an
+        off-centre sphere is close to that)."""
+        if coverage is not None:
+            coverage[:] = np.pi / 4
         view = np.asarray(view, dtype=np.float64)
         proj = np.asarray(proj, dtype=np.float64)
         _check(view, proj)

@@ -25,13 +25,16 @@ from .regions import pixel_spans
 
 @dataclass
 class Strategy:
-    """Common configuration; subclasses add ``plan(rects, tris) -> Partition``."""
+    """Common configuration; subclasses add ``plan(rects, tris, coverage=None) -> Partition``
+    (``coverage``: per-object silhouette fraction of the rect, for strategies that count
+    pixels)."""
 
     grid: tuple[int, int]
     size: tuple[int, int]
     strips: int = 2048
 
     name = "base"
+    needs_coverage = False  # whether ``plan`` wants per-object silhouette coverage
 
     def observe(self, partition: Partition, render_ms: np.ndarray) -> None:
         """Take the frame's measured per-rank render times (ms). Default: ignore them."""
@@ -46,7 +49,7 @@ class Strips(Strategy):
 
     name = "strips"
 
-    def plan(self, rects, tris):
+    def plan(self, rects, tris, coverage=None):
         return partition(rects, tris, self.grid, self.size, self.strips)
 
 
@@ -55,13 +58,15 @@ class NoBalance(Strategy):
 
     name = "none"
 
-    def plan(self, rects, tris):
+    def plan(self, rects, tris, coverage=None):
         return partition_tiles(rects, tris, self.grid, self.size)
 
 
-def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, size) -> np.ndarray:
+def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, size,
+                coverage: np.ndarray | None = None) -> np.ndarray:
     """(K,) pixels each rank fills by the rect estimate: its visible objects' rects clipped to
-    its region, summed (overlapping rects count once each: depth complexity)."""
+    its region, times their silhouette ``coverage`` (fraction of the rect, default 1), summed
+    (overlapping objects count once each: depth complexity)."""
     spans, _ = pixel_spans(rects, size)
     sp = spans.T  # (4, N)
     out = np.zeros(len(regions))
@@ -69,6 +74,8 @@ def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, siz
         w = np.minimum(sp[2], x1 - 1) - np.maximum(sp[0], x0) + 1
         h = np.minimum(sp[3], y1 - 1) - np.maximum(sp[1], y0) + 1
         area = np.maximum(w, 0).astype(np.float64) * np.maximum(h, 0)
+        if coverage is not None:
+            area *= coverage
         out[k] = area @ visible[k]
     return out
 
@@ -93,6 +100,7 @@ class CostModel(Strategy):
     warmup: int = 3
 
     name = "cost"
+    needs_coverage = True
 
     def __post_init__(self):
         self._samples: deque = deque(maxlen=self.window)
@@ -102,18 +110,19 @@ class CostModel(Strategy):
         self.why = "warming up: balancing on triangles until enough frames are measured"
         self.history: list[tuple[str, ...]] = []
 
-    def plan(self, rects, tris):
+    def plan(self, rects, tris, coverage: np.ndarray | None = None):
         a, b = self.coef[0], self.coef[1]
+        cov = np.ones(len(tris)) if coverage is None else np.nan_to_num(np.asarray(coverage, np.float64))
         if "pixels" in self.kept and b > 0:
-            # only the ratio matters: a triangle weighs 1 and a pixel b / a triangles
-            weights, fill = (tris, b / a) if a > 0 else (np.zeros(len(tris)), 1.0)
+            # only the ratio matters: a triangle weighs 1 and a covered pixel b / a triangles
+            weights, fill = (tris, cov * (b / a)) if a > 0 else (np.zeros(len(tris)), cov)
             p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill)
             if a <= 0:  # loads stay triangle counts
                 p = Partition(p.regions, p.visible @ np.asarray(tris, np.int64), p.visible, p.splits, p.split_pixels)
         else:
             p = partition(rects, tris, self.grid, self.size, self.strips)
         self._features = (p.loads.astype(np.float64), rank_pixels(np.asarray(rects, np.float64), p.visible,
-                                                                   p.regions, self.size))
+                                                                   p.regions, self.size, cov))
         return p
 
     def observe(self, partition: Partition, render_ms: np.ndarray) -> None:
@@ -219,7 +228,7 @@ class TimeFeedback(Strategy):
         self._last: Partition | None = None
         self._times: np.ndarray | None = None
 
-    def plan(self, rects, tris):
+    def plan(self, rects, tris, coverage=None):
         if self._last is None:
             return partition(rects, tris, self.grid, self.size, self.strips)
         choose = time_chooser(self._last.regions, self._times, self._last.split_pixels, self.damping)

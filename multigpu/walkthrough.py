@@ -133,6 +133,9 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
     strategy = make_strategy(cfg.balance, cfg.grid, size, cfg.strips)
     tris = scene.tris
     project = projector(cfg, scene)
+    coverage = None
+    if strategy.needs_coverage:
+        coverage = np.ones(scene.n_objects)
     back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
     front = np.zeros_like(back)  # what the rank's monitor shows
     n_frames = len(path)
@@ -163,7 +166,10 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
             w0, c0 = time.perf_counter(), time.process_time()
             _fault(rank, f)
             view, proj, light = frame_matrices(path.camera(f), size)
-            part = strategy.plan(project(view, proj), tris)
+            if coverage is None:
+                part = strategy.plan(project(view, proj), tris)
+            else:
+                part = strategy.plan(project(view, proj, coverage), tris, coverage)
             w1, c1 = time.perf_counter(), time.process_time()
             region = part.regions[rank]
             mask = part.visible[rank]

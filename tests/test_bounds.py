@@ -147,3 +147,20 @@ def test_projector_shape_errors():
 
 def test_keep_heap_is_idempotent():
     assert keep_heap() == keep_heap()
+
+
+def test_silhouette_coverage_fraction():
+    view = look_at([0, 0, 50], [0, 0, 0], [0, 1, 0])
+    proj = perspective(30, 1, 0.1, 100)
+    bp = BoxProjector(np.array([[-1, -1, -1.0], [-1, -1, -1]]), np.array([[1, 1, 1.0], [1, 1, 1]]))
+    cov = np.zeros(2)
+    bp(view, proj, cov)
+    assert cov == pytest.approx([1.0, 1.0], abs=1e-3)  # face-on: the silhouette is the rect
+    # seen along the diagonal from far away: a regular hexagon, 3/4 of its bounding rect
+    view = look_at([300, 300, 300], [0, 0, 0], [0, 0, 1])
+    bp(view, perspective(2, 1, 1, 1000), cov)
+    assert cov == pytest.approx([0.75, 0.75], abs=0.02)
+    bmin, bmax = random_boxes(200, seed=7)
+    cov = np.full(200, -1.0)
+    BoxProjector(bmin, bmax)(V, P, cov)
+    assert ((cov > 0) & (cov <= 1)).all()
