@@ -68,15 +68,15 @@ def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, siz
     its region, times their silhouette ``coverage`` (fraction of the rect, default 1), summed
     (overlapping objects count once each: depth complexity)."""
     spans, _ = pixel_spans(rects, size)
-    sp = spans.T  # (4, N)
+    sp = spans.T  # (4, N) int32
+    cov = None if coverage is None else np.asarray(coverage, dtype=np.float64)
     out = np.zeros(len(regions))
     for k, (x0, y0, x1, y1) in enumerate(regions):  # K ranks, not objects
-        w = np.minimum(sp[2], x1 - 1) - np.maximum(sp[0], x0) + 1
-        h = np.minimum(sp[3], y1 - 1) - np.maximum(sp[1], y0) + 1
+        idx = np.flatnonzero(visible[k])
+        w = np.minimum(sp[2].take(idx), x1 - 1) - np.maximum(sp[0].take(idx), x0) + 1
+        h = np.minimum(sp[3].take(idx), y1 - 1) - np.maximum(sp[1].take(idx), y0) + 1
         area = np.maximum(w, 0).astype(np.float64) * np.maximum(h, 0)
-        if coverage is not None:
-            area *= coverage
-        out[k] = area @ visible[k]
+        out[k] = float(area.sum()) if cov is None else float(area @ cov.take(idx))
     return out
 
 
