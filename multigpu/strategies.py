@@ -15,7 +15,7 @@ gathered inputs, so all copies take the same decisions.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
