@@ -17,9 +17,6 @@ from __future__ import annotations
 import csv
 import os
 import shutil
-import signal
-import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .mpirun import JobTimeout, run_multigpu
 from .report import COLUMNS, read_timings
 
 # Dong & Peng 2019, Section 7 (quoted for comparison, not measured here)
@@ -64,14 +62,6 @@ class Settings:
         return s
 
 
-def _mpiexec() -> str:
-    here = Path(sys.executable).parent
-    found = shutil.which("mpiexec", path=f"{here}{os.pathsep}{os.environ.get('PATH', '')}")
-    if not found:
-        raise InputError("mpiexec not found: install MPI (pip install mpich) or put mpiexec on PATH")
-    return found
-
-
 @dataclass
 class Run:
     """One finished walkthrough job: its summary and its per-(frame, rank) timing rows."""
@@ -95,22 +85,17 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str
 
     k = grid[0] * grid[1]
     out.mkdir(parents=True, exist_ok=True)
-    cmd = [_mpiexec(), "-n", str(k), sys.executable, "-m", "mpi4py", "-m", "multigpu", "walkthrough",
-           "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
-           "--no-progress", *args]
-    env = {**os.environ, "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", "1")}
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
-                            start_new_session=True)
+    args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
+            "--no-progress", *args]
     try:
-        log, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.communicate()
-        raise RuntimeError(f"experiment job timed out after {timeout} s: {' '.join(cmd)}") from None
+        job = run_multigpu(k, args, timeout, merge_stderr=True)
+    except JobTimeout:
+        raise RuntimeError(f"experiment job timed out after {timeout} s: multigpu {' '.join(args)}") from None
+    log = job.stdout
     (out / "log.txt").write_text(log)
-    if proc.returncode != 0:
+    if job.returncode != 0:
         tail = "\n".join(log.strip().splitlines()[-5:])
-        raise RuntimeError(f"experiment job failed (exit {proc.returncode}): {' '.join(cmd)}\n{tail}")
+        raise RuntimeError(f"experiment job failed (exit {job.returncode}): multigpu {' '.join(args)}\n{tail}")
     summary = json.loads((out / "summary.json").read_text())
     rows = read_timings(out / "timings.csv")
     rows = rows[np.lexsort((rows[:, 1], rows[:, 0]))]
