@@ -49,7 +49,7 @@ def bench_balance(quick: bool) -> list[dict]:
     view = look_at([-40, -60, 40], [100, 60, 0], [0, 0, 1])
     proj = perspective(60, 1.0, 0.1, 1000)
     rows = []
-    heap = os.environ.get("MULTIGPU_MALLOC", "keep") != "default" and keep_heap()
+    heap = keep_heap()
     print("per-frame wall time, median of 7; bounds prepared once per scene (not timed); "
           f"allocator: {'heap kept (memory.keep_heap)' if heap else 'glibc default (MULTIGPU_MALLOC=default)'}")
     print(f"{'objects':>9} {'grid':>5} {'bounds':>7} {'project ms':>11} {'partition ms':>13} {'total ms':>9} {'target ms':>10}")

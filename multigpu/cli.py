@@ -13,7 +13,6 @@ Bad input prints ``multigpu: error: ...`` (one line) and exits 2.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from .errors import InputError
@@ -99,8 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if os.environ.get("MULTIGPU_MALLOC", "keep") != "default":
-        keep_heap()  # per-frame temporaries stay in the heap (see memory.py)
+    keep_heap()  # per-frame temporaries stay in the heap (see memory.py)
     try:
         if args.cmd == "walkthrough":
             return _walkthrough(args)

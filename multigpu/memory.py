@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
@@ -23,9 +24,13 @@ _applied: bool | None = None
 
 def keep_heap() -> bool:
     """Keep large temporaries in the heap (glibc only; elsewhere a no-op). Returns whether the
-    setting is active. Idempotent."""
+    setting is active. Idempotent. ``MULTIGPU_MALLOC=default`` leaves glibc's defaults (for
+    comparison)."""
     global _applied
     if _applied is None:
+        if os.environ.get("MULTIGPU_MALLOC", "keep") == "default":
+            _applied = False
+            return _applied
         try:
             libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
             mallopt = libc.mallopt
