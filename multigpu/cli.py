@@ -55,6 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--mosaic-every", type=int, default=100, help="write the full wall every N frames (0: never)")
     w.add_argument("--no-overlay", action="store_true", help="do not write partition overlay images")
     w.add_argument("--video", action="store_true", help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
+    w.add_argument("--subfrustum", default="auto",
+                   help="how a rank renders its region: auto | viewport | scissor | offaxis (docs/ACCURACY.md)")
+    w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
     w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
     w.add_argument("--timeout", type=float, default=120.0, help="seconds any rank waits for the others")
     w.add_argument("--no-progress", action="store_true")
@@ -152,14 +155,15 @@ def _depth(a) -> int:
 def _walkthrough(a) -> int:
     from mpi4py import MPI
 
-    from .config import WalkConfig, parse_pair
+    from .config import WalkConfig, parse_pair, parse_vec3
 
     comm = MPI.COMM_WORLD
     try:
         cfg = WalkConfig(scene=_spec(a), path=a.path, path_kind=a.path_kind, frames=a.frames,
                          grid=parse_pair(a.grid, "--grid"), tile=parse_pair(a.tile, "--tile"), strips=a.strips,
                          balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
-                         overlay=not a.no_overlay, video=a.video, device=a.device, timeout=a.timeout,
+                         overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
+                         offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
                          progress=not a.no_progress)
         from .walkthrough import run
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -10,6 +11,17 @@ from pathlib import Path
 from .errors import InputError
 from .models import SceneSpec
 from .strategies import REGISTRY
+
+
+def parse_vec3(text: str, flag: str) -> tuple[float, float, float]:
+    """'X,Y,Z' as three floats, or a clear error naming ``flag``."""
+    try:
+        v = tuple(float(t) for t in str(text).split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 3:
+        raise InputError(f"{flag} must look like X,Y,Z (three numbers), got '{text}'")
+    return v
 
 
 def parse_pair(text: str, flag: str, sep: str = "x") -> tuple[int, int]:
@@ -40,6 +52,8 @@ class WalkConfig:
     overlay: bool = True
     video: bool = False
     device: int | None = None
+    subfrustum: str = "auto"
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     timeout: float = 120.0
     progress: bool = True
 
@@ -56,6 +70,12 @@ class WalkConfig:
             raise InputError(f"--path-kind must be 'walkthrough' or 'orbit', got '{self.path_kind}'")
         if self.mosaic_every < 0:
             raise InputError(f"--mosaic-every must be >= 0 (0 = never), got {self.mosaic_every}")
+        from .render import METHODS
+
+        if self.subfrustum not in METHODS:
+            raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{self.subfrustum}'")
+        if len(self.offset) != 3 or not all(math.isfinite(v) and abs(v) <= 1e15 for v in self.offset):
+            raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
         if self.device is not None and self.device < 0:
             raise InputError(f"--device must be >= 0, got {self.device}")
         if not self.timeout > 0:

@@ -87,11 +87,11 @@ def summarize(d: np.ndarray, o: np.ndarray) -> dict:
 
 def run(scene, camera, size: tuple[int, int], out: Path) -> dict:
     """Measure one frame, write ``depth_complexity.png``, ``overdraw.png`` and ``depth.json``."""
-    from .render import create_context, frame_matrices
+    from .render import create_context, frame_matrices, model_view
 
     ctx, _ = create_context()
     view, proj, _ = frame_matrices(camera, size)
-    d, o = measure(ctx, scene, proj @ view, size)
+    d, o = measure(ctx, scene, proj @ model_view(view, scene.origin), size)
     stats = summarize(d, o)
     out.mkdir(parents=True, exist_ok=True)
     import matplotlib

@@ -243,10 +243,11 @@ def _from_labels(verts, faces, labels, path, warnings, meta) -> Scene:
     centers = (bmin + bmax) / 2
     d = np.linalg.norm(tri - centers[labels][:, None, :], axis=2).max(axis=1)
     radii = np.maximum.reduceat(d, starts)
-    return Scene(vertices=np.concatenate([v, normals[used]], axis=1).astype(np.float32),
+    origin = (bmin.min(axis=0) + bmax.max(axis=0)) / 2  # float32 vertices relative to it
+    return Scene(vertices=np.concatenate([v - origin, normals[used]], axis=1).astype(np.float32),
                  indices=f.ravel().astype(np.uint32), first_index=first.astype(np.int64),
                  index_count=(counts * 3).astype(np.int64), base_vertex=np.zeros(n, dtype=np.int64),
-                 bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=_colors(n),
+                 bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=_colors(n), origin=origin,
                  name=Path(path).stem, meta={**meta, "source": str(path), "warnings": warnings,
                                               "up": _guess_up(bmin, bmax)})
 

@@ -46,6 +46,11 @@ class CameraPath:
         return Camera(tuple(self.position[i]), tuple(self.target[i]), tuple(self.up[i]),
                       float(self.fov[i]), float(self.near[i]), float(self.far[i]))
 
+    def translated(self, offset) -> "CameraPath":
+        """The same path moved by ``offset`` world units."""
+        off = np.asarray(offset, dtype=np.float64).reshape(3)
+        return CameraPath(self.position + off, self.target + off, self.up, self.fov, self.near, self.far)
+
     def to_json(self) -> dict:
         cams = [{"position": self.position[i].tolist(), "target": self.target[i].tolist(),
                  "up": self.up[i].tolist(), "fov": float(self.fov[i]), "near": float(self.near[i]),

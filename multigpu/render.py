@@ -4,10 +4,12 @@ One context per rank, the whole scene uploaded once. A frame is ONE ``render_ind
 over the draw commands of the objects in the rank's T' mask (one command per run of visible
 objects in the spatially ordered index buffer, built with numpy: see ``drawlist.py``), into a
 full-display-sized framebuffer with the full-display viewport and projection, scissored to the
-rank's region. Because viewport and projection are those of a one-rank full render, the pixels
-a rank produces are bit-identical to that render's pixels in its region (the scissor only
-discards fragments outside it; llvmpipe bins triangles to the scissor, so work outside the
-region is skipped).
+rank's region (``scissor``, the default where the display fits one framebuffer): viewport and
+projection are those of a one-rank full render, so the pixels a rank produces are bit-identical
+to that render's pixels in its region (llvmpipe bins triangles to the scissor, so work outside
+the region is skipped). ``viewport`` (a region-sized framebuffer, shifted viewport) and
+``offaxis`` (the region's own frustum) need less memory and reach bigger walls, at the price of
+a few differing edge pixels. docs/ACCURACY.md measures all three.
 """
 
 from __future__ import annotations
@@ -100,14 +102,82 @@ def create_context(device: int | None = None):
     return ctx, index
 
 
-class RegionRenderer:
-    """Draws any subset of a scene's objects into any region of a ``size`` display."""
+METHODS = ("auto", "viewport", "scissor", "offaxis")
 
-    def __init__(self, ctx, scene, size: tuple[int, int]):
+
+def gl_limits(ctx) -> dict:
+    """The GL limits that bound each sub-frustum method (pixels)."""
+    info = ctx.info
+    vw, vh = info.get("GL_MAX_VIEWPORT_DIMS", (16384, 16384))
+    lo, _ = info.get("GL_VIEWPORT_BOUNDS_RANGE", (-32768, 32767))
+    return {"viewport": (int(vw), int(vh)), "bounds_low": int(lo),
+            "renderbuffer": int(info.get("GL_MAX_RENDERBUFFER_SIZE", 16384))}
+
+
+def choose_method(method: str, size: tuple[int, int], limits: dict) -> str:
+    """The sub-frustum method to use for a ``size`` display, or a clear error.
+
+    ``scissor`` (bit-exact): full-display framebuffer scissored to the region; needs W, H
+    within GL_MAX_RENDERBUFFER_SIZE and costs W*H*8 bytes per rank. ``viewport``:
+    region-sized framebuffer, the full-display viewport shifted by the region's origin; needs
+    W, H within GL_MAX_VIEWPORT_DIMS and the shift within GL_VIEWPORT_BOUNDS_RANGE; the
+    shifted viewport transform rounds differently, so a few edge pixels per frame differ.
+    ``offaxis``: region-sized framebuffer, the region's own off-axis frustum; any display size;
+    not bit-exact either. docs/ACCURACY.md measures all three. ``auto``: the first that fits,
+    in that order.
+    """
+    if method not in METHODS:
+        raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{method}'")
+    W, H = size
+    fits_viewport = W <= limits["viewport"][0] and H <= limits["viewport"][1] and max(W, H) <= -limits["bounds_low"]
+    fits_scissor = max(W, H) <= limits["renderbuffer"]
+    if method == "auto":
+        return "scissor" if fits_scissor else "viewport" if fits_viewport else "offaxis"
+    if method == "viewport" and not fits_viewport:
+        raise InputError(f"--subfrustum viewport: a {W}x{H} display exceeds this GL's maximum viewport "
+                         f"{limits['viewport'][0]}x{limits['viewport'][1]} (use offaxis or auto)")
+    if method == "scissor" and not fits_scissor:
+        raise InputError(f"--subfrustum scissor: a {W}x{H} display exceeds this GL's maximum framebuffer "
+                         f"{limits['renderbuffer']} pixels per side (use viewport, offaxis or auto)")
+    return method
+
+
+def region_clip(region, size) -> np.ndarray:
+    """4x4 clip-space map taking the full display's NDC over ``region`` to [-1, 1]^2: applied
+    after the full projection it gives the region's off-axis sub-frustum (glFrustum over the
+    region's share of the near plane), algebraically."""
+    W, H = size
+    x0, y0, x1, y1 = region
+    w, h = x1 - x0, y1 - y0
+    c = np.eye(4)
+    c[0, 0], c[0, 3] = W / w, (W - 2.0 * x0 - w) / w
+    c[1, 1], c[1, 3] = H / h, (H - 2.0 * y0 - h) / h
+    return c
+
+
+def model_view(view: np.ndarray, origin) -> np.ndarray:
+    """view @ translate(origin) in float64: the camera relative to the scene's vertex origin,
+    so float32 vertex coordinates stay small wherever the scene lies in the world."""
+    t = np.eye(4)
+    t[:3, 3] = np.asarray(origin, dtype=np.float64)
+    return np.asarray(view, dtype=np.float64) @ t
+
+
+class RegionRenderer:
+    """Draws any subset of a scene's objects into any region of a ``size`` display.
+
+    ``method`` picks how a region's pixels are made (see ``choose_method``); with ``scissor``
+    they are bit-identical to a one-rank render of the whole display.
+    """
+
+    def __init__(self, ctx, scene, size: tuple[int, int], method: str = "auto"):
         import moderngl
 
         self.ctx = ctx
         self.size = W, H = size
+        self.limits = gl_limits(ctx)
+        self.method = choose_method(method, size, self.limits)
+        self.origin = np.asarray(scene.origin, dtype=np.float64)
         self.prog = ctx.program(vertex_shader=VERTEX, fragment_shader=FRAGMENT)
         self.draws = DrawList(scene)
         self.vbo = ctx.buffer(np.ascontiguousarray(scene.vertices, dtype=np.float32))
@@ -119,38 +189,98 @@ class RegionRenderer:
                                     index_buffer=self.ibo, index_element_size=4)
         self.indirect = ctx.buffer(reserve=20 * 1024)  # grows when a frame needs more commands
         self.last_commands = 0  # draw commands of the last frame (runs of visible objects)
-        self.fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer((W, H), 4)],
-                                   depth_attachment=ctx.depth_renderbuffer((W, H)))
+        self.fbo = None
+        self.fbo_size = (0, 0)
+        # the largest framebuffer side a region chunk may use
+        self.chunk = self.limits["renderbuffer"]
+        if self.method == "scissor":
+            self._framebuffer((W, H))
         self.depth_test = moderngl.DEPTH_TEST
 
-    def render(self, mvp: np.ndarray, light: np.ndarray, region, mask: np.ndarray | None) -> np.ndarray:
+    def _framebuffer(self, need: tuple[int, int]) -> None:
+        """Make the framebuffer at least ``need`` (grown by 1/4 to avoid re-allocating often)."""
+        fw, fh = self.fbo_size
+        if need[0] <= fw and need[1] <= fh:
+            return
+        if self.method != "scissor":
+            need = (min(self.chunk, max(need[0], fw, need[0] * 5 // 4)), min(self.chunk, max(need[1], fh, need[1] * 5 // 4)))
+        if self.fbo is not None:
+            for att in (*self.fbo.color_attachments, self.fbo.depth_attachment):
+                att.release()
+            self.fbo.release()
+        ctx = self.ctx
+        self.fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer(need, 4)],
+                                   depth_attachment=ctx.depth_renderbuffer(need))
+        self.fbo_size = need
+
+    def _chunks(self, region):
+        """The region cut into pieces no larger than the framebuffer limit (usually one)."""
+        x0, y0, x1, y1 = region
+        c = self.chunk if self.method != "scissor" else max(self.size)
+        for cy in range(y0, y1, c):
+            for cx in range(x0, x1, c):
+                yield cx, cy, min(cx + c, x1), min(cy + c, y1)
+
+    def render(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, region, mask: np.ndarray | None,
+               depth: bool = False):
         """Render the objects in ``mask`` (all when None) into ``region``; return its pixels.
 
-        Returns ``(h, w, 3)`` uint8, row 0 at the BOTTOM of the region (GL order).
+        Returns ``(h, w, 3)`` uint8, row 0 at the BOTTOM of the region (GL order); with
+        ``depth`` also the ``(h, w)`` float32 window depth.
         """
         x0, y0, x1, y1 = (int(v) for v in region)
         w, h = x1 - x0, y1 - y0
         cmds = self.draws.commands(mask)
         self.last_commands = len(cmds)
         ctx = self.ctx
-        self.fbo.use()
-        self.fbo.viewport = (0, 0, *self.size)
-        self.fbo.scissor = (x0, y0, w, h)
-        ctx.enable(self.depth_test)
-        self.fbo.clear(*BACKGROUND, 1.0, depth=1.0)
+        mvp = np.asarray(proj, dtype=np.float64) @ model_view(view, self.origin)
         if len(cmds):
             if cmds.nbytes > self.indirect.size:
                 self.indirect.orphan(cmds.nbytes)
             self.indirect.write(cmds)
-            self.prog["mvp"].write(np.ascontiguousarray(mvp.T, dtype=np.float32))
             self.prog["light"].value = tuple(float(v) for v in light)
             self.cbo.bind_to_storage_buffer(0)
-            self.vao.render_indirect(self.indirect, count=len(cmds))
-        data = self.fbo.read(viewport=(x0, y0, w, h), components=3, alignment=1)
-        return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)
+        out = np.empty((h, w, 3), dtype=np.uint8)
+        zout = np.empty((h, w), dtype=np.float32) if depth else None
+        W, H = self.size
+        for cx0, cy0, cx1, cy1 in self._chunks((x0, y0, x1, y1)):
+            cw, ch = cx1 - cx0, cy1 - cy0
+            if self.method == "scissor":
+                fx, fy, viewport, m = cx0, cy0, (0, 0, W, H), mvp
+            else:
+                self._framebuffer((cw, ch))
+                fx = fy = 0
+                if self.method == "viewport":
+                    viewport, m = (-cx0, -cy0, W, H), mvp
+                else:
+                    viewport, m = (0, 0, cw, ch), region_clip((cx0, cy0, cx1, cy1), self.size) @ mvp
+            self.fbo.use()
+            self.fbo.viewport = viewport
+            self.fbo.scissor = (fx, fy, cw, ch)
+            ctx.enable(self.depth_test)
+            self.fbo.clear(*BACKGROUND, 1.0, depth=1.0)
+            if len(cmds):
+                self.prog["mvp"].write(np.ascontiguousarray(m.T, dtype=np.float32))
+                self.vao.render_indirect(self.indirect, count=len(cmds))
+            rows, cols = slice(cy0 - y0, cy1 - y0), slice(cx0 - x0, cx1 - x0)
+            data = self.fbo.read(viewport=(fx, fy, cw, ch), components=3, alignment=1)
+            out[rows, cols] = np.frombuffer(data, dtype=np.uint8).reshape(ch, cw, 3)
+            if depth:
+                data = self.fbo.read(viewport=(fx, fy, cw, ch), attachment=-1, dtype="f4", alignment=1)
+                zout[rows, cols] = np.frombuffer(data, dtype=np.float32).reshape(ch, cw)
+        return (out, zout) if depth else out
+
+    @property
+    def framebuffer_bytes(self) -> int:
+        """Colour + depth bytes of the framebuffer this renderer holds now."""
+        return self.fbo_size[0] * self.fbo_size[1] * 8
 
     def release(self) -> None:
-        for obj in (self.vao, self.fbo, self.indirect, self.cbo, self.ibo, self.obo, self.vbo, self.prog):
+        if self.fbo is not None:
+            for att in (*self.fbo.color_attachments, self.fbo.depth_attachment):
+                att.release()
+            self.fbo.release()
+        for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.vbo, self.prog):
             obj.release()
 
 

@@ -3,7 +3,10 @@
 All objects' vertices (position + normal, float32) live in one buffer and all indices in one
 uint32 buffer; object ``i`` is drawn by the indirect command ``(index_count[i], 1,
 first_index[i], base_vertex[i], i)``. Per-object bounds (box and sphere, float64) feed the
-balancer. A scene saves to and loads from one uncompressed ``.npz`` (the cache format).
+balancer. Vertex positions are stored relative to the scene's float64 ``origin`` (the centre of
+its bounds), so float32 keeps sub-millimetre precision for CAD or geographic data placed 1e6 or
+1e8 units from the world origin; the renderer folds ``origin`` into the camera in float64. A
+scene saves to and loads from one uncompressed ``.npz`` (the cache format).
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import numpy as np
 
 from .errors import InputError
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 
 @dataclass
@@ -29,6 +32,7 @@ class Scene:
     bmin, bmax : (N, 3) float64  axis-aligned bounding boxes (world space)
     centers : (N, 3) float64, radii : (N,) float64  bounding spheres
     colors : (N, 3) float32  per-object colour in [0, 1]
+    origin : (3,) float64  world position of vertex coordinate (0, 0, 0)
     meta : free-form facts (generator options, landmarks for camera paths, warnings)
     """
 
@@ -42,6 +46,7 @@ class Scene:
     centers: np.ndarray
     radii: np.ndarray
     colors: np.ndarray
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
     name: str = "scene"
     meta: dict = field(default_factory=dict)
 
@@ -70,7 +75,21 @@ class Scene:
 
     def _arrays(self) -> dict[str, np.ndarray]:
         return {k: getattr(self, k) for k in ("vertices", "indices", "first_index", "index_count", "base_vertex",
-                                              "bmin", "bmax", "centers", "radii", "colors")}
+                                              "bmin", "bmax", "centers", "radii", "colors", "origin")}
+
+    def translated(self, offset) -> "Scene":
+        """The same scene moved by ``offset`` world units (float64 bounds and origin; the
+        float32 vertex buffer is shared, unchanged)."""
+        off = np.asarray(offset, dtype=np.float64).reshape(3)
+        if not np.isfinite(off).all():
+            raise InputError(f"scene offset must be finite, got {off.tolist()}")
+        moved = {k: getattr(self, k) + off for k in ("bmin", "bmax", "centers", "origin")}
+        return Scene(**{**self._arrays(), **moved}, name=self.name,
+                     meta={**self.meta, "offset": (np.asarray(self.meta.get("offset", 0.0)) + off).tolist()})
+
+    def world_positions(self) -> np.ndarray:
+        """(V, 3) float64 vertex positions in world space."""
+        return self.vertices[:, :3].astype(np.float64) + self.origin
 
     def draw_commands(self) -> np.ndarray:
         """(N, 5) uint32 indirect commands (count, instances, first, base vertex, base instance)."""
@@ -115,13 +134,20 @@ def assemble(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
     Each part is ``(positions (n, v, 3), normals (n, v, 3), indices (t*3,), color (n, 3))``: ``n``
     objects sharing one index list of ``v`` local vertices. Vectorized per group.
     """
+    positions = [np.asarray(p, dtype=np.float64) for p, *_ in parts if p.shape[0]]
+    if not positions:
+        raise InputError(f"{name}: the scene has no objects")
+    bmin = np.concatenate([p.min(axis=1) for p in positions])
+    bmax = np.concatenate([p.max(axis=1) for p in positions])
+    origin = (bmin.min(axis=0) + bmax.max(axis=0)) / 2
     verts, idx, first, count, base, cols = [], [], [], [], [], []
     v_off = i_off = 0
     for pos, nrm, tri_idx, col in parts:
         n, v, _ = pos.shape
         if n == 0:
             continue
-        verts.append(np.concatenate([pos, nrm], axis=2).reshape(n * v, 6).astype(np.float32))
+        verts.append(np.concatenate([np.asarray(pos, dtype=np.float64) - origin, nrm], axis=2)
+                     .reshape(n * v, 6).astype(np.float32))
         idx.append(np.tile(tri_idx.astype(np.uint32), n))
         t = tri_idx.size
         first.append(i_off + np.arange(n, dtype=np.int64) * t)
@@ -130,16 +156,11 @@ def assemble(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
         cols.append(np.asarray(col, dtype=np.float32))
         v_off += n * v
         i_off += n * t
-    if not verts:
-        raise InputError(f"{name}: the scene has no objects")
     vertices = np.concatenate(verts)
-    positions = [p for p, *_ in parts if p.shape[0]]
-    bmin = np.concatenate([p.min(axis=1) for p in positions]).astype(np.float64)
-    bmax = np.concatenate([p.max(axis=1) for p in positions]).astype(np.float64)
     centers = (bmin + bmax) / 2
     radii = np.concatenate([np.linalg.norm(p - ((p.min(1) + p.max(1)) / 2)[:, None, :], axis=2).max(axis=1)
                             for p in positions]).astype(np.float64)
     return Scene(vertices=vertices, indices=np.concatenate(idx), first_index=np.concatenate(first),
                  index_count=np.concatenate(count), base_vertex=np.concatenate(base), bmin=bmin, bmax=bmax,
                  centers=centers, radii=radii, colors=np.concatenate(cols) if colors is None else colors,
-                 name=name, meta=meta)
+                 origin=origin, name=name, meta=meta)

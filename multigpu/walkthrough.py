@@ -58,6 +58,18 @@ def make_path(cfg: WalkConfig, scene) -> CameraPath:
     return gen(scene, frames=cfg.frames or (1200 if cfg.path_kind == "walkthrough" else 300))
 
 
+def load_world(cfg: WalkConfig):
+    """Scene, camera path and load facts, both moved by ``--offset`` (a file path too), so an
+    offset run should show the same images as one at the scene's own coordinates."""
+    scene, load_info = load_scene(cfg.scene)
+    if any(cfg.offset):
+        scene = scene.translated(cfg.offset)
+    path = make_path(cfg, scene)
+    if cfg.path and any(cfg.offset):
+        path = path.translated(cfg.offset)
+    return scene, path, load_info
+
+
 def projector(cfg: WalkConfig, scene) -> BoxProjector | SphereProjector:
     """The scene's bounds prepared once for per-frame projection (``--bounds box|sphere``)."""
     if cfg.bounds == "sphere":
@@ -97,8 +109,7 @@ def run(cfg: WalkConfig, comm) -> dict | None:
     if rank == 0:
         try:
             out = cfg.check_output()
-            scene, load_info = load_scene(cfg.scene)
-            path = make_path(cfg, scene)
+            scene, path, load_info = load_world(cfg)
             _check_visible(cfg, scene, path)
         except InputError as exc:
             error = str(exc)
@@ -108,12 +119,11 @@ def run(cfg: WalkConfig, comm) -> dict | None:
     ctx = renderer = None
     try:
         if rank != 0:
-            scene, load_info = load_scene(cfg.scene)
-            path = make_path(cfg, scene)
+            scene, path, load_info = load_world(cfg)
         from .render import RegionRenderer, create_context
 
         ctx, device = create_context(cfg.device)
-        renderer = RegionRenderer(ctx, scene, cfg.size)
+        renderer = RegionRenderer(ctx, scene, cfg.size, cfg.subfrustum)
     except (InputError, RuntimeError) as exc:
         error = str(exc)
     error = agree(comm, error, max(cfg.timeout, 600.0))
@@ -148,7 +158,7 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
 
     writer = video = bar = None
     history: list[np.ndarray] = []
-    config_doc = _config_doc(cfg, scene, load_info, n_frames, device)
+    config_doc = _config_doc(cfg, scene, load_info, n_frames, device, renderer.method)
     if rank == 0:
         (out / "mosaic").mkdir(exist_ok=True)
         writer = TimingWriter(out / "timings.csv")
@@ -173,7 +183,7 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
             w1, c1 = time.perf_counter(), time.process_time()
             region = part.regions[rank]
             mask = part.visible[rank]
-            pixels = renderer.render(proj @ view, light, region, mask)
+            pixels = renderer.render(view, proj, light, region, mask)
             w2, c2 = time.perf_counter(), time.process_time()
             barrier(comm, cfg.timeout)
             w3, c3 = time.perf_counter(), time.process_time()
@@ -233,9 +243,10 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
     return None
 
 
-def _config_doc(cfg, scene, load_info, n_frames, device) -> dict:
+def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dict:
     return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
             "balance": cfg.balance, "bounds": cfg.bounds, "frames_planned": n_frames,
+            "subfrustum": renderer_method, "offset": list(cfg.offset),
             "scene": {"name": scene.name, "objects": scene.n_objects, "triangles": scene.n_triangles,
                       "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
                       "warnings": scene.meta.get("warnings", [])},
