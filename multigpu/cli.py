@@ -6,6 +6,7 @@
     multigpu tree RxC                          print the GPU tree and each rank's ParInfo
     multigpu bench balance|scene|render        benchmarks (speed and memory figures)
     multigpu experiment NAME|all [--quick]     the paper's evaluation: CSV, plots, Markdown
+    multigpu accuracy [--quick]                speed-for-accuracy trades: CSV + ACCURACY.md
 
 Bad input prints ``multigpu: error: ...`` (one line) and exits 2.
 """
@@ -93,6 +94,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--quick", action="store_true", help="tiny sizes: the same code in a few minutes")
     e.add_argument("--out", default="out/experiments", help="output directory")
     e.add_argument("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)")
+    ac = sub.add_parser("accuracy", help="measure every speed-for-accuracy trade (tables for docs/ACCURACY.md)")
+    ac.add_argument("--quick", action="store_true", help="tiny sizes: the same code in under a minute")
+    ac.add_argument("--out", default="out/accuracy", help="directory for the CSV tables")
+    ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
     b.add_argument("what", help="balance | scene | render")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
@@ -117,6 +122,10 @@ def main(argv: list[str] | None = None) -> int:
             from . import experiments
 
             return experiments.run(args.name, args.out, quick=args.quick, results=args.results)
+        if args.cmd == "accuracy":
+            from . import accuracy
+
+            return accuracy.run(args.out, args.page, quick=args.quick)
         if args.cmd == "bench":
             from . import bench
 

@@ -266,7 +266,7 @@ class RegionRenderer:
             data = self.fbo.read(viewport=(fx, fy, cw, ch), components=3, alignment=1)
             out[rows, cols] = np.frombuffer(data, dtype=np.uint8).reshape(ch, cw, 3)
             if depth:
-                data = self.fbo.read(viewport=(fx, fy, cw, ch), attachment=-1, dtype="f4", alignment=1)
+                data = self.fbo.read(viewport=(fx, fy, cw, ch), components=1, attachment=-1, dtype="f4", alignment=1)
                 zout[rows, cols] = np.frombuffer(data, dtype=np.float32).reshape(ch, cw)
         return (out, zout) if depth else out
 

@@ -21,6 +21,10 @@ pytestmark = pytest.mark.mpi
     (["--path", "/nonexistent/p.json"], "path file not found"),
     (["--out", "/proc/multigpu-cannot-write"], "not writable"),
     (["--device", "99"], "--device 99"),
+    (["--subfrustum", "tiles"], "--subfrustum must be one of"),
+    (["--offset", "1e8,x"], "--offset must look like X,Y,Z"),
+    (["--offset", "1e300,0,0"], "--offset must be three finite numbers"),
+    (["--tile", "16384x64", "--subfrustum", "scissor"], "exceeds this GL's maximum framebuffer"),
 ])
 def test_bad_input_matrix(tmp_path, flags, needle):
     args = ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "2", "--out", str(tmp_path / "o"), *flags]

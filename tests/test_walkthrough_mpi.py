@@ -43,6 +43,19 @@ def test_composite_equals_one_rank_render(tmp_path, reference, grid):
         assert (got == ref).all(), f"frame {f}: {(got != ref).any(axis=2).sum()} pixels differ"
 
 
+def test_far_from_origin_and_offaxis_runs_match_the_reference(tmp_path, reference):
+    """--offset 1e8 moves scene and path: the wall looks the same; offaxis stays within its bound."""
+    far = walk(tmp_path, "far", (2, 2), ["--offset", "1e8,-1e8,1e6"])
+    for f, (got, ref) in enumerate(zip(frames_of(far), reference)):
+        assert (got != ref).any(axis=2).sum() <= 0.0005 * W * H, f"frame {f}"
+    s = json.loads((far / "summary.json").read_text())
+    assert s["config"]["offset"] == [1e8, -1e8, 1e6] and s["config"]["subfrustum"] == "scissor"
+    off = walk(tmp_path, "offaxis", (1, 2), ["--subfrustum", "offaxis"])
+    for f, (got, ref) in enumerate(zip(frames_of(off), reference)):
+        assert (got != ref).any(axis=2).sum() <= 0.005 * W * H, f"frame {f}"
+    assert json.loads((off / "summary.json").read_text())["config"]["subfrustum"] == "offaxis"
+
+
 def test_none_and_strips_give_same_images_and_schema(tmp_path, reference):
     out = walk(tmp_path, "none", (2, 2), ["--balance", "none"])
     for got, ref in zip(frames_of(out), reference):
