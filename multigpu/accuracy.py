@@ -356,6 +356,7 @@ def run(out: Path, page: Path | None, quick: bool = False) -> int:
     s = Sizes.make(quick)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    page = Path(page) if page else out / "ACCURACY.md"
     ctx, _ = create_context()
     sections = []
     t_all = time.perf_counter()
@@ -367,9 +368,8 @@ def run(out: Path, page: Path | None, quick: bool = False) -> int:
         print(f"accuracy: {name} ...", flush=True)
         md = fn()
         dt = time.perf_counter() - t
-        sections.append(f"## {title}\n\n{md}\n\n_{dt:.0f} s wall; data: `{os.path.relpath(out / (name + '.csv'), (page or out / 'ACCURACY.md').parent)}`._\n")
+        sections.append(f"## {title}\n\n{md}\n\n_{dt:.0f} s wall; data: `{os.path.relpath(out / (name + '.csv'), page.parent)}`._\n")
         print(f"accuracy: {name}: {dt:.0f} s", flush=True)
-    page = Path(page) if page else out / "ACCURACY.md"
     cmd = "launch/accuracy" + (" --quick" if quick else "")
     page.parent.mkdir(parents=True, exist_ok=True)
     page.write_text("\n".join([

@@ -229,3 +229,16 @@ def test_accuracy_report_quick(tmp_path):
     offsets = rows("offsets")
     assert all(float(r["mismatch_share"]) <= 5e-4 for r in offsets if "ours" in r["vertices"])
     assert {r["strips"] for r in rows("balance")} >= {"2", "2048"}
+
+
+@pytest.mark.parametrize("fov,near,far", [(1.0, 0.1, 1e3), (170.0, 0.1, 1e3), (60.0, 1e-6, 10.0), (60.0, 1.0, 1e7)])
+def test_extreme_cameras_render_right(world, ctx, fov, near, far):
+    """Extreme fov and near/far ratios: composite == one-rank render, no needed object missed."""
+    scene, path = world
+    base = path.camera(30)
+    cam = Camera(base.position, base.target, base.up, fov, near, far)
+    r = RegionRenderer(ctx, scene, SIZE, "scissor")
+    got, _ = compose(r, scene, cam)
+    assert mismatch(got, full(r, cam)) == 0
+    _check_nothing_missed(scene, cam, SIZE, BoxProjector(scene.bmin, scene.bmax))
+    r.release()

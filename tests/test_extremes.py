@@ -111,3 +111,22 @@ def test_ranks_agree_bit_for_bit_near_2_pow_53():
         np.testing.assert_array_equal(p.regions, runs[0].regions)
         np.testing.assert_array_equal(p.loads, runs[0].loads)
     assert runs[0].loads.dtype == np.int64 and runs[0].loads.sum() >= tris.sum()
+
+
+def test_needle_and_zero_area_rects_land_in_one_pixel_column_or_row():
+    rng = np.random.default_rng(4)
+    n = 2000
+    x = rng.random(n)
+    y = rng.random(n)
+    needles_v = np.stack([x, np.zeros(n), x, np.ones(n)], axis=1)  # zero width, full height
+    needles_h = np.stack([np.zeros(n), y, np.ones(n), y], axis=1)  # full width, zero height
+    points = np.stack([x, y, x, y], axis=1)  # zero area
+    rects = np.concatenate([needles_v, needles_h, points])
+    tris = rng.integers(1, 50, len(rects))
+    for grid in [(2, 2), (1, 4), (4, 1), (3, 3)]:
+        W, H = 64 * grid[1], 48 * grid[0]
+        p = partition(rects, tris, grid, (W, H))
+        assert_partition_valid(p, W, H)
+        assert (p.visible.sum(axis=0) >= 1).all()  # every rect drawn by someone
+        # a point lies in exactly one region
+        assert (p.visible[:, 2 * n:].sum(axis=0) == 1).all()
