@@ -29,13 +29,15 @@ def _scene_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--triangles", type=int, default=100_000, help="plant size in triangles (default 100000)")
     g.add_argument("--copies", type=int, default=1, help="plants side by side (the paper used 6..20)")
     g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--cluster", type=int, default=0,
+                   help="split objects above N triangles into spatial clusters of at most N (0: as modelled)")
 
 
 def _spec(a):
     from .models import SceneSpec
 
     return SceneSpec(scene=a.scene, model=a.model, split=a.split, merge_below=a.merge_below,
-                     triangles=a.triangles, copies=a.copies, seed=a.seed)
+                     triangles=a.triangles, copies=a.copies, seed=a.seed, cluster=a.cluster)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -50,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--grid", default="2x2", help="display wall ROWSxCOLS (ranks = rows*cols)")
     w.add_argument("--tile", default="256x256", help="pixels per display tile WxH")
     w.add_argument("--strips", type=int, default=2048, help="strips per split axis (>= 2)")
-    w.add_argument("--balance", default="strips", help="balancing strategy: strips | cost | time | none")
+    w.add_argument("--balance", default="strips", help="balancing strategy: strips | cost | time | adaptive | none")
     w.add_argument("--bounds", default="box", help="object bounds: box (8 corners) | sphere")
     w.add_argument("--out", default="out", help="output directory")
     w.add_argument("--mosaic-every", type=int, default=100, help="write the full wall every N frames (0: never)")
@@ -148,7 +150,7 @@ def _depth(a) -> int:
     if a.path_kind not in ("walkthrough", "orbit"):
         raise InputError(f"--path-kind must be walkthrough or orbit, got '{a.path_kind}'")
     scene, _ = load_scene(SceneSpec(scene=a.scene, model=a.model, split=a.split, merge_below=a.merge_below,
-                                    triangles=a.triangles, copies=a.copies, seed=a.seed))
+                                    triangles=a.triangles, copies=a.copies, seed=a.seed, cluster=a.cluster))
     gen = walkthrough if a.path_kind == "walkthrough" else orbit
     path = gen(scene, frames=a.frames or (1200 if a.path_kind == "walkthrough" else 300))
     if not 0 <= a.frame < len(path):
@@ -206,7 +208,7 @@ def _scene_info(a) -> int:
     src = a.source
     is_file = Path(src).suffix != "" or Path(src).exists()
     spec = SceneSpec(scene=a.scene if is_file else src, model=src if is_file else a.model, split=a.split,
-                     merge_below=a.merge_below, triangles=a.triangles, copies=a.copies, seed=a.seed)
+                     merge_below=a.merge_below, triangles=a.triangles, copies=a.copies, seed=a.seed, cluster=a.cluster)
     scene, info = load_scene(spec, use_cache=not a.no_cache)
     lo, hi = scene.bounds
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -19,11 +19,11 @@ import numpy as np
 MORTON_BITS = 10  # per axis: 2**30 cells
 
 
-def morton_order(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
-    """Permutation sorting ``points`` (N, 3) along a 3-D Z-order curve over their bounding box."""
+def morton_codes(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
+    """(N,) uint64 3-D Z-order codes of ``points`` (N, 3) over their bounding box."""
     p = np.asarray(points, dtype=np.float64)
     if p.shape[0] == 0:
-        return np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.uint64)
     lo, hi = p.min(axis=0), p.max(axis=0)
     span = np.where(hi > lo, hi - lo, 1.0)
     cells = ((p - lo) / span * ((1 << bits) - 1)).astype(np.uint64)
@@ -31,7 +31,12 @@ def morton_order(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
     for b in range(bits):  # bits of the code, not objects
         for axis in range(3):
             code |= ((cells[:, axis] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + axis)
-    return np.argsort(code, kind="stable")
+    return code
+
+
+def morton_order(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
+    """Permutation sorting ``points`` (N, 3) along a 3-D Z-order curve over their bounding box."""
+    return np.argsort(morton_codes(points, bits), kind="stable")
 
 
 class DrawList:

@@ -39,6 +39,7 @@ class SceneSpec:
     triangles: int = 300_000
     copies: int = 1
     seed: int = 0
+    cluster: int = 0  # split objects above this many triangles into clusters (0: as modelled)
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
@@ -49,6 +50,8 @@ class SceneSpec:
             raise InputError(f"--triangles must be >= 1000, got {self.triangles}")
         if self.copies < 1:
             raise InputError(f"--copies must be >= 1, got {self.copies}")
+        if self.cluster < 0:
+            raise InputError(f"--cluster must be >= 0 (0 keeps objects whole), got {self.cluster}")
 
 
 def cache_dir() -> Path:
@@ -69,13 +72,21 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
         if src.suffix.lower() not in FORMATS:
             raise InputError(f"--model {src}: unsupported extension '{src.suffix}' (use {', '.join(sorted(FORMATS))})")
         st = src.stat()
-        key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below)
+        key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, spec.cluster)
         name = f"{src.stem}-{key}.npz"
-        build = lambda: load_model(src, spec.split, spec.merge_below)
+        make = lambda: load_model(src, spec.split, spec.merge_below)
     else:
-        key = _key(spec.scene, spec.triangles, spec.copies, spec.seed)
+        key = _key(spec.scene, spec.triangles, spec.copies, spec.seed, spec.cluster)
         name = f"{spec.scene}-{key}.npz"
-        build = lambda: BUILTIN[spec.scene](spec)
+        make = lambda: BUILTIN[spec.scene](spec)
+
+    def build() -> Scene:
+        scene = make()
+        if spec.cluster:
+            from .cluster import split_objects
+
+            scene = split_objects(scene, spec.cluster)
+        return scene
     path = cache_dir() / name
     if use_cache and path.is_file():
         try:

@@ -1,0 +1,59 @@
+"""Split big objects into spatially coherent clusters of at most ``max_tris`` triangles.
+
+The balancer culls and counts whole objects, so an object straddling a split is drawn (all of
+its triangles transformed) by every rank it touches. Objects of hundreds or thousands of
+triangles (slabs, long pipes, tanks) make most of that overlap. Cutting them into clusters
+along a Z-order curve of their triangle centroids keeps each cluster compact on screen, so a
+split cuts few clusters and each cut costs few triangles; the draw list merges consecutive
+visible clusters into one command, so more objects cost no more draw calls. Vertices, normals
+and colours are shared with the original object, so images do not change. Pure numpy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .drawlist import morton_codes
+from .errors import InputError
+from .scene import Scene
+from .triangles import triangle_objects
+
+
+def split_objects(scene: Scene, max_tris: int) -> Scene:
+    """The scene with every object above ``max_tris`` triangles cut into near-equal clusters."""
+    if max_tris < 1:
+        raise InputError(f"--cluster must be >= 1 triangle (0 keeps objects whole), got {max_tris}")
+    tris = scene.tris
+    if tris.size == 0 or tris.max() <= max_tris:
+        return scene
+    tri, obj = triangle_objects(scene)  # (T, 3) absolute vertices, object of each triangle
+    pos = scene.vertices[:, :3].astype(np.float64)
+    centroid = pos[tri].mean(axis=1)
+    big = tris[obj] > max_tris
+    key = np.where(big, morton_codes(centroid), np.uint64(0))  # small objects keep their order
+    order = np.lexsort((np.arange(len(obj)), key, obj))
+    tri, obj = tri[order], obj[order]
+    # rank of each triangle within its object, and the object's cluster count and size
+    counts = np.bincount(obj, minlength=scene.n_objects)
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    within = np.arange(len(obj)) - start[obj]
+    n_clusters = -(-counts // max_tris)
+    per = -(-counts // np.maximum(n_clusters, 1))  # near-equal cluster sizes
+    cluster = within // np.maximum(per[obj], 1)
+    first_of_obj = np.concatenate([[0], np.cumsum(n_clusters)[:-1]])
+    cid = first_of_obj[obj] + cluster  # new object id, in (object, cluster) order
+    n_new = int(n_clusters.sum())
+    new_counts = np.bincount(cid, minlength=n_new)
+    parent = np.repeat(np.arange(scene.n_objects), n_clusters)
+    starts = np.concatenate([[0], np.cumsum(new_counts)[:-1]])
+    world = pos[tri] + scene.origin  # (T, 3, 3) float64
+    bmin = np.minimum.reduceat(world.min(axis=1), starts)
+    bmax = np.maximum.reduceat(world.max(axis=1), starts)
+    centers = (bmin + bmax) / 2
+    radii = np.maximum.reduceat(np.linalg.norm(world - centers[cid][:, None, :], axis=2).max(axis=1), starts)
+    base = scene.base_vertex[parent]
+    local = (tri - base[cid][:, None]).astype(np.uint32)
+    return Scene(vertices=scene.vertices, indices=local.ravel(), first_index=starts * 3,
+                 index_count=new_counts.astype(np.int64) * 3, base_vertex=base, bmin=bmin, bmax=bmax,
+                 centers=centers, radii=radii, colors=scene.colors[parent], origin=scene.origin, name=scene.name,
+                 meta={**scene.meta, "cluster": int(max_tris), "modelled_objects": scene.n_objects})
