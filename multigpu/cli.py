@@ -60,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--video", action="store_true", help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
     w.add_argument("--subfrustum", default="auto",
                    help="how a rank renders its region: auto | viewport | scissor | offaxis (docs/ACCURACY.md)")
+    w.add_argument("--partition", default="redundant",
+                   help="who computes the partition: redundant (every rank) | broadcast (rank 0, then MPI_Bcast)")
     w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
     w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
     w.add_argument("--timeout", type=float, default=120.0, help="seconds any rank waits for the others")
@@ -92,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     dp.add_argument("--size", default="1024x1024", help="display WxH in pixels")
     dp.add_argument("--out", default="out/depth", help="output directory")
     e = sub.add_parser("experiment", help="the paper's evaluation: tables, plots, Markdown")
-    e.add_argument("name", help="all | gpus | resolution | balance | strips | orbit | overlap | cost")
+    e.add_argument("name", help="all | gpus | resolution | balance | strips | orbit | overlap | cost | speedup")
     e.add_argument("--quick", action="store_true", help="tiny sizes: the same code in a few minutes")
     e.add_argument("--out", default="out/experiments", help="output directory")
     e.add_argument("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)")
@@ -173,7 +175,7 @@ def _walkthrough(a) -> int:
         cfg = WalkConfig(scene=_spec(a), path=a.path, path_kind=a.path_kind, frames=a.frames,
                          grid=parse_pair(a.grid, "--grid"), tile=parse_pair(a.tile, "--tile"), strips=a.strips,
                          balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
-                         overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
+                         overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum, partition=a.partition,
                          offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
                          progress=not a.no_progress)
         from .walkthrough import run

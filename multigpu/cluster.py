@@ -42,6 +42,9 @@ def split_objects(scene: Scene, max_tris: int) -> Scene:
     cluster = within // np.maximum(per[obj], 1)
     first_of_obj = np.concatenate([[0], np.cumsum(n_clusters)[:-1]])
     cid = first_of_obj[obj] + cluster  # new object id, in (object, cluster) order
+    # inside a cluster keep the modelled triangle order (vertex reuse as the modeller left it)
+    keep = np.lexsort((order, cid))
+    tri, obj, cid = tri[keep], obj[keep], cid[keep]
     n_new = int(n_clusters.sum())
     new_counts = np.bincount(cid, minlength=n_new)
     parent = np.repeat(np.arange(scene.n_objects), n_clusters)

@@ -53,6 +53,7 @@ class WalkConfig:
     video: bool = False
     device: int | None = None
     subfrustum: str = "auto"
+    partition: str = "redundant"
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     timeout: float = 120.0
     progress: bool = True
@@ -74,6 +75,8 @@ class WalkConfig:
 
         if self.subfrustum not in METHODS:
             raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{self.subfrustum}'")
+        if self.partition not in ("redundant", "broadcast"):
+            raise InputError(f"--partition must be 'redundant' or 'broadcast', got '{self.partition}'")
         if len(self.offset) != 3 or not all(math.isfinite(v) and abs(v) <= 1e15 for v in self.offset):
             raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
         if self.device is not None and self.device < 0:

@@ -77,3 +77,27 @@ def exchange(comm, me: int, pixels: np.ndarray, region, tile, plan: list[Transfe
     for buf, (x0, y0, x1, y1) in inbox:
         out[y0 - ty0:y1 - ty0, x0 - tx0:x1 - tx0] = buf
     return sent
+
+
+def broadcast_partition(comm, part, k: int, n: int, timeout: float):
+    """Rank 0's partition on every rank (the ``--partition broadcast`` variant): one
+    non-blocking broadcast of regions, loads, splits and the bit-packed (K, N) T' masks."""
+    from mpi4py import MPI
+
+    from .balance import Partition
+
+    m = max(k - 1, 0)
+    ints, floats = 5 * k + m, m  # regions, loads, split pixels (int64); splits (float64)
+    head = 8 * (ints + floats)
+    buf = np.empty(head + (k * n + 7) // 8, dtype=np.uint8)
+    if comm.Get_rank() == 0:
+        buf[:8 * ints] = np.concatenate([part.regions.ravel(), part.loads, part.split_pixels]).astype(np.int64).view(np.uint8)
+        buf[8 * ints:head] = np.asarray(part.splits, dtype=np.float64).view(np.uint8)
+        buf[head:] = np.packbits(part.visible.ravel())
+    wait_all([comm.Ibcast([buf, MPI.BYTE], root=0)], timeout, "partition broadcast")
+    if comm.Get_rank() == 0:
+        return part
+    i = buf[:8 * ints].view(np.int64)
+    visible = np.unpackbits(buf[head:], count=k * n).reshape(k, n).view(bool)
+    return Partition(i[:4 * k].reshape(k, 4).copy(), i[4 * k:5 * k].copy(), visible,
+                     buf[8 * ints:head].view(np.float64).copy(), i[5 * k:].copy())

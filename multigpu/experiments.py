@@ -460,8 +460,90 @@ def exp_cost(s: Settings, out: Path) -> str:
         "|---:|---:|---:|---:|---:|---:|---:|", *md_depth])
 
 
+def exp_speedup(s: Settings, out: Path) -> str:
+    """Issue 4's target: rendering speedup of 4 ranks over 1 on the default plant, per strategy,
+    with objects as modelled and clustered (``--cluster 64``), repeated in alternating rounds
+    (1 rank, then every 4-rank configuration, then again) so slow drifts of a shared machine
+    hit all configurations alike; medians and ranges over rounds."""
+    rounds = 1 if s.quick else 3
+    displays = [(128, 128)] if s.quick else [(512, 512), (1024, 1024)]
+    configs = [("strips", 0), ("adaptive", 0), ("time", 0), ("none", 0), ("strips", 64), ("adaptive", 64)]
+    base_args = _scene_args(s) + ["--frames", str(s.frames), "--mosaic-every", "0"]
+    speed: dict = {}
+    for W, H in displays:
+        for rnd in range(rounds):
+            k1 = {}
+            for cl in sorted({c for _, c in configs}):
+                run = walk(out / f"{W}-r{rnd}-k1-c{cl}", (1, 1), (W, H), base_args + ["--cluster", str(cl)], s.timeout)
+                k1[cl] = float(run.render_max_cpu.mean())
+            for bal, cl in configs:
+                run = walk(out / f"{W}-r{rnd}-{bal}-c{cl}", (2, 2), (W // 2, H // 2),
+                           base_args + ["--balance", bal, "--cluster", str(cl)], s.timeout)
+                c = run.col("rendering_cpu_ms")
+                speed.setdefault((W, bal, cl), []).append(
+                    (k1[cl] / float(c.max(axis=1).mean()), float((c.max(axis=1) / c.mean(axis=1)).mean()),
+                     float(c.mean()), k1[cl]))
+    rows = []
+    for (W, bal, cl), v in speed.items():
+        a = np.array(v)
+        rows.append({"display": f"{W}x{W}", "balance": bal, "cluster": cl, "rounds": len(v),
+                     "k1_render_ms": float(np.median(a[:, 3])), "k4_mean_rank_ms": float(np.median(a[:, 2])),
+                     "time_imbalance": float(np.median(a[:, 1])), "speedup_median": float(np.median(a[:, 0])),
+                     "speedup_min": float(a[:, 0].min()), "speedup_max": float(a[:, 0].max())})
+    _write_csv(out / "speedup.csv", rows)
+    best = max(rows, key=lambda r: r["speedup_median"])
+    return "\n".join([
+        f"Default plant ({s.triangles} requested triangles), walkthrough resampled to {s.frames} frames, 1 rank "
+        f"against a 2x2 wall of the same display, {rounds} alternating rounds. Speedup = mean 1-rank rendering "
+        "CPU time / mean over frames of the slowest of 4 ranks' rendering CPU time (emulated parallel; per-rank "
+        "CPU time with `LP_NUM_THREADS=1`). `Cluster 64`: objects above 64 triangles split into spatial clusters "
+        "(`--cluster 64`, same triangles and images, less overlap). Time imbalance: per frame max/mean of the 4 "
+        "ranks' rendering CPU time, averaged.", "",
+        _md_table(rows, [("display", "Display", ""), ("balance", "Balance", ""), ("cluster", "Cluster", ""),
+                         ("k1_render_ms", "1 rank ms", ".2f"), ("k4_mean_rank_ms", "4 ranks: mean rank ms", ".2f"),
+                         ("time_imbalance", "Time imbalance", ".3f"), ("speedup_median", "Speedup (median)", ".2f"),
+                         ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f")]), "",
+        f"Best: {best['balance']} with cluster {best['cluster']} at {best['display']}: {best['speedup_median']:.2f}x "
+        f"(target 3x)."])
+
+
+def exp_partition(s: Settings, out: Path) -> str:
+    """DESIGN.md's open choice: every rank computes the partition (redundant) or rank 0 computes
+    and broadcasts it. Alternating rounds, 2x2 wall, the default plant and 4 plants."""
+    rounds = 1 if s.quick else 2
+    W, H = (128, 128) if s.quick else (512, 512)
+    rows = []
+    acc: dict = {}
+    for copies in ((1,) if s.quick else (1, 4)):
+        for rnd in range(rounds):
+            for mode in ("redundant", "broadcast"):
+                run = walk(out / f"c{copies}-r{rnd}-{mode}", (2, 2), (W // 2, H // 2),
+                           _scene_args(s, copies) + ["--frames", str(s.frames), "--mosaic-every", "0",
+                                                     "--partition", mode], s.timeout)
+                b = _breakdown(run)
+                acc.setdefault((copies, mode), []).append(
+                    (float(run.col("load_balancing_ms").mean()), float(run.col("load_balancing_cpu_ms").mean()),
+                     float(run.col("load_balancing_cpu_ms").sum(axis=1).mean()), b["emulated_ms"], b["frame_ms"],
+                     run.summary["config"]["scene"]["objects"]))
+    for (copies, mode), v in acc.items():
+        a = np.median(np.array(v), axis=0)
+        rows.append({"copies": copies, "objects": int(a[5]), "partition": mode, "lb_wall_ms": a[0],
+                     "lb_cpu_ms_per_rank": a[1], "lb_cpu_ms_all_ranks": a[2], "emulated_ms": a[3], "frame_wall_ms": a[4]})
+    _write_csv(out / "partition.csv", rows)
+    return "\n".join([
+        f"2x2 wall of {W}x{H}, walkthrough resampled to {s.frames} frames, {rounds} alternating round(s), medians. "
+        "LB wall: load-balancing phase per rank and frame (for broadcast: rank 0's plan plus the broadcast, "
+        "which the other ranks spend waiting); LB CPU: process CPU time in that phase, per rank and summed over "
+        "the 4 ranks; emulated: slowest rank's CPU time per frame.", "",
+        _md_table(rows, [("copies", "Plants", ""), ("objects", "Objects", ""), ("partition", "Partition", ""),
+                         ("lb_wall_ms", "LB wall ms", ".2f"), ("lb_cpu_ms_per_rank", "LB CPU ms/rank", ".2f"),
+                         ("lb_cpu_ms_all_ranks", "LB CPU ms, 4 ranks", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f"),
+                         ("frame_wall_ms", "Frame (wall) ms", ".2f")])])
+
+
 EXPERIMENTS = {"gpus": exp_gpus, "resolution": exp_resolution, "balance": exp_balance, "strips": exp_strips,
-               "orbit": exp_orbit, "overlap": exp_overlap, "cost": exp_cost}
+               "orbit": exp_orbit, "overlap": exp_overlap, "cost": exp_cost,
+               "speedup": exp_speedup, "partition": exp_partition}
 
 
 def run(name: str, out: Path, quick: bool = False, results: Path | None = None) -> int:

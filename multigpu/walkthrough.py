@@ -19,7 +19,7 @@ import numpy as np
 from .bounds import BoxProjector, SphereProjector
 from .config import WalkConfig
 from .errors import InputError
-from .exchange import barrier, exchange, wait_all
+from .exchange import barrier, broadcast_partition, exchange, wait_all
 from .models import load_scene
 from .mosaic import overlay, save_png, stitch
 from .paths import CameraPath, load_path, orbit, walkthrough
@@ -141,6 +141,7 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
     tiles = tile_regions(cfg.grid[0], cfg.grid[1], tw, th)
     my_tile = tiles[rank]
     strategy = make_strategy(cfg.balance, cfg.grid, size, cfg.strips)
+    broadcast = cfg.partition == "broadcast" and K > 1
     tris = scene.tris
     project = projector(cfg, scene)
     coverage = None
@@ -176,10 +177,14 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
             w0, c0 = time.perf_counter(), time.process_time()
             _fault(rank, f)
             view, proj, light = frame_matrices(path.camera(f), size)
-            if coverage is None:
-                part = strategy.plan(project(view, proj), tris)
-            else:
-                part = strategy.plan(project(view, proj, coverage), tris, coverage)
+            part = None
+            if rank == 0 or not broadcast:  # redundant: every rank plans the same partition
+                if coverage is None:
+                    part = strategy.plan(project(view, proj), tris)
+                else:
+                    part = strategy.plan(project(view, proj, coverage), tris, coverage)
+            if broadcast:
+                part = broadcast_partition(comm, part, K, scene.n_objects, cfg.timeout)
             w1, c1 = time.perf_counter(), time.process_time()
             region = part.regions[rank]
             mask = part.visible[rank]
@@ -246,7 +251,7 @@ def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | 
 def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dict:
     return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
             "balance": cfg.balance, "bounds": cfg.bounds, "frames_planned": n_frames,
-            "subfrustum": renderer_method, "offset": list(cfg.offset),
+            "subfrustum": renderer_method, "offset": list(cfg.offset), "partition": cfg.partition,
             "scene": {"name": scene.name, "objects": scene.n_objects, "triangles": scene.n_triangles,
                       "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
                       "warnings": scene.meta.get("warnings", [])},

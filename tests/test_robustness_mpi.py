@@ -22,6 +22,8 @@ pytestmark = pytest.mark.mpi
     (["--out", "/proc/multigpu-cannot-write"], "not writable"),
     (["--device", "99"], "--device 99"),
     (["--subfrustum", "tiles"], "--subfrustum must be one of"),
+    (["--partition", "gossip"], "--partition must be 'redundant' or 'broadcast'"),
+    (["--cluster", "-3"], "--cluster must be >= 0"),
     (["--offset", "1e8,x"], "--offset must look like X,Y,Z"),
     (["--offset", "1e300,0,0"], "--offset must be three finite numbers"),
     (["--tile", "16384x64", "--subfrustum", "scissor"], "exceeds this GL's maximum framebuffer"),

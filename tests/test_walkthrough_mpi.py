@@ -56,6 +56,20 @@ def test_far_from_origin_and_offaxis_runs_match_the_reference(tmp_path, referenc
     assert json.loads((off / "summary.json").read_text())["config"]["subfrustum"] == "offaxis"
 
 
+def test_broadcast_partition_equals_redundant(tmp_path, reference):
+    """--partition broadcast (rank 0 plans, MPI_Bcast) gives the same regions, loads and images."""
+    outs = {m: walk(tmp_path, m, (2, 2), ["--partition", m]) for m in ("redundant", "broadcast")}
+    for got, ref in zip(frames_of(outs["broadcast"]), reference):
+        assert (got == ref).all()
+    cols = ("frame", "rank", "triangles", "x0", "y0", "x1", "y1", "objects")
+    rows = {}
+    for m, out in outs.items():
+        with open(out / "timings.csv") as fh:
+            rows[m] = sorted(tuple(r[c] for c in cols) for r in csv.DictReader(fh))
+    assert rows["broadcast"] == rows["redundant"]
+    assert json.loads((outs["broadcast"] / "summary.json").read_text())["config"]["partition"] == "broadcast"
+
+
 def test_none_and_strips_give_same_images_and_schema(tmp_path, reference):
     out = walk(tmp_path, "none", (2, 2), ["--balance", "none"])
     for got, ref in zip(frames_of(out), reference):
