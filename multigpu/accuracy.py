@@ -15,7 +15,6 @@ one after another, so per-rank figures are honest process CPU times with ``LP_NU
 
 from __future__ import annotations
 
-import csv
 import os
 import platform
 import time
@@ -26,7 +25,9 @@ import numpy as np
 
 from .balance import partition
 from .bounds import BoxProjector, SphereProjector
+from .bench import median_ms
 from .regions import overlaps, pixel_spans
+from .tables import md_table, write_csv
 
 
 @dataclass
@@ -52,21 +53,6 @@ def _cpu_ms(fn):
     t = time.process_time()
     r = fn()
     return r, (time.process_time() - t) * 1e3
-
-
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-
-
-def _md(rows: list[dict], cols: list[tuple[str, str, str]]) -> str:
-    head = "| " + " | ".join(h for _, h, _ in cols) + " |"
-    sep = "|" + "|".join("---:" for _ in cols) + "|"
-    body = ["| " + " | ".join(format(r[k], f) if f else str(r[k]) for k, _, f in cols) + " |" for r in rows]
-    return "\n".join([head, sep, *body])
 
 
 def _world(s: Sizes):
@@ -134,7 +120,7 @@ def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
                          "vs_scissor": float(np.median(a["sum"]) / base), "fbo_mib": r.framebuffer_bytes / 2**20})
             r.release()
         ref.release()
-    _write_csv(out / "subfrustum.csv", rows)
+    write_csv(out / "subfrustum.csv", rows)
     vw, vh = limits["viewport"]
     rb = limits["renderbuffer"]
     big = (2 * rb, 1024)
@@ -145,7 +131,7 @@ def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
         "of the whole display (`scissor` over the full display). Depth is window depth in [0, 1]. Render time "
         "is process CPU time summed over the ranks' regions (median frame); `slowest rank` is the emulated "
         "parallel rendering time.", "",
-        _md(rows, [("grid", "Grid", ""), ("display", "Display", ""), ("method", "Method", ""),
+        md_table(rows, [("grid", "Grid", ""), ("display", "Display", ""), ("method", "Method", ""),
                    ("mismatch_px", "Mismatching px", ""), ("mismatch_share", "Share", ".2e"),
                    ("max_color_diff", "Max colour diff", ""), ("max_depth_diff", "Max depth diff", ".2e"),
                    ("render_cpu_ms", "Render CPU ms (sum)", ".2f"), ("slowest_rank_ms", "Slowest rank ms", ".2f"),
@@ -179,16 +165,6 @@ def _views(n: int):
     return [(look_at(e, t, [0, 0, 1]), proj) for e, t in eyes[:n]]
 
 
-def _median_ms(fn, repeat: int) -> float:
-    fn()
-    ts = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts) * 1e3)
-
-
 def table_balance(s: Sizes, out: Path) -> str:
     from .bench import synthetic_objects
 
@@ -212,7 +188,7 @@ def table_balance(s: Sizes, out: Path) -> str:
                 visible = tris[~np.isnan(rects[:, 0])].sum()
                 imb.append(p.loads.max() / p.loads.mean())
                 ovl.append(p.loads.sum() / max(visible, 1))
-                ms.append(_median_ms(lambda: partition(project(view, proj), tris, grid, size, q), s.repeat))
+                ms.append(median_ms(lambda: partition(project(view, proj), tris, grid, size, q), s.repeat))
                 if bounds == "box":
                     ref = projectors[("box", "float64")](view, proj)
                     with np.errstate(invalid="ignore"):
@@ -221,14 +197,14 @@ def table_balance(s: Sizes, out: Path) -> str:
                          "imbalance": float(np.mean(imb)), "overlap": float(np.mean(ovl)),
                          "balancer_ms": float(np.median(ms)),
                          "rect_err_px": float(max(err)) if err else float("nan")})
-    _write_csv(out / "balance.csv", rows)
+    write_csv(out / "balance.csv", rows)
     return "\n".join([
         f"Synthetic plant-like objects (`multigpu.bench.synthetic_objects`: clustered boxes, heavy-tailed "
         f"triangle counts), {len(views)} views, a 2x2 wall of {size[0]}x{size[1]} pixels (so {W} strips is one "
         "strip per pixel). Imbalance: max/mean triangles per rank; overlap: triangles rendered summed over ranks "
         "over triangles visible; balancer: wall ms per frame for projection + partition (median); rect error: "
         "largest difference of any rect side against float64 corners, in pixels.", "",
-        _md(rows, [("objects", "Objects", ""), ("bounds", "Bounds", ""), ("dtype", "Corners", ""),
+        md_table(rows, [("objects", "Objects", ""), ("bounds", "Bounds", ""), ("dtype", "Corners", ""),
                    ("strips", "Strips", ""), ("imbalance", "Imbalance", ".3f"), ("overlap", "Overlap", ".3f"),
                    ("balancer_ms", "Balancer ms", ".2f"), ("rect_err_px", "Rect error px", ".1e")])])
 
@@ -274,7 +250,7 @@ def table_needed(s: Sizes, out: Path) -> str:
                          "submitted_over_needed": float(sub[:, k].sum() / max(need_t[:, k].sum(), 1)),
                          "share_of_scene": float(sub[:, k].mean() / scene.n_triangles),
                          "objects_not_needed": float(wasted[:, k].mean()), "missed": missed})
-    _write_csv(out / "needed.csv", rows)
+    write_csv(out / "needed.csv", rows)
     return "\n".join([
         f"The default plant ({scene.n_triangles} triangles, {scene.n_objects} objects), {len(frames)} walkthrough "
         f"frames on a 2x2 wall of {size[0]}x{size[1]}, `strips` balancing. Per rank and frame (means): triangles "
@@ -284,7 +260,7 @@ def table_needed(s: Sizes, out: Path) -> str:
         "own pixel-span rule). `Objects not needed`: share of submitted objects without any triangle in the "
         "region (loose bounds). `Missed`: objects with a triangle in the region that the rank did not draw, "
         "summed over all frames and ranks: it must be 0 (a missing object would be a hole in the image).", "",
-        _md(rows, [("bounds", "Bounds", ""), ("rank", "Rank", ""), ("scene", "Scene tris", ""),
+        md_table(rows, [("bounds", "Bounds", ""), ("rank", "Rank", ""), ("scene", "Scene tris", ""),
                    ("submitted", "Submitted", ".0f"), ("share_of_scene", "of scene", ".3f"),
                    ("needed_objects", "Needed (objects)", ".0f"), ("needed_triangles", "Needed (triangles)", ".0f"),
                    ("submitted_over_needed_objects", "Submitted / needed objects", ".3f"),
@@ -333,7 +309,7 @@ def table_offsets(s: Sizes, ctx, out: Path) -> str:
             rows.append({"offset": f"{off:.0e}", "vertices": label, "mismatch_px": px,
                          "mismatch_share": px / (len(frames) * size[0] * size[1]), "max_color_diff": dc,
                          "same_partition": f"{same}/{len(frames)}"})
-    _write_csv(out / "offsets.csv", rows)
+    write_csv(out / "offsets.csv", rows)
     return "\n".join([
         f"The plant and its walkthrough moved by (d, d, 0), {len(frames)} frames on a 2x2 wall of "
         f"{size[0]}x{size[1]}, each composed from 4 ranks' regions, against the scene at its own coordinates. "
@@ -341,7 +317,7 @@ def table_offsets(s: Sizes, ctx, out: Path) -> str:
         "(`render.model_view`). The alternative stores float32 world coordinates (what a renderer without an "
         "origin does). `Same partition`: frames whose regions and draw lists equal those at offset 0 (bounds "
         "projected with float64 centres).", "",
-        _md(rows, [("offset", "Offset d", ""), ("vertices", "Vertices", ""), ("mismatch_px", "Mismatching px", ""),
+        md_table(rows, [("offset", "Offset d", ""), ("vertices", "Vertices", ""), ("mismatch_px", "Mismatching px", ""),
                    ("mismatch_share", "Share", ".2e"), ("max_color_diff", "Max colour diff", ""),
                    ("same_partition", "Same partition", "")])])
 

@@ -17,7 +17,7 @@ import numpy as np
 from .errors import InputError
 
 
-def _median_ms(fn, repeat: int) -> float:
+def median_ms(fn, repeat: int) -> float:
     fn()  # warm up (first-touch page faults, caches)
     times = []
     for _ in range(repeat):
@@ -60,9 +60,9 @@ def bench_balance(quick: bool) -> list[dict]:
             for kind in ("box", "sphere"):
                 project = BoxProjector(bmin, bmax) if kind == "box" else SphereProjector(c, r)
                 rects = project(view, proj)
-                t_proj = _median_ms(lambda: project(view, proj), 7)
-                t_part = _median_ms(lambda: partition(rects, tris, grid, size, 2048), 7)
-                t_all = _median_ms(lambda: partition(project(view, proj), tris, grid, size, 2048), 7)
+                t_proj = median_ms(lambda: project(view, proj), 7)
+                t_part = median_ms(lambda: partition(rects, tris, grid, size, 2048), 7)
+                t_all = median_ms(lambda: partition(project(view, proj), tris, grid, size, 2048), 7)
                 target = 15 * n / 100_000 if grid == (2, 2) else None
                 rows.append({"objects": n, "grid": f"{grid[0]}x{grid[1]}", "bounds": kind, "project_ms": t_proj,
                              "partition_ms": t_part, "total_ms": t_all, "target_ms": target, "heap_kept": heap})
@@ -168,13 +168,13 @@ def bench_render(quick: bool) -> list[dict]:
             r.vao.render(vertices=total)
             r.fbo.read(viewport=(0, 0, *size), components=3, alignment=1)
 
-        t_bare = _median_ms(bare, 7)
+        t_bare = median_ms(bare, 7)
         quarter = (scene.bmin[:, 0] <= 0) & (scene.bmin[:, 1] <= 0)
         scattered = np.random.default_rng(1).random(n) < 0.5
         for frame, region, mask in (("all", (0, 0, W, H), np.ones(n, bool)),
                                     ("quarter", (0, 0, W // 2, H // 2), quarter),
                                     ("scattered", (0, 0, W, H), scattered)):
-            t = _median_ms(lambda: r.render(eye, eye, light, region, mask), 7)
+            t = median_ms(lambda: r.render(eye, eye, light, region, mask), 7)
             rows.append({"frame": frame, "objects": n, "triangles": int(scene.tris[mask].sum()),
                          "commands": r.last_commands, "indirect_ms": t, "bare_ms": t_bare})
             print(f"{frame:>9} {n:8d} {rows[-1]['triangles']:10d} {r.last_commands:9d} {t:12.2f} {t_bare:8.2f} "

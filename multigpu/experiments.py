@@ -14,7 +14,6 @@ speedups and efficiencies are computed from emulated figures only.
 
 from __future__ import annotations
 
-import csv
 import os
 import shutil
 import time
@@ -26,6 +25,7 @@ import numpy as np
 from .errors import InputError
 from .mpirun import JobTimeout, run_multigpu
 from .report import COLUMNS, read_timings
+from .tables import md_table, write_csv
 
 # Dong & Peng 2019, Section 7 (quoted for comparison, not measured here)
 PAPER = {
@@ -108,23 +108,6 @@ def _scene_args(s: Settings, copies: int = 1) -> list[str]:
     return ["--triangles", str(s.triangles * copies), "--copies", str(copies)]
 
 
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    keys = list(rows[0])
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()})
-
-
-def _md_table(rows: list[dict], cols: list[tuple[str, str, str]]) -> str:
-    """Markdown table of ``rows`` with ``cols`` = (key, header, format)."""
-    head = "| " + " | ".join(h for _, h, _ in cols) + " |"
-    sep = "|" + "|".join("---:" for _ in cols) + "|"
-    body = ["| " + " | ".join(format(r[k], f) if f else str(r[k]) for k, _, f in cols) + " |" for r in rows]
-    return "\n".join([head, sep, *body])
-
-
 def _plt():
     import matplotlib
 
@@ -176,7 +159,7 @@ def exp_gpus(s: Settings, out: Path) -> str:
                 rows.append({"copies": copies, "triangles": run.summary["config"]["scene"]["triangles"],
                              "ranks": k, "grid": f"{grid[0]}x{grid[1]}", "balance": bal, **_breakdown(run),
                              "render_speedup": speed, "render_efficiency": speed / k})
-    _write_csv(out / "gpus.csv", rows)
+    write_csv(out / "gpus.csv", rows)
     plt = _plt()
     fig, ax = plt.subplots(1, 2, figsize=(11, 4))
     for copies in s.copies:
@@ -196,7 +179,7 @@ def exp_gpus(s: Settings, out: Path) -> str:
     md = [f"Display {W}x{H}; walkthrough path resampled to {s.frames} frames; plant copies {list(s.copies)}.",
           "Render speedup = mean 1-rank rendering CPU time / mean over frames of the slowest rank's rendering "
           "CPU time (emulated parallel); efficiency = speedup / ranks.", "",
-          _md_table(rows, [("triangles", "Triangles", ""), ("grid", "Grid", ""), ("balance", "Balance", ""),
+          md_table(rows, [("triangles", "Triangles", ""), ("grid", "Grid", ""), ("balance", "Balance", ""),
                            *BREAKDOWN_COLS, ("render_speedup", "Render speedup", ".2f"),
                            ("render_efficiency", "Efficiency", ".0%")]),
           "", "![gpus](gpus.png)", ""]
@@ -216,7 +199,7 @@ def exp_resolution(s: Settings, out: Path) -> str:
                    _scene_args(s) + ["--frames", str(s.res_frames), "--strips", str(res), "--mosaic-every", "0"],
                    s.timeout)
         rows.append({"display": f"{res}x{res}", "pixels": res * res, **_breakdown(run)})
-    _write_csv(out / "resolution.csv", rows)
+    write_csv(out / "resolution.csv", rows)
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 4))
     x = np.arange(len(rows))
@@ -233,7 +216,7 @@ def exp_resolution(s: Settings, out: Path) -> str:
     fig.savefig(out / "resolution.png", dpi=100)
     plt.close(fig)
     return "\n".join([f"2x2 wall, strips = display width, {s.res_frames} frames.", "",
-                      _md_table(rows, [("display", "Display", ""), *BREAKDOWN_COLS,
+                      md_table(rows, [("display", "Display", ""), *BREAKDOWN_COLS,
                                        ("exchange_cpu_ms", "Exchange CPU", ".2f"),
                                        ("bytes_per_frame", "Bytes/frame", ".0f")]),
                       "", "![resolution](resolution.png)"])
@@ -254,7 +237,7 @@ def exp_balance(s: Settings, out: Path) -> str:
     per = {n: np.array(r.summary["per_frame_emulated_ms"]) for n, r in runs.items()}
     rows = [{"balance": n, **_breakdown(r), "speedup_vs_none": float(per["none"].mean() / per[n].mean())}
             for n, r in runs.items()]
-    _write_csv(out / "balance.csv", rows)
+    write_csv(out / "balance.csv", rows)
     plt = _plt()
     fig, ax = plt.subplots(figsize=(10, 4))
     for n, v in per.items():
@@ -280,7 +263,7 @@ def exp_balance(s: Settings, out: Path) -> str:
     sp = rows[[r["balance"] for r in rows].index("strips")]["speedup_vs_none"]
     return "\n".join([f"2x2 wall of 256x256 tiles, walkthrough resampled to {s.frames} frames, plant "
                       f"{runs['strips'].summary['config']['scene']['triangles']} triangles.", "",
-                      _md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
+                      md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
                                        ("imb_render", "Imb. render", ".3f"),
                                        ("speedup_vs_none", "Speedup vs none", ".2f")]),
                       "", "![balance](balance.png)", "", *md_thumbs, "",
@@ -298,7 +281,7 @@ def exp_strips(s: Settings, out: Path) -> str:
             "--frames", str(s.strip_frames), "--strips", str(q), "--mosaic-every", "0"], s.timeout)
         b = _breakdown(run)
         rows.append({"strips": q, **b, "balancer_share": b["lb_cpu_ms"] / b["emulated_ms"]})
-    _write_csv(out / "strips.csv", rows)
+    write_csv(out / "strips.csv", rows)
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 4))
     q = [r["strips"] for r in rows]
@@ -314,7 +297,7 @@ def exp_strips(s: Settings, out: Path) -> str:
     last = rows[-1]
     return "\n".join([f"2x2 wall of {W}x{W}, {s.strip_frames} frames per strip count. Balancer share = "
                       "balancer CPU time / emulated frame time.", "",
-                      _md_table(rows, [("strips", "Strips", ""), ("lb_cpu_ms", "Balancer CPU ms", ".2f"),
+                      md_table(rows, [("strips", "Strips", ""), ("lb_cpu_ms", "Balancer CPU ms", ".2f"),
                                        ("balancer_share", "Share", ".1%"), ("imb_tris", "Imb. tris", ".3f"),
                                        ("emulated_ms", "Frame (emulated)", ".2f"),
                                        ("emulated_fps", "FPS (emulated)", ".1f"), ("frame_ms", "Frame (wall)", ".2f")]),
@@ -330,9 +313,9 @@ def exp_orbit(s: Settings, out: Path) -> str:
         run = walk(out / name, (2, 2), (256, 256), _scene_args(s) + [
             "--path-kind", "orbit", "--frames", str(s.frames), "--balance", name, "--mosaic-every", "0"], s.timeout)
         rows.append({"balance": name, **_breakdown(run)})
-    _write_csv(out / "orbit.csv", rows)
+    write_csv(out / "orbit.csv", rows)
     return "\n".join([f"2x2 wall of 256x256 tiles, orbit path ({s.frames} frames) with the whole plant in view.", "",
-                      _md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
+                      md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
                                        ("imb_render", "Imb. render", ".3f")])])
 
 
@@ -378,7 +361,7 @@ def exp_overlap(s: Settings, out: Path) -> str:
         for q in counts:
             rows.append({"ranks": g[0] * g[1], "grid": f"{g[0]}x{g[1]}", "strips": q,
                          "overlap": float(np.mean(acc[(g, q)])), "molnar": float(np.mean(molnar[g]))})
-    _write_csv(out / "overlap.csv", rows)
+    write_csv(out / "overlap.csv", rows)
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 4))
     ks = [g[0] * g[1] for g in grids]
@@ -395,7 +378,7 @@ def exp_overlap(s: Settings, out: Path) -> str:
                       "display, balancer only. Molnar's prediction uses S = sqrt(W H / K) and, for sqrt(rho a), the "
                       "triangle-weighted RMS footprint of the visible objects' screen rects (we cull whole objects, "
                       "so the object is the primitive).", "",
-                      _md_table(rows, [("grid", "Grid", ""), ("strips", "Strips", ""), ("overlap", "Measured O", ".3f"),
+                      md_table(rows, [("grid", "Grid", ""), ("strips", "Strips", ""), ("overlap", "Measured O", ".3f"),
                                        ("molnar", "Molnar O", ".3f")]), "", "![overlap](overlap.png)"])
 
 
@@ -437,7 +420,7 @@ def exp_cost(s: Settings, out: Path) -> str:
         md_depth.append(f"| {scene_name} | {st.get('coverage', 0):.1%} | {st['mean_d']:.2f} | {st['max_d']} | "
                         f"{st['mean_o']:.2f} | {st['model_o']:.2f} | ![]({scene_name}_depth_complexity.png) |")
         (out / f"depth-{scene_name}.json").write_text(json.dumps(st))
-    _write_csv(out / "cost.csv", rows)
+    write_csv(out / "cost.csv", rows)
     fill = {r["balance"]: r for r in rows if r["scene"] == "fill"}
     plant = {r["balance"]: r for r in rows if r["scene"] == "plant"}
     return "\n".join([
@@ -445,7 +428,7 @@ def exp_cost(s: Settings, out: Path) -> str:
         "and the fill scene (24 screen-filling panels beside a dense sphere cluster) on its orbit. "
         "`Imb. render` is max/mean of the measured per-rank rendering CPU time, averaged over frames; "
         "`vs strips` divides it by strips' on the same scene; `LB extra` is the extra balancer CPU ms per frame.", "",
-        _md_table(rows, [("scene", "Scene", ""), ("balance", "Balance", ""), ("imb_tris", "Imb. tris", ".3f"),
+        md_table(rows, [("scene", "Scene", ""), ("balance", "Balance", ""), ("imb_tris", "Imb. tris", ".3f"),
                          ("imb_render", "Imb. render", ".3f"), ("imb_vs_strips", "vs strips", ".2f"),
                          ("render_cpu_max_ms", "Slowest render CPU", ".2f"),
                          ("emulated_ms", "Frame (emulated)", ".2f"), ("lb_cpu_ms", "LB CPU", ".2f"),
@@ -490,7 +473,7 @@ def exp_speedup(s: Settings, out: Path) -> str:
                      "k1_render_ms": float(np.median(a[:, 3])), "k4_mean_rank_ms": float(np.median(a[:, 2])),
                      "time_imbalance": float(np.median(a[:, 1])), "speedup_median": float(np.median(a[:, 0])),
                      "speedup_min": float(a[:, 0].min()), "speedup_max": float(a[:, 0].max())})
-    _write_csv(out / "speedup.csv", rows)
+    write_csv(out / "speedup.csv", rows)
     best = max(rows, key=lambda r: r["speedup_median"])
     return "\n".join([
         f"Default plant ({s.triangles} requested triangles), walkthrough resampled to {s.frames} frames, 1 rank "
@@ -499,7 +482,7 @@ def exp_speedup(s: Settings, out: Path) -> str:
         "CPU time with `LP_NUM_THREADS=1`). `Cluster 64`: objects above 64 triangles split into spatial clusters "
         "(`--cluster 64`, same triangles and images, less overlap). Time imbalance: per frame max/mean of the 4 "
         "ranks' rendering CPU time, averaged.", "",
-        _md_table(rows, [("display", "Display", ""), ("balance", "Balance", ""), ("cluster", "Cluster", ""),
+        md_table(rows, [("display", "Display", ""), ("balance", "Balance", ""), ("cluster", "Cluster", ""),
                          ("k1_render_ms", "1 rank ms", ".2f"), ("k4_mean_rank_ms", "4 ranks: mean rank ms", ".2f"),
                          ("time_imbalance", "Time imbalance", ".3f"), ("speedup_median", "Speedup (median)", ".2f"),
                          ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f")]), "",
@@ -529,13 +512,13 @@ def exp_partition(s: Settings, out: Path) -> str:
         a = np.median(np.array(v), axis=0)
         rows.append({"copies": copies, "objects": int(a[5]), "partition": mode, "lb_wall_ms": a[0],
                      "lb_cpu_ms_per_rank": a[1], "lb_cpu_ms_all_ranks": a[2], "emulated_ms": a[3], "frame_wall_ms": a[4]})
-    _write_csv(out / "partition.csv", rows)
+    write_csv(out / "partition.csv", rows)
     return "\n".join([
         f"2x2 wall of {W}x{H}, walkthrough resampled to {s.frames} frames, {rounds} alternating round(s), medians. "
         "LB wall: load-balancing phase per rank and frame (for broadcast: rank 0's plan plus the broadcast, "
         "which the other ranks spend waiting); LB CPU: process CPU time in that phase, per rank and summed over "
         "the 4 ranks; emulated: slowest rank's CPU time per frame.", "",
-        _md_table(rows, [("copies", "Plants", ""), ("objects", "Objects", ""), ("partition", "Partition", ""),
+        md_table(rows, [("copies", "Plants", ""), ("objects", "Objects", ""), ("partition", "Partition", ""),
                          ("lb_wall_ms", "LB wall ms", ".2f"), ("lb_cpu_ms_per_rank", "LB CPU ms/rank", ".2f"),
                          ("lb_cpu_ms_all_ranks", "LB CPU ms, 4 ranks", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f"),
                          ("frame_wall_ms", "Frame (wall) ms", ".2f")])])
