@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .balance import partition
-from .bounds import BoxProjector, SphereProjector
+from .bounds import BoxProjector, SphereProjector, make_projector
 from .bench import median_ms
 from .regions import overlaps, pixel_spans
 from .tables import md_table, write_csv
@@ -224,7 +224,7 @@ def table_needed(s: Sizes, out: Path) -> str:
     K = grid[0] * grid[1]
     rows = []
     for bounds in ("box", "sphere"):
-        project = BoxProjector(scene.bmin, scene.bmax) if bounds == "box" else SphereProjector(scene.centers, scene.radii)
+        project = make_projector(scene, bounds)
         sub = np.zeros((len(frames), K))
         need_t = np.zeros_like(sub)
         need_o = np.zeros_like(sub)

@@ -319,3 +319,12 @@ def _near_distance(proj: np.ndarray) -> float:
     """Near-plane distance of a GL perspective matrix."""
     a, b = proj[2, 2], proj[2, 3]
     return float(b / (a - 1.0))
+
+
+def make_projector(scene, kind: str = "box", dtype=np.float32) -> "BoxProjector | SphereProjector":
+    """A scene's bounds prepared once for per-frame projection: ``box`` (8 corners) or ``sphere``."""
+    if kind == "sphere":
+        return SphereProjector(scene.centers, scene.radii)
+    if kind == "box":
+        return BoxProjector(scene.bmin, scene.bmax, dtype)
+    raise ValueError(f"bounds must be 'box' or 'sphere', got '{kind}'")

@@ -67,17 +67,18 @@ def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, siz
                 coverage: np.ndarray | None = None) -> np.ndarray:
     """(K,) pixels each rank fills by the rect estimate: its visible objects' rects clipped to
     its region, times their silhouette ``coverage`` (fraction of the rect, default 1), summed
-    (overlapping objects count once each: depth complexity)."""
+    (overlapping objects count once each: depth complexity). A (M, N) ``coverage`` gives (K, M):
+    several weightings of the same clipped areas in one pass."""
     spans, _ = pixel_spans(rects, size)
     sp = spans.T  # (4, N) int32
     cov = None if coverage is None else np.asarray(coverage, dtype=np.float64)
-    out = np.zeros(len(regions))
+    out = np.zeros((len(regions),) + (() if cov is None or cov.ndim == 1 else cov.shape[:1]))
     for k, (x0, y0, x1, y1) in enumerate(regions):  # K ranks, not objects
         idx = np.flatnonzero(visible[k])
         w = np.minimum(sp[2].take(idx), x1 - 1) - np.maximum(sp[0].take(idx), x0) + 1
         h = np.minimum(sp[3].take(idx), y1 - 1) - np.maximum(sp[1].take(idx), y0) + 1
         area = np.maximum(w, 0).astype(np.float64) * np.maximum(h, 0)
-        out[k] = float(area.sum()) if cov is None else float(area @ cov.take(idx))
+        out[k] = area.sum() if cov is None else cov.take(idx, axis=-1) @ area
     return out
 
 
@@ -223,10 +224,9 @@ class Adaptive(CostModel):
         vis = p.visible
         loads = vis @ tris.astype(np.int64)
         p = Partition(p.regions, loads, vis, p.splits, p.split_pixels)
-        r = np.asarray(rects, np.float64)
-        px = rank_pixels(r, vis, p.regions, self.size, cov)
+        px, px_corr = rank_pixels(np.asarray(rects, np.float64), vis, p.regions, self.size,
+                                  np.stack([cov, cov * self.corr])).T
         self._features = (loads.astype(np.float64), px)  # the fit sees raw features
-        px_corr = rank_pixels(r, vis, p.regions, self.size, cov * self.corr) if b > 0 else np.zeros(len(loads))
         self._pred = a * (vis @ (tris * self.corr)) + b * px_corr + c
         self._visible = vis
         return p

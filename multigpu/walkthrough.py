@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bounds import BoxProjector, SphereProjector
+from .bounds import BoxProjector, SphereProjector, make_projector
 from .config import WalkConfig
 from .errors import InputError
 from .exchange import barrier, broadcast_partition, exchange, wait_all
@@ -72,9 +72,7 @@ def load_world(cfg: WalkConfig):
 
 def projector(cfg: WalkConfig, scene) -> BoxProjector | SphereProjector:
     """The scene's bounds prepared once for per-frame projection (``--bounds box|sphere``)."""
-    if cfg.bounds == "sphere":
-        return SphereProjector(scene.centers, scene.radii)
-    return BoxProjector(scene.bmin, scene.bmax)
+    return make_projector(scene, cfg.bounds)
 
 
 def _check_visible(cfg, scene, path) -> None:
