@@ -84,7 +84,8 @@ def _compose(renderer, view, proj, light, part, size, depth: bool):
 # ---------------------------------------------------------------- 1. sub-frustum methods
 
 def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
-    from .render import RegionRenderer, choose_method, frame_matrices, gl_limits
+    from .camera import frame_matrices
+    from .render import RegionRenderer, choose_method, gl_limits
 
     scene, path, frames = _world(s)
     limits = gl_limits(ctx)
@@ -212,7 +213,7 @@ def table_balance(s: Sizes, out: Path) -> str:
 # ---------------------------------------------------------------- 3. only what a scene requires
 
 def table_needed(s: Sizes, out: Path) -> str:
-    from .render import frame_matrices
+    from .camera import frame_matrices
     from .triangles import triangle_objects, triangle_rects
 
     scene, path, frames = _world(s)
@@ -273,7 +274,8 @@ def table_needed(s: Sizes, out: Path) -> str:
 def table_offsets(s: Sizes, ctx, out: Path) -> str:
     from dataclasses import replace
 
-    from .render import RegionRenderer, frame_matrices
+    from .camera import frame_matrices
+    from .render import RegionRenderer
 
     scene, path, frames = _world(s)
     grid = (2, 2)

@@ -71,3 +71,33 @@ def sub_frustum(fov_deg: float, aspect: float, near: float, far: float, region, 
     r = t * aspect
     x0, y0, x1, y1 = region
     return frustum(-r + 2 * r * x0 / W, -r + 2 * r * x1 / W, -t + 2 * t * y0 / H, -t + 2 * t * y1 / H, near, far)
+
+
+def region_clip(region, size) -> np.ndarray:
+    """4x4 clip-space map taking the full display's NDC over ``region`` to [-1, 1]^2: applied
+    after the full projection it gives the region's off-axis sub-frustum (glFrustum over the
+    region's share of the near plane), algebraically."""
+    W, H = size
+    x0, y0, x1, y1 = region
+    w, h = x1 - x0, y1 - y0
+    c = np.eye(4)
+    c[0, 0], c[0, 3] = W / w, (W - 2.0 * x0 - w) / w
+    c[1, 1], c[1, 3] = H / h, (H - 2.0 * y0 - h) / h
+    return c
+
+
+def model_view(view: np.ndarray, origin) -> np.ndarray:
+    """view @ translate(origin) in float64: the camera relative to the scene's vertex origin,
+    so float32 vertex coordinates stay small wherever the scene lies in the world."""
+    t = np.eye(4)
+    t[:3, 3] = np.asarray(origin, dtype=np.float64)
+    return np.asarray(view, dtype=np.float64) @ t
+
+
+def frame_matrices(camera, size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """view, projection (float64) and the light direction (towards the viewer, slightly above)."""
+    W, H = size
+    view = camera.view()
+    proj = camera.projection(W / H)
+    light = view[:3, :3].T @ np.array([0.3, 0.5, 0.8])
+    return view, proj, light / np.linalg.norm(light)

@@ -40,8 +40,19 @@ def _spec(a):
                      triangles=a.triangles, copies=a.copies, seed=a.seed, cluster=a.cluster)
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse that speaks once per MPI job: only launcher rank 0 prints usage, help and
+    errors (every rank parses the same argv and exits the same way)."""
+
+    def _print_message(self, message, file=None):
+        from .job import launcher_rank
+
+        if launcher_rank() == 0:
+            super()._print_message(message, file)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="multigpu", description=__doc__.split("\n")[0])
+    ap = Parser(prog="multigpu", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
 
     w = sub.add_parser("walkthrough", help="render a camera path on a display wall (run under mpiexec)")
@@ -64,7 +75,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="who computes the partition: redundant (every rank) | broadcast (rank 0, then MPI_Bcast)")
     w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
     w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
-    w.add_argument("--timeout", type=float, default=120.0, help="seconds any rank waits for the others")
+    w.add_argument("--timeout", type=float, default=120.0,
+                   help="seconds a rank waits for the others within a frame (default 120)")
+    w.add_argument("--liveness", type=float, default=30.0,
+                   help="seconds without a heartbeat before a rank counts as stopped and the job ends "
+                        "(default 30; 0: off, timeouts only)")
     w.add_argument("--no-progress", action="store_true")
 
     s = sub.add_parser("scene", help="scene tools")
@@ -109,7 +124,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # usage errors and --help: the same on every rank
+        if "mpi4py.MPI" in sys.modules:  # under `python -m mpi4py`: exit together, no MPI_Abort
+            from .job import collective_exit
+
+            collective_exit(exc.code if isinstance(exc.code, int) else 0)
+        raise
     keep_heap()  # per-frame temporaries stay in the heap (see memory.py)
     try:
         if args.cmd == "walkthrough":
@@ -169,36 +191,76 @@ def _walkthrough(a) -> int:
     from mpi4py import MPI
 
     from .config import WalkConfig, parse_pair, parse_vec3
+    from .job import Interrupted, Job, collective_exit
 
     comm = MPI.COMM_WORLD
+    job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else 30.0)
+    job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:
         cfg = WalkConfig(scene=_spec(a), path=a.path, path_kind=a.path_kind, frames=a.frames,
                          grid=parse_pair(a.grid, "--grid"), tile=parse_pair(a.tile, "--tile"), strips=a.strips,
                          balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
-                         overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum, partition=a.partition,
-                         offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
-                         progress=not a.no_progress)
+                         overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
+                         partition=a.partition, offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
+                         liveness=a.liveness, progress=not a.no_progress)
         from .walkthrough import run
 
-        run(cfg, comm)
-    except InputError as exc:  # agreed on every rank before any frame: all exit 2
+        with job:
+            run(cfg, comm, job)
+    except InputError as exc:  # agreed on every rank before any frame: one line, all exit 2
+        job.close()
         if comm.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
-        from .exchange import PeerTimeout, barrier
-
-        try:  # let rank 0 print before any rank's exit ends the job
-            barrier(comm, 10.0)
-        except PeerTimeout:
-            pass
-        return 2
-    except BaseException as exc:  # one rank failed mid-run: say so once and end the whole job
-        print(f"multigpu: rank {comm.Get_rank()}: {exc.__class__.__name__}: {exc}", file=sys.stderr, flush=True)
-        if comm.Get_rank() != 0:
-            import time
-
-            time.sleep(1.0)  # grace: rank 0 writes the last completed frame's rows before the abort
-        comm.Abort(1)
+        collective_exit(2)
+    except BaseException as exc:  # noqa: BLE001 -- every other way a run can end early
+        job.close()
+        _end_failed_job(comm, job, exc)
+    job.close()
+    if job.signum is not None:  # every rank stopped after the same frame: exit 128 + signal, together
+        collective_exit(Interrupted(job.signum).code)
     return 0
+
+
+def _end_failed_job(comm, job, exc: BaseException) -> None:
+    """End the whole job after a failure, with one message and rank 0's outputs saved.
+
+    A rank's own failure is printed by that rank and announced to the others (``Job``), so they
+    stop waiting at once. Rank 0 has already written timings.csv and summary.json for every
+    whole frame (the frame loop's ``finally``) when it gets here, and aborts the job. Other
+    ranks that only saw the consequence (a failed, stalled or silent peer) stay quiet and give
+    rank 0 ``FAILURE_GRACE`` seconds to save and end the job, unless rank 0 is the silent one.
+    """
+    import time
+
+    from .exchange import PeerTimeout
+    from .job import ABORT_PAUSE, FAILURE_GRACE, Interrupted, PeerFailed, PeerStalled
+
+    rank = comm.Get_rank()
+    consequence = isinstance(exc, (PeerTimeout, PeerFailed))
+    if isinstance(exc, Interrupted):
+        code, text = exc.code, f"multigpu: {exc}; ending the job"
+    elif isinstance(exc, KeyboardInterrupt):
+        code, text = 130, "multigpu: interrupted; ending the job"
+    elif isinstance(exc, PeerStalled):
+        code, text = 1, f"multigpu: {exc}"
+    else:
+        code, text = 1, f"multigpu: rank {rank}: {exc.__class__.__name__}: {exc}"
+    if not consequence:
+        if rank == 0 or not isinstance(exc, (Interrupted, KeyboardInterrupt)):
+            print(text, file=sys.stderr, flush=True)
+        job.announce_failure(f"{exc.__class__.__name__}: {exc}")
+    if rank != 0:
+        deadline = time.monotonic() + FAILURE_GRACE
+        while time.monotonic() < deadline and not job.silent(0):
+            time.sleep(0.05)  # rank 0 saves the frames done, then ends the job
+        if consequence and not isinstance(exc, PeerFailed):
+            live = [r for r in range(comm.Get_size()) if not job.silent(r)]
+            if not live or rank == min(live):
+                print(text, file=sys.stderr, flush=True)
+    elif consequence and not isinstance(exc, PeerFailed):
+        print(text, file=sys.stderr, flush=True)
+    time.sleep(ABORT_PAUSE)  # the launcher forwards what we printed before MPI_Abort tears it down
+    comm.Abort(code)
 
 
 def _scene_info(a) -> int:

@@ -3,14 +3,25 @@
 from __future__ import annotations
 
 import math
-import os
 import re
 from dataclasses import dataclass, field
-from pathlib import Path
-
 from .errors import InputError
 from .models import SceneSpec
 from .strategies import REGISTRY
+
+
+#: frames of a generated path when --frames is not given
+DEFAULT_FRAMES = {"walkthrough": 1200, "orbit": 300}
+#: rank 0 rewrites summary.json every this many frames (and whenever the run ends)
+SUMMARY_EVERY = 50
+#: setup (building a scene cache, loading a big model) may take this long on a live rank;
+#: a stopped rank is caught by the liveness check long before
+SETUP_SECONDS = 1800.0
+
+
+def setup_timeout(cfg: "WalkConfig") -> float:
+    """How long a rank waits for the others to finish setup."""
+    return max(cfg.timeout, SETUP_SECONDS)
 
 
 def parse_vec3(text: str, flag: str) -> tuple[float, float, float]:
@@ -56,6 +67,7 @@ class WalkConfig:
     partition: str = "redundant"
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     timeout: float = 120.0
+    liveness: float = 30.0
     progress: bool = True
 
     def __post_init__(self):
@@ -81,8 +93,10 @@ class WalkConfig:
             raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
         if self.device is not None and self.device < 0:
             raise InputError(f"--device must be >= 0, got {self.device}")
-        if not self.timeout > 0:
+        if not (self.timeout > 0 and math.isfinite(self.timeout)):
             raise InputError(f"--timeout must be > 0 seconds, got {self.timeout}")
+        if not (self.liveness >= 0 and math.isfinite(self.liveness)):
+            raise InputError(f"--liveness must be >= 0 seconds (0: off), got {self.liveness}")
         tw, th = self.tile
         if tw > 16384 or th > 16384:
             raise InputError(f"--tile {tw}x{th}: tiles above 16384 pixels per side are not supported")
@@ -94,17 +108,9 @@ class WalkConfig:
         return self.grid[0] * self.grid[1]
 
     @property
+    def default_frames(self) -> int:
+        return DEFAULT_FRAMES[self.path_kind]
+
+    @property
     def size(self) -> tuple[int, int]:
         return self.grid[1] * self.tile[0], self.grid[0] * self.tile[1]
-
-    def check_output(self) -> Path:
-        """Create the output directory and prove it writable (rank 0, before the run)."""
-        out = Path(self.out)
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-            probe = out / f".write-test-{os.getpid()}"
-            probe.write_text("ok")
-            probe.unlink()
-        except OSError as exc:
-            raise InputError(f"--out {out}: not writable ({exc.strerror or exc})") from None
-        return out

@@ -87,7 +87,8 @@ def summarize(d: np.ndarray, o: np.ndarray) -> dict:
 
 def run(scene, camera, size: tuple[int, int], out: Path) -> dict:
     """Measure one frame, write ``depth_complexity.png``, ``overdraw.png`` and ``depth.json``."""
-    from .render import create_context, frame_matrices, model_view
+    from .camera import frame_matrices, model_view
+    from .render import create_context
 
     ctx, _ = create_context()
     view, proj, _ = frame_matrices(camera, size)

@@ -19,6 +19,9 @@ import numpy as np
 from .regions import Transfer
 
 TAG = 7
+#: checks every bounded wait runs while it polls (``job.Job.check``: stalled or failed peers,
+#: interrupts); each raises to end the wait
+WATCH: list = []
 
 
 class PeerTimeout(RuntimeError):
@@ -36,6 +39,8 @@ def wait_all(requests, timeout: float, what: str) -> None:
     while not MPI.Request.Testall(requests):
         if time.monotonic() > deadline:
             raise PeerTimeout(f"{what}: no answer from other ranks within {timeout:g} s")
+        for check in WATCH:
+            check()
         time.sleep(sleep)
         sleep = min(sleep * 2, 2e-3)
 

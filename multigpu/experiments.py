@@ -326,7 +326,7 @@ def exp_overlap(s: Settings, out: Path) -> str:
     from .bounds import BoxProjector
     from .models import SceneSpec, load_scene
     from .paths import walkthrough
-    from .render import frame_matrices
+    from .camera import frame_matrices
 
     scene, _ = load_scene(SceneSpec(triangles=s.triangles))
     path = walkthrough(scene, frames=s.frames)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, check_file
 from .scene import FORMAT_VERSION, Scene
 
 FORMATS = {".obj", ".ply", ".stl", ".off", ".gltf", ".glb"}
@@ -48,6 +48,8 @@ class SceneSpec:
             raise InputError(f"--split must be 'components' or 'grid:N' with N >= 1, got '{self.split}'")
         if self.triangles < 1000:
             raise InputError(f"--triangles must be >= 1000, got {self.triangles}")
+        if self.seed < 0:
+            raise InputError(f"--seed must be >= 0, got {self.seed}")
         if self.copies < 1:
             raise InputError(f"--copies must be >= 1, got {self.copies}")
         if self.cluster < 0:
@@ -66,9 +68,7 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
     """The scene for ``spec`` and load facts (seconds, whether the cache was hit)."""
     t0 = time.perf_counter()
     if spec.model is not None:
-        src = Path(spec.model)
-        if not src.is_file():
-            raise InputError(f"--model {src}: file not found")
+        src = check_file(spec.model, "--model", "model file")
         if src.suffix.lower() not in FORMATS:
             raise InputError(f"--model {src}: unsupported extension '{src.suffix}' (use {', '.join(sorted(FORMATS))})")
         st = src.stat()
@@ -126,16 +126,19 @@ def load_model(path: Path, split: str = "components", merge_below: int = 64) -> 
     """Load a model file through trimesh into the GPU layout (one object per node or piece)."""
     import trimesh
 
+    kind = path.suffix.lstrip(".").upper()
     try:
-        loaded = trimesh.load(str(path), process=False)
+        with np.errstate(all="ignore"):
+            loaded = trimesh.load(str(path), process=False)
     except Exception as exc:
-        raise InputError(f"--model {path}: cannot read ({exc.__class__.__name__}: {str(exc).splitlines()[0] if str(exc) else 'corrupt file'})") from None
+        why = str(exc).splitlines()[0] if str(exc) else "corrupt file"
+        raise InputError(f"--model {path}: cannot read as {kind} ({exc.__class__.__name__}: {why})") from None
     warnings: list[str] = []
     if isinstance(loaded, trimesh.Scene):
         meshes = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh)]
         meshes = [m for m in meshes if len(m.faces)]
         if not meshes:
-            raise InputError(f"--model {path}: the file holds no triangles")
+            raise InputError(f"--model {path}: the file holds no triangles (empty, or not a {kind} file)")
         if len(meshes) > 1:
             return _from_meshes(meshes, path, warnings)
         mesh = meshes[0]
@@ -147,6 +150,7 @@ def load_model(path: Path, split: str = "components", merge_below: int = 64) -> 
         raise InputError(f"--model {path}: the mesh is empty (no triangles)")
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
+    _check_indices_and_range(verts, faces, path)
     faces = _clean_faces(verts, faces, path, warnings)
     if split == "components":
         labels = _component_labels(faces, verts)
@@ -154,6 +158,24 @@ def load_model(path: Path, split: str = "components", merge_below: int = 64) -> 
     else:
         labels = _grid_labels(verts, faces, int(split.split(":")[1]))
     return _from_labels(verts, faces, labels, path, warnings, {"split": split})
+
+
+#: coordinates beyond this (in model units) leave float64 no precision for a renderer
+MAX_COORD = 1e15
+
+
+def _check_indices_and_range(verts, faces, path) -> None:
+    """Refuse face indices outside the vertex list and coordinates no renderer can use."""
+    if faces.size and (faces.min() < 0 or faces.max() >= len(verts)):
+        bad = int(faces.max()) if faces.max() >= len(verts) else int(faces.min())
+        raise InputError(f"--model {path}: a face uses vertex index {bad}, but the file has "
+                         f"{len(verts)} vertices (corrupt or truncated file)")
+    finite = np.isfinite(verts).all(axis=1)
+    if finite.any():
+        reach = float(np.abs(verts[finite]).max())
+        if reach > MAX_COORD:
+            raise InputError(f"--model {path}: coordinates reach {reach:.3g}, beyond +-{MAX_COORD:g} "
+                             "(rescale the model; --offset moves a scene far from the origin)")
 
 
 def _clean_faces(verts, faces, path, warnings) -> np.ndarray:
@@ -278,6 +300,11 @@ def _from_meshes(meshes, path, warnings) -> Scene:
     verts = np.concatenate([np.asarray(m.vertices, dtype=np.float64) for m in meshes])
     faces = np.concatenate([np.asarray(m.faces, dtype=np.int64) + o for m, o in zip(meshes, offsets)])
     labels = np.repeat(np.arange(len(meshes)), [len(m.faces) for m in meshes])
+    local = faces - np.repeat(offsets, [len(m.faces) for m in meshes])[:, None]  # indices within each mesh
+    own = np.repeat(sizes, [len(m.faces) for m in meshes])[:, None]
+    if (local < 0).any() or (local >= own).any():
+        raise InputError(f"--model {path}: a face uses a vertex index outside its mesh (corrupt file)")
+    _check_indices_and_range(verts, faces, path)
     bad_v = ~np.isfinite(verts).all(axis=1)
     bad_obj = np.zeros(len(meshes), dtype=bool)
     np.logical_or.at(bad_obj, labels, bad_v[faces].any(axis=1))

@@ -42,5 +42,8 @@ def save_png(img: np.ndarray, path: Path) -> None:
 
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
-    Image.fromarray(img).save(tmp)
-    tmp.replace(path)
+    try:
+        Image.fromarray(img).save(tmp, format="PNG")
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)

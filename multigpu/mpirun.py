@@ -1,19 +1,32 @@
-"""Start ``multigpu`` under ``mpiexec`` from Python, always bounded and always cleaned up.
+"""Start ``multigpu`` under ``mpiexec``: the right flags for the MPI at hand, always bounded.
 
-Used by the experiments and by the tests: the job runs in its own process group, which is
-killed whole (launcher and every rank) when it outlives its timeout.
+Which MPI: ``$MULTIGPU_MPIEXEC`` if set, else the ``mpiexec`` beside this interpreter (the
+``mpich`` wheel's), else the first on ``PATH``. ``mpiexec --version`` tells MPICH (Hydra) from
+Open MPI (OpenRTE / Open MPI). Open MPI gets what it needs on a workstation: ``--oversubscribe``
+(more ranks than cores), its documented root opt-in when run as root, ``--quiet`` (its
+multi-line banner after a non-zero exit), and ``MPI4PY_LIBMPI`` so mpi4py's wheel loads Open
+MPI's library even where the ``mpich`` wheel is installed too.
+
+Used by the launch scripts (``python -m multigpu.mpirun -n K ARGS``), the experiments and
+the tests: a job started from Python runs in its own process group, which is killed whole
+(launcher and every rank) when it outlives its timeout.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import signal
 import subprocess
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import InputError
+
+#: the soname of Open MPI's library (3.x to 5.x); mpi4py loads it by this name
+OPENMPI_LIBMPI = "libmpi.so.40"
 
 
 class JobTimeout(RuntimeError):
@@ -24,21 +37,90 @@ class JobTimeout(RuntimeError):
         self.stdout, self.stderr = stdout, stderr
 
 
-def mpiexec() -> str:
-    """The ``mpiexec`` beside this interpreter (the mpich wheel's), else the one on PATH."""
+@functools.lru_cache(maxsize=8)
+def flavor(mpiexec: str) -> str:
+    """'openmpi', 'mpich' or 'unknown', from ``mpiexec --version``."""
+    try:
+        out = subprocess.run([mpiexec, "--version"], capture_output=True, text=True, timeout=20)
+        text = out.stdout + out.stderr
+    except (OSError, subprocess.TimeoutExpired):
+        return "unknown"
+    if "Open MPI" in text or "OpenRTE" in text:
+        return "openmpi"
+    if "HYDRA" in text or "MPICH" in text or "Intel(R) MPI" in text:
+        return "mpich"
+    return "unknown"
+
+
+@dataclass(frozen=True)
+class Launcher:
+    """One ``mpiexec`` and what it needs to start ``n`` ranks of multigpu."""
+
+    path: str
+    flavor: str
+    args: tuple[str, ...] = ()
+    env: dict = field(default_factory=dict)
+
+    def command(self, n: int, argv: list[str], python: str | None = None) -> list[str]:
+        return [self.path, *self.args, "-n", str(n), python or sys.executable, "-m", "mpi4py", "-m", "multigpu",
+                *argv]
+
+    def environ(self, extra: dict | None = None) -> dict:
+        """The environment for the job: ours, the launcher's needs, one rasterizer thread per
+        rank unless set, then ``extra``."""
+        base = {**os.environ, "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", "1")}
+        for k, v in self.env.items():
+            base.setdefault(k, v)
+        return {**base, **(extra or {})}
+
+
+def launcher_for(mpiexec: str) -> Launcher:
+    kind = flavor(mpiexec)
+    if kind != "openmpi":
+        return Launcher(mpiexec, kind)
+    env = {"MPI4PY_LIBMPI": OPENMPI_LIBMPI}
+    if hasattr(os, "geteuid") and os.geteuid() == 0:  # Open MPI's documented opt-in for root
+        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    return Launcher(mpiexec, kind, ("--oversubscribe", "--quiet"), env)
+
+
+def find_launcher() -> Launcher:
+    """The launcher to use (see the module doc)."""
+    explicit = os.environ.get("MULTIGPU_MPIEXEC")
+    if explicit:
+        found = shutil.which(explicit)
+        if not found:
+            raise InputError(f"MULTIGPU_MPIEXEC={explicit}: not an executable")
+        return launcher_for(found)
     here = Path(sys.executable).parent
     found = shutil.which("mpiexec", path=f"{here}{os.pathsep}{os.environ.get('PATH', '')}")
     if not found:
         raise InputError("mpiexec not found: install MPI (pip install mpich) or put mpiexec on PATH")
-    return found
+    return launcher_for(found)
+
+
+def mpiexec() -> str:
+    """Path of the ``mpiexec`` ``find_launcher`` picks."""
+    return find_launcher().path
+
+
+def openmpi_on_path() -> str | None:
+    """An Open MPI ``mpiexec`` on this machine besides the default one, if any (for tests)."""
+    dirs = os.environ.get("PATH", "").split(os.pathsep) + ["/usr/bin", "/usr/local/bin"]
+    for name in ("mpiexec.openmpi", "mpiexec", "mpirun.openmpi"):
+        for d in dirs:
+            p = Path(d) / name
+            if p.is_file() and os.access(p, os.X_OK) and flavor(str(p.resolve())) == "openmpi":
+                return str(p)
+    return None
 
 
 def run_multigpu(n: int, args: list[str], timeout: float, env: dict | None = None, cwd=None,
-                 merge_stderr: bool = False) -> subprocess.CompletedProcess:
-    """``mpiexec -n n python -m mpi4py -m multigpu ARGS`` with ``LP_NUM_THREADS=1`` unless set."""
-    cmd = [mpiexec(), "-n", str(n), sys.executable, "-m", "mpi4py", "-m", "multigpu", *args]
-    full_env = {**os.environ, "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", "1"), **(env or {})}
-    proc = subprocess.Popen(cmd, cwd=cwd, env=full_env, stdout=subprocess.PIPE,
+                 merge_stderr: bool = False, launcher: Launcher | None = None) -> subprocess.CompletedProcess:
+    """``mpiexec -n n python -m mpi4py -m multigpu ARGS``, killed whole after ``timeout`` s."""
+    launcher = launcher or find_launcher()
+    cmd = launcher.command(n, args)
+    proc = subprocess.Popen(cmd, cwd=cwd, env=launcher.environ(env), stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT if merge_stderr else subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
@@ -51,3 +133,23 @@ def run_multigpu(n: int, args: list[str], timeout: float, env: dict | None = Non
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err or "")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m multigpu.mpirun -n K ARGS...``: exec the right mpiexec for K ranks."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if len(argv) < 2 or argv[0] != "-n" or not argv[1].isdigit() or int(argv[1]) < 1:
+        print("usage: python -m multigpu.mpirun -n RANKS MULTIGPU_ARGS...", file=sys.stderr)
+        return 2
+    try:
+        launcher = find_launcher()
+    except InputError as exc:
+        print(f"multigpu: error: {exc}", file=sys.stderr)
+        return 2
+    cmd = launcher.command(int(argv[1]), argv[2:])
+    os.execvpe(cmd[0], cmd, launcher.environ())
+    return 127  # not reached
+
+
+if __name__ == "__main__":
+    sys.exit(main())

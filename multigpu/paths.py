@@ -23,9 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from .camera import Camera
-from .errors import InputError
+from .errors import InputError, check_file
 
 DEFAULTS = {"fov": 60.0, "near": 0.1, "far": 1000.0, "up": [0.0, 0.0, 1.0]}
+MAX_FRAMES = 10_000_000  # a path longer than this is a typo, not a walkthrough
+MAX_COORD = 1e15  # world coordinates beyond this lose all float64 precision below a metre
 
 
 @dataclass
@@ -90,19 +92,36 @@ def from_keyframes(keys: list[dict], frames: int, defaults: dict) -> CameraPath:
     return CameraPath(catmull_rom(pos, t), catmull_rom(tgt, t), up, lin("fov"), lin("near"), lin("far"))
 
 
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _float(v) -> float | None:
+    """A JSON number as a finite float, or None (bools, strings, NaN, numbers beyond float)."""
+    if not isinstance(v, (int, float)) or isinstance(v, bool):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:
+        return None
+    return f if np.isfinite(f) else None
+
+
 def _vec3(value, where: str) -> list[float]:
-    if (not isinstance(value, (list, tuple)) or len(value) != 3
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
-        raise InputError(f"{where} must be a list of 3 numbers, got {value!r}")
-    if not np.isfinite(value).all():
-        raise InputError(f"{where} must be finite, got {value!r}")
-    return [float(v) for v in value]
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise InputError(f"{where} must be a list of 3 numbers, got {_short(value)}")
+    out = [_float(v) for v in value]
+    if any(v is None or abs(v) > MAX_COORD for v in out):
+        raise InputError(f"{where} must be 3 finite numbers of magnitude <= {MAX_COORD:g}, got {_short(value)}")
+    return out
 
 
 def _number(value, where: str, lo: float, hi: float) -> float:
-    if not isinstance(value, (int, float)) or isinstance(value, bool) or not (lo < value < hi):
-        raise InputError(f"{where} must be a number in ({lo:g}, {hi:g}), got {value!r}")
-    return float(value)
+    f = _float(value)
+    if f is None or not (lo < f < hi):
+        raise InputError(f"{where} must be a number in ({lo:g}, {hi:g}), got {_short(value)}")
+    return f
 
 
 def _check_camera(cam, where: str, defaults: dict, need_up: bool = False) -> dict:
@@ -124,13 +143,17 @@ def _check_camera(cam, where: str, defaults: dict, need_up: bool = False) -> dic
 
 def load_path(path: str | Path) -> CameraPath:
     """Read and validate a path file; every problem is one InputError naming file and field."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: path file not found")
+    path = check_file(path, "--path", "path file")
     try:
         doc = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"{path}: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise InputError(f"{path}: not a camera path (JSON nested too deeply)") from None
+    except ValueError as exc:  # e.g. an integer of more digits than Python converts
+        raise InputError(f"{path}: not a camera path ({str(exc).splitlines()[0]})") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if not isinstance(doc, dict):
         raise InputError(f"{path}: the top level must be a JSON object")
     if doc.get("version", 1) != 1:
@@ -155,9 +178,30 @@ def load_path(path: str | Path) -> CameraPath:
         raise InputError(f"{path}: field 'keyframes' must be a non-empty list")
     keys = [_check_camera(k, f"{path}: keyframes[{i}]", defaults) for i, k in enumerate(keys)]
     frames = doc.get("frames", 1200)
-    if not isinstance(frames, int) or isinstance(frames, bool) or frames < 1:
-        raise InputError(f"{path}: field 'frames' must be a positive integer, got {frames!r}")
+    if not isinstance(frames, int) or isinstance(frames, bool) or not 1 <= frames <= MAX_FRAMES:
+        raise InputError(f"{path}: field 'frames' must be an integer in 1..{MAX_FRAMES}, got {_short(frames)}")
     return from_keyframes(keys, frames, defaults)
+
+
+def check_cameras(path: CameraPath, where: str) -> None:
+    """Every frame's camera is usable (vectorized over frames): finite, eye apart from the
+    target, 0 < near < far, 0 < fov < 180. Interpolated keyframes can fail this between valid
+    keys (a spline through the target), so the door checks every frame, not only the keys."""
+    eye, tgt = path.position, path.target
+    d = np.linalg.norm(tgt - eye, axis=1)
+    scale = np.maximum(np.maximum(np.abs(eye).max(axis=1), np.abs(tgt).max(axis=1)), 1.0)
+    checks = [
+        (~(np.isfinite(eye).all(axis=1) & np.isfinite(tgt).all(axis=1) & np.isfinite(path.up).all(axis=1)),
+         "a position, target or up vector is not finite"),
+        (~(d > scale * 1e-12), "the eye meets the target (no view direction)"),
+        (~(np.linalg.norm(path.up, axis=1) > 0), "the up vector is zero"),
+        (~((path.near > 0) & (path.far > path.near)), "near/far are not 0 < near < far"),
+        (~((path.fov > 0) & (path.fov < 180)), "fov is not in (0, 180) degrees"),
+    ]
+    for bad, what in checks:
+        if bad.any():
+            f = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{where}: frame {f} of {len(path)}: {what}")
 
 
 # ---------------------------------------------------------------- generators

@@ -11,7 +11,6 @@ Figures and what they are:
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 from pathlib import Path
@@ -27,21 +26,41 @@ INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent
 
 
 class TimingWriter:
-    """Appends rows to timings.csv and flushes every frame, so a crash loses nothing done."""
+    """Appends one frame's rows to timings.csv at a time, whole or not at all.
+
+    Each frame's K rows are one ``write`` on an unbuffered file; if it fails part way (disk
+    full, file size limit) the file is truncated back to the last whole frame and the error
+    raised, so ``read_timings`` always parses what is there and a crash loses nothing done.
+    """
 
     def __init__(self, path: Path):
-        self.file = open(path, "w", newline="")
-        self.writer = csv.writer(self.file)
-        self.writer.writerow(COLUMNS)
-        self.file.flush()
+        self.path = Path(path)
+        self.fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self.size = 0
+        self._append((",".join(COLUMNS) + "\n").encode())
 
     def write(self, rows: np.ndarray) -> None:
-        for row in rows:  # K rows per frame
-            self.writer.writerow([int(v) if c in INT_COLUMNS else f"{v:.4f}" for c, v in zip(COLUMNS, row)])
-        self.file.flush()
+        text = "".join(",".join(str(int(v)) if c in INT_COLUMNS else f"{v:.4f}" for c, v in zip(COLUMNS, row)) + "\n"
+                       for row in rows)  # K rows per frame
+        self._append(text.encode())
+
+    def _append(self, data: bytes) -> None:
+        try:
+            done = 0
+            while done < len(data):
+                done += os.pwrite(self.fd, data[done:], self.size + done)
+        except OSError as exc:
+            try:
+                os.ftruncate(self.fd, self.size)
+            except OSError:
+                pass
+            raise OSError(exc.errno, f"{exc.strerror}: writing {self.path} (kept {self.size} bytes of whole rows)") from None
+        self.size += len(data)
 
     def close(self) -> None:
-        self.file.close()
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
 
 
 def read_timings(path: Path) -> np.ndarray:
@@ -116,5 +135,8 @@ def write_json(path: Path, doc: dict) -> None:
     """Write JSON atomically (temp file, then rename)."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(doc, indent=1))
-    tmp.replace(path)
+    try:
+        tmp.write_text(json.dumps(doc, indent=1))
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)

@@ -1,43 +1,52 @@
 """One rank of the parallel renderer: balance, render, synchronize, exchange, display.
 
-Run under ``mpiexec -n K``; ``comm`` is passed in. Setup (scene, path, output, GL context) is
-checked on every rank and agreed before the first frame, so a bad input ends the whole job
-with one message and exit code 2 instead of a hang. Every wait afterwards is bounded
-(``--timeout``); timing rows reach ``timings.csv`` frame by frame; ``summary.json`` and images
-are written atomically; SIGINT/SIGTERM stop all ranks after the current frame.
+Run under ``mpiexec -n K``; ``comm`` and the rank's ``job.Job`` (liveness, interrupts) are
+passed in. Setup (output directory, scene, path, GL context) is checked on every rank and
+agreed before the first frame, so a bad input ends the whole job with one message and exit
+code 2 instead of a hang. Every wait afterwards is bounded (``--timeout``) and watched
+(a stalled or failed peer ends it in ``--liveness`` seconds or at once); timing rows reach
+``timings.csv`` a whole frame at a time; ``summary.json`` always describes exactly the rows
+written, and is rewritten when the run ends however it ends. SIGINT/SIGTERM stop all ranks
+after the current frame.
 """
 
 from __future__ import annotations
 
 import os
-import signal
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .bounds import BoxProjector, SphereProjector, make_projector
-from .config import WalkConfig
+from .camera import frame_matrices
+from .config import SUMMARY_EVERY, WalkConfig, setup_timeout
 from .errors import InputError
 from .exchange import barrier, broadcast_partition, exchange, wait_all
 from .models import load_scene
 from .mosaic import overlay, save_png, stitch
-from .paths import CameraPath, load_path, orbit, walkthrough
+from .outdir import OutputDir
+from .paths import CameraPath, check_cameras, load_path, orbit, walkthrough
 from .regions import tile_regions, transfers
 from .report import COLUMNS, TimingWriter, summarize, table, write_json
 from .strategies import make_strategy
 
-STOP = {"flag": False}
-
-
-def _on_signal(signum, frame):
-    STOP["flag"] = True
+ERROR_BYTES = 1024  # an agreed setup error travels as a fixed-size buffer
 
 
 def agree(comm, error: str | None, timeout: float) -> str | None:
-    """Every rank's setup outcome; the first error (with its rank) or None, on all ranks."""
-    wait_all([comm.Ibarrier()], timeout, "setup")
-    errors = comm.allgather(error)
+    """Every rank's setup outcome; the first error (with its rank) or None, on all ranks.
+
+    Non-blocking and bounded: a fixed-size buffer per rank in one ``Iallgather``, so a rank
+    that never arrives ends the wait (timeout, or sooner through the job's liveness check)."""
+    K = comm.Get_size()
+    mine = np.zeros(ERROR_BYTES, dtype=np.uint8)
+    msg = (error or "").encode("utf-8")[:ERROR_BYTES - 1]
+    mine[:len(msg)] = np.frombuffer(msg, dtype=np.uint8)
+    allbuf = np.zeros((K, ERROR_BYTES), dtype=np.uint8)
+    wait_all([comm.Iallgather(mine, allbuf)], timeout, "setup")
+    errors = [bytes(b).rstrip(b"\0").decode("utf-8", "replace") for b in allbuf]
     bad = [(r, e) for r, e in enumerate(errors) if e]
     if not bad:
         return None
@@ -55,7 +64,7 @@ def make_path(cfg: WalkConfig, scene) -> CameraPath:
                                                            path.near, path.far)))
         return path
     gen = walkthrough if cfg.path_kind == "walkthrough" else orbit
-    return gen(scene, frames=cfg.frames or (1200 if cfg.path_kind == "walkthrough" else 300))
+    return gen(scene, frames=cfg.frames or cfg.default_frames)
 
 
 def load_world(cfg: WalkConfig):
@@ -75,9 +84,9 @@ def projector(cfg: WalkConfig, scene) -> BoxProjector | SphereProjector:
     return make_projector(scene, cfg.bounds)
 
 
-def _check_visible(cfg, scene, path) -> None:
-    from .render import frame_matrices
-
+def _check_path(cfg, scene, path) -> None:
+    """Every frame's camera is valid (the door, not frame N), and the path sees the scene."""
+    check_cameras(path, cfg.path or "the generated path")
     project = projector(cfg, scene)
     for f in np.linspace(0, len(path) - 1, min(len(path), 12)).astype(int):
         view, proj, _ = frame_matrices(path.camera(int(f)), cfg.size)
@@ -86,164 +95,260 @@ def _check_visible(cfg, scene, path) -> None:
     raise InputError(f"the camera path never sees the scene ({scene.name}): no visible triangles")
 
 
-def _fault(rank: int, frame: int) -> None:
-    """Test-only fault injection: MULTIGPU_FAULT='RANK:FRAME' raises there."""
+def _fault(rank: int, where: int | str) -> None:
+    """Test-only fault injection: MULTIGPU_FAULT='RANK:WHERE[:stop]' with WHERE a frame
+    number or 'setup' raises there, or with ':stop' stops the rank (SIGSTOP: a frozen rank)."""
     spec = os.environ.get("MULTIGPU_FAULT")
     if spec:
-        r, f = (int(v) for v in spec.split(":"))
-        if r == rank and f == frame:
-            raise RuntimeError(f"injected fault at frame {frame}")
+        r, w, *action = spec.split(":")
+        if int(r) == rank and w == str(where):
+            if action == ["stop"]:
+                import signal
+
+                os.kill(os.getpid(), signal.SIGSTOP)
+            raise RuntimeError(f"injected fault at {'frame ' if isinstance(where, int) else ''}{where}")
 
 
-def run(cfg: WalkConfig, comm) -> dict | None:
+def _check_video() -> None:
+    try:
+        import imageio.v2  # noqa: F401
+        import imageio_ffmpeg
+
+        imageio_ffmpeg.get_ffmpeg_exe()
+    except Exception as exc:
+        raise InputError(f"--video needs imageio with ffmpeg (pip install 'multigpu[video]'): "
+                         f"{exc.__class__.__name__}: {exc}") from None
+
+
+def run(cfg: WalkConfig, comm, job) -> dict | None:
     """Render the walkthrough on this rank; rank 0 returns the summary."""
     rank, K = comm.Get_rank(), comm.Get_size()
     if K != cfg.ranks:
         raise InputError(f"--grid {cfg.grid[0]}x{cfg.grid[1]} needs {cfg.ranks} ranks but the job has {K} "
                          f"(start it with mpiexec -n {cfg.ranks})")
-    # -- setup: rank 0 builds the scene cache first, then every rank loads and checks
+    wait = setup_timeout(cfg)
+    # -- setup: rank 0 takes the output directory and builds the scene cache first
     error = None
     scene = path = out = None
     if rank == 0:
         try:
-            out = cfg.check_output()
+            out = OutputDir(cfg.out)
+            if cfg.video:
+                _check_video()
             scene, path, load_info = load_world(cfg)
-            _check_visible(cfg, scene, path)
+            _check_path(cfg, scene, path)
         except InputError as exc:
             error = str(exc)
-    error = agree(comm, error, max(cfg.timeout, 600.0))
-    if error:
-        raise InputError(error)
-    ctx = renderer = None
     try:
-        if rank != 0:
-            scene, path, load_info = load_world(cfg)
-        from .render import RegionRenderer, create_context
+        _fault(rank, "setup")
+        error = agree(comm, error, wait)
+        if error:
+            raise InputError(error)
+        ctx = renderer = None
+        try:
+            if rank != 0:
+                scene, path, load_info = load_world(cfg)
+            from .render import RegionRenderer, create_context
 
-        ctx, device = create_context(cfg.device)
-        renderer = RegionRenderer(ctx, scene, cfg.size, cfg.subfrustum)
-    except (InputError, RuntimeError) as exc:
-        error = str(exc)
-    error = agree(comm, error, max(cfg.timeout, 600.0))
-    if error:
-        raise InputError(error)
-    return _frames(cfg, comm, scene, path, renderer, out, load_info, device)
+            ctx, device = create_context(cfg.device)
+            renderer = RegionRenderer(ctx, scene, cfg.size, cfg.subfrustum)
+        except (InputError, RuntimeError) as exc:
+            error = str(exc)
+        error = agree(comm, error, wait)
+        if error:
+            raise InputError(error)
+    except BaseException:
+        if out is not None:
+            out.abandon()
+        raise
+    try:
+        return Frames(cfg, comm, job, scene, path, renderer, out, load_info, device).run()
+    finally:
+        renderer.release()
+        if out is not None:
+            out.release()
 
 
-def _frames(cfg, comm, scene, path, renderer, out, load_info, device) -> dict | None:
-    from .render import frame_matrices
+@dataclass
+class Timer:
+    """Named phase marks of one frame: wall (perf_counter) and process CPU time."""
 
-    rank, K = comm.Get_rank(), comm.Get_size()
-    size = cfg.size
-    tw, th = cfg.tile
-    tiles = tile_regions(cfg.grid[0], cfg.grid[1], tw, th)
-    my_tile = tiles[rank]
-    strategy = make_strategy(cfg.balance, cfg.grid, size, cfg.strips)
-    broadcast = cfg.partition == "broadcast" and K > 1
-    tris = scene.tris
-    project = projector(cfg, scene)
-    coverage = None
-    if strategy.needs_coverage:
-        coverage = np.ones(scene.n_objects)
-    back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
-    front = np.zeros_like(back)  # what the rank's monitor shows
-    n_frames = len(path)
-    ncol = len(COLUMNS)
-    row = np.zeros(ncol + 1)  # + stop flag
-    allrows = np.zeros((K, ncol + 1))
-    gathered = np.zeros((K, th, tw, 3), dtype=np.uint8) if rank == 0 else None
-    signal.signal(signal.SIGINT, _on_signal)
-    signal.signal(signal.SIGTERM, _on_signal)
+    marks: list = field(default_factory=list)
 
-    writer = video = bar = None
-    history: list[np.ndarray] = []
-    config_doc = _config_doc(cfg, scene, load_info, n_frames, device, renderer.method)
-    if rank == 0:
-        (out / "mosaic").mkdir(exist_ok=True)
-        writer = TimingWriter(out / "timings.csv")
-        if cfg.video:
-            video = _open_video(out / "mosaic.mp4")
-        if cfg.progress:
+    def mark(self) -> None:
+        self.marks.append((time.perf_counter(), time.process_time()))
+
+    def ms(self, i: int, j: int, cpu: bool = False) -> float:
+        return (self.marks[j][1 if cpu else 0] - self.marks[i][1 if cpu else 0]) * 1e3
+
+
+class Frames:
+    """The frame loop in named phases: plan, render, synchronize, exchange, display, record."""
+
+    def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, out: OutputDir | None, load_info, device):
+        self.cfg, self.comm, self.job = cfg, comm, job
+        self.scene, self.path, self.renderer = scene, path, renderer
+        self.rank, self.K = comm.Get_rank(), comm.Get_size()
+        tw, th = cfg.tile
+        self.tiles = tile_regions(cfg.grid[0], cfg.grid[1], tw, th)
+        self.strategy = make_strategy(cfg.balance, cfg.grid, cfg.size, cfg.strips)
+        self.broadcast = cfg.partition == "broadcast" and self.K > 1
+        self.project = projector(cfg, scene)
+        self.coverage = np.ones(scene.n_objects) if self.strategy.needs_coverage else None
+        self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
+        self.front = np.zeros_like(self.back)  # what the rank's monitor shows
+        self.col = {c: i for i, c in enumerate(COLUMNS)}
+        self.row = np.zeros(len(COLUMNS) + 1)  # + stop flag
+        self.allrows = np.zeros((self.K, len(COLUMNS) + 1))
+        self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
+        self.n_frames = len(path)
+        self.done = 0
+        self.out = out
+        self.history: list[np.ndarray] = []
+        self.config_doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
+        self.writer = self.video = self.bar = None
+
+    # -- phases of one frame
+    def plan(self, f: int):
+        view, proj, light = frame_matrices(self.path.camera(f), self.cfg.size)
+        part = None
+        if self.rank == 0 or not self.broadcast:  # redundant: every rank plans the same partition
+            if self.coverage is None:
+                part = self.strategy.plan(self.project(view, proj), self.scene.tris)
+            else:
+                part = self.strategy.plan(self.project(view, proj, self.coverage), self.scene.tris, self.coverage)
+        if self.broadcast:
+            part = broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
+        return part, (view, proj, light)
+
+    def record(self, f: int, part, t: Timer, sent: int, mask) -> None:
+        """This rank's row by column name, gathered so every rank sees every rank's row."""
+        region = part.regions[self.rank]
+        values = {"frame": f, "rank": self.rank, "triangles": part.loads[self.rank],
+                  "x0": region[0], "y0": region[1], "x1": region[2], "y1": region[3],
+                  "load_balancing_ms": t.ms(0, 1), "rendering_ms": t.ms(1, 2), "synchronization_ms": t.ms(2, 3),
+                  "frame_exchange_ms": t.ms(3, 4), "display_ms": t.ms(4, 5), "frame_ms": t.ms(0, 5),
+                  "load_balancing_cpu_ms": t.ms(0, 1, True), "rendering_cpu_ms": t.ms(1, 2, True),
+                  "frame_exchange_cpu_ms": t.ms(3, 4, True), "display_cpu_ms": t.ms(4, 5, True),
+                  "bytes_sent": sent, "objects": int(mask.sum())}
+        for c, v in values.items():
+            self.row[self.col[c]] = v
+        self.row[-1] = float(self.job.signum or 0)  # a signal seen here stops every rank after this frame
+        wait_all([self.comm.Iallgather(self.row, self.allrows)], self.cfg.timeout, "timing gather")
+
+    def show(self, f: int, part) -> None:
+        """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""
+        cfg = self.cfg
+        mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or f == self.n_frames - 1)
+        if not (mosaic_due or cfg.video):
+            return
+        wait_all([self.comm.Igather(self.front, self.gathered, root=0)], cfg.timeout, "mosaic gather")
+        if self.rank != 0:
+            return
+        img = stitch(self.gathered, self.tiles, cfg.size)
+        if mosaic_due:
+            save_png(img, self.out.path / "mosaic" / f"frame_{f:05d}.png")
+            if cfg.overlay:
+                save_png(overlay(img, part.regions), self.out.path / "mosaic" / f"frame_{f:05d}_partition.png")
+        if self.video is not None:
+            self.video.append_data(img)
+
+    def frame(self, f: int) -> None:
+        t = Timer()
+        t.mark()
+        _fault(self.rank, f)
+        part, (view, proj, light) = self.plan(f)
+        t.mark()
+        region, mask = part.regions[self.rank], part.visible[self.rank]
+        pixels = self.renderer.render(view, proj, light, region, mask)
+        t.mark()
+        barrier(self.comm, self.cfg.timeout)
+        t.mark()
+        plan = transfers(part.regions, self.tiles, include_self=True)
+        sent = exchange(self.comm, self.rank, pixels, region, self.tiles[self.rank], plan, self.cfg.timeout, self.back)
+        t.mark()
+        np.copyto(self.front, self.back)  # present the composed tile
+        t.mark()
+        self.record(f, part, t, sent, mask)
+        self.strategy.observe(part, self.allrows[:, self.col["rendering_cpu_ms"]])
+        if self.rank == 0:  # rows first: the summary always matches the CSV
+            rows = self.allrows[:, :len(COLUMNS)]
+            self.writer.write(rows)
+            self.history.append(rows.copy())
+        self.done = f + 1
+        self.show(f, part)
+        if self.rank == 0:
+            if self.bar is not None:
+                self.bar.update(1)
+                self.bar.set_postfix(fps=f"{1e3 / max(self.allrows[:, self.col['frame_ms']].max(), 1e-9):.1f}")
+            if f % SUMMARY_EVERY == SUMMARY_EVERY - 1:
+                self.write_summary(complete=False)
+
+    # -- the run
+    def open_outputs(self) -> None:
+        self.out.clear_previous()
+        self.writer = TimingWriter(self.out.path / "timings.csv")
+        self.write_summary(complete=False)
+        if self.cfg.video:
+            import imageio.v2 as imageio
+
+            self.video = imageio.get_writer(str(self.out.path / "mosaic.mp4"), fps=30, macro_block_size=1)
+        if self.cfg.progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=n_frames, unit="frame", desc=f"{K} ranks", dynamic_ncols=True, mininterval=1.0)
-    complete = False
-    done = 0
-    summary = {"frames": 0}
-    try:
-        for f in range(n_frames):
-            w0, c0 = time.perf_counter(), time.process_time()
-            _fault(rank, f)
-            view, proj, light = frame_matrices(path.camera(f), size)
-            part = None
-            if rank == 0 or not broadcast:  # redundant: every rank plans the same partition
-                if coverage is None:
-                    part = strategy.plan(project(view, proj), tris)
-                else:
-                    part = strategy.plan(project(view, proj, coverage), tris, coverage)
-            if broadcast:
-                part = broadcast_partition(comm, part, K, scene.n_objects, cfg.timeout)
-            w1, c1 = time.perf_counter(), time.process_time()
-            region = part.regions[rank]
-            mask = part.visible[rank]
-            pixels = renderer.render(view, proj, light, region, mask)
-            w2, c2 = time.perf_counter(), time.process_time()
-            barrier(comm, cfg.timeout)
-            w3, c3 = time.perf_counter(), time.process_time()
-            plan = transfers(part.regions, tiles, include_self=True)
-            sent = exchange(comm, rank, pixels, region, my_tile, plan, cfg.timeout, back)
-            w4, c4 = time.perf_counter(), time.process_time()
-            np.copyto(front, back)  # present the composed tile
-            w5, c5 = time.perf_counter(), time.process_time()
-            row[:] = [f, rank, part.loads[rank], *region,
-                      (w1 - w0) * 1e3, (w2 - w1) * 1e3, (w3 - w2) * 1e3, (w4 - w3) * 1e3, (w5 - w4) * 1e3,
-                      (w5 - w0) * 1e3, (c1 - c0) * 1e3, (c2 - c1) * 1e3, (c4 - c3) * 1e3, (c5 - c4) * 1e3,
-                      sent, int(mask.sum()), float(STOP["flag"])]
-            wait_all([comm.Iallgather(row, allrows)], cfg.timeout, "timing gather")
-            strategy.observe(part, allrows[:, COLUMNS.index("rendering_cpu_ms")])
-            done = f + 1
-            mosaic_due = cfg.mosaic_every and (f % cfg.mosaic_every == 0 or f == n_frames - 1)
-            if mosaic_due or video is not None:
-                wait_all([comm.Igather(front, gathered, root=0)], cfg.timeout, "mosaic gather")
-            if rank == 0:
-                writer.write(allrows[:, :ncol])
-                history.append(allrows[:, :ncol].copy())
-                if mosaic_due or video is not None:
-                    img = stitch(gathered, tiles, size)
-                    if mosaic_due:
-                        save_png(img, out / "mosaic" / f"frame_{f:05d}.png")
-                        if cfg.overlay:
-                            save_png(overlay(img, part.regions), out / "mosaic" / f"frame_{f:05d}_partition.png")
-                    if video is not None:
-                        video.append_data(img)
-                if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix(fps=f"{1e3 / max(allrows[:, COLUMNS.index('frame_ms')].max(), 1e-9):.1f}")
-                if f % 50 == 49:
-                    _write_summary(out, history, K, {**config_doc, "strategy": strategy.report()}, complete=False)
-            if allrows[:, -1].any():
-                break
-        complete = done == n_frames
-    finally:
-        if rank == 0:
-            if bar is not None:
-                bar.close()
-            if writer is not None:
-                writer.close()
-            if video is not None:
-                video.close()
-            if history:
-                summary = _write_summary(out, history, K, {**config_doc, "strategy": strategy.report()}, complete=complete)
-        if renderer is not None:
-            renderer.release()
-    if rank == 0:
-        state = "" if complete else f" (stopped after {done} of {n_frames} frames)"
-        print(table(summary, f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in "
-                             f"{scene.n_objects} objects, {cfg.grid[0]}x{cfg.grid[1]} wall of {size[0]}x{size[1]}, "
-                             f"balance={cfg.balance}{state}"), flush=True)
-        print(f"outputs in {out}/ (timings.csv, summary.json, mosaic/)", flush=True)
+            self.bar = tqdm(total=self.n_frames, unit="frame", desc=f"{self.K} ranks", dynamic_ncols=True,
+                            mininterval=1.0)
+
+    def close_outputs(self, complete: bool, stopped_by: str | None) -> dict:
+        for thing in (self.bar, self.writer, self.video):
+            if thing is not None:
+                try:
+                    thing.close()
+                except Exception:  # closing must not hide the run's own error
+                    pass
+        return self.write_summary(complete=complete, stopped_by=stopped_by)
+
+    def write_summary(self, complete: bool, stopped_by: str | None = None) -> dict:
+        rows = np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS)))
+        summary = summarize(rows, self.K)
+        doc = {"complete": complete, "frames_written": self.done, "config": self.config_doc,
+               "strategy": self.strategy.report(), **summary}
+        if stopped_by:
+            doc["stopped_by"] = stopped_by
+        write_json(self.out.path / "summary.json", doc)
         return summary
-    return None
+
+    def run(self) -> dict | None:
+        if self.rank == 0:
+            self.open_outputs()
+        complete, stopped_by = False, None
+        self.job.in_frames = True
+        try:
+            for f in range(self.n_frames):
+                self.frame(f)
+                if self.allrows[:, -1].any():  # a rank was interrupted: all stop after this frame
+                    self.job.signum = self.job.signum or int(self.allrows[:, -1].max())
+                    break
+            complete = self.done == self.n_frames
+            if not complete:
+                import signal
+
+                stopped_by = f"signal {signal.Signals(self.job.signum).name}"
+        except BaseException as exc:
+            stopped_by = f"{exc.__class__.__name__}: {exc}"
+            raise
+        finally:
+            if self.rank == 0:
+                summary = self.close_outputs(complete, stopped_by)
+        if self.rank != 0:
+            return None
+        cfg, scene = self.cfg, self.scene
+        state = "" if complete else f" (stopped after {self.done} of {self.n_frames} frames)"
+        print(table(summary, f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in "
+                             f"{scene.n_objects} objects, {cfg.grid[0]}x{cfg.grid[1]} wall of {cfg.size[0]}x"
+                             f"{cfg.size[1]}, balance={cfg.balance}{state}"), flush=True)
+        print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
+        return summary
 
 
 def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dict:
@@ -255,20 +360,3 @@ def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dic
                       "warnings": scene.meta.get("warnings", [])},
             "path": cfg.path or cfg.path_kind, "egl_device": device,
             "lp_num_threads": os.environ.get("LP_NUM_THREADS")}
-
-
-def _write_summary(out: Path, history, K, config_doc, complete: bool) -> dict:
-    summary = summarize(np.concatenate(history), K)
-    doc = {"complete": complete, "config": config_doc, **summary}
-    write_json(out / "summary.json", doc)
-    return summary
-
-
-def _open_video(path: Path):
-    try:
-        import imageio.v2 as imageio
-
-        return imageio.get_writer(str(path), fps=30, macro_block_size=1)
-    except Exception as exc:  # imageio or its ffmpeg missing: say so, render on
-        print(f"multigpu: --video disabled: {exc.__class__.__name__}: {exc}", flush=True)
-        return None

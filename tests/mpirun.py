@@ -6,17 +6,30 @@ from pathlib import Path
 
 import numpy as np
 
-from multigpu.mpirun import JobTimeout, mpiexec, run_multigpu
+from multigpu.mpirun import JobTimeout, find_launcher, run_multigpu
 
 ROOT = Path(__file__).resolve().parents[1]
-MPIEXEC = mpiexec()
 SMALL = ["--triangles", "20000", "--no-progress"]
 
 
-def run_mpi(n: int, args: list[str], timeout: float = 120, env: dict | None = None):
+def start_mpi(n: int, args: list[str], env: dict | None = None):
+    """A job in its own process group (for signal tests); returns (proc, kill)."""
+    import os
+    import signal
+    import subprocess
+
+    launcher = find_launcher()
+    proc = subprocess.Popen(launcher.command(n, args), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True,
+                            env=launcher.environ({"LP_NUM_THREADS": "1", **(env or {})}))
+    return proc, lambda: os.killpg(proc.pid, signal.SIGKILL)
+
+
+def run_mpi(n: int, args: list[str], timeout: float = 120, env: dict | None = None, launcher=None):
     """``mpiexec -n n python -m mpi4py -m multigpu ARGS``; the whole process group is killed on timeout."""
     try:
-        return run_multigpu(n, args, timeout, env={"LP_NUM_THREADS": "1", **(env or {})}, cwd=ROOT)
+        return run_multigpu(n, args, timeout, env={"LP_NUM_THREADS": "1", **(env or {})}, cwd=ROOT,
+                            launcher=launcher)
     except JobTimeout as exc:
         raise AssertionError(f"{exc}\n{exc.stderr[-2000:]}") from None
 

@@ -12,7 +12,8 @@ from multigpu.errors import InputError
 from multigpu.models import SceneSpec, load_scene, load_model
 from multigpu.paths import walkthrough
 from multigpu.regions import overlaps, pixel_spans
-from multigpu.render import RegionRenderer, choose_method, create_context, frame_matrices
+from multigpu.camera import frame_matrices
+from multigpu.render import RegionRenderer, choose_method, create_context
 from multigpu.triangles import triangle_objects, triangle_rects
 
 SIZE = (160, 120)

@@ -9,7 +9,8 @@ from multigpu.cluster import split_objects
 from multigpu.errors import InputError
 from multigpu.models import SceneSpec, load_scene
 from multigpu.paths import walkthrough
-from multigpu.render import RegionRenderer, create_context, frame_matrices
+from multigpu.camera import frame_matrices
+from multigpu.render import RegionRenderer, create_context
 from multigpu.triangles import triangle_objects
 
 

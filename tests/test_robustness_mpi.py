@@ -2,11 +2,14 @@
 
 import csv
 import json
+import os
+import signal
 import time
 
 import pytest
 
-from mpirun import SMALL, run_mpi
+from multigpu.report import read_timings
+from mpirun import SMALL, run_mpi, start_mpi
 
 pytestmark = pytest.mark.mpi
 
@@ -49,35 +52,116 @@ def test_corrupt_model_and_bad_path_file(tmp_path):
     assert res.returncode != 0 and "missing the field 'target'" in res.stderr
 
 
-def test_exception_on_one_rank_ends_job_and_keeps_frames(tmp_path):
+def _rows(out):
+    with open(out / "timings.csv") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _summary_matches_csv(out):
+    """summary.json describes exactly the whole frames in timings.csv."""
+    s = json.loads((out / "summary.json").read_text())
+    frames = {int(r["frame"]) for r in _rows(out)}
+    assert s["frames"] == len(frames) == s["frames_written"]
+    assert frames == set(range(len(frames)))
+    read_timings(out / "timings.csv")  # parses: whole rows only
+    return s
+
+
+@pytest.mark.parametrize("failing", [0, 1])
+def test_exception_on_one_rank_ends_job_and_keeps_frames(tmp_path, failing):
     out = tmp_path / "o"
     t = time.monotonic()
     res = run_mpi(3, ["walkthrough", *SMALL, "--grid", "1x3", "--frames", "40", "--mosaic-every", "0",
-                      "--out", str(out)], timeout=60, env={"MULTIGPU_FAULT": "1:6"})
+                      "--out", str(out)], timeout=60, env={"MULTIGPU_FAULT": f"{failing}:6"})
     assert time.monotonic() - t < 30
     assert res.returncode != 0
-    assert "rank 1: RuntimeError: injected fault at frame 6" in res.stderr
-    with open(out / "timings.csv") as fh:
-        rows = list(csv.DictReader(fh))
-    frames = {int(r["frame"]) for r in rows}
-    assert set(range(6)) <= frames and len(rows) >= 6 * 3
-    s = json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else None
-    assert s is None or s["complete"] is False
+    assert res.stderr.count("injected fault at frame 6") == 1, res.stderr
+    assert f"rank {failing}: RuntimeError: injected fault at frame 6" in res.stderr
+    s = _summary_matches_csv(out)
+    assert s["complete"] is False and s["frames"] == 6 and "injected fault" in s["stopped_by"]
 
 
-def _start(args, tmp_path):
-    import os
-    import signal
-    import subprocess
-    import sys
+def test_failed_rerun_leaves_no_stale_summary_or_mosaics(tmp_path):
+    out = tmp_path / "o"
+    res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "8", "--mosaic-every", "1",
+                      "--out", str(out)], timeout=90)
+    assert res.returncode == 0 and json.loads((out / "summary.json").read_text())["complete"] is True
+    (out / "mine.txt").write_text("not a run output")
+    res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "8", "--mosaic-every", "2",
+                      "--out", str(out)], timeout=90, env={"MULTIGPU_FAULT": "1:3"})
+    assert res.returncode != 0
+    s = _summary_matches_csv(out)
+    assert s["complete"] is False and s["frames"] == 3
+    pngs = sorted(p.name for p in (out / "mosaic").glob("frame_*.png"))
+    assert pngs == ["frame_00000.png", "frame_00000_partition.png", "frame_00002.png", "frame_00002_partition.png"]
+    assert (out / "mine.txt").read_text() == "not a run output"  # only the run's own files are replaced
+    assert not list(out.glob(".*.tmp")) and not list((out / "mosaic").glob(".*tmp*"))
 
-    from mpirun import MPIEXEC, ROOT
 
-    cmd = [MPIEXEC, "-n", "2", sys.executable, "-m", "mpi4py", "-m", "multigpu", "walkthrough", *SMALL,
-           "--grid", "1x2", "--mosaic-every", "0", "--out", str(tmp_path / "o"), *args]
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, env={**os.environ, "LP_NUM_THREADS": "1"})
-    return proc, lambda: os.killpg(proc.pid, signal.SIGKILL)
+def test_bad_input_leaves_no_new_directory_and_old_outputs_alone(tmp_path):
+    res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--seed", "3", "--balance", "magic",
+                      "--out", str(tmp_path / "new" / "o")])
+    assert res.returncode == 2 and not (tmp_path / "new" / "o").exists()
+    out = tmp_path / "o"
+    assert run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "3", "--out", str(out)]).returncode == 0
+    before = (out / "summary.json").read_text()
+    res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--path", str(tmp_path / "none.json"),
+                      "--out", str(out)])
+    assert res.returncode == 2 and (out / "summary.json").read_text() == before
+
+
+@pytest.mark.parametrize("flags,needle", [
+    (["--seed", "-1"], "--seed must be >= 0, got -1"),
+    (["--bogus-flag"], "unrecognized arguments: --bogus-flag"),
+    (["--grid", "1x3"], "needs 3 ranks but the job has 2"),
+])
+def test_errors_print_once_and_exit_together(tmp_path, flags, needle):
+    """Every rank hits these: one line on stderr, exit 2, no MPI_Abort banner."""
+    args = ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "2", "--out", str(tmp_path / "o")]
+    if "--grid" in flags:
+        args = args[:args.index("--grid")] + args[args.index("--grid") + 2:]
+    res = run_mpi(2, args + flags, timeout=60)
+    assert res.returncode == 2
+    assert res.stderr.count(needle) == 1, res.stderr
+    assert "Abort(" not in res.stderr and "Traceback" not in res.stderr
+
+
+def test_video_with_several_ranks(tmp_path):
+    out = tmp_path / "o"
+    res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "4", "--video", "--mosaic-every", "0",
+                      "--timeout", "30", "--out", str(out)], timeout=90)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert (out / "mosaic.mp4").stat().st_size > 1000
+    import imageio.v2 as imageio
+
+    with imageio.get_reader(str(out / "mosaic.mp4")) as r:
+        assert sum(1 for _ in r) == 4
+
+
+def test_rank_stalled_in_setup_ends_the_job(tmp_path):
+    """A rank frozen (SIGSTOP) before the first agreement: the others notice its silence."""
+    out = tmp_path / "o"
+    t = time.monotonic()
+    res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "5", "--liveness", "3", "--out", str(out)],
+                  timeout=60, env={"MULTIGPU_FAULT": "1:setup:stop"})
+    assert time.monotonic() - t < 20
+    assert res.returncode != 0
+    assert res.stderr.count("rank 1 stopped responding") == 1, res.stderr
+    assert not out.exists()  # refused before any frame: no directory left behind
+
+
+def test_rank_stalled_mid_run_ends_job_within_default_liveness(tmp_path):
+    """Default settings: a frozen rank ends the job in about 30 s (not the 120 s frame timeout),
+    and rank 0 keeps every whole frame."""
+    out = tmp_path / "o"
+    t = time.monotonic()
+    res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "50", "--mosaic-every", "0",
+                      "--out", str(out)], timeout=90, env={"MULTIGPU_FAULT": "1:4:stop"})
+    took = time.monotonic() - t
+    assert res.returncode != 0 and took < 45, (took, res.stderr)
+    assert "rank 1 stopped responding (no heartbeat for 30 s)" in res.stderr
+    s = _summary_matches_csv(out)
+    assert s["complete"] is False and s["frames"] == 4
 
 
 def _wait_for_frames(path, n, limit=60):
@@ -89,28 +173,82 @@ def _wait_for_frames(path, n, limit=60):
     raise AssertionError("the run produced no frames")
 
 
-def test_sigterm_stops_cleanly_with_complete_outputs(tmp_path):
-    import signal
+def _start(args, tmp_path, env=None):
+    return start_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--mosaic-every", "0", "--out", str(tmp_path / "o"),
+                         *args], env=env)
 
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_signal_stops_cleanly_with_complete_outputs_and_nonzero_exit(tmp_path, sig, code):
     proc, kill = _start([], tmp_path)
     try:
         _wait_for_frames(tmp_path / "o" / "timings.csv", 10)
-        proc.send_signal(signal.SIGTERM)
+        os.killpg(proc.pid, sig)  # as Ctrl-C does: the launcher and every rank
         out, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             kill()
-    s = json.loads((tmp_path / "o" / "summary.json").read_text())
-    assert s["complete"] is False and 0 < s["frames"] < 1200
-    with open(tmp_path / "o" / "timings.csv") as fh:
-        rows = list(csv.DictReader(fh))
-    assert len(rows) == 2 * s["frames"]  # every written frame is complete
+    assert proc.returncode == code, err
+    s = _summary_matches_csv(tmp_path / "o")
+    assert s["complete"] is False and 0 < s["frames"] < 1200 and s["stopped_by"] == f"signal {sig.name}"
     assert "stopped after" in out
 
 
+def test_ctrl_c_ends_a_job_waiting_on_a_frozen_rank(tmp_path):
+    proc, kill = _start(["--liveness", "0"], tmp_path, env={"MULTIGPU_FAULT": "1:5:stop"})
+    try:
+        _wait_for_frames(tmp_path / "o" / "timings.csv", 2 * 5)
+        time.sleep(1.0)
+        t = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+        took = time.monotonic() - t
+    finally:
+        if proc.poll() is None:
+            kill()
+    assert took < 10 and proc.returncode == 130, (took, proc.returncode, err)
+    assert err.count("interrupted by SIGINT") == 1
+    assert _summary_matches_csv(tmp_path / "o")["frames"] == 5
+
+
+def test_second_job_on_the_same_out_is_refused(tmp_path):
+    proc, kill = _start(["--frames", "2000"], tmp_path)
+    try:
+        _wait_for_frames(tmp_path / "o" / "timings.csv", 4)
+        res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "3", "--out", str(tmp_path / "o")])
+        assert res.returncode == 2
+        assert res.stderr.count("multigpu: error:") == 1
+        assert f"--out {tmp_path / 'o'}: in use by another multigpu job (pid" in res.stderr
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            kill()
+    _summary_matches_csv(tmp_path / "o")  # the first job's outputs are intact
+
+
+def test_disk_full_keeps_whole_rows_and_no_temp_files(tmp_path):
+    """RLIMIT_FSIZE makes writes past 20 kB fail (EFBIG, as a full disk gives ENOSPC)."""
+    import subprocess
+
+    from multigpu.mpirun import find_launcher
+    from mpirun import ROOT
+
+    out = tmp_path / "o"
+    launcher = find_launcher()
+    cmd = launcher.command(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "400", "--mosaic-every", "0",
+                               "--out", str(out)])
+    py = cmd.index("-m")  # python -m mpi4py ... -> python tests/fsize_limited.py BYTES -m multigpu ...
+    cmd[py:py + 2] = [str(ROOT / "tests" / "fsize_limited.py"), "20000"]
+    res = subprocess.run(cmd, cwd=ROOT, env=launcher.environ(), capture_output=True, text=True, timeout=120)
+    assert res.returncode != 0
+    assert "timings.csv" in res.stderr and res.stderr.count("multigpu: rank 0") == 1, res.stderr
+    s = _summary_matches_csv(out)
+    assert 0 < s["frames"] < 400 and s["complete"] is False
+    assert not [p.name for p in out.rglob(".*") if p.name != ".multigpu.lock"]
+
+
 def test_sigkill_of_one_rank_ends_the_job(tmp_path):
-    import os
-    import signal
     import subprocess
 
     proc, kill = _start(["--timeout", "10"], tmp_path)
@@ -125,3 +263,27 @@ def test_sigkill_of_one_rank_ends_the_job(tmp_path):
         if proc.poll() is None:
             kill()
     assert proc.returncode != 0
+
+
+def test_open_mpi_runs_and_refuses_bad_input(tmp_path):
+    """With a system Open MPI (Debian's openmpi-bin), the launcher passes what it needs: more
+    ranks than cores, root, its own libmpi; outputs equal MPICH's."""
+    from multigpu.mpirun import launcher_for, openmpi_on_path
+
+    found = openmpi_on_path()
+    if not found:
+        pytest.skip("no Open MPI mpiexec on this machine (Debian: apt install openmpi-bin)")
+    ompi = launcher_for(found)
+    args = ["walkthrough", *SMALL, "--grid", "2x2", "--tile", "40x32", "--frames", "3", "--mosaic-every", "1",
+            "--no-overlay"]
+    res = run_mpi(4, [*args, "--out", str(tmp_path / "ompi")], launcher=ompi, timeout=120)
+    assert res.returncode == 0, res.stderr[-3000:]
+    ref = run_mpi(4, [*args, "--out", str(tmp_path / "mpich")], timeout=120)
+    assert ref.returncode == 0
+    from mpirun import read_png
+
+    for f in range(3):
+        a, b = (read_png(tmp_path / d / "mosaic" / f"frame_{f:05d}.png") for d in ("ompi", "mpich"))
+        assert (a == b).all()
+    bad = run_mpi(4, [*args, "--seed", "-2", "--out", str(tmp_path / "x")], launcher=ompi, timeout=60)
+    assert bad.returncode == 2 and bad.stderr.count("--seed must be >= 0") == 1, bad.stderr

@@ -1,0 +1,161 @@
+"""Bad inputs named at the door, in one process: path files, model files, odd file kinds,
+and outputs written whole (issue: reliability, round two)."""
+
+import errno
+import json
+import os
+import warnings
+
+import numpy as np
+import pytest
+
+from multigpu.errors import InputError, check_file
+from multigpu.models import SceneSpec, load_scene
+from multigpu.paths import load_path
+from multigpu.report import COLUMNS, TimingWriter, read_timings, write_json
+
+
+def _path_file(tmp_path, text):
+    p = tmp_path / "p.json"
+    p.write_text(text)
+    return p
+
+
+KEYS = [{"position": [0, 0, 0], "target": [1, 0, 0]}, {"position": [0, 1, 0], "target": [1, 1, 0]}]
+
+
+@pytest.mark.parametrize("doc,needle", [
+    ('{"frames": %s, "keyframes": %s}' % ("9" * 400, json.dumps(KEYS)), "field 'frames' must be an integer"),
+    ('{"frames": 1000000000000, "keyframes": %s}' % json.dumps(KEYS), "field 'frames' must be an integer in 1..10000000"),
+    ('{"frames": 1e12, "keyframes": %s}' % json.dumps(KEYS), "field 'frames' must be an integer"),
+    ('{"keyframes": [{"position": [%s, 0, 0], "target": [1, 0, 0]}]}' % ("1" * 400), "position must be 3 finite numbers"),
+    ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    ('{"fov": %s, "keyframes": %s}' % ("9" * 5000, json.dumps(KEYS)), "not a camera path"),
+])
+def test_path_file_errors_name_file_and_field(tmp_path, doc, needle):
+    p = _path_file(tmp_path, doc)
+    with pytest.raises(InputError) as e:
+        load_path(p)
+    assert needle in str(e.value) and str(p) in str(e.value)
+    assert "\n" not in str(e.value) and len(str(e.value)) < 400
+
+
+def test_interpolated_eye_meeting_target_is_refused_at_the_door(tmp_path):
+    """Each keyframe is valid; the spline puts the eye on the target at frame 1 of 3."""
+    from multigpu.paths import check_cameras
+
+    keys = [{"position": [0, 0, 0], "target": [2, 0, 0]}, {"position": [2, 0, 0], "target": [0, 0, 0]}]
+    path = load_path(_path_file(tmp_path, json.dumps({"frames": 3, "keyframes": keys})))
+    with pytest.raises(InputError, match=r"frame 1 of 3: the eye meets the target"):
+        check_cameras(path, "p.json")
+    ok = load_path(_path_file(tmp_path, json.dumps({"frames": 4, "keyframes": keys})))
+    check_cameras(ok, "p.json")  # t = 0, 1/3, 2/3, 1 never meets
+
+
+def test_seed_must_be_non_negative():
+    with pytest.raises(InputError, match="--seed must be >= 0, got -1"):
+        SceneSpec(seed=-1)
+
+
+def test_odd_file_kinds_say_what_they_are(tmp_path):
+    (tmp_path / "d.obj").mkdir()
+    os.symlink(tmp_path / "loop2.obj", tmp_path / "loop1.obj")
+    os.symlink(tmp_path / "loop1.obj", tmp_path / "loop2.obj")
+    os.mkfifo(tmp_path / "fifo.obj")
+    cases = {tmp_path / "d.obj": "is a directory", tmp_path / "loop1.obj": "symbolic link loop",
+             "/dev/null": "is a character device", tmp_path / "fifo.obj": "is a named pipe",
+             tmp_path / "none.obj": "model file not found"}
+    for path, needle in cases.items():
+        with pytest.raises(InputError) as e:
+            load_scene(SceneSpec(model=str(path)), use_cache=False)
+        assert needle in str(e.value) and str(e.value).startswith("--model ")
+    with pytest.raises(InputError, match="--path .*is a directory, not a path file"):
+        load_path(tmp_path / "d.obj")
+
+
+def test_check_file_passes_regular_files(tmp_path):
+    f = tmp_path / "ok.obj"
+    f.write_text("v 0 0 0\n")
+    assert check_file(f, "--model") == f
+
+
+PLY = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_indices\nend_header\n{verts}3 0 1 {last}\n")
+
+
+def test_ply_face_index_out_of_range(tmp_path):
+    p = tmp_path / "bad.ply"
+    p.write_text(PLY.format(verts="0 0 0\n1 0 0\n0 1 0\n", last=7))
+    with pytest.raises(InputError, match=r"bad.ply: a face uses vertex index 7, but the file has 3 vertices"):
+        load_scene(SceneSpec(model=str(p)), use_cache=False)
+
+
+def test_model_beyond_float_range_is_one_clear_error_without_warnings(tmp_path):
+    p = tmp_path / "far.obj"
+    p.write_text("v 1e300 0 0\nv -1e300 1 0\nv 0 0 1e300\nf 1 2 3\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any RuntimeWarning fails the test
+        with pytest.raises(InputError, match=r"far.obj: coordinates reach 1e\+300, beyond \+-1e\+15"):
+            load_scene(SceneSpec(model=str(p)), use_cache=False)
+
+
+def test_latin1_text_models_load(tmp_path):
+    obj = tmp_path / "caf\u00e9.obj"
+    obj.write_bytes("# mod\xe8le caf\xe9\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".encode("latin-1"))
+    stl = tmp_path / "s.stl"
+    stl.write_bytes("solid pi\xe8ce\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+                    "endloop\nendfacet\nendsolid\n".encode("latin-1"))
+    for f in (obj, stl):
+        scene, _ = load_scene(SceneSpec(model=str(f)), use_cache=False)
+        assert scene.n_triangles == 1
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".stl", ".off"])
+def test_garbage_text_models_say_so(tmp_path, suffix):
+    p = tmp_path / f"junk{suffix}"
+    p.write_bytes(b"\x00\x01 garbage \xff\xfe nonsense\nxx yy zz\n" * 5)
+    with pytest.raises(InputError) as e:
+        load_scene(SceneSpec(model=str(p)), use_cache=False)
+    msg = str(e.value)
+    assert msg.startswith(f"--model {p}") and "charset" not in msg and "module" not in msg
+    assert "no triangles" in msg or f"cannot read as {suffix[1:].upper()}" in msg
+
+
+def test_timing_rows_are_whole_after_a_failed_write(tmp_path, monkeypatch):
+    """A write that fails part way (disk full) leaves the file at the last whole frame."""
+    w = TimingWriter(tmp_path / "timings.csv")
+    rows = np.arange(2 * len(COLUMNS), dtype=float).reshape(2, len(COLUMNS))
+    w.write(rows)
+    real = os.pwrite
+
+    def half_then_full(fd, data, offset):
+        if len(data) > 20:
+            real(fd, data[:len(data) // 2], offset)
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(fd, data, offset)
+
+    monkeypatch.setattr(os, "pwrite", half_then_full)
+    with pytest.raises(OSError, match="No space left on device: writing .*timings.csv"):
+        w.write(rows + 100)
+    monkeypatch.setattr(os, "pwrite", real)
+    w.write(rows + 200)  # the run could go on: appends after the last whole frame
+    w.close()
+    got = read_timings(tmp_path / "timings.csv")
+    assert got.shape == (4, len(COLUMNS))
+    assert (got[2:, 0] == rows[:, 0] + 200).all()
+
+
+def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
+    from pathlib import Path
+
+    def full(self, target):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "replace", full)
+    with pytest.raises(OSError):
+        write_json(tmp_path / "summary.json", {"a": 1})
+    from multigpu.mosaic import save_png
+
+    with pytest.raises(OSError):
+        save_png(np.zeros((4, 4, 3), np.uint8), tmp_path / "f.png")
+    assert list(tmp_path.iterdir()) == []
