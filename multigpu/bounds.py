@@ -135,6 +135,24 @@ def project_boxes(bmin, bmax, view, proj, dtype=np.float32, chunk: int = 1 << 15
     return BoxProjector(bmin, bmax, dtype, chunk)(view, proj)
 
 
+#: GPUs clip at the far plane in float32 (``z_clip <= w``), so a point beyond it by less than
+#: a few float32 ulps of ``w`` may still be drawn; only boxes and spheres beyond the far plane by
+#: more than this (relative to ``w``) are culled. With far/near above ~1e6 nothing beyond the
+#: far plane is reliably clipped by the GPU, and nothing is culled there.
+FAR_TOL = 16 * 2.0**-23
+
+
+def _far_slack(proj: np.ndarray) -> float:
+    """How far (view-space units per unit of far) beyond the far plane the GPU may still draw:
+    a point at distance ``d`` is clipped reliably once ``2n(d - f) / ((f - n) d) > FAR_TOL``;
+    inf when no ``d`` qualifies."""
+    near = _near_distance(proj)
+    a, b = proj[2, 2], proj[2, 3]
+    far = b / (a + 1.0) if a != -1.0 else np.inf
+    k = FAR_TOL * (far - near) / (2.0 * near)
+    return np.inf if not k < 1.0 else 1.0 / (1.0 - k) - 1.0
+
+
 def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
     """Rects of one block: ``center``/``half64`` (3, n) float64, ``half`` (3, n) in ``dtype``;
     silhouette fractions into ``coverage`` when given."""
@@ -147,8 +165,10 @@ def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
     near_c, far_c = clip_c[2] + clip_c[3], clip_c[3] - clip_c[2]
     near_r = np.dot(np.abs(near_row[:3]), half64)
     far_r = np.dot(np.abs(far_row[:3]), half64)
+    w_r = np.dot(np.abs(M[3, :3]), half64)
     all_front = near_c >= near_r
-    invisible = (near_c + near_r < 0) | (far_c + far_r < 0)
+    # beyond the far plane only by more than the GPU's float32 clip test can tell (FAR_TOL)
+    invisible = (near_c + near_r < 0) | (far_c + far_r < -FAR_TOL * (np.abs(clip_c[3]) + w_r))
     fast = all_front & ~invisible
     if fast.all():
         fast = slice(None)
@@ -260,6 +280,9 @@ class SphereProjector:
                            proj[3] - proj[1], proj[3] + proj[2], proj[3] - proj[2]])
         planes /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
         near = _near_distance(proj)
+        far = proj[2, 3] / (proj[2, 2] + 1.0)
+        # the far plane moved out by what the GPU's float32 clip test cannot resolve (FAR_TOL)
+        planes[5, 3] += far * _far_slack(proj) if np.isfinite(_far_slack(proj)) else np.inf
         for s in range(0, n, self.chunk):  # blocks of objects, not objects
             e = min(n, s + self.chunk)
             _spheres_block(self.center[:, s:e], self.radii[s:e], view, proj, planes, near, out[:, s:e])

@@ -24,20 +24,42 @@ def _scene_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("scene")
     g.add_argument("--scene", default="plant", help="built-in scene name (default: plant)")
     g.add_argument("--model", help="model file (OBJ, PLY, STL, OFF, glTF/GLB) instead of --scene")
-    g.add_argument("--split", default="components", help="split one mesh into objects: components | grid:N")
+    g.add_argument("--split", default="auto",
+                   help="objects of a model: auto (scene-graph nodes, else connected components) | components | "
+                        "grid:N (applies to any file)")
     g.add_argument("--merge-below", type=int, default=64, help="merge components under this many triangles")
     g.add_argument("--triangles", type=int, default=100_000, help="plant size in triangles (default 100000)")
     g.add_argument("--copies", type=int, default=1, help="plants side by side (the paper used 6..20)")
     g.add_argument("--seed", type=int, default=0)
-    g.add_argument("--cluster", type=int, default=0,
-                   help="split objects above N triangles into spatial clusters of at most N (0: as modelled)")
+    g.add_argument("--cluster", default="auto",
+                   help="cut objects above N triangles into spatial clusters of at most N: auto (when an object "
+                        "is too big to balance on the wall) | N | 0 (keep objects as modelled)")
+    g.add_argument("--up", default=None, help="up axis of the model: x | y | z | -x | -y | -z "
+                                              "(default: the format's convention, see scene info)")
 
 
-def _spec(a):
+def _cluster(text: str) -> int | None:
+    if str(text).strip() == "auto":
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        raise InputError(f"--cluster must be 'auto' or a number of triangles (0: never), got '{text}'") from None
+
+
+def _ranks(a) -> int:
+    from .config import parse_pair
+
+    rows, cols = parse_pair(getattr(a, "grid", None) or "2x2", "--grid")
+    return rows * cols
+
+
+def _spec(a, **override):
     from .models import SceneSpec
 
-    return SceneSpec(scene=a.scene, model=a.model, split=a.split, merge_below=a.merge_below,
-                     triangles=a.triangles, copies=a.copies, seed=a.seed, cluster=a.cluster)
+    fields = dict(scene=a.scene, model=a.model, split=a.split, merge_below=a.merge_below, triangles=a.triangles,
+                  copies=a.copies, seed=a.seed, cluster=_cluster(a.cluster), up=a.up, ranks=_ranks(a))
+    return SceneSpec(**{**fields, **override})
 
 
 class Parser(argparse.ArgumentParser):
@@ -87,6 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     si = ssub.add_parser("info", help="print objects, triangles, bounds, memory and load time")
     si.add_argument("source", nargs="?", default="plant", help="built-in scene name or model file")
     _scene_args(si)
+    si.add_argument("--grid", default="2x2", help="the wall the scene is prepared for (automatic clustering)")
     si.add_argument("--no-cache", action="store_true")
 
     p = sub.add_parser("path", help="camera path tools")
@@ -173,8 +196,7 @@ def _depth(a) -> int:
     size = parse_pair(a.size, "--size")
     if a.path_kind not in ("walkthrough", "orbit"):
         raise InputError(f"--path-kind must be walkthrough or orbit, got '{a.path_kind}'")
-    scene, _ = load_scene(SceneSpec(scene=a.scene, model=a.model, split=a.split, merge_below=a.merge_below,
-                                    triangles=a.triangles, copies=a.copies, seed=a.seed, cluster=a.cluster))
+    scene, _ = load_scene(_spec(a))
     gen = walkthrough if a.path_kind == "walkthrough" else orbit
     path = gen(scene, frames=a.frames or (1200 if a.path_kind == "walkthrough" else 300))
     if not 0 <= a.frame < len(path):
@@ -267,12 +289,11 @@ def _scene_info(a) -> int:
     import resource
     from pathlib import Path
 
-    from .models import SceneSpec, load_scene
+    from .models import axis_name, load_scene
 
     src = a.source
     is_file = Path(src).suffix != "" or Path(src).exists()
-    spec = SceneSpec(scene=a.scene if is_file else src, model=src if is_file else a.model, split=a.split,
-                     merge_below=a.merge_below, triangles=a.triangles, copies=a.copies, seed=a.seed, cluster=a.cluster)
+    spec = _spec(a, scene=a.scene if is_file else src, model=src if is_file else a.model)
     scene, info = load_scene(spec, use_cache=not a.no_cache)
     lo, hi = scene.bounds
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
@@ -282,6 +303,10 @@ def _scene_info(a) -> int:
     print(f"triangles  {scene.n_triangles} (per object: min {tris.min()}, median {int(sorted(tris)[len(tris) // 2])}, max {tris.max()})")
     print(f"vertices   {scene.vertices.shape[0]}")
     print(f"bounds     {lo.round(3).tolist()} .. {hi.round(3).tolist()}")
+    print(f"up         {axis_name(scene.meta.get('up', [0, 0, 1]))} ({scene.meta.get('up_source', 'as generated')})")
+    objs = scene.meta.get("objects", {})
+    if objs:
+        print(f"split      {objs['split']}: {objs['modelled']} objects as modelled -> {objs['objects']}; {objs['why']}")
     print(f"memory     {scene.nbytes / 2**20:.1f} MiB in arrays ({scene.nbytes / max(scene.n_triangles, 1):.1f} B/triangle), peak RSS {peak:.0f} MiB")
     print(f"load       {info['seconds']:.3f} s ({'cache hit' if info['cached'] else 'built'}{', ' + info['cache'] if info['cache'] else ''})")
     for w in scene.meta.get("warnings", []):

@@ -19,6 +19,36 @@ from .scene import Scene
 from .triangles import triangle_objects
 
 
+#: automatic clusters are never smaller than this (tiny pieces only add per-object cost)
+MIN_CLUSTER = 256
+
+
+def auto_cluster(tris: np.ndarray, ranks: int) -> tuple[int, str]:
+    """Cluster size that makes a scene balanceable on ``ranks`` ranks, and why (0: keep).
+
+    The balancer moves whole objects, so one object holding a share ``s`` of the triangles
+    bounds the triangle imbalance below by ``s * K``, and a scene of few objects leaves the
+    splits few places to go. Objects are cut when one holds more than 1/(4K) of the triangles
+    or when there are fewer than 8 objects per rank; the clusters then hold at most 1/(16K)
+    of the triangles (and at least ``MIN_CLUSTER``)."""
+    tris = np.asarray(tris, dtype=np.int64)
+    total, k = int(tris.sum()), int(ranks)
+    if total == 0:
+        return 0, "no triangles"
+    share = float(tris.max()) / total
+    reasons = []
+    if share > 1.0 / (4 * k):
+        reasons.append(f"one object holds {share:.1%} of the triangles (more than 1/(4K) = {1 / (4 * k):.1%})")
+    if tris.size < 8 * k:
+        reasons.append(f"{tris.size} objects for {k} ranks (fewer than 8 per rank)")
+    if not reasons:
+        return 0, f"kept as modelled: largest object {share:.1%} of the triangles, {tris.size} objects for {k} ranks"
+    size = max(MIN_CLUSTER, -(-total // (16 * k)))
+    if tris.max() <= size:
+        return 0, "kept as modelled: " + "; ".join(reasons) + f", but no object exceeds {size} triangles"
+    return size, f"objects above {size} triangles cut into clusters for {k} ranks: " + "; ".join(reasons)
+
+
 def split_objects(scene: Scene, max_tris: int) -> Scene:
     """The scene with every object above ``max_tris`` triangles cut into near-equal clusters."""
     if max_tris < 1:

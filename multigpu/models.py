@@ -1,11 +1,20 @@
 """Scenes from names and files: the built-in plant, users' models through trimesh, the cache.
 
-A scene graph (glTF/GLB, multi-object OBJ) gives one object per node instance with its
-transform applied. A single mesh is split into objects by connected components
-(``components``) or by a spatial grid (``grid:N``, N cells along the longest axis, the paper's
-future-work idea); with ``components``, pieces under ``merge_below`` triangles are merged by
-grid cell so object counts stay sane. Faces with non-finite vertices and degenerate faces are
-dropped and counted (``scene.meta['warnings']``).
+Objects (``--split``): ``auto`` (default) takes one object per node instance of a scene graph
+(glTF/GLB, multi-object OBJ; transforms applied) and the connected components of a single
+mesh; ``components`` and ``grid:N`` (N cells along the longest axis, the paper's future-work
+idea) apply to any file, scene graphs included. With components, pieces under ``merge_below``
+triangles are merged by grid cell so object counts stay sane. Then, for the wall the scene is
+loaded for (``ranks``), objects too big to balance are cut into spatial clusters
+(``cluster.auto_cluster``: no object above 1/(4K) of the triangles, at least 8 objects per
+rank), unless ``--cluster N`` (explicit size, 0 = never) says otherwise. ``meta['objects']``
+records what was done and why. Faces with non-finite vertices and degenerate faces are dropped
+and counted (``scene.meta['warnings']``); a file shorter than its header promises is refused.
+
+Up axis (``meta['up']``, used by generated camera paths): ``--up`` if given; glTF's +Y by its
+specification; for a flat scene (smallest extent under 0.35 of the largest: a city, a track) its thin axis; else
+the format's usual convention: +Y for OBJ and PLY (Blender/Maya exports, scanned data), +Z for
+STL and OFF (CAD, 3-D printing). ``meta['up_source']`` says which rule decided.
 
 Loaded and generated scenes are cached as ``.npz`` in ``$MULTIGPU_CACHE`` (default
 ``~/.cache/multigpu``), keyed by source path, size, mtime and options.
@@ -26,6 +35,11 @@ from .errors import InputError, check_file
 from .scene import FORMAT_VERSION, Scene
 
 FORMATS = {".obj", ".ply", ".stl", ".off", ".gltf", ".glb"}
+#: up axis by format convention, where the format has one (glTF: the specification)
+FORMAT_UP = {".gltf": "+y", ".glb": "+y", ".obj": "+y", ".ply": "+y", ".stl": "+z", ".off": "+z"}
+AXES = {"x": 0, "y": 1, "z": 2}
+#: a scene whose smallest extent is under this share of its largest is flat: its thin axis is up
+FLAT = 0.35
 
 
 @dataclass(frozen=True)
@@ -34,25 +48,31 @@ class SceneSpec:
 
     scene: str = "plant"
     model: str | None = None
-    split: str = "components"
+    split: str = "auto"
     merge_below: int = 64
     triangles: int = 300_000
     copies: int = 1
     seed: int = 0
-    cluster: int = 0  # split objects above this many triangles into clusters (0: as modelled)
+    cluster: int | None = None  # cut objects above N triangles into clusters (0: never; None: auto)
+    ranks: int = 4  # the wall the scene is prepared for (automatic clustering)
+    up: str | None = None  # x|y|z|-x|-y|-z, None: format convention / heuristic
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
             raise InputError(f"--scene: unknown scene '{self.scene}' (known: {', '.join(BUILTIN)})")
-        if not re.fullmatch(r"components|grid:[1-9][0-9]*", self.split):
-            raise InputError(f"--split must be 'components' or 'grid:N' with N >= 1, got '{self.split}'")
+        if not re.fullmatch(r"auto|components|grid:[1-9][0-9]*", self.split):
+            raise InputError(f"--split must be 'auto', 'components' or 'grid:N' with N >= 1, got '{self.split}'")
+        if self.up is not None and not re.fullmatch(r"[+-]?[xyz]", self.up):
+            raise InputError(f"--up must be one of x, y, z, -x, -y, -z, got '{self.up}'")
+        if self.ranks < 1:
+            raise InputError(f"ranks must be >= 1, got {self.ranks}")
         if self.triangles < 1000:
             raise InputError(f"--triangles must be >= 1000, got {self.triangles}")
         if self.seed < 0:
             raise InputError(f"--seed must be >= 0, got {self.seed}")
         if self.copies < 1:
             raise InputError(f"--copies must be >= 1, got {self.copies}")
-        if self.cluster < 0:
+        if self.cluster is not None and self.cluster < 0:
             raise InputError(f"--cluster must be >= 0 (0 keeps objects whole), got {self.cluster}")
 
 
@@ -67,40 +87,68 @@ def _key(*parts) -> str:
 def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
     """The scene for ``spec`` and load facts (seconds, whether the cache was hit)."""
     t0 = time.perf_counter()
+    cluster = "auto" if spec.cluster is None else spec.cluster
+    wall = spec.ranks if spec.cluster is None else None  # the automatic choice depends on the wall
     if spec.model is not None:
         src = check_file(spec.model, "--model", "model file")
         if src.suffix.lower() not in FORMATS:
             raise InputError(f"--model {src}: unsupported extension '{src.suffix}' (use {', '.join(sorted(FORMATS))})")
         st = src.stat()
-        key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, spec.cluster)
+        key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, cluster, wall)
         name = f"{src.stem}-{key}.npz"
         make = lambda: load_model(src, spec.split, spec.merge_below)
     else:
-        key = _key(spec.scene, spec.triangles, spec.copies, spec.seed, spec.cluster)
+        key = _key(spec.scene, spec.triangles, spec.copies, spec.seed, cluster, wall)
         name = f"{spec.scene}-{key}.npz"
         make = lambda: BUILTIN[spec.scene](spec)
 
     def build() -> Scene:
-        scene = make()
-        if spec.cluster:
-            from .cluster import split_objects
+        from .cluster import auto_cluster, split_objects
 
-            scene = split_objects(scene, spec.cluster)
+        scene = make()
+        modelled = scene.n_objects
+        if spec.cluster is None:
+            size, why = auto_cluster(scene.tris, spec.ranks)
+        else:
+            size, why = spec.cluster, ("--cluster 0: objects kept as modelled" if spec.cluster == 0
+                                       else f"--cluster {spec.cluster}: objects above it cut into clusters")
+        if size:
+            scene = split_objects(scene, size)
+        scene.meta["objects"] = {"split": scene.meta.get("split", spec.split), "modelled": modelled,
+                                 "objects": scene.n_objects, "cluster": int(size), "why": why}
         return scene
     path = cache_dir() / name
+    scene, cached = None, False
     if use_cache and path.is_file():
         try:
-            scene = Scene.load(path)
-            return scene, {"seconds": time.perf_counter() - t0, "cached": True, "cache": str(path)}
+            scene, cached = Scene.load(path), True
         except InputError:
             path.unlink(missing_ok=True)  # stale or damaged: rebuild
-    scene = build()
-    if use_cache:
-        try:
-            scene.save(path)
-        except OSError:
-            pass  # a read-only cache only costs time
-    return scene, {"seconds": time.perf_counter() - t0, "cached": False, "cache": str(path) if use_cache else None}
+    if scene is None:
+        scene = build()
+        if use_cache:
+            try:
+                scene.save(path)
+            except OSError:
+                pass  # a read-only cache only costs time
+    if spec.up is not None:
+        scene.meta["up"], scene.meta["up_source"] = axis_vector(spec.up), "--up"
+    info = {"seconds": time.perf_counter() - t0, "cached": cached, "cache": str(path) if use_cache else None}
+    return scene, info
+
+
+def axis_vector(name: str) -> list[float]:
+    """'y', '+y' or '-z' as a unit vector."""
+    v = [0.0, 0.0, 0.0]
+    v[AXES[name[-1]]] = -1.0 if name.startswith("-") else 1.0
+    return v
+
+
+def axis_name(v) -> str:
+    """A unit axis vector back to '+y' / '-z' (the nearest axis)."""
+    v = np.asarray(v, dtype=np.float64)
+    i = int(np.argmax(np.abs(v)))
+    return ("-" if v[i] < 0 else "+") + "xyz"[i]
 
 
 def _plant(spec: SceneSpec) -> Scene:
@@ -122,17 +170,21 @@ BUILTIN = {"plant": _plant, "fill": _fill}
 
 # ---------------------------------------------------------------- model files
 
-def load_model(path: Path, split: str = "components", merge_below: int = 64) -> Scene:
+def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     """Load a model file through trimesh into the GPU layout (one object per node or piece)."""
     import trimesh
 
     kind = path.suffix.lstrip(".").upper()
+    declared = declared_counts(path)
+    _check_size(path, declared)
     try:
         with np.errstate(all="ignore"):
             loaded = trimesh.load(str(path), process=False)
     except Exception as exc:
         why = str(exc).splitlines()[0] if str(exc) else "corrupt file"
-        raise InputError(f"--model {path}: cannot read as {kind} ({exc.__class__.__name__}: {why})") from None
+        promise = (f"; the header promises {declared[0]} vertices and {declared[1]} faces: truncated or corrupt"
+                   if declared and declared[0] >= 0 else "")
+        raise InputError(f"--model {path}: cannot read as {kind} ({exc.__class__.__name__}: {why}){promise}") from None
     warnings: list[str] = []
     if isinstance(loaded, trimesh.Scene):
         meshes = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh)]
@@ -140,7 +192,7 @@ def load_model(path: Path, split: str = "components", merge_below: int = 64) -> 
         if not meshes:
             raise InputError(f"--model {path}: the file holds no triangles (empty, or not a {kind} file)")
         if len(meshes) > 1:
-            return _from_meshes(meshes, path, warnings)
+            return _from_meshes(meshes, path, warnings, split, merge_below)
         mesh = meshes[0]
     elif isinstance(loaded, trimesh.Trimesh):
         mesh = loaded
@@ -150,14 +202,61 @@ def load_model(path: Path, split: str = "components", merge_below: int = 64) -> 
         raise InputError(f"--model {path}: the mesh is empty (no triangles)")
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
+    _check_complete(path, declared, len(verts), len(faces))
     _check_indices_and_range(verts, faces, path)
     faces = _clean_faces(verts, faces, path, warnings)
+    split = "components" if split == "auto" else split
+    return _from_labels(verts, faces, _labels(verts, faces, split, merge_below), path, warnings, {"split": split})
+
+
+def _labels(verts, faces, split: str, merge_below: int) -> np.ndarray:
+    """Object of every face for ``components`` or ``grid:N``."""
     if split == "components":
-        labels = _component_labels(faces, verts)
-        labels = _merge_small(labels, verts, faces, merge_below)
-    else:
-        labels = _grid_labels(verts, faces, int(split.split(":")[1]))
-    return _from_labels(verts, faces, labels, path, warnings, {"split": split})
+        return _merge_small(_component_labels(faces, verts), verts, faces, merge_below)
+    return _grid_labels(verts, faces, int(split.split(":")[1]))
+
+
+def declared_counts(path: Path) -> tuple[int, int] | None:
+    """(vertices, faces) a file's header promises, where the format has one: PLY's element
+    counts, binary STL's triangle count (vertices then unknown: -1). None otherwise."""
+    suffix = path.suffix.lower()
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError:
+        return None
+    if suffix == ".ply" and head.startswith(b"ply"):
+        end = head.find(b"end_header")
+        text = head[:end if end >= 0 else len(head)].decode("ascii", "replace")
+        counts = dict(re.findall(r"^element\s+(\w+)\s+(\d+)", text, flags=re.M))
+        if "vertex" in counts:
+            return int(counts["vertex"]), int(counts.get("face", 0))
+    if suffix == ".stl" and len(head) >= 84 and not head[:5].lower().startswith(b"solid"):
+        n = int(np.frombuffer(head[80:84], dtype="<u4")[0])
+        return -1, n
+    return None
+
+
+def _check_size(path: Path, declared) -> None:
+    """Binary STL: the header's triangle count fixes the file size; refuse a shorter file."""
+    if declared is None or path.suffix.lower() != ".stl":
+        return
+    want_f = declared[1]
+    size = path.stat().st_size
+    if size < 84 + 50 * want_f:
+        raise InputError(f"--model {path}: not a complete binary STL: its header promises {want_f} triangles "
+                         f"({84 + 50 * want_f} bytes), the file has {size} bytes (truncated, or not an STL file)")
+
+
+def _check_complete(path: Path, declared, n_verts: int, n_faces: int) -> None:
+    """Refuse a file that holds fewer vertices or faces than its header promises (truncated).
+    (Polygons with more than 3 corners become several triangles, so more faces is fine.)"""
+    if declared is None or declared[0] < 0:
+        return
+    want_v, want_f = declared
+    if n_verts < want_v or n_faces < want_f:
+        raise InputError(f"--model {path}: truncated: the header promises {want_v} vertices and {want_f} faces, "
+                         f"the file holds {n_verts} and {n_faces}")
 
 
 #: coordinates beyond this (in model units) leave float64 no precision for a renderer
@@ -220,23 +319,28 @@ def _grid_labels(verts, faces, n: int) -> np.ndarray:
     cen = verts[faces].mean(axis=1)
     lo, hi = cen.min(0), cen.max(0)
     size = max(float((hi - lo).max()), 1e-12) / n
-    cell = np.minimum(((cen - lo) / size).astype(np.int64), n)
+    cell = np.minimum(((cen - lo) / size).astype(np.int64), n - 1)  # the far edge is in the last cell
     return np.unique(cell, axis=0, return_inverse=True)[1].ravel()
 
 
 def _merge_small(labels, verts, faces, merge_below: int) -> np.ndarray:
-    """Merge components with fewer than ``merge_below`` faces by the grid cell of their centre."""
+    """Merge components with fewer than ``merge_below`` faces by the grid cell (1/16 of the
+    extent) of their centre: a small part stays whole, neighbouring small parts share an object."""
     uniq, inv, counts = np.unique(labels, return_inverse=True, return_counts=True)
-    small = counts[inv] < merge_below
-    if not small.any():
+    small_comp = counts < merge_below
+    if not small_comp.any():
         return inv
-    cen = verts[faces[small]].mean(axis=1)
+    face_cen = verts[faces].mean(axis=1)
+    comp_cen = np.stack([np.bincount(inv, weights=face_cen[:, a], minlength=uniq.size) for a in range(3)], 1)
+    comp_cen /= counts[:, None]
+    cen = comp_cen[small_comp]
     lo, hi = cen.min(0), cen.max(0)
-    cell = np.minimum(((cen - lo) / (max(float((hi - lo).max()), 1e-12) / 16)).astype(np.int64), 16)
-    cell_id = cell[:, 0] * 289 + cell[:, 1] * 17 + cell[:, 2]
-    out = inv.copy()
-    out[small] = uniq.size + np.unique(cell_id, return_inverse=True)[1].ravel()
-    return np.unique(out, return_inverse=True)[1].ravel()
+    cell = np.minimum(((cen - lo) / (max(float((hi - lo).max()), 1e-12) / 16)).astype(np.int64), 15)
+    cell_id = np.full(uniq.size, -1, dtype=np.int64)
+    cell_id[small_comp] = uniq.size + np.unique(cell[:, 0] * 256 + cell[:, 1] * 16 + cell[:, 2],
+                                                return_inverse=True)[1].ravel()
+    comp_new = np.where(small_comp, cell_id, np.arange(uniq.size))
+    return np.unique(comp_new[inv], return_inverse=True)[1].ravel()
 
 
 def _normals(verts, faces) -> np.ndarray:
@@ -282,19 +386,24 @@ def _from_labels(verts, faces, labels, path, warnings, meta) -> Scene:
                  index_count=(counts * 3).astype(np.int64), base_vertex=np.zeros(n, dtype=np.int64),
                  bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=_colors(n), origin=origin,
                  name=Path(path).stem, meta={**meta, "source": str(path), "warnings": warnings,
-                                              "up": _guess_up(bmin, bmax)})
+                                              **guess_up(Path(path).suffix.lower(), bmin, bmax)})
 
 
-def _guess_up(bmin, bmax) -> list[float]:
-    """The axis of smallest extent is taken as up for wide scenes (z for CAD, y for glTF)."""
-    ext = bmax.max(0) - bmin.min(0)
-    up = [0.0, 0.0, 0.0]
-    up[int(np.argmin(ext)) if ext.min() < 0.5 * ext.max() else 2] = 1.0
-    return up
+def guess_up(suffix: str, bmin, bmax) -> dict:
+    """The up axis by the rules in the module doc: {'up': vector, 'up_source': why}."""
+    if suffix in (".gltf", ".glb"):
+        return {"up": axis_vector("+y"), "up_source": "glTF convention (+Y up)"}
+    ext = np.asarray(bmax).max(0) - np.asarray(bmin).min(0)
+    if ext.max() > 0 and ext.min() < FLAT * ext.max():
+        thin = "xyz"[int(np.argmin(ext))]
+        return {"up": axis_vector(thin), "up_source": f"flat scene: its thin axis ({thin})"}
+    conv = FORMAT_UP.get(suffix, "+z")
+    return {"up": axis_vector(conv), "up_source": f"{suffix[1:].upper()} convention ({conv[1:].upper()} up)"}
 
 
-def _from_meshes(meshes, path, warnings) -> Scene:
-    """One object per scene-graph node instance (transforms already applied by trimesh)."""
+def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int = 64) -> Scene:
+    """One object per scene-graph node instance (transforms already applied by trimesh), or
+    the whole graph's triangles cut by an explicit ``--split components|grid:N``."""
     sizes = np.array([len(m.vertices) for m in meshes])
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     verts = np.concatenate([np.asarray(m.vertices, dtype=np.float64) for m in meshes])
@@ -318,5 +427,7 @@ def _from_meshes(meshes, path, warnings) -> Scene:
     if degenerate.any():
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
         faces, labels = faces[~degenerate], labels[~degenerate]
+    if split != "auto":
+        return _from_labels(verts, faces, _labels(verts, faces, split, merge_below), path, warnings, {"split": split})
     labels = np.unique(labels, return_inverse=True)[1].ravel()
     return _from_labels(verts, faces, labels, path, warnings, {"split": "nodes"})

@@ -213,53 +213,152 @@ def _frame_of(scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     return lo, hi, up, float(np.linalg.norm(hi - lo))
 
 
-def walkthrough(scene, frames: int = 1200, fov: float = 60.0) -> CameraPath:
-    """Fly through the scene, low through its densest parts and high over sparse ones.
+#: the plant's ground diagonal in its own units (metres): the walkthrough's eye heights were
+#: tuned on it, and scale with a scene's ground diagonal from there
+REFERENCE_GROUND = 233.0
+#: a scene whose ground is less than this many times its height is compact (an engine, a statue)
+COMPACT = 2.0
 
-    The ground plane is split into 6 x 6 cells weighted by triangles; the path alternates
-    between dense and sparse cells (so the screen distribution of load changes strongly over
-    time), starting and ending with an overview. Deterministic for a scene.
+
+def walkthrough(scene, frames: int = 1200, fov: float = 60.0) -> CameraPath:
+    """A camera path that sees the scene in every frame, at any scale (every length is a
+    fraction of the scene's size).
+
+    Wide scenes (a plant, a city, a track): fly through, low through the densest of 6 x 6
+    ground cells and high over sparse ones (so the screen distribution of load changes
+    strongly over time), starting and ending with an overview. Compact scenes (ground under
+    ``COMPACT`` times the height): an overview circle, then close looks at the densest parts
+    from outside the bounding sphere. Deterministic for a scene; the up axis is the scene's
+    ``meta['up']`` (its sign included).
     """
     lo, hi, up, diag = _frame_of(scene)
     ax = int(np.argmax(np.abs(up)))
     g = [a for a in range(3) if a != ax]
+    span = np.maximum(hi - lo, 1e-300)
+    ground_span = float(np.hypot(span[g[0]], span[g[1]]))
+    if ground_span < COMPACT * span[ax]:
+        return _compact_path(scene, frames, fov)
+    sign = 1.0 if up[ax] >= 0 else -1.0
     n = 6
-    span = np.maximum(hi - lo, 1e-9)
     cell = np.clip(((scene.centers[:, g] - lo[g]) / span[g] * n).astype(int), 0, n - 1)
-    mass = np.zeros((n, n))
-    np.add.at(mass, (cell[:, 0], cell[:, 1]), scene.tris.astype(np.float64))
-    order = np.argsort(-mass.ravel(), kind="stable")
+    flat = cell[:, 0] * n + cell[:, 1]
+    w = scene.tris.astype(np.float64)
+    mass = np.bincount(flat, weights=w, minlength=n * n)
+    # where each cell's content is (triangle-weighted object centres): stops look at content
+    content = np.stack([np.bincount(flat, weights=w * scene.centers[:, a], minlength=n * n) for a in range(3)], 1)
+    content /= np.maximum(mass, 1e-300)[:, None]
+    order = np.argsort(-mass, kind="stable")
     dense = order[:3]
-    sparse = [c for c in order[::-1] if mass.ravel()[c] >= 0][:3]
+    sparse = [c for c in order[::-1] if mass[c] > 0][:3]
     height = span[ax]
-    ground = lo[ax]
+    ground = lo[ax] if sign > 0 else hi[ax]  # the floor seen from the up side
+    unit = ground_span / REFERENCE_GROUND  # one plant metre in scene units
 
     def point(c, h):
-        p = np.empty(3)
-        p[g[0]] = lo[g[0]] + (c // n + 0.5) * span[g[0]] / n
-        p[g[1]] = lo[g[1]] + (c % n + 0.5) * span[g[1]] / n
-        p[ax] = ground + h
+        p = content[c].copy()
+        p[ax] = ground + sign * h
         return p
 
-    eye_low = min(0.08 * height + 1.5, 0.3 * height)
+    eye_low = min(0.08 * height + 1.5 * unit, 0.3 * height)
     overview_a = lo.copy()
-    overview_a[ax] = ground + 0.6 * height + 0.15 * diag
+    overview_a[ax] = ground + sign * (0.6 * height + 0.15 * diag)
     overview_a[g[0]] -= 0.15 * span[g[0]]
     overview_b = hi.copy()
     overview_b[ax] = overview_a[ax]
     overview_b[g[1]] += 0.15 * span[g[1]]
-    stops = [overview_a]
-    for d, s in zip(dense, sparse):
-        stops += [point(d, eye_low), point(s, 0.35 * height + 2)]
+    stops, looks = [overview_a], []
+    for d, s_ in zip(dense, sparse):
+        stops += [point(d, eye_low), point(s_, 0.35 * height + 2 * unit)]
+        looks += [d, s_]
     stops.append(overview_b)
     pos = np.array(stops)
-    # look ahead: towards the next stop, with the last one looking back at the centre
+    # look ahead: at the content of the next stop's cell, the last stop back at the centre
     centre = (lo + hi) / 2
-    tgt = np.vstack([pos[1:], centre[None]])
-    tgt[:, ax] = np.minimum(tgt[:, ax], ground + 0.2 * height)
-    near = max(diag * 1e-4, 1e-4)
+    tgt = np.vstack([content[looks], centre[None]]) if looks else centre[None].repeat(len(pos), 0)
+    tgt[:, ax] = ground + sign * np.clip(sign * (tgt[:, ax] - ground), 0.0, 0.2 * height)
     keys = [{"position": p.tolist(), "target": t.tolist()} for p, t in zip(pos, tgt)]
-    return from_keyframes(keys, frames, {"fov": fov, "near": near, "far": 3 * diag, "up": up.tolist()})
+    path = from_keyframes(keys, frames, {"fov": fov, "near": diag * 1e-4, "far": 3 * diag, "up": up.tolist()})
+    # the spline may overshoot between low stops: keep the eye above half the low eye height
+    floor = ground + sign * 0.5 * eye_low
+    path.position[:, ax] = floor + sign * np.maximum(sign * (path.position[:, ax] - floor), 0.0)
+    return look_at_something(path, scene)
+
+
+#: generated paths check visibility against at most this many (the largest) objects
+CHECK_OBJECTS = 4096
+
+
+def look_at_something(path: CameraPath, scene, aspect: float = 1.0) -> CameraPath:
+    """Turn every frame that would see none of the scene's largest objects towards the object
+    nearest its eye, so a generated path never shows an empty screen (one projection of at
+    most ``CHECK_OBJECTS`` bounds per frame, so big scenes stay quick to set up)."""
+    from .bounds import BoxProjector
+    from .camera import frame_matrices
+
+    keep = np.argsort(-scene.tris, kind="stable")[:CHECK_OBJECTS]
+    project = BoxProjector(scene.bmin[keep], scene.bmax[keep])
+    size = (max(int(round(256 * aspect)), 1), 256)
+    for f in range(len(path)):  # path generation, once per run: frames, not objects
+        view, proj, _ = frame_matrices(path.camera(f), size)
+        r = project(view, proj)
+        with np.errstate(invalid="ignore"):
+            if ((r[:, 2] >= 0) & (r[:, 0] <= 1) & (r[:, 3] >= 0) & (r[:, 1] <= 1)).any():
+                continue
+        d = np.linalg.norm(scene.centers - path.position[f], axis=1) - scene.radii
+        near = int(np.argmin(np.where(d > path.near[f] * 2, d, np.inf)) if (d > path.near[f] * 2).any() else np.argmin(d))
+        path.target[f] = scene.centers[near]
+    return path
+
+
+def _compact_path(scene, frames: int, fov: float) -> CameraPath:
+    """Overview circle (first 40 %), then close looks at the densest parts (3-D cells of the
+    bounding box, by triangles) from 1.3 bounding radii, eye always outside the bounding
+    sphere, so no frame is inside the model and every frame looks at it."""
+    lo, hi, up, diag = _frame_of(scene)
+    ax = int(np.argmax(np.abs(up)))
+    g = [a for a in range(3) if a != ax]
+    centre = (lo + hi) / 2
+    radius = max(diag / 2, 1e-300)
+    far_d = radius / np.sin(np.radians(fov) / 2) * 1.05  # the whole sphere in view
+    n_over = max(1, int(round(frames * 0.4)))
+    ang = np.linspace(0, 2 * np.pi, n_over, endpoint=False)
+    el = np.radians(25.0)
+    over = np.tile(centre, (n_over, 1))
+    over[:, g[0]] += far_d * np.cos(el) * np.cos(ang)
+    over[:, g[1]] += far_d * np.cos(el) * np.sin(ang)
+    over[:, ax] += np.sign(up[ax]) * far_d * np.sin(el)
+    # the densest 3-D cells, looked at from outside along the ray from the centre
+    n = 4
+    span = np.maximum(hi - lo, 1e-300)
+    cell = np.clip(((scene.centers - lo) / span * n).astype(int), 0, n - 1)
+    flat = (cell[:, 0] * n + cell[:, 1]) * n + cell[:, 2]
+    mass = np.bincount(flat, weights=scene.tris.astype(np.float64), minlength=n ** 3)
+    cells = np.argsort(-mass, kind="stable")[:4]
+    cells = cells[mass[cells] > 0]
+    idx = np.stack([cells // (n * n), (cells // n) % n, cells % n], axis=1)
+    looks = lo + (idx + 0.5) * span / n
+    rng = looks - centre
+    rng[:, ax] = np.abs(rng[:, ax]) * np.sign(up[ax]) + 0.3 * radius * np.sign(up[ax])  # from above the part
+    dirs = rng / np.maximum(np.linalg.norm(rng, axis=1, keepdims=True), 1e-300)
+    eyes = centre + dirs * 1.3 * radius
+    keys = [{"position": over[-1].tolist(), "target": centre.tolist()}]
+    keys += [{"position": e.tolist(), "target": t.tolist()} for e, t in zip(eyes, looks)]
+    keys.append({"position": over[0].tolist(), "target": centre.tolist()})
+    near = 0.02 * radius
+    close = from_keyframes(keys, frames - n_over, {"fov": fov, "near": near, "far": far_d + 2 * radius,
+                                                   "up": up.tolist()}) if frames > n_over else None
+    # the spline between outside stops can cut inside the sphere: push eyes back out
+    if close is not None:
+        off = close.position - centre
+        dist = np.linalg.norm(off, axis=1, keepdims=True)
+        close.position = centre + off * np.maximum(1.0, 1.15 * radius / np.maximum(dist, 1e-300))
+    ones = np.ones(n_over)
+    overview = CameraPath(over, np.tile(centre, (n_over, 1)), np.tile(up, (n_over, 1)), fov * ones, near * ones,
+                          (far_d + 2 * radius) * ones)
+    if close is None:
+        return look_at_something(overview, scene)
+    return look_at_something(CameraPath(*(np.concatenate([getattr(overview, k), getattr(close, k)]) for k in
+                                          ("position", "target", "up", "fov", "near", "far"))), scene)
 
 
 def orbit(scene, frames: int = 300, fov: float = 60.0, elevation_deg: float = 30.0) -> CameraPath:
@@ -275,7 +374,7 @@ def orbit(scene, frames: int = 300, fov: float = 60.0, elevation_deg: float = 30
     pos = np.tile(centre, (frames, 1))
     pos[:, g[0]] += dist * np.cos(el) * np.cos(ang)
     pos[:, g[1]] += dist * np.cos(el) * np.sin(ang)
-    pos[:, ax] += dist * np.sin(el)
+    pos[:, ax] += np.sign(up[ax]) * dist * np.sin(el)
     ones = np.ones(frames)
     near = max(dist - radius * 1.01, diag * 1e-4)
     return CameraPath(pos, np.tile(centre, (frames, 1)), np.tile(up, (frames, 1)), fov * ones,

@@ -87,7 +87,11 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
     emulated = cpu.max(axis=1)
     tri = get("triangles")
     rend = get("rendering_cpu_ms")
-    ratio = lambda a: float(np.mean(a.max(axis=1) / np.maximum(a.mean(axis=1), 1e-12)))
+    drawn = tri.sum(axis=1) > 0  # frames that drew nothing have no balance to measure (max/mean >= 1)
+
+    def ratio(a):
+        a = a[drawn]
+        return float(np.mean(a.max(axis=1) / np.maximum(a.mean(axis=1), 1e-12))) if len(a) else None
     out = {
         "frames": int(frames.size),
         "ranks": int(ranks),
@@ -102,6 +106,7 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "render_cpu_max_ms": float(rend.max(axis=1).mean()),
         "imbalance_triangles": ratio(tri),
         "imbalance_render_cpu": ratio(rend),
+        "empty_frames": int((~drawn).sum()),
         "triangles_per_frame": float(tri.sum(axis=1).mean()),
         "bytes_sent_per_frame": float(get("bytes_sent").sum(axis=1).mean()),
         "per_frame_emulated_ms": emulated.round(3).tolist(),
@@ -126,9 +131,19 @@ def table(summary: dict, title: str = "") -> str:
               f"{c['frame_exchange_cpu_ms']:.2f}, display {c['display_cpu_ms']:.2f}",
               f"Emulated parallel frame (slowest rank's CPU time): {summary['emulated_frame_ms']:.2f} ms = "
               f"{summary['emulated_fps']:.2f} FPS (median {summary['emulated_frame_ms_median']:.2f} ms)",
-              f"Imbalance max/mean: triangles {summary['imbalance_triangles']:.3f}, render CPU time "
-              f"{summary['imbalance_render_cpu']:.3f}; bytes exchanged per frame {summary['bytes_sent_per_frame']:.0f}"]
+              f"Imbalance max/mean: triangles {_fmt(summary['imbalance_triangles'])}, render CPU time "
+              f"{_fmt(summary['imbalance_render_cpu'])}{_empty(summary)}; bytes exchanged per frame "
+              f"{summary['bytes_sent_per_frame']:.0f}"]
     return "\n".join(lines)
+
+
+def _fmt(v) -> str:
+    return "n/a" if v is None else f"{v:.3f}"
+
+
+def _empty(summary: dict) -> str:
+    n = summary.get("empty_frames", 0)
+    return f" (over frames that drew something; {n} drew nothing)" if n else ""
 
 
 def write_json(path: Path, doc: dict) -> None:

@@ -24,7 +24,7 @@ from .camera import frame_matrices
 from .config import SUMMARY_EVERY, WalkConfig, setup_timeout
 from .errors import InputError
 from .exchange import barrier, broadcast_partition, exchange, wait_all
-from .models import load_scene
+from .models import axis_name, load_scene
 from .mosaic import overlay, save_png, stitch
 from .outdir import OutputDir
 from .paths import CameraPath, check_cameras, load_path, orbit, walkthrough
@@ -357,6 +357,7 @@ def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dic
             "subfrustum": renderer_method, "offset": list(cfg.offset), "partition": cfg.partition,
             "scene": {"name": scene.name, "objects": scene.n_objects, "triangles": scene.n_triangles,
                       "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
-                      "warnings": scene.meta.get("warnings", [])},
+                      "warnings": scene.meta.get("warnings", []), "objects_from": scene.meta.get("objects"),
+                      "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source")},
             "path": cfg.path or cfg.path_kind, "egl_device": device,
             "lp_num_threads": os.environ.get("LP_NUM_THREADS")}

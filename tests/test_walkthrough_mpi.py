@@ -125,3 +125,24 @@ def test_empty_region_renders_background(tmp_path):
             assert any(int(r["objects"]) == 0 for r in rows)
         img = read_png(out / "mosaic" / "frame_00000.png")
         assert (img[:20] == BG).all()
+
+
+def test_shipped_model_composite_equals_one_rank(tmp_path):
+    """models/pump.glb (glTF, +Y up, clustered for the wall) on 4 ranks equals 1 rank."""
+    from mpirun import ROOT
+
+    def run(n, grid, name):
+        out = tmp_path / name
+        res = run_mpi(n, ["walkthrough", "--model", str(ROOT / "models" / "pump.glb"), "--no-progress",
+                          "--frames", "4", "--grid", grid, "--tile", f"{W // int(grid[2])}x{H // int(grid[0])}",
+                          "--mosaic-every", "1", "--no-overlay", "--cluster", "256", "--out", str(out)])
+        assert res.returncode == 0, res.stderr[-3000:]
+        return out
+
+    one, four = run(1, "1x1", "one"), run(4, "2x2", "four")
+    for f in range(4):
+        a, b = (read_png(o / "mosaic" / f"frame_{f:05d}.png") for o in (one, four))
+        assert (a == b).all() and (a != BG).any(axis=2).mean() > 0.05, f"frame {f}"
+    s = json.loads((four / "summary.json").read_text())
+    assert s["config"]["scene"]["up"] == "+y" and s["config"]["scene"]["objects_from"]["split"] == "nodes"
+    assert s["empty_frames"] == 0

@@ -1,0 +1,71 @@
+"""Write models/pump.glb: a small pump assembly (glTF 2.0, +Y up, metres), made of trimesh
+primitives, one node per part. Deterministic; run ``python models/make_pump.py`` to remake it.
+
+It is the kind of model users bring (a CAD assembly exported to glTF): compact, a few big
+parts (base, casing, motor) among many small ones (bolts, flanges, pipe segments).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from trimesh.transformations import rotation_matrix, translation_matrix
+
+HERE = Path(__file__).resolve().parent
+
+
+def _at(mesh: trimesh.Trimesh, xyz, rot=None) -> trimesh.Trimesh:
+    if rot is not None:
+        mesh.apply_transform(rotation_matrix(np.radians(rot[0]), rot[1]))
+    mesh.apply_transform(translation_matrix(xyz))
+    return mesh
+
+
+def parts() -> dict[str, trimesh.Trimesh]:
+    """Name -> part, in metres, +Y up (glTF's convention)."""
+    x, z = [1, 0, 0], [0, 0, 1]
+    p = {"base": _at(trimesh.creation.box([1.6, 0.08, 0.7]), [0, 0.04, 0])}
+    p["motor"] = _at(trimesh.creation.cylinder(0.18, 0.6, sections=48), [-0.45, 0.3, 0], (90, z))
+    p["fan_cover"] = _at(trimesh.creation.cylinder(0.2, 0.08, sections=48), [-0.79, 0.3, 0], (90, z))
+    p["coupling"] = _at(trimesh.creation.cylinder(0.07, 0.16, sections=32), [-0.07, 0.3, 0], (90, z))
+    p["casing"] = _at(trimesh.creation.icosphere(subdivisions=3, radius=0.24), [0.28, 0.3, 0])
+    p["volute"] = _at(trimesh.creation.torus(0.22, 0.06, major_sections=48, minor_sections=16), [0.28, 0.3, 0], (90, z))
+    p["inlet"] = _at(trimesh.creation.cylinder(0.08, 0.5, sections=32), [0.7, 0.3, 0], (90, z))
+    p["outlet"] = _at(trimesh.creation.cylinder(0.07, 0.5, sections=32), [0.28, 0.72, 0])
+    for i, (pos, rot) in enumerate([([0.95, 0.3, 0], (90, z)), ([0.28, 0.97, 0], None)]):
+        p[f"flange_{i}"] = _at(trimesh.creation.cylinder(0.13, 0.03, sections=40), pos, rot)
+    for i, (px, pz) in enumerate([(-0.7, -0.25), (-0.7, 0.25), (-0.2, -0.25), (-0.2, 0.25),
+                                  (0.1, -0.25), (0.1, 0.25), (0.5, -0.25), (0.5, 0.25)]):
+        p[f"foot_bolt_{i}"] = _at(trimesh.creation.cylinder(0.02, 0.06, sections=12), [px, 0.11, pz], (90, x))
+    rng = np.random.default_rng(7)
+    for f, (cx, cy, rot) in enumerate([(0.95, 0.3, (90, z)), (0.28, 0.97, None)]):
+        for k in range(8):  # bolt circle on each flange
+            a = 2 * np.pi * k / 8
+            off = [0, 0.1 * np.cos(a), 0.1 * np.sin(a)] if rot else [0.1 * np.cos(a), 0, 0.1 * np.sin(a)]
+            p[f"flange_{f}_bolt_{k}"] = _at(trimesh.creation.cylinder(0.012, 0.05, sections=10),
+                                           [cx + off[0], cy + off[1], off[2]], rot)
+    for k in range(12):  # motor cooling fins
+        a = 2 * np.pi * k / 12
+        p[f"fin_{k}"] = _at(trimesh.creation.box([0.56, 0.02, 0.05]),
+                            [-0.45, 0.3 + 0.19 * np.cos(a), 0.19 * np.sin(a)], (np.degrees(-a), x))
+    for k in range(6):  # a pipe run leaving the outlet
+        p[f"pipe_{k}"] = _at(trimesh.creation.cylinder(0.07, 0.3, sections=32), [0.28 + 0.3 * (k + 0.5), 1.1, 0], (90, z))
+    p["gauge"] = _at(trimesh.creation.cylinder(0.05, 0.02, sections=24), [0.28, 0.86, 0.09 + rng.uniform(0, 1e-3)],
+                     (90, x))
+    return p
+
+
+def main() -> Path:
+    scene = trimesh.Scene()
+    for name, mesh in parts().items():
+        scene.add_geometry(mesh, node_name=name, geom_name=name)
+    out = HERE / "pump.glb"
+    out.write_bytes(scene.export(file_type="glb"))
+    return out
+
+
+if __name__ == "__main__":
+    path = main()
+    print(f"wrote {path} ({path.stat().st_size} bytes)")
