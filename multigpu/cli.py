@@ -16,26 +16,38 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .errors import InputError
-from .memory import keep_heap
+from multigpu.errors import InputError, as_flags
+from multigpu.core.memory import keep_heap
+
+
+def _defaults(cls) -> dict:
+    """A configuration dataclass's field defaults: the one place every default lives."""
+    import dataclasses
+
+    return {f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
 
 
 def _scene_args(p: argparse.ArgumentParser) -> None:
+    from multigpu.scene.models import BUILTIN, SceneSpec
+
+    d = _defaults(SceneSpec)
     g = p.add_argument_group("scene")
-    g.add_argument("--scene", default="plant", help="built-in scene name (default: plant)")
+    g.add_argument("--scene", default=d["scene"], help=f"built-in scene: {' | '.join(BUILTIN)} (default: %(default)s)")
     g.add_argument("--model", help="model file (OBJ, PLY, STL, OFF, glTF/GLB) instead of --scene")
-    g.add_argument("--split", default="auto",
+    g.add_argument("--split", default=d["split"],
                    help="objects of a model: auto (scene-graph nodes, else connected components) | components | "
                         "grid:N (applies to any file)")
-    g.add_argument("--merge-below", type=int, default=64, help="merge components under this many triangles")
-    g.add_argument("--triangles", type=int, default=100_000, help="plant size in triangles (default 100000)")
-    g.add_argument("--copies", type=int, default=1, help="plants side by side (the paper used 6..20)")
-    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--merge-below", type=int, default=d["merge_below"],
+                   help="merge components under this many triangles (default %(default)s)")
+    g.add_argument("--triangles", type=int, default=d["triangles"],
+                   help="built-in scene size in triangles (default %(default)s)")
+    g.add_argument("--copies", type=int, default=d["copies"], help="plants side by side (the paper used 6..20)")
+    g.add_argument("--seed", type=int, default=d["seed"])
     g.add_argument("--cluster", default="auto",
                    help="cut objects above N triangles into spatial clusters of at most N: auto (when an object "
                         "is too big to balance on the wall) | N | 0 (keep objects as modelled)")
-    g.add_argument("--up", default=None, help="up axis of the model: x | y | z | -x | -y | -z "
-                                              "(default: the format's convention, see scene info)")
+    g.add_argument("--up", default=d["up"], help="up axis of the model: x | y | z | -x | -y | -z "
+                                                 "(default: the format's convention, see scene info)")
 
 
 def _cluster(text: str) -> int | None:
@@ -48,14 +60,14 @@ def _cluster(text: str) -> int | None:
 
 
 def _ranks(a) -> int:
-    from .config import parse_pair
+    from multigpu.config import parse_pair
 
     rows, cols = parse_pair(getattr(a, "grid", None) or "2x2", "--grid")
     return rows * cols
 
 
 def _spec(a, **override):
-    from .models import SceneSpec
+    from multigpu.scene.models import SceneSpec
 
     fields = dict(scene=a.scene, model=a.model, split=a.split, merge_below=a.merge_below, triangles=a.triangles,
                   copies=a.copies, seed=a.seed, cluster=_cluster(a.cluster), up=a.up, ranks=_ranks(a))
@@ -67,7 +79,7 @@ class Parser(argparse.ArgumentParser):
     errors (every rank parses the same argv and exits the same way)."""
 
     def _print_message(self, message, file=None):
-        from .job import launcher_rank
+        from multigpu.parallel.job import launcher_rank
 
         if launcher_rank() == 0:
             super()._print_message(message, file)
@@ -77,31 +89,40 @@ def build_parser() -> argparse.ArgumentParser:
     ap = Parser(prog="multigpu", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
 
+    from multigpu.config import DEFAULT_FRAMES, WalkConfig
+    from multigpu.gpu.render import METHODS
+    from multigpu.strategies import REGISTRY, describe
+
+    d = _defaults(WalkConfig)
+    pair = lambda v: f"{v[0]}x{v[1]}"
     w = sub.add_parser("walkthrough", help="render a camera path on a display wall (run under mpiexec)")
     _scene_args(w)
     w.add_argument("--path", help="camera path JSON file (default: generated walkthrough)")
-    w.add_argument("--path-kind", default="walkthrough", help="generated path: walkthrough | orbit")
-    w.add_argument("--frames", type=int, help="frames to render (default: the whole path, 1200)")
-    w.add_argument("--grid", default="2x2", help="display wall ROWSxCOLS (ranks = rows*cols)")
-    w.add_argument("--tile", default="256x256", help="pixels per display tile WxH")
-    w.add_argument("--strips", type=int, default=2048, help="strips per split axis (>= 2)")
-    w.add_argument("--balance", default="strips", help="balancing strategy: strips | cost | time | adaptive | none")
-    w.add_argument("--bounds", default="box", help="object bounds: box (8 corners) | sphere")
-    w.add_argument("--out", default="out", help="output directory")
-    w.add_argument("--mosaic-every", type=int, default=100, help="write the full wall every N frames (0: never)")
+    w.add_argument("--path-kind", default=d["path_kind"], help=f"generated path: {' | '.join(DEFAULT_FRAMES)}")
+    w.add_argument("--frames", type=int, help="frames to render (default: the whole path; generated: "
+                                              + ", ".join(f"{k} {v}" for k, v in DEFAULT_FRAMES.items()) + ")")
+    w.add_argument("--grid", default=pair(WalkConfig.grid), help="display wall ROWSxCOLS (ranks = rows*cols)")
+    w.add_argument("--tile", default=pair(WalkConfig.tile), help="pixels per display tile WxH (default %(default)s)")
+    w.add_argument("--strips", type=int, default=d["strips"], help="strips per split axis (>= 2)")
+    w.add_argument("--balance", default=d["balance"],
+                   help=f"balancing strategy, one of {' | '.join(REGISTRY)} (default %(default)s). {describe()}")
+    w.add_argument("--bounds", default=d["bounds"], help="object bounds: box (8 corners) | sphere")
+    w.add_argument("--out", default=d["out"], help="output directory (README: Outputs)")
+    w.add_argument("--mosaic-every", type=int, default=d["mosaic_every"],
+                   help="write the full wall every N frames (0: never)")
     w.add_argument("--no-overlay", action="store_true", help="do not write partition overlay images")
     w.add_argument("--video", action="store_true", help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
-    w.add_argument("--subfrustum", default="auto",
-                   help="how a rank renders its region: auto | viewport | scissor | offaxis (docs/ACCURACY.md)")
-    w.add_argument("--partition", default="redundant",
+    w.add_argument("--subfrustum", default=d["subfrustum"],
+                   help=f"how a rank renders its region: {' | '.join(METHODS)} (docs/ACCURACY.md)")
+    w.add_argument("--partition", default=d["partition"],
                    help="who computes the partition: redundant (every rank) | broadcast (rank 0, then MPI_Bcast)")
     w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
     w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
-    w.add_argument("--timeout", type=float, default=120.0,
-                   help="seconds a rank waits for the others within a frame (default 120)")
-    w.add_argument("--liveness", type=float, default=30.0,
+    w.add_argument("--timeout", type=float, default=d["timeout"],
+                   help="seconds a rank waits for the others within a frame (default %(default)s)")
+    w.add_argument("--liveness", type=float, default=d["liveness"],
                    help="seconds without a heartbeat before a rank counts as stopped and the job ends "
-                        "(default 30; 0: off, timeouts only)")
+                        "(default %(default)s; 0: off, timeouts only)")
     w.add_argument("--no-progress", action="store_true")
 
     s = sub.add_parser("scene", help="scene tools")
@@ -151,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors and --help: the same on every rank
         if "mpi4py.MPI" in sys.modules:  # under `python -m mpi4py`: exit together, no MPI_Abort
-            from .job import collective_exit
+            from multigpu.parallel.job import collective_exit
 
             collective_exit(exc.code if isinstance(exc.code, int) else 0)
         raise
@@ -168,19 +189,19 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "depth":
             return _depth(args)
         if args.cmd == "experiment":
-            from . import experiments
+            from multigpu.studies import experiments
 
             return experiments.run(args.name, args.out, quick=args.quick, results=args.results)
         if args.cmd == "accuracy":
-            from . import accuracy
+            from multigpu.studies import accuracy
 
             return accuracy.run(args.out, args.page, quick=args.quick)
         if args.cmd == "bench":
-            from . import bench
+            from multigpu.studies import bench
 
             return bench.main(args.what, quick=args.quick)
     except InputError as exc:
-        print(f"multigpu: error: {exc}", file=sys.stderr)
+        print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr)
         return 2
     return 0
 
@@ -188,17 +209,14 @@ def main(argv: list[str] | None = None) -> int:
 def _depth(a) -> int:
     from pathlib import Path
 
-    from . import depth
-    from .config import parse_pair
-    from .models import SceneSpec, load_scene
-    from .paths import orbit, walkthrough
+    from multigpu.gpu import depth
+    from multigpu.config import parse_pair
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import generate
 
     size = parse_pair(a.size, "--size")
-    if a.path_kind not in ("walkthrough", "orbit"):
-        raise InputError(f"--path-kind must be walkthrough or orbit, got '{a.path_kind}'")
     scene, _ = load_scene(_spec(a))
-    gen = walkthrough if a.path_kind == "walkthrough" else orbit
-    path = gen(scene, frames=a.frames or (1200 if a.path_kind == "walkthrough" else 300))
+    path = generate(a.path_kind, scene, a.frames)
     if not 0 <= a.frame < len(path):
         raise InputError(f"--frame must be in 0..{len(path) - 1}, got {a.frame}")
     s = depth.run(scene, path.camera(a.frame), size, Path(a.out))
@@ -209,30 +227,36 @@ def _depth(a) -> int:
     return 0
 
 
+def walk_config(a) -> "WalkConfig":
+    """The walkthrough's flags as a validated configuration (no MPI: testable in one process)."""
+    from multigpu.config import WalkConfig, parse_pair, parse_vec3
+
+    return WalkConfig(scene=_spec(a), path=a.path, path_kind=a.path_kind, frames=a.frames,
+                      grid=parse_pair(a.grid, "--grid"), tile=parse_pair(a.tile, "--tile"), strips=a.strips,
+                      balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
+                      overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
+                      partition=a.partition, offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
+                      liveness=a.liveness, progress=not a.no_progress)
+
+
 def _walkthrough(a) -> int:
     from mpi4py import MPI
 
-    from .config import WalkConfig, parse_pair, parse_vec3
-    from .job import Interrupted, Job, collective_exit
+    from multigpu.parallel.job import Interrupted, Job, collective_exit
 
     comm = MPI.COMM_WORLD
     job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else 30.0)
     job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:
-        cfg = WalkConfig(scene=_spec(a), path=a.path, path_kind=a.path_kind, frames=a.frames,
-                         grid=parse_pair(a.grid, "--grid"), tile=parse_pair(a.tile, "--tile"), strips=a.strips,
-                         balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
-                         overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
-                         partition=a.partition, offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
-                         liveness=a.liveness, progress=not a.no_progress)
-        from .walkthrough import run
+        cfg = walk_config(a)
+        from multigpu.parallel.walkthrough import run
 
         with job:
             run(cfg, comm, job)
     except InputError as exc:  # agreed on every rank before any frame: one line, all exit 2
         job.close()
         if comm.Get_rank() == 0:
-            print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
+            print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr, flush=True)
         collective_exit(2)
     except BaseException as exc:  # noqa: BLE001 -- every other way a run can end early
         job.close()
@@ -254,8 +278,8 @@ def _end_failed_job(comm, job, exc: BaseException) -> None:
     """
     import time
 
-    from .exchange import PeerTimeout
-    from .job import ABORT_PAUSE, FAILURE_GRACE, Interrupted, PeerFailed, PeerStalled
+    from multigpu.parallel.exchange import PeerTimeout
+    from multigpu.parallel.job import ABORT_PAUSE, FAILURE_GRACE, Interrupted, PeerFailed, PeerStalled
 
     rank = comm.Get_rank()
     consequence = isinstance(exc, (PeerTimeout, PeerFailed))
@@ -289,7 +313,7 @@ def _scene_info(a) -> int:
     import resource
     from pathlib import Path
 
-    from .models import axis_name, load_scene
+    from multigpu.scene.models import axis_name, load_scene
 
     src = a.source
     is_file = Path(src).suffix != "" or Path(src).exists()
@@ -315,25 +339,23 @@ def _scene_info(a) -> int:
 
 
 def _path_make(a) -> int:
-    from .models import load_scene
-    from .paths import orbit, walkthrough
+    from multigpu.scene.models import load_scene
+    from multigpu.scene.paths import GENERATORS, generate
 
-    if a.kind not in ("walkthrough", "orbit"):
-        raise InputError(f"path kind must be 'walkthrough' or 'orbit', got '{a.kind}'")
+    if a.kind not in GENERATORS:
+        raise InputError(f"path kind must be one of {', '.join(GENERATORS)}, got '{a.kind}'")
     if a.frames is not None and a.frames < 1:
         raise InputError(f"--frames must be >= 1, got {a.frames}")
     scene, _ = load_scene(_spec(a))
-    gen = walkthrough if a.kind == "walkthrough" else orbit
-    frames = a.frames or (1200 if a.kind == "walkthrough" else 300)
-    path = gen(scene, frames=frames, fov=a.fov)
+    path = generate(a.kind, scene, a.frames, fov=a.fov)
     path.save(a.out)
     print(f"wrote {a.out}: {len(path)} frames ({a.kind} of {scene.name})")
     return 0
 
 
 def _tree(a) -> int:
-    from .config import parse_pair
-    from .tree import GpuTree
+    from multigpu.config import parse_pair
+    from multigpu.core.tree import GpuTree
 
     rows, cols = parse_pair(a.grid, "grid")
     t = GpuTree(rows, cols)

@@ -5,13 +5,12 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from .errors import InputError
-from .models import SceneSpec
-from .strategies import REGISTRY
+from multigpu.errors import InputError
+from multigpu.scene.models import SceneSpec
+from multigpu.strategies import REGISTRY
 
 
-#: frames of a generated path when --frames is not given
-DEFAULT_FRAMES = {"walkthrough": 1200, "orbit": 300}
+from multigpu.scene.paths import DEFAULT_FRAMES  # noqa: F401  (frames of generated paths; re-exported for the CLI)
 #: rank 0 rewrites summary.json every this many frames (and whenever the run ends)
 SUMMARY_EVERY = 50
 #: setup (building a scene cache, loading a big model) may take this long on a live rank;
@@ -79,11 +78,11 @@ class WalkConfig:
             raise InputError(f"--balance must be one of {', '.join(REGISTRY)}, got '{self.balance}'")
         if self.bounds not in ("box", "sphere"):
             raise InputError(f"--bounds must be 'box' or 'sphere', got '{self.bounds}'")
-        if self.path_kind not in ("walkthrough", "orbit"):
-            raise InputError(f"--path-kind must be 'walkthrough' or 'orbit', got '{self.path_kind}'")
+        if self.path_kind not in DEFAULT_FRAMES:
+            raise InputError(f"--path-kind must be one of {', '.join(DEFAULT_FRAMES)}, got '{self.path_kind}'")
         if self.mosaic_every < 0:
             raise InputError(f"--mosaic-every must be >= 0 (0 = never), got {self.mosaic_every}")
-        from .render import METHODS
+        from multigpu.gpu.render import METHODS
 
         if self.subfrustum not in METHODS:
             raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{self.subfrustum}'")
@@ -106,10 +105,6 @@ class WalkConfig:
     @property
     def ranks(self) -> int:
         return self.grid[0] * self.grid[1]
-
-    @property
-    def default_frames(self) -> int:
-        return DEFAULT_FRAMES[self.path_kind]
 
     @property
     def size(self) -> tuple[int, int]:

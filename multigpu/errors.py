@@ -1,11 +1,43 @@
-"""User-facing errors: one clear line naming the flag or file and the problem."""
+"""User-facing errors: one clear line naming the setting or file and the problem.
+
+Library code names the *field* a bad value came from (``InputError.of("seed", "must be >= 0")``
+reads "seed must be >= 0"); ``as_flags`` turns it into the command line's words ("--seed must
+be >= 0"). Fields and flags follow one convention (``merge_below`` is ``--merge-below``), so the
+mapping lives here, once.
+"""
+
+from __future__ import annotations
 
 
 class InputError(ValueError):
-    """Bad user input (a flag, a model file, a path file). Printed as one line, exit code 2."""
+    """Bad user input (a setting, a model file, a path file). One line; the CLI exits 2."""
+
+    def __init__(self, message: str, field: str | None = None):
+        super().__init__(message)
+        self.message, self.field = message, field
+
+    @classmethod
+    def of(cls, field: str, message: str) -> "InputError":
+        """An error about the value of ``field`` (a SceneSpec/WalkConfig field name)."""
+        return cls(message, field)
+
+    def __str__(self) -> str:
+        return f"{self.field} {self.message}" if self.field else self.message
 
 
-def check_file(path, flag: str, what: str = "file"):
+def flag(field: str) -> str:
+    """The command-line flag of a configuration field."""
+    return "--" + field.replace("_", "-")
+
+
+def as_flags(exc: BaseException) -> str:
+    """An error as the command line says it: fields become flags."""
+    if isinstance(exc, InputError) and exc.field:
+        return f"{flag(exc.field)} {exc.message}"
+    return str(exc)
+
+
+def check_file(path, field: str | None, what: str = "file"):
     """``path`` as a ``Path`` if it is a readable regular file, else an InputError that says
     what it is instead (missing, a directory, a symlink loop, a device or pipe, unreadable)."""
     import errno
@@ -14,22 +46,23 @@ def check_file(path, flag: str, what: str = "file"):
     from pathlib import Path
 
     p = Path(path)
-    where = f"{flag} {p}" if flag else str(p)
+    where = str(p)
+    error = (lambda text: InputError.of(field, text)) if field else InputError
     try:
         st = p.stat()
     except OSError as exc:
         if exc.errno == errno.ELOOP:
-            raise InputError(f"{where}: a symbolic link loop, not a {what}") from None
+            raise error(f"{where}: a symbolic link loop, not a {what}") from None
         if exc.errno in (errno.ENOENT, errno.ENOTDIR):
-            raise InputError(f"{where}: {what} not found") from None
-        raise InputError(f"{where}: cannot read ({exc.strerror or exc})") from None
+            raise error(f"{where}: {what} not found") from None
+        raise error(f"{where}: cannot read ({exc.strerror or exc})") from None
     if stat.S_ISDIR(st.st_mode):
-        raise InputError(f"{where}: is a directory, not a {what}")
+        raise error(f"{where}: is a directory, not a {what}")
     if not stat.S_ISREG(st.st_mode):
         kind = ("a character device" if stat.S_ISCHR(st.st_mode) else "a block device" if stat.S_ISBLK(st.st_mode)
                 else "a named pipe" if stat.S_ISFIFO(st.st_mode) else "a socket" if stat.S_ISSOCK(st.st_mode)
                 else "not a regular file")
-        raise InputError(f"{where}: is {kind}, not a {what}")
+        raise error(f"{where}: is {kind}, not a {what}")
     if not os.access(p, os.R_OK):
-        raise InputError(f"{where}: not readable (permission denied)")
+        raise error(f"{where}: not readable (permission denied)")
     return p

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multigpu.mpirun import JobTimeout, find_launcher, run_multigpu
+from multigpu.parallel.mpirun import JobTimeout, find_launcher, run_multigpu
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--triangles", "20000", "--no-progress"]

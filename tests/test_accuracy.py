@@ -5,16 +5,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from multigpu.balance import partition
-from multigpu.bounds import BoxProjector, SphereProjector
-from multigpu.camera import Camera
+from multigpu.core.balance import partition
+from multigpu.core.bounds import BoxProjector, SphereProjector
+from multigpu.core.camera import Camera
 from multigpu.errors import InputError
-from multigpu.models import SceneSpec, load_scene, load_model
-from multigpu.paths import walkthrough
-from multigpu.regions import overlaps, pixel_spans
-from multigpu.camera import frame_matrices
-from multigpu.render import RegionRenderer, choose_method, create_context
-from multigpu.triangles import triangle_objects, triangle_rects
+from multigpu.scene.models import SceneSpec, load_scene, load_model
+from multigpu.scene.paths import walkthrough
+from multigpu.core.regions import overlaps, pixel_spans
+from multigpu.core.camera import frame_matrices
+from multigpu.gpu.render import RegionRenderer, choose_method, create_context
+from multigpu.core.triangles import triangle_objects, triangle_rects
 
 SIZE = (160, 120)
 GRID = (2, 2)
@@ -199,7 +199,7 @@ def test_triangle_rects_agree_with_exact_projection():
     world = np.array([[-1.0, -1.0, -5.0], [1.0, -1.0, -5.0], [0.0, 2.0, -10.0], [0.0, 0.0, 5.0]])
     tri = np.array([[0, 1, 2], [3, 3, 3]])
     view = np.eye(4)
-    from multigpu.camera import perspective
+    from multigpu.core.camera import perspective
 
     proj = perspective(90.0, 1.0, 0.1, 100.0)
     r = triangle_rects(world, tri, view, proj)
@@ -213,7 +213,7 @@ def test_accuracy_report_quick(tmp_path):
     """`multigpu accuracy --quick` writes the four tables; their invariants hold."""
     import csv
 
-    from multigpu import accuracy
+    from multigpu.studies import accuracy
 
     assert accuracy.run(tmp_path, tmp_path / "ACCURACY.md", quick=True) == 0
     page = (tmp_path / "ACCURACY.md").read_text()

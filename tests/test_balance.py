@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from multigpu.balance import partition, partition_tiles
-from multigpu.regions import overlaps, pixel_spans, tile_regions
+from multigpu.core.balance import partition, partition_tiles
+from multigpu.core.regions import overlaps, pixel_spans, tile_regions
 
 GRIDS = [(1, 1), (1, 2), (2, 1), (2, 2), (1, 3), (3, 1), (2, 3), (1, 5), (5, 1), (1, 7), (7, 1), (4, 4), (3, 3)]
 

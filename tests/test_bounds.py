@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from multigpu.bounds import BoxProjector, SphereProjector, project_boxes, project_spheres
-from multigpu.memory import keep_heap
-from multigpu.camera import look_at, perspective
+from multigpu.core.bounds import BoxProjector, SphereProjector, project_boxes, project_spheres
+from multigpu.core.memory import keep_heap
+from multigpu.core.camera import look_at, perspective
 
 V = look_at([0, -10, 2], [0, 0, 0], [0, 0, 1])
 P = perspective(60, 1.5, 0.1, 100)
@@ -145,8 +145,17 @@ def test_projector_shape_errors():
         SphereProjector(np.zeros((2, 3)), np.ones(3))
 
 
-def test_keep_heap_is_idempotent():
-    assert keep_heap() == keep_heap()
+@pytest.mark.parametrize("env,want", [({}, "True True"), ({"MULTIGPU_MALLOC": "default"}, "False False")])
+def test_keep_heap_applies_once_and_honours_the_opt_out(env, want):
+    """In a fresh process (the setting is process-wide): glibc takes it, the opt-out skips it."""
+    import os
+    import subprocess
+    import sys
+
+    code = "from multigpu.core.memory import keep_heap; print(keep_heap(), keep_heap())"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, **env}).stdout.strip()
+    assert out == want
 
 
 def test_silhouette_coverage_fraction():

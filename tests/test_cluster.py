@@ -3,15 +3,15 @@
 import numpy as np
 import pytest
 
-from multigpu.balance import partition
-from multigpu.bounds import BoxProjector
-from multigpu.cluster import split_objects
+from multigpu.core.balance import partition
+from multigpu.core.bounds import BoxProjector
+from multigpu.scene.cluster import split_objects
 from multigpu.errors import InputError
-from multigpu.models import SceneSpec, load_scene
-from multigpu.paths import walkthrough
-from multigpu.camera import frame_matrices
-from multigpu.render import RegionRenderer, create_context
-from multigpu.triangles import triangle_objects
+from multigpu.scene.models import SceneSpec, load_scene
+from multigpu.scene.paths import walkthrough
+from multigpu.core.camera import frame_matrices
+from multigpu.gpu.render import RegionRenderer, create_context
+from multigpu.core.triangles import triangle_objects
 
 
 @pytest.fixture(scope="module")
@@ -38,9 +38,9 @@ def test_clusters_keep_every_triangle_and_bound_it(plant):
 
 def test_small_objects_are_untouched_and_bad_sizes_refused(plant):
     assert split_objects(plant, int(plant.tris.max())) is plant
-    with pytest.raises(InputError, match="--cluster"):
+    with pytest.raises(InputError, match="cluster must be >= 1"):
         split_objects(plant, 0)
-    with pytest.raises(InputError, match="--cluster"):
+    with pytest.raises(InputError, match="cluster must be >= 0"):
         SceneSpec(cluster=-1)
 
 

@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from multigpu.depth import harmonic, measure, summarize
-from multigpu.render import create_context
-from multigpu.scene import assemble
+from multigpu.gpu.depth import harmonic, measure, summarize
+from multigpu.gpu.render import create_context
+from multigpu.scene.layout import assemble
 
 
 def stacked_quads(depths):

@@ -3,8 +3,8 @@
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from multigpu.drawlist import DrawList, morton_order
-from multigpu.plant import generate_plant
+from multigpu.core.drawlist import DrawList, morton_order
+from multigpu.scene.plant import generate_plant
 
 
 def _triangles(scene, mask):

@@ -6,11 +6,13 @@ import signal
 import subprocess
 import sys
 
+import pytest
 from PIL import Image
 
-from multigpu.experiments import EXPERIMENTS
+from multigpu.studies.experiments import EXPERIMENTS
 
 
+@pytest.mark.slow
 def test_all_experiments_quick(tmp_path):
     out = tmp_path / "exp"
     page = tmp_path / "RESULTS.md"
@@ -40,4 +42,7 @@ def test_all_experiments_quick(tmp_path):
                 assert im.size[0] > 10
     for name in ("gpus", "resolution", "balance", "strips", "overlap"):
         assert (out / name / f"{name}.png").exists()
-    assert float(next(csv.DictReader(open(out / "gpus" / "gpus.csv")))["render_speedup"]) == 1.0
+    gpus = list(csv.DictReader(open(out / "gpus" / "gpus.csv")))
+    one = [r for r in gpus if int(r["ranks"]) == 1]
+    many = [r for r in gpus if int(r["ranks"]) > 1]
+    assert one and many and all(float(r["render_speedup"]) > 1.0 for r in many), gpus

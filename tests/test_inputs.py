@@ -9,10 +9,10 @@ import warnings
 import numpy as np
 import pytest
 
-from multigpu.errors import InputError, check_file
-from multigpu.models import SceneSpec, load_scene
-from multigpu.paths import load_path
-from multigpu.report import COLUMNS, TimingWriter, read_timings, write_json
+from multigpu.errors import InputError, as_flags, check_file
+from multigpu.scene.models import SceneSpec, load_scene
+from multigpu.scene.paths import load_path
+from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, write_json
 
 
 def _path_file(tmp_path, text):
@@ -42,7 +42,7 @@ def test_path_file_errors_name_file_and_field(tmp_path, doc, needle):
 
 def test_interpolated_eye_meeting_target_is_refused_at_the_door(tmp_path):
     """Each keyframe is valid; the spline puts the eye on the target at frame 1 of 3."""
-    from multigpu.paths import check_cameras
+    from multigpu.scene.paths import check_cameras
 
     keys = [{"position": [0, 0, 0], "target": [2, 0, 0]}, {"position": [2, 0, 0], "target": [0, 0, 0]}]
     path = load_path(_path_file(tmp_path, json.dumps({"frames": 3, "keyframes": keys})))
@@ -53,8 +53,9 @@ def test_interpolated_eye_meeting_target_is_refused_at_the_door(tmp_path):
 
 
 def test_seed_must_be_non_negative():
-    with pytest.raises(InputError, match="--seed must be >= 0, got -1"):
+    with pytest.raises(InputError, match="seed must be >= 0, got -1") as e:
         SceneSpec(seed=-1)
+    assert e.value.field == "seed" and as_flags(e.value) == "--seed must be >= 0, got -1"
 
 
 def test_odd_file_kinds_say_what_they_are(tmp_path):
@@ -68,9 +69,10 @@ def test_odd_file_kinds_say_what_they_are(tmp_path):
     for path, needle in cases.items():
         with pytest.raises(InputError) as e:
             load_scene(SceneSpec(model=str(path)), use_cache=False)
-        assert needle in str(e.value) and str(e.value).startswith("--model ")
-    with pytest.raises(InputError, match="--path .*is a directory, not a path file"):
+        assert needle in str(e.value) and as_flags(e.value).startswith("--model ")
+    with pytest.raises(InputError, match="is a directory, not a path file") as e:
         load_path(tmp_path / "d.obj")
+    assert as_flags(e.value).startswith("--path ")
 
 
 def test_check_file_passes_regular_files(tmp_path):
@@ -116,7 +118,7 @@ def test_garbage_text_models_say_so(tmp_path, suffix):
     p.write_bytes(b"\x00\x01 garbage \xff\xfe nonsense\nxx yy zz\n" * 5)
     with pytest.raises(InputError) as e:
         load_scene(SceneSpec(model=str(p)), use_cache=False)
-    msg = str(e.value)
+    msg = as_flags(e.value)
     assert msg.startswith(f"--model {p}") and "charset" not in msg and "module" not in msg
     assert ("no triangles" in msg or f"cannot read as {suffix[1:].upper()}" in msg
             or "not a complete binary STL" in msg)
@@ -155,8 +157,62 @@ def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
     monkeypatch.setattr(Path, "replace", full)
     with pytest.raises(OSError):
         write_json(tmp_path / "summary.json", {"a": 1})
-    from multigpu.mosaic import save_png
+    from multigpu.parallel.mosaic import save_png
 
     with pytest.raises(OSError):
         save_png(np.zeros((4, 4, 3), np.uint8), tmp_path / "f.png")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("flags,needle", [
+    (["--strips", "1"], "--strips must be >= 2"),
+    (["--tile", "0x5"], "--tile must be positive"),
+    (["--grid", "two"], "--grid must look like"),
+    (["--frames", "0"], "--frames must be >= 1"),
+    (["--balance", "magic"], "--balance must be one of strips, cost, time, adaptive, none"),
+    (["--subfrustum", "tiles"], "--subfrustum must be one of"),
+    (["--partition", "gossip"], "--partition must be 'redundant' or 'broadcast'"),
+    (["--cluster", "-3"], "--cluster must be >= 0"),
+    (["--cluster", "lots"], "--cluster must be 'auto' or a number"),
+    (["--offset", "1e8,x"], "--offset must look like X,Y,Z"),
+    (["--offset", "1e300,0,0"], "--offset must be three finite numbers"),
+    (["--seed", "-1"], "--seed must be >= 0"),
+    (["--up", "q"], "--up must be one of x, y, z"),
+    (["--split", "halves"], "--split must be 'auto', 'components' or 'grid:N'"),
+    (["--liveness", "-1"], "--liveness must be >= 0"),
+    (["--timeout", "0"], "--timeout must be > 0"),
+    (["--device", "-2"], "--device must be >= 0"),
+    (["--mosaic-every", "-1"], "--mosaic-every must be >= 0"),
+    (["--path-kind", "spiral"], "--path-kind must be one of walkthrough, orbit"),
+    (["--scene", "moon"], "--scene must be one of plant, fill"),
+])
+def test_walkthrough_flags_are_validated_at_the_door(flags, needle):
+    """Every flag's bad value, in one process, as the CLI prints it (the MPI path prints the
+    same text once: test_robustness_mpi.test_errors_print_once_and_exit_together)."""
+    from multigpu.cli import build_parser, walk_config
+
+    args = build_parser().parse_args(["walkthrough", *flags])
+    with pytest.raises(InputError) as e:
+        walk_config(args)
+    assert needle in as_flags(e.value)
+
+
+def test_setup_stage_errors_name_their_flag(tmp_path):
+    """Checks that need the file system or GL: output directory, files, device, GL limits."""
+    from multigpu.gpu.render import choose_method, create_context, gl_limits
+    from multigpu.parallel.outdir import OutputDir
+
+    for make, needle in [
+        (lambda: OutputDir("/proc/multigpu-cannot-write"), "--out /proc/multigpu-cannot-write: not writable"),
+        (lambda: load_scene(SceneSpec(model="/nonexistent/m.obj")), "--model /nonexistent/m.obj: model file not found"),
+        (lambda: load_path("/nonexistent/p.json"), "--path /nonexistent/p.json: path file not found"),
+        (lambda: create_context(99), "--device 99: this machine has"),
+    ]:
+        with pytest.raises(InputError) as e:
+            make()
+        assert needle in as_flags(e.value)
+    ctx, _ = create_context()
+    with pytest.raises(InputError) as e:
+        choose_method("scissor", (16384 * 4, 64), gl_limits(ctx))
+    assert "--subfrustum scissor: a 65536x64 display exceeds this GL's maximum framebuffer" in as_flags(e.value)
+    ctx.release()

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from multigpu.bounds import make_projector
-from multigpu.camera import frame_matrices
+from multigpu.core.bounds import make_projector
+from multigpu.core.camera import frame_matrices
 from multigpu.cli import main as cli
 from multigpu.errors import InputError
-from multigpu.models import SceneSpec, axis_name, load_scene
-from multigpu.paths import orbit, walkthrough
-from multigpu.report import COLUMNS, summarize
+from multigpu.scene.models import SceneSpec, axis_name, load_scene
+from multigpu.scene.paths import orbit, walkthrough
+from multigpu.parallel.report import COLUMNS, summarize
 
 ROOT = Path(__file__).resolve().parents[1]
 PUMP = ROOT / "models" / "pump.glb"
@@ -133,7 +133,7 @@ def test_stl_is_z_up_by_convention(tmp_path):
 
 
 def test_bad_up_flag():
-    with pytest.raises(InputError, match="--up must be one of"):
+    with pytest.raises(InputError, match="up must be one of"):
         SceneSpec(up="w")
 
 

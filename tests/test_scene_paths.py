@@ -7,9 +7,9 @@ import pytest
 import trimesh
 
 from multigpu.errors import InputError
-from multigpu.models import SceneSpec, load_model, load_scene
-from multigpu.paths import catmull_rom, load_path, orbit, walkthrough
-from multigpu.plant import generate_plant
+from multigpu.scene.models import SceneSpec, load_model, load_scene
+from multigpu.scene.paths import catmull_rom, load_path, orbit, walkthrough
+from multigpu.scene.plant import generate_plant
 
 
 def test_plant_deterministic_and_scales():
@@ -67,13 +67,14 @@ def test_cache_hit_returns_identical_arrays(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("content,needle", [
-    (None, "file not found"), (b"\x00\x01garbage", "cannot read"), (b"", "")])
+    (None, "model file not found"), (b"\x00\x01garbage", "cannot read as PLY"),
+    (b"", "cannot read as PLY (ValueError: Not a ply file!)")])
 def test_bad_model_files(tmp_path, content, needle):
     p = tmp_path / "bad.ply"
     if content is not None:
         p.write_bytes(content)
     with pytest.raises(InputError) as e:
-        load_model(p) if content is not None else load_scene(SceneSpec(model=str(p)))
+        load_scene(SceneSpec(model=str(p)), use_cache=False)
     assert "bad.ply" in str(e.value) and needle in str(e.value)
 
 

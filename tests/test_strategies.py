@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from multigpu.balance import partition, tree_partition, fill_prefix, strip_chooser
+from multigpu.core.balance import partition, tree_partition
+from multigpu.core.splits import fill_prefix, strip_chooser
 from multigpu.strategies import REGISTRY, Adaptive, CostModel, TimeFeedback, make_strategy, rank_pixels
-from multigpu.regions import pixel_spans
+from multigpu.core.regions import pixel_spans
 
 
 def workload(n=400, seed=0):
@@ -75,9 +76,9 @@ def test_rank_pixels_counts_clipped_rect_areas():
 
 def simulate(strategy, rects, tris, time_of, frames=30):
     parts = []
-    for _ in range(frames):
-        p = strategy.plan(rects, tris)
-        strategy.observe(p, time_of(p))
+    for f in range(frames):
+        p = strategy.plan(rects, tris, np.ones(len(tris)) if strategy.needs_coverage else None)
+        strategy.observe(f, p, time_of(p))
         parts.append(p)
     return parts
 
@@ -156,3 +157,40 @@ def test_adaptive_learns_a_per_object_cost_the_model_cannot_see():
     for p in runs[0]:
         assert p.loads.dtype.kind == "i"  # loads stay triangle counts
         np.testing.assert_array_equal(p.loads, p.visible @ tris)
+
+
+@pytest.mark.parametrize("name", list(REGISTRY))
+def test_every_registered_strategy_keeps_the_contract(name):
+    """Each strategy: a Strategy, partitions that tile the display with consistent loads and
+    masks, a JSON-able report naming it; reproducible ones repeat themselves bit for bit."""
+    import json
+
+    from multigpu.strategies import Strategy
+
+    rects, tris = workload(300, seed=7)
+    size = (192, 128)
+    heavy = np.where(rects[:, 0] > 0.6, 3.0, 1.0)
+    time_of = lambda p: p.visible.astype(float) @ (tris * heavy) * 1e-3 + 0.1
+    runs = []
+    for _ in range(2):
+        strategy = REGISTRY[name]((2, 3), size, 64)
+        assert isinstance(strategy, Strategy) and strategy.name == name
+        runs.append(simulate(strategy, rects, tris, time_of, frames=12))
+        doc = strategy.report()
+        assert doc["name"] == name and json.loads(json.dumps(doc)) == doc
+    for p in runs[0]:
+        r = p.regions
+        assert ((r[:, 2] - r[:, 0]) * (r[:, 3] - r[:, 1])).sum() == size[0] * size[1]
+        np.testing.assert_array_equal(p.loads, p.visible @ tris)
+        assert p.spans is not None and p.spans.shape == (4, len(tris))
+    if REGISTRY[name].reproducible:
+        for a, b in zip(*runs):
+            np.testing.assert_array_equal(a.regions, b.regions)
+            np.testing.assert_array_equal(a.visible, b.visible)
+
+
+def test_rank_pixels_uses_the_partition_spans():
+    rects, tris = workload(200, seed=8)
+    p = partition(rects, tris, (2, 2), (128, 128), 64)
+    np.testing.assert_array_equal(rank_pixels(rects, p.visible, p.regions, (128, 128)),
+                                  rank_pixels(rects, p.visible, p.regions, (128, 128), spans=p.spans))

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from multigpu.balance import partition
-from multigpu.regions import tile_regions, transfers
-from multigpu.tree import GpuTree
+from multigpu.core.balance import partition
+from multigpu.core.regions import tile_regions, transfers
+from multigpu.core.tree import GpuTree
 
 SHAPES = [(1, 1), (1, 2), (2, 1), (2, 2), (1, 3), (3, 1), (1, 5), (5, 1), (1, 7), (7, 1), (2, 3), (3, 2), (4, 4), (3, 5)]
 

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from multigpu.report import COLUMNS
+from multigpu.parallel.report import COLUMNS
 from mpirun import SMALL, read_png, run_mpi
 
 pytestmark = pytest.mark.mpi

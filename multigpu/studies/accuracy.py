@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .balance import partition
-from .bounds import BoxProjector, SphereProjector, make_projector
-from .bench import median_ms
-from .regions import overlaps, pixel_spans
-from .tables import md_table, write_csv
+from multigpu.core.balance import partition
+from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
+from multigpu.studies.bench import median_ms
+from multigpu.core.regions import overlaps, pixel_spans
+from multigpu.studies.tables import md_table, write_csv
 
 
 @dataclass
@@ -56,8 +56,8 @@ def _cpu_ms(fn):
 
 
 def _world(s: Sizes):
-    from .models import SceneSpec, load_scene
-    from .paths import walkthrough
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import walkthrough
 
     scene, _ = load_scene(SceneSpec(triangles=s.triangles))
     path = walkthrough(scene, frames=1200)
@@ -84,8 +84,8 @@ def _compose(renderer, view, proj, light, part, size, depth: bool):
 # ---------------------------------------------------------------- 1. sub-frustum methods
 
 def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
-    from .camera import frame_matrices
-    from .render import RegionRenderer, choose_method, gl_limits
+    from multigpu.core.camera import frame_matrices
+    from multigpu.gpu.render import RegionRenderer, choose_method, gl_limits
 
     scene, path, frames = _world(s)
     limits = gl_limits(ctx)
@@ -147,7 +147,7 @@ def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
 
 
 def _try_method(choose, m, size, limits) -> str:
-    from .errors import InputError
+    from multigpu.errors import InputError
 
     try:
         return choose(m, size, limits)
@@ -158,7 +158,7 @@ def _try_method(choose, m, size, limits) -> str:
 # ---------------------------------------------------------------- 2. balance accuracy vs cost
 
 def _views(n: int):
-    from .camera import look_at, perspective
+    from multigpu.core.camera import look_at, perspective
 
     eyes = [([-40, -60, 40], [100, 60, 0]), ([100, 60, 90], [100, 60, 0]), ([45, 35, 10], [140, 80, 8]),
             ([210, 130, 25], [40, 92, 8]), ([100, -30, 12], [100, 60, 10]), ([20, 100, 30], [150, 40, 0])]
@@ -167,7 +167,7 @@ def _views(n: int):
 
 
 def table_balance(s: Sizes, out: Path) -> str:
-    from .bench import synthetic_objects
+    from multigpu.studies.bench import synthetic_objects
 
     grid, size = (2, 2), (2048, 2048)
     W = size[0]
@@ -200,7 +200,7 @@ def table_balance(s: Sizes, out: Path) -> str:
                          "rect_err_px": float(max(err)) if err else float("nan")})
     write_csv(out / "balance.csv", rows)
     return "\n".join([
-        f"Synthetic plant-like objects (`multigpu.bench.synthetic_objects`: clustered boxes, heavy-tailed "
+        f"Synthetic plant-like objects (`multigpu.studies.bench.synthetic_objects`: clustered boxes, heavy-tailed "
         f"triangle counts), {len(views)} views, a 2x2 wall of {size[0]}x{size[1]} pixels (so {W} strips is one "
         "strip per pixel). Imbalance: max/mean triangles per rank; overlap: triangles rendered summed over ranks "
         "over triangles visible; balancer: wall ms per frame for projection + partition (median); rect error: "
@@ -213,8 +213,8 @@ def table_balance(s: Sizes, out: Path) -> str:
 # ---------------------------------------------------------------- 3. only what a scene requires
 
 def table_needed(s: Sizes, out: Path) -> str:
-    from .camera import frame_matrices
-    from .triangles import triangle_objects, triangle_rects
+    from multigpu.core.camera import frame_matrices
+    from multigpu.core.triangles import triangle_objects, triangle_rects
 
     scene, path, frames = _world(s)
     grid = (2, 2)
@@ -274,8 +274,8 @@ def table_needed(s: Sizes, out: Path) -> str:
 def table_offsets(s: Sizes, ctx, out: Path) -> str:
     from dataclasses import replace
 
-    from .camera import frame_matrices
-    from .render import RegionRenderer
+    from multigpu.core.camera import frame_matrices
+    from multigpu.gpu.render import RegionRenderer
 
     scene, path, frames = _world(s)
     grid = (2, 2)
@@ -329,7 +329,7 @@ TABLES = ("subfrustum", "balance", "needed", "offsets")
 
 def run(out: Path, page: Path | None, quick: bool = False) -> int:
     """All four tables into ``out`` (CSV) and the Markdown ``page``."""
-    from .render import create_context
+    from multigpu.gpu.render import create_context
 
     s = Sizes.make(quick)
     out = Path(out)

@@ -19,9 +19,9 @@ import os
 
 import numpy as np
 
-from .drawlist import DrawList
-from .camera import model_view, region_clip
-from .errors import InputError
+from multigpu.core.drawlist import DrawList
+from multigpu.core.camera import model_view, region_clip
+from multigpu.errors import InputError
 
 EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL drivers "
             "(Debian/Ubuntu: sudo apt install libegl1 libgl1-mesa-dri) or an NVIDIA driver with EGL")
@@ -95,7 +95,7 @@ def create_context(device: int | None = None):
     count = egl_device_count()
     index = local_rank() % count if device is None else device
     if device is not None and not (0 <= device < count):
-        raise InputError(f"--device {device}: this machine has {count} EGL device(s) (0..{count - 1})")
+        raise InputError.of("device", f"{device}: this machine has {count} EGL device(s) (0..{count - 1})")
     try:
         ctx = moderngl.create_standalone_context(backend="egl", require=430, device_index=index)
     except Exception as exc:
@@ -128,17 +128,17 @@ def choose_method(method: str, size: tuple[int, int], limits: dict) -> str:
     in that order.
     """
     if method not in METHODS:
-        raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{method}'")
+        raise InputError.of("subfrustum", f"must be one of {', '.join(METHODS)}, got '{method}'")
     W, H = size
     fits_viewport = W <= limits["viewport"][0] and H <= limits["viewport"][1] and max(W, H) <= -limits["bounds_low"]
     fits_scissor = max(W, H) <= limits["renderbuffer"]
     if method == "auto":
         return "scissor" if fits_scissor else "viewport" if fits_viewport else "offaxis"
     if method == "viewport" and not fits_viewport:
-        raise InputError(f"--subfrustum viewport: a {W}x{H} display exceeds this GL's maximum viewport "
+        raise InputError.of("subfrustum", f"viewport: a {W}x{H} display exceeds this GL's maximum viewport "
                          f"{limits['viewport'][0]}x{limits['viewport'][1]} (use offaxis or auto)")
     if method == "scissor" and not fits_scissor:
-        raise InputError(f"--subfrustum scissor: a {W}x{H} display exceeds this GL's maximum framebuffer "
+        raise InputError.of("subfrustum", f"scissor: a {W}x{H} display exceeds this GL's maximum framebuffer "
                          f"{limits['renderbuffer']} pixels per side (use viewport, offaxis or auto)")
     return method
 

@@ -19,18 +19,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .bounds import BoxProjector, SphereProjector, make_projector
-from .camera import frame_matrices
-from .config import SUMMARY_EVERY, WalkConfig, setup_timeout
-from .errors import InputError
-from .exchange import barrier, broadcast_partition, exchange, wait_all
-from .models import axis_name, load_scene
-from .mosaic import overlay, save_png, stitch
-from .outdir import OutputDir
-from .paths import CameraPath, check_cameras, load_path, orbit, walkthrough
-from .regions import tile_regions, transfers
-from .report import COLUMNS, TimingWriter, summarize, table, write_json
-from .strategies import make_strategy
+from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
+from multigpu.core.camera import frame_matrices
+from multigpu.config import SUMMARY_EVERY, WalkConfig, setup_timeout
+from multigpu.errors import InputError, as_flags
+from multigpu.parallel.exchange import barrier, broadcast_partition, exchange, wait_all
+from multigpu.scene.models import axis_name, load_scene
+from multigpu.parallel.mosaic import overlay, save_png, stitch
+from multigpu.parallel.outdir import OutputDir
+from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
+from multigpu.core.regions import tile_regions, transfers
+from multigpu.parallel.report import COLUMNS, TimingWriter, summarize, table, write_json
+from multigpu.strategies import make_strategy
 
 ERROR_BYTES = 1024  # an agreed setup error travels as a fixed-size buffer
 
@@ -59,12 +59,11 @@ def make_path(cfg: WalkConfig, scene) -> CameraPath:
         path = load_path(cfg.path)
         if cfg.frames is not None:
             if cfg.frames > len(path):
-                raise InputError(f"--frames {cfg.frames}: the path file {cfg.path} has only {len(path)} frames")
+                raise InputError.of("frames", f"{cfg.frames}: the path file {cfg.path} has only {len(path)} frames")
             path = CameraPath(*(a[:cfg.frames] for a in (path.position, path.target, path.up, path.fov,
                                                            path.near, path.far)))
         return path
-    gen = walkthrough if cfg.path_kind == "walkthrough" else orbit
-    return gen(scene, frames=cfg.frames or cfg.default_frames)
+    return generate(cfg.path_kind, scene, cfg.frames)
 
 
 def load_world(cfg: WalkConfig):
@@ -116,7 +115,7 @@ def _check_video() -> None:
 
         imageio_ffmpeg.get_ffmpeg_exe()
     except Exception as exc:
-        raise InputError(f"--video needs imageio with ffmpeg (pip install 'multigpu[video]'): "
+        raise InputError.of("video", f"needs imageio with ffmpeg (pip install 'multigpu[video]'): "
                          f"{exc.__class__.__name__}: {exc}") from None
 
 
@@ -124,7 +123,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
     """Render the walkthrough on this rank; rank 0 returns the summary."""
     rank, K = comm.Get_rank(), comm.Get_size()
     if K != cfg.ranks:
-        raise InputError(f"--grid {cfg.grid[0]}x{cfg.grid[1]} needs {cfg.ranks} ranks but the job has {K} "
+        raise InputError.of("grid", f"{cfg.grid[0]}x{cfg.grid[1]} needs {cfg.ranks} ranks but the job has {K} "
                          f"(start it with mpiexec -n {cfg.ranks})")
     wait = setup_timeout(cfg)
     # -- setup: rank 0 takes the output directory and builds the scene cache first
@@ -138,7 +137,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             scene, path, load_info = load_world(cfg)
             _check_path(cfg, scene, path)
         except InputError as exc:
-            error = str(exc)
+            error = as_flags(exc)
     try:
         _fault(rank, "setup")
         error = agree(comm, error, wait)
@@ -148,12 +147,12 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         try:
             if rank != 0:
                 scene, path, load_info = load_world(cfg)
-            from .render import RegionRenderer, create_context
+            from multigpu.gpu.render import RegionRenderer, create_context
 
             ctx, device = create_context(cfg.device)
             renderer = RegionRenderer(ctx, scene, cfg.size, cfg.subfrustum)
         except (InputError, RuntimeError) as exc:
-            error = str(exc)
+            error = as_flags(exc)
         error = agree(comm, error, wait)
         if error:
             raise InputError(error)
@@ -270,7 +269,7 @@ class Frames:
         np.copyto(self.front, self.back)  # present the composed tile
         t.mark()
         self.record(f, part, t, sent, mask)
-        self.strategy.observe(part, self.allrows[:, self.col["rendering_cpu_ms"]])
+        self.strategy.observe(f, part, self.allrows[:, self.col["rendering_cpu_ms"]])
         if self.rank == 0:  # rows first: the summary always matches the CSV
             rows = self.allrows[:, :len(COLUMNS)]
             self.writer.write(rows)

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .drawlist import morton_codes
-from .errors import InputError
-from .scene import Scene
-from .triangles import triangle_objects
+from multigpu.core.drawlist import morton_codes
+from multigpu.errors import InputError
+from multigpu.scene.layout import Scene
+from multigpu.core.triangles import triangle_objects
 
 
 #: automatic clusters are never smaller than this (tiny pieces only add per-object cost)
@@ -52,7 +52,7 @@ def auto_cluster(tris: np.ndarray, ranks: int) -> tuple[int, str]:
 def split_objects(scene: Scene, max_tris: int) -> Scene:
     """The scene with every object above ``max_tris`` triangles cut into near-equal clusters."""
     if max_tris < 1:
-        raise InputError(f"--cluster must be >= 1 triangle (0 keeps objects whole), got {max_tris}")
+        raise InputError.of("cluster", f"must be >= 1 triangle (0 keeps objects whole), got {max_tris}")
     tris = scene.tris
     if tris.size == 0 or tris.max() <= max_tris:
         return scene

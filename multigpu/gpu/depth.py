@@ -39,7 +39,7 @@ def measure(ctx, scene, mvp: np.ndarray, size: tuple[int, int]) -> tuple[np.ndar
     """(d, o) per pixel, (H, W) int arrays, row 0 at the bottom (GL order)."""
     import moderngl
 
-    from .drawlist import DrawList
+    from multigpu.core.drawlist import DrawList
 
     W, H = size
     draws = DrawList(scene)
@@ -87,8 +87,8 @@ def summarize(d: np.ndarray, o: np.ndarray) -> dict:
 
 def run(scene, camera, size: tuple[int, int], out: Path) -> dict:
     """Measure one frame, write ``depth_complexity.png``, ``overdraw.png`` and ``depth.json``."""
-    from .camera import frame_matrices, model_view
-    from .render import create_context
+    from multigpu.core.camera import frame_matrices, model_view
+    from multigpu.gpu.render import create_context
 
     ctx, _ = create_context()
     view, proj, _ = frame_matrices(camera, size)

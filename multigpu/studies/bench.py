@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .errors import InputError
+from multigpu.errors import InputError
 
 
 def median_ms(fn, repeat: int) -> float:
@@ -40,10 +40,10 @@ def synthetic_objects(n: int, seed: int = 0):
 
 
 def bench_balance(quick: bool) -> list[dict]:
-    from .balance import partition
-    from .bounds import BoxProjector, SphereProjector
-    from .camera import look_at, perspective
-    from .memory import keep_heap
+    from multigpu.core.balance import partition
+    from multigpu.core.bounds import BoxProjector, SphereProjector
+    from multigpu.core.camera import look_at, perspective
+    from multigpu.core.memory import keep_heap
 
     sizes = [10_000, 100_000] if quick else [100_000, 1_000_000]
     view = look_at([-40, -60, 40], [100, 60, 0], [0, 0, 1])
@@ -73,7 +73,7 @@ def bench_balance(quick: bool) -> list[dict]:
 
 _SCENE_CHILD = """
 import json, resource, sys, time
-from multigpu.models import SceneSpec, load_scene
+from multigpu.scene.models import SceneSpec, load_scene
 spec = SceneSpec(triangles=int(sys.argv[1]))
 t = time.perf_counter(); scene, info = load_scene(spec); dt = time.perf_counter() - t
 print(json.dumps({"seconds": dt, "cached": info["cached"], "triangles": scene.n_triangles,
@@ -88,7 +88,7 @@ def bench_scene(quick: bool) -> list[dict]:
 
     sizes = [100_000, 1_000_000] if quick else [1_000_000, 10_000_000]
     rows = []
-    base = json.loads(subprocess.run([sys.executable, "-c", "import resource, json, multigpu.models, multigpu.plant;"
+    base = json.loads(subprocess.run([sys.executable, "-c", "import resource, json, multigpu.scene.models, multigpu.scene.plant;"
                                       "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)"],
                                      capture_output=True, text=True, check=True).stdout)
     print(f"interpreter + imports peak RSS: {base / 2**20:.0f} MiB")
@@ -111,7 +111,7 @@ def bench_scene(quick: bool) -> list[dict]:
 def _quad_grid_scene(g: int, blocks: int):
     """The same ``2 g^2`` triangles (a ``g x g`` grid of quads over NDC [-1, 1]^2, depths
     varying) grouped into ``blocks^2`` objects of ``(g/blocks)^2`` quads each."""
-    from .scene import assemble
+    from multigpu.scene.layout import assemble
 
     b = g // blocks
     n = blocks * blocks
@@ -141,7 +141,7 @@ def bench_render(quick: bool) -> list[dict]:
     (what a 2 x 2 wall's rank draws); and a scattered half of the objects (the worst case for
     merged runs). Wall time per frame including the region's read-back, median of 7.
     """
-    from .render import RegionRenderer, create_context
+    from multigpu.gpu.render import RegionRenderer, create_context
 
     ctx, _ = create_context()
     g = 320 if quick else 640

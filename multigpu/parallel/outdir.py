@@ -23,7 +23,7 @@ import os
 import socket
 from pathlib import Path
 
-from .errors import InputError
+from multigpu.errors import InputError
 
 LOCK = ".multigpu.lock"
 RUN_FILES = ("timings.csv", "summary.json", "mosaic.mp4")

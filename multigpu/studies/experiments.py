@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .mpirun import JobTimeout, run_multigpu
-from .report import COLUMNS, read_timings
-from .tables import md_table, write_csv
+from multigpu.errors import InputError
+from multigpu.parallel.mpirun import JobTimeout, run_multigpu
+from multigpu.parallel.report import COLUMNS, read_timings
+from multigpu.studies.tables import md_table, write_csv
 
 # Dong & Peng 2019, Section 7 (quoted for comparison, not measured here)
 PAPER = {
@@ -53,7 +53,7 @@ class Settings:
 
     @classmethod
     def make(cls, quick: bool) -> "Settings":
-        from .strategies import REGISTRY
+        from multigpu.strategies import REGISTRY
 
         s = cls(quick=quick, strategies=tuple(REGISTRY))
         if quick:
@@ -322,11 +322,11 @@ def exp_orbit(s: Settings, out: Path) -> str:
 def exp_overlap(s: Settings, out: Path) -> str:
     """Triangles rendered summed over ranks / visible triangles, against ranks and strips,
     beside Molnar's O = ((S + sqrt(rho a)) / S)^2. In process: balancer only, no rendering."""
-    from .balance import partition
-    from .bounds import BoxProjector
-    from .models import SceneSpec, load_scene
-    from .paths import walkthrough
-    from .camera import frame_matrices
+    from multigpu.core.balance import partition
+    from multigpu.core.bounds import BoxProjector
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import walkthrough
+    from multigpu.core.camera import frame_matrices
 
     scene, _ = load_scene(SceneSpec(triangles=s.triangles))
     path = walkthrough(scene, frames=s.frames)
@@ -387,9 +387,9 @@ def exp_cost(s: Settings, out: Path) -> str:
     render-time imbalance, emulated frame time, the cost model's kept terms, balancer cost."""
     import json
 
-    from . import depth
-    from .models import SceneSpec, load_scene
-    from .paths import orbit, walkthrough
+    from multigpu.gpu import depth
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import orbit, walkthrough
 
     cases = [("plant", "walkthrough", _scene_args(s)),
              ("fill", "orbit", ["--scene", "fill", "--triangles", str(s.triangles)])]

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from .regions import Transfer
+from multigpu.core.regions import Transfer
 
 TAG = 7
 #: checks every bounded wait runs while it polls (``job.Job.check``: stalled or failed peers,
@@ -89,7 +89,7 @@ def broadcast_partition(comm, part, k: int, n: int, timeout: float):
     non-blocking broadcast of regions, loads, splits and the bit-packed (K, N) T' masks."""
     from mpi4py import MPI
 
-    from .balance import Partition
+    from multigpu.core.balance import Partition
 
     m = max(k - 1, 0)
     ints, floats = 5 * k + m, m  # regions, loads, split pixels (int64); splits (float64)

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera
-from .errors import InputError, check_file
+from multigpu.core.camera import Camera
+from multigpu.errors import InputError, check_file
 
 DEFAULTS = {"fov": 60.0, "near": 0.1, "far": 1000.0, "up": [0.0, 0.0, 1.0]}
 MAX_FRAMES = 10_000_000  # a path longer than this is a typo, not a walkthrough
@@ -143,7 +143,7 @@ def _check_camera(cam, where: str, defaults: dict, need_up: bool = False) -> dic
 
 def load_path(path: str | Path) -> CameraPath:
     """Read and validate a path file; every problem is one InputError naming file and field."""
-    path = check_file(path, "--path", "path file")
+    path = check_file(path, "path", "path file")
     try:
         doc = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -292,8 +292,8 @@ def look_at_something(path: CameraPath, scene, aspect: float = 1.0) -> CameraPat
     """Turn every frame that would see none of the scene's largest objects towards the object
     nearest its eye, so a generated path never shows an empty screen (one projection of at
     most ``CHECK_OBJECTS`` bounds per frame, so big scenes stay quick to set up)."""
-    from .bounds import BoxProjector
-    from .camera import frame_matrices
+    from multigpu.core.bounds import BoxProjector
+    from multigpu.core.camera import frame_matrices
 
     keep = np.argsort(-scene.tris, kind="stable")[:CHECK_OBJECTS]
     project = BoxProjector(scene.bmin[keep], scene.bmax[keep])
@@ -379,3 +379,17 @@ def orbit(scene, frames: int = 300, fov: float = 60.0, elevation_deg: float = 30
     near = max(dist - radius * 1.01, diag * 1e-4)
     return CameraPath(pos, np.tile(centre, (frames, 1)), np.tile(up, (frames, 1)), fov * ones,
                       near * ones, (dist + radius * 1.01) * ones)
+
+
+#: the generated paths, and their frame counts when none is asked for
+GENERATORS = {"walkthrough": walkthrough, "orbit": orbit}
+DEFAULT_FRAMES = {"walkthrough": 1200, "orbit": 300}
+
+
+def generate(kind: str, scene, frames: int | None = None, fov: float = 60.0) -> CameraPath:
+    """A generated camera path of ``kind`` (walkthrough | orbit) for ``scene``."""
+    if kind not in GENERATORS:
+        raise InputError.of("path_kind", f"must be one of {', '.join(GENERATORS)}, got '{kind}'")
+    if frames is not None and not 1 <= frames <= MAX_FRAMES:
+        raise InputError.of("frames", f"must be in 1..{MAX_FRAMES}, got {frames}")
+    return GENERATORS[kind](scene, frames=frames or DEFAULT_FRAMES[kind], fov=fov)

@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, check_file
-from .scene import FORMAT_VERSION, Scene
+from multigpu.errors import InputError, check_file
+from multigpu.scene.layout import FORMAT_VERSION, Scene
 
 FORMATS = {".obj", ".ply", ".stl", ".off", ".gltf", ".glb"}
 #: up axis by format convention, where the format has one (glTF: the specification)
@@ -50,7 +50,7 @@ class SceneSpec:
     model: str | None = None
     split: str = "auto"
     merge_below: int = 64
-    triangles: int = 300_000
+    triangles: int = 100_000  # the one default size of the built-in scenes
     copies: int = 1
     seed: int = 0
     cluster: int | None = None  # cut objects above N triangles into clusters (0: never; None: auto)
@@ -59,21 +59,21 @@ class SceneSpec:
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
-            raise InputError(f"--scene: unknown scene '{self.scene}' (known: {', '.join(BUILTIN)})")
+            raise InputError.of("scene", f"must be one of {', '.join(BUILTIN)} (or give a model file), got '{self.scene}'")
         if not re.fullmatch(r"auto|components|grid:[1-9][0-9]*", self.split):
-            raise InputError(f"--split must be 'auto', 'components' or 'grid:N' with N >= 1, got '{self.split}'")
+            raise InputError.of("split", f"must be 'auto', 'components' or 'grid:N' with N >= 1, got '{self.split}'")
         if self.up is not None and not re.fullmatch(r"[+-]?[xyz]", self.up):
-            raise InputError(f"--up must be one of x, y, z, -x, -y, -z, got '{self.up}'")
+            raise InputError.of("up", f"must be one of x, y, z, -x, -y, -z, got '{self.up}'")
         if self.ranks < 1:
             raise InputError(f"ranks must be >= 1, got {self.ranks}")
         if self.triangles < 1000:
-            raise InputError(f"--triangles must be >= 1000, got {self.triangles}")
+            raise InputError.of("triangles", f"must be >= 1000, got {self.triangles}")
         if self.seed < 0:
-            raise InputError(f"--seed must be >= 0, got {self.seed}")
+            raise InputError.of("seed", f"must be >= 0, got {self.seed}")
         if self.copies < 1:
-            raise InputError(f"--copies must be >= 1, got {self.copies}")
+            raise InputError.of("copies", f"must be >= 1, got {self.copies}")
         if self.cluster is not None and self.cluster < 0:
-            raise InputError(f"--cluster must be >= 0 (0 keeps objects whole), got {self.cluster}")
+            raise InputError.of("cluster", f"must be >= 0 (0 keeps objects whole), got {self.cluster}")
 
 
 def cache_dir() -> Path:
@@ -90,9 +90,9 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
     cluster = "auto" if spec.cluster is None else spec.cluster
     wall = spec.ranks if spec.cluster is None else None  # the automatic choice depends on the wall
     if spec.model is not None:
-        src = check_file(spec.model, "--model", "model file")
+        src = check_file(spec.model, "model", "model file")
         if src.suffix.lower() not in FORMATS:
-            raise InputError(f"--model {src}: unsupported extension '{src.suffix}' (use {', '.join(sorted(FORMATS))})")
+            raise InputError.of("model", f"{src}: unsupported extension '{src.suffix}' (use {', '.join(sorted(FORMATS))})")
         st = src.stat()
         key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, cluster, wall)
         name = f"{src.stem}-{key}.npz"
@@ -103,7 +103,7 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
         make = lambda: BUILTIN[spec.scene](spec)
 
     def build() -> Scene:
-        from .cluster import auto_cluster, split_objects
+        from multigpu.scene.cluster import auto_cluster, split_objects
 
         scene = make()
         modelled = scene.n_objects
@@ -152,13 +152,13 @@ def axis_name(v) -> str:
 
 
 def _plant(spec: SceneSpec) -> Scene:
-    from .plant import generate_plant
+    from multigpu.scene.plant import generate_plant
 
     return generate_plant(spec.triangles, spec.copies, spec.seed)
 
 
 def _fill(spec: SceneSpec) -> Scene:
-    from .fillscene import generate_fill
+    from multigpu.scene.fill import generate_fill
 
     return generate_fill(spec.triangles, panels=24 * spec.copies, seed=spec.seed)
 
@@ -184,22 +184,22 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
         why = str(exc).splitlines()[0] if str(exc) else "corrupt file"
         promise = (f"; the header promises {declared[0]} vertices and {declared[1]} faces: truncated or corrupt"
                    if declared and declared[0] >= 0 else "")
-        raise InputError(f"--model {path}: cannot read as {kind} ({exc.__class__.__name__}: {why}){promise}") from None
+        raise InputError.of("model", f"{path}: cannot read as {kind} ({exc.__class__.__name__}: {why}){promise}") from None
     warnings: list[str] = []
     if isinstance(loaded, trimesh.Scene):
         meshes = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh)]
         meshes = [m for m in meshes if len(m.faces)]
         if not meshes:
-            raise InputError(f"--model {path}: the file holds no triangles (empty, or not a {kind} file)")
+            raise InputError.of("model", f"{path}: the file holds no triangles (empty, or not a {kind} file)")
         if len(meshes) > 1:
             return _from_meshes(meshes, path, warnings, split, merge_below)
         mesh = meshes[0]
     elif isinstance(loaded, trimesh.Trimesh):
         mesh = loaded
     else:
-        raise InputError(f"--model {path}: holds no triangle mesh (got {type(loaded).__name__})")
+        raise InputError.of("model", f"{path}: holds no triangle mesh (got {type(loaded).__name__})")
     if len(mesh.faces) == 0:
-        raise InputError(f"--model {path}: the mesh is empty (no triangles)")
+        raise InputError.of("model", f"{path}: the mesh is empty (no triangles)")
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     _check_complete(path, declared, len(verts), len(faces))
@@ -244,7 +244,7 @@ def _check_size(path: Path, declared) -> None:
     want_f = declared[1]
     size = path.stat().st_size
     if size < 84 + 50 * want_f:
-        raise InputError(f"--model {path}: not a complete binary STL: its header promises {want_f} triangles "
+        raise InputError.of("model", f"{path}: not a complete binary STL: its header promises {want_f} triangles "
                          f"({84 + 50 * want_f} bytes), the file has {size} bytes (truncated, or not an STL file)")
 
 
@@ -255,7 +255,7 @@ def _check_complete(path: Path, declared, n_verts: int, n_faces: int) -> None:
         return
     want_v, want_f = declared
     if n_verts < want_v or n_faces < want_f:
-        raise InputError(f"--model {path}: truncated: the header promises {want_v} vertices and {want_f} faces, "
+        raise InputError.of("model", f"{path}: truncated: the header promises {want_v} vertices and {want_f} faces, "
                          f"the file holds {n_verts} and {n_faces}")
 
 
@@ -267,13 +267,13 @@ def _check_indices_and_range(verts, faces, path) -> None:
     """Refuse face indices outside the vertex list and coordinates no renderer can use."""
     if faces.size and (faces.min() < 0 or faces.max() >= len(verts)):
         bad = int(faces.max()) if faces.max() >= len(verts) else int(faces.min())
-        raise InputError(f"--model {path}: a face uses vertex index {bad}, but the file has "
+        raise InputError.of("model", f"{path}: a face uses vertex index {bad}, but the file has "
                          f"{len(verts)} vertices (corrupt or truncated file)")
     finite = np.isfinite(verts).all(axis=1)
     if finite.any():
         reach = float(np.abs(verts[finite]).max())
         if reach > MAX_COORD:
-            raise InputError(f"--model {path}: coordinates reach {reach:.3g}, beyond +-{MAX_COORD:g} "
+            raise InputError.of("model", f"{path}: coordinates reach {reach:.3g}, beyond +-{MAX_COORD:g} "
                              "(rescale the model; --offset moves a scene far from the origin)")
 
 
@@ -288,7 +288,7 @@ def _clean_faces(verts, faces, path, warnings) -> np.ndarray:
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
     f = f[~degenerate]
     if len(f) == 0:
-        raise InputError(f"--model {path}: no valid triangles (all faces degenerate or non-finite)")
+        raise InputError.of("model", f"{path}: no valid triangles (all faces degenerate or non-finite)")
     return f
 
 
@@ -412,7 +412,7 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     local = faces - np.repeat(offsets, [len(m.faces) for m in meshes])[:, None]  # indices within each mesh
     own = np.repeat(sizes, [len(m.faces) for m in meshes])[:, None]
     if (local < 0).any() or (local >= own).any():
-        raise InputError(f"--model {path}: a face uses a vertex index outside its mesh (corrupt file)")
+        raise InputError.of("model", f"{path}: a face uses a vertex index outside its mesh (corrupt file)")
     _check_indices_and_range(verts, faces, path)
     bad_v = ~np.isfinite(verts).all(axis=1)
     bad_obj = np.zeros(len(meshes), dtype=bool)
@@ -422,7 +422,7 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
         keep = ~bad_obj[labels]
         faces, labels = faces[keep], labels[keep]
         if len(faces) == 0:
-            raise InputError(f"--model {path}: every object has non-finite vertices")
+            raise InputError.of("model", f"{path}: every object has non-finite vertices")
     degenerate = _degenerate(verts, faces)
     if degenerate.any():
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")

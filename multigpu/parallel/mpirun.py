@@ -7,7 +7,7 @@ Open MPI (OpenRTE / Open MPI). Open MPI gets what it needs on a workstation: ``-
 multi-line banner after a non-zero exit), and ``MPI4PY_LIBMPI`` so mpi4py's wheel loads Open
 MPI's library even where the ``mpich`` wheel is installed too.
 
-Used by the launch scripts (``python -m multigpu.mpirun -n K ARGS``), the experiments and
+Used by the launch scripts (``python -m multigpu.parallel.mpirun -n K ARGS``), the experiments and
 the tests: a job started from Python runs in its own process group, which is killed whole
 (launcher and every rank) when it outlives its timeout.
 """
@@ -23,7 +23,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import InputError
+from multigpu.errors import InputError
 
 #: the soname of Open MPI's library (3.x to 5.x); mpi4py loads it by this name
 OPENMPI_LIBMPI = "libmpi.so.40"
@@ -136,10 +136,10 @@ def run_multigpu(n: int, args: list[str], timeout: float, env: dict | None = Non
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m multigpu.mpirun -n K ARGS...``: exec the right mpiexec for K ranks."""
+    """``python -m multigpu.parallel.mpirun -n K ARGS...``: exec the right mpiexec for K ranks."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) < 2 or argv[0] != "-n" or not argv[1].isdigit() or int(argv[1]) < 1:
-        print("usage: python -m multigpu.mpirun -n RANKS MULTIGPU_ARGS...", file=sys.stderr)
+        print("usage: python -m multigpu.parallel.mpirun -n RANKS MULTIGPU_ARGS...", file=sys.stderr)
         return 2
     try:
         launcher = find_launcher()

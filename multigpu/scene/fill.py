@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .plant import box, instance, uv_sphere, z_rotation
-from .scene import Scene, assemble
+from multigpu.scene.plant import box, instance, uv_sphere, z_rotation
+from multigpu.scene.layout import Scene, assemble
 
 
-def generate_fill(triangles: int = 100_000, panels: int = 24, seed: int = 0) -> Scene:
+def generate_fill(triangles: int, panels: int = 24, seed: int = 0) -> Scene:
     """``panels`` screen-filling panels (x < 50) and about ``triangles`` triangles of spheres
     (x > 60) on a 100 x 100 ground, z up."""
     if triangles < 1000:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from multigpu.errors import InputError
 
 FORMAT_VERSION = 3
 

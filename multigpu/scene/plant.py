@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import Scene, assemble
+from multigpu.scene.layout import Scene, assemble
 
 FOOTPRINT = np.array([200.0, 120.0])  # one plant, metres (x, y); z is up
 GAP = 30.0
@@ -169,7 +169,7 @@ def _counts(budget: float, shares: dict[str, float], tris_each: dict[str, float]
     return {k: int(max(0, round(budget * shares[k] / tris_each[k]))) for k in shares}
 
 
-def generate_plant(triangles: int = 400_000, copies: int = 1, seed: int = 0) -> Scene:
+def generate_plant(triangles: int, copies: int = 1, seed: int = 0) -> Scene:
     """Generate ``copies`` plants with about ``triangles`` triangles in all."""
     if triangles < 1000:
         raise ValueError(f"plant triangles must be >= 1000, got {triangles}")

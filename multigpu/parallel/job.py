@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from . import exchange
+from multigpu.parallel import exchange
 
 HEARTBEAT, FAILED = 1, 2
 #: seconds between heartbeats

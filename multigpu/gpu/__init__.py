@@ -1,0 +1,3 @@
+"""The GL edge: the one place that creates contexts (moderngl on EGL), region rendering,
+depth-complexity measurement.
+"""

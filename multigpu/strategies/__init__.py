@@ -1,0 +1,31 @@
+"""Balancing strategies: one file each behind one contract (``base.Strategy``), one registry.
+
+The registry is the single list the CLI's ``--balance`` help, the configuration's validation
+and the tests that loop over every strategy read (as IceT's ``select.c`` and its tests do).
+"""
+
+from __future__ import annotations
+
+from multigpu.strategies.adaptive import Adaptive
+from multigpu.strategies.base import Configured, Strategy, rank_pixels
+from multigpu.strategies.cost import CostModel
+from multigpu.strategies.none import NoBalance
+from multigpu.strategies.strips import Strips
+from multigpu.strategies.time import TimeFeedback
+
+REGISTRY: dict[str, type] = {cls.name: cls for cls in (Strips, CostModel, TimeFeedback, Adaptive, NoBalance)}
+
+
+def describe() -> str:
+    """One line per strategy (name: first docstring line), for --help."""
+    return "; ".join(f"{name}: {cls.__doc__.strip().splitlines()[0].rstrip('.')}" for name, cls in REGISTRY.items())
+
+
+def make_strategy(name: str, grid, size, strips: int) -> Strategy:
+    if name not in REGISTRY:
+        raise ValueError(f"unknown balancing strategy '{name}' (known: {', '.join(REGISTRY)})")
+    return REGISTRY[name](tuple(grid), tuple(size), strips)
+
+
+__all__ = ["REGISTRY", "Strategy", "Configured", "make_strategy", "describe", "rank_pixels",
+           "Strips", "CostModel", "TimeFeedback", "Adaptive", "NoBalance"]

@@ -1,0 +1,83 @@
+"""``adaptive``: ``cost`` with per-object corrections learned from measured times (not
+bit-reproducible between runs: it follows the times each run measures)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multigpu.core.balance import Partition, partition
+from multigpu.strategies.base import rank_pixels
+from multigpu.strategies.cost import CostModel
+
+@dataclass
+class Adaptive(CostModel):
+    """``cost`` whose per-object costs are corrected by what each rank measured.
+
+    The fitted model sees triangles and rect pixels; it cannot see depth complexity, shading
+    or clipping cost, which differ between parts of a scene. After each frame, every rank's
+    measured time over its predicted time (``s_k``, normalized by their geometric mean, so only
+    the relative error is learned; the level stays the fit's job) multiplies the correction of
+    the objects it drew, by ``rate`` in log space (objects drawn by several ranks take the mean
+    of their logs). The correction rides with the objects to the next frame, where the camera
+    has moved a little, so the splits follow costs the model cannot predict. Corrections are
+    kept within [1/``limit``, ``limit``].
+    """
+
+    rate: float = 0.5
+    limit: float = 8.0
+
+    name = "adaptive"
+    reproducible = False  # it follows measured times, which differ between runs
+
+    def __post_init__(self):
+        super().__post_init__()
+        self.corr: np.ndarray | None = None
+        self._pred: np.ndarray | None = None
+        self._visible: np.ndarray | None = None
+
+    def plan(self, rects, tris, coverage: np.ndarray | None = None):
+        tris = np.asarray(tris)
+        n = len(tris)
+        if self.corr is None or len(self.corr) != n:
+            self.corr = np.ones(n)
+        a, b, c = self.coef
+        cov = np.ones(n) if coverage is None else np.nan_to_num(np.asarray(coverage, np.float64))
+        use_px = "pixels" in self.kept and b > 0
+        weights = tris * self.corr * (1.0 if a > 0 or not use_px else 0.0)
+        fill = cov * self.corr * (b / a if a > 0 else 1.0) if use_px else None
+        p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill)
+        vis = p.visible
+        loads = vis @ tris.astype(np.int64)
+        p = Partition(p.regions, loads, vis, p.splits, p.split_pixels, p.spans)
+        px, px_corr = rank_pixels(np.asarray(rects, np.float64), vis, p.regions, self.size,
+                                  np.stack([cov, cov * self.corr]), p.spans).T
+        self._features = (loads.astype(np.float64), px)  # the fit sees raw features
+        self._pred = a * (vis @ (tris * self.corr)) + b * px_corr + c
+        self._visible = vis
+        return p
+
+    def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
+        super().observe(frame, partition, times)
+        if self._pred is None or len(self._samples) < self.warmup:
+            return
+        t = np.asarray(times, dtype=np.float64)
+        pred = np.maximum(self._pred, 1e-9)
+        if not (np.isfinite(t).all() and (t > 0).all()):
+            return
+        log_s = np.log(t / pred)
+        log_s -= log_s.mean()  # relative error only
+        vis = self._visible
+        count = vis.sum(axis=0)
+        seen = count > 0
+        step = (log_s @ vis)[seen] / count[seen]  # mean log error over the ranks that drew it
+        self.corr[seen] *= np.exp(self.rate * step)
+        np.clip(self.corr, 1.0 / self.limit, self.limit, out=self.corr)
+
+    def report(self) -> dict:
+        doc = super().report()
+        if self.corr is not None:
+            q = np.percentile(self.corr, [5, 50, 95])
+            doc["correction_p5_p50_p95"] = [float(v) for v in q]
+        return doc

@@ -1,0 +1,75 @@
+"""The strategy contract: one small interface, like Equalizer's equalizers and IceT's strategies.
+
+A strategy has three hooks: ``plan`` before the frame (object rects and triangle counts in, a
+``Partition`` out), ``observe`` after it (the frame's measured per-rank render times, for
+strategies that learn), ``report`` for summary.json. Strategies are pure (no MPI, no GL).
+Every rank runs its own copy on the same gathered inputs, so all copies decide alike; all
+but ``adaptive`` are also bit-reproducible across reruns (``adaptive`` follows measured
+times, which differ from run to run).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+
+from multigpu.core.balance import Partition
+from multigpu.core.regions import pixel_spans
+
+
+@runtime_checkable
+class Strategy(Protocol):
+    """What the frame loop needs of a balancing strategy."""
+
+    name: ClassVar[str]
+    needs_coverage: ClassVar[bool]  # whether ``plan`` wants per-object silhouette coverage
+    reproducible: ClassVar[bool]  # same inputs, same partitions in every run
+
+    def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
+        """This frame's partition from (N, 4) normalized rects and (N,) triangle counts."""
+
+    def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
+        """Take frame ``frame``'s measured (K,) per-rank render times in ms."""
+
+    def report(self) -> dict:
+        """What the strategy decided or learned (for summary.json)."""
+
+
+@dataclass
+class Configured:
+    """Common state of the built-in strategies: the wall and the strip count, default hooks."""
+
+    grid: tuple[int, int]
+    size: tuple[int, int]
+    strips: int = 2048
+
+    name: ClassVar[str] = "base"
+    needs_coverage: ClassVar[bool] = False
+    reproducible: ClassVar[bool] = True
+
+    def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
+        """Default: measured times are not used."""
+
+    def report(self) -> dict:
+        return {"name": self.name}
+
+
+def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, size,
+                coverage: np.ndarray | None = None, spans: np.ndarray | None = None) -> np.ndarray:
+    """(K,) pixels each rank fills by the rect estimate: its visible objects' rects clipped to
+    its region, times their silhouette ``coverage`` (fraction of the rect, default 1), summed
+    (overlapping objects count once each: depth complexity). A (M, N) ``coverage`` gives (K, M):
+    several weightings of the same clipped areas in one pass. ``spans`` (the partition's) saves
+    recomputing the pixel spans."""
+    sp = pixel_spans(rects, size)[0].T if spans is None else spans  # (4, N) int32, once per frame
+    cov = None if coverage is None else np.asarray(coverage, dtype=np.float64)
+    out = np.zeros((len(regions),) + (() if cov is None or cov.ndim == 1 else cov.shape[:1]))
+    for k, (x0, y0, x1, y1) in enumerate(regions):  # K ranks, not objects
+        idx = np.flatnonzero(visible[k])
+        w = np.minimum(sp[2].take(idx), x1 - 1) - np.maximum(sp[0].take(idx), x0) + 1
+        h = np.minimum(sp[3].take(idx), y1 - 1) - np.maximum(sp[1].take(idx), y0) + 1
+        area = np.maximum(w, 0).astype(np.float64) * np.maximum(h, 0)
+        out[k] = area.sum() if cov is None else cov.take(idx, axis=-1) @ area
+    return out

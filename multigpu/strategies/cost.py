@@ -1,0 +1,115 @@
+"""``cost``: the strip balancer on a cost ``a*triangles + b*pixels (+ c)`` fitted online from
+measured per-rank render times; the pixel term is kept only where the scene needs it."""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from multigpu.core.balance import Partition, partition
+from multigpu.strategies.base import Configured, rank_pixels
+
+@dataclass
+class CostModel(Configured):
+    """Balance ``a*triangles + b*pixels``, the coefficients fitted online from measured times.
+
+    Every frame records, per rank, the triangles it drew, the pixels its objects' rects cover
+    in its region, and its measured render time. Least squares over the last ``window``
+    frames (``time = a*tris + b*pixels + c``) gives new coefficients, blended into the current
+    ones with ``damping`` so the splits do not oscillate. A term is kept only while it is
+    positive, explains at least ``min_share`` of the predicted time and is determined to
+    within ``max_rel_se`` (relative standard error); without the pixel term the plan is
+    exactly ``strips`` (triangle-bound scenes pay only the feature bookkeeping).
+    """
+
+    window: int = 30
+    damping: float = 0.3
+    min_share: float = 0.05
+    max_rel_se: float = 0.5
+    warmup: int = 3
+
+    name = "cost"
+    needs_coverage = True
+    reproducible = False  # its coefficients are fitted to measured times
+
+    def __post_init__(self):
+        self._samples: deque = deque(maxlen=self.window)
+        self._features: tuple[np.ndarray, np.ndarray] | None = None
+        self.coef = np.array([1.0, 0.0, 0.0])  # a (per triangle), b (per pixel), c
+        self.kept = ["triangles"]
+        self.why = "warming up: balancing on triangles until enough frames are measured"
+        self.history: list[tuple[str, ...]] = []
+
+    def plan(self, rects, tris, coverage: np.ndarray | None = None):
+        a, b = self.coef[0], self.coef[1]
+        cov = np.ones(len(tris)) if coverage is None else np.nan_to_num(np.asarray(coverage, np.float64))
+        if "pixels" in self.kept and b > 0:
+            # only the ratio matters: a triangle weighs 1 and a covered pixel b / a triangles
+            weights, fill = (tris, cov * (b / a)) if a > 0 else (np.zeros(len(tris)), cov)
+            p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill)
+            if a <= 0:  # loads stay triangle counts
+                p = Partition(p.regions, p.visible @ np.asarray(tris, np.int64), p.visible, p.splits, p.split_pixels)
+        else:
+            p = partition(rects, tris, self.grid, self.size, self.strips)
+        self._features = (p.loads.astype(np.float64), rank_pixels(np.asarray(rects, np.float64), p.visible,
+                                                                   p.regions, self.size, cov, p.spans))
+        return p
+
+    def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
+        if self._features is None:
+            return
+        tri, px = self._features
+        self._samples.append(np.column_stack([tri, px, np.asarray(times, np.float64)]))
+        if len(self._samples) >= self.warmup:
+            self._fit(np.concatenate(self._samples))
+        self.history.append(tuple(self.kept))
+
+    def _fit(self, data: np.ndarray) -> None:
+        y = data[:, 2]
+        cols = {"triangles": data[:, 0], "pixels": data[:, 1]}
+        terms = ["triangles", "pixels"]
+        while True:  # drop terms until every kept one is positive, material and stable
+            X = np.column_stack([*(cols[t] for t in terms), np.ones_like(y)])
+            scale = np.maximum(np.abs(X).max(axis=0), 1e-300)
+            beta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
+            beta = beta / scale
+            dof = max(len(y) - X.shape[1], 1)
+            resid = y - X @ beta
+            sigma2 = float(resid @ resid) / dof
+            try:
+                cov = sigma2 * np.linalg.inv(X.T @ X)
+                se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+            except np.linalg.LinAlgError:
+                se = np.full(X.shape[1], np.inf)
+            pred = X @ beta
+            verdicts = {}
+            for i, t in enumerate(terms):
+                share = float(np.mean(beta[i] * X[:, i]) / max(np.mean(pred), 1e-12))
+                rel = float(se[i] / beta[i]) if beta[i] > 0 else np.inf
+                verdicts[t] = (beta[i] > 0 and share >= self.min_share and rel <= self.max_rel_se, share, rel)
+            bad = [t for t in terms if not verdicts[t][0]]
+            if not bad or len(terms) == 1:
+                break
+            # drop the weakest failing term and refit
+            terms.remove(min(bad, key=lambda t: verdicts[t][1]))
+        new = np.zeros(3)
+        for i, t in enumerate(terms):
+            new[0 if t == "triangles" else 1] = max(beta[i], 0.0)
+        new[2] = beta[-1]
+        if new[0] <= 0 and new[1] <= 0:  # nothing explains the time: stay on triangles
+            new[0] = 1.0
+        self.coef = (1 - self.damping) * self.coef + self.damping * new
+        if "pixels" not in terms:
+            self.coef[1] = 0.0
+        self.kept = terms if verdicts[terms[0]][0] else ["triangles"]
+        self.why = "; ".join(f"{t}: share {v[1]:.1%}, rel. s.e. {v[2]:.2f}, {'kept' if t in self.kept else 'dropped'}"
+                             for t, v in verdicts.items())
+
+    def report(self) -> dict:
+        frames = max(len(self.history), 1)
+        pixel_frames = sum("pixels" in h for h in self.history)
+        return {"name": self.name, "terms": list(self.kept), "coef_ms": {"per_triangle": float(self.coef[0]),
+                "per_pixel": float(self.coef[1]), "per_rank": float(self.coef[2])}, "why": self.why,
+                "pixel_term_frames_share": pixel_frames / frames}
