@@ -51,7 +51,8 @@ def parts() -> dict[str, trimesh.Trimesh]:
         p[f"fin_{k}"] = _at(trimesh.creation.box([0.56, 0.02, 0.05]),
                             [-0.45, 0.3 + 0.19 * np.cos(a), 0.19 * np.sin(a)], (np.degrees(-a), x))
     for k in range(6):  # a pipe run leaving the outlet
-        p[f"pipe_{k}"] = _at(trimesh.creation.cylinder(0.07, 0.3, sections=32), [0.28 + 0.3 * (k + 0.5), 1.1, 0], (90, z))
+        pipe = trimesh.creation.cylinder(0.07, 0.3, sections=32)
+        p[f"pipe_{k}"] = _at(pipe, [0.28 + 0.3 * (k + 0.5), 1.1, 0], (90, z))
     p["gauge"] = _at(trimesh.creation.cylinder(0.05, 0.02, sections=24), [0.28, 0.86, 0.09 + rng.uniform(0, 1e-3)],
                      (90, x))
     return p

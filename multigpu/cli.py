@@ -16,8 +16,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from multigpu.errors import InputError, as_flags
 from multigpu.core.memory import keep_heap
+from multigpu.errors import InputError, as_flags
 
 
 def _defaults(cls) -> dict:
@@ -209,9 +209,9 @@ def main(argv: list[str] | None = None) -> int:
 def _depth(a) -> int:
     from pathlib import Path
 
-    from multigpu.gpu import depth
     from multigpu.config import parse_pair
-    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.gpu import depth
+    from multigpu.scene.models import load_scene
     from multigpu.scene.paths import generate
 
     size = parse_pair(a.size, "--size")
@@ -227,7 +227,7 @@ def _depth(a) -> int:
     return 0
 
 
-def walk_config(a) -> "WalkConfig":
+def walk_config(a):
     """The walkthrough's flags as a validated configuration (no MPI: testable in one process)."""
     from multigpu.config import WalkConfig, parse_pair, parse_vec3
 
@@ -324,15 +324,18 @@ def _scene_info(a) -> int:
     tris = scene.tris
     print(f"scene      {scene.name}")
     print(f"objects    {scene.n_objects}")
-    print(f"triangles  {scene.n_triangles} (per object: min {tris.min()}, median {int(sorted(tris)[len(tris) // 2])}, max {tris.max()})")
+    median = int(sorted(tris)[len(tris) // 2]) if len(tris) else 0
+    print(f"triangles  {scene.n_triangles} (per object: min {tris.min()}, median {median}, max {tris.max()})")
     print(f"vertices   {scene.vertices.shape[0]}")
     print(f"bounds     {lo.round(3).tolist()} .. {hi.round(3).tolist()}")
     print(f"up         {axis_name(scene.meta.get('up', [0, 0, 1]))} ({scene.meta.get('up_source', 'as generated')})")
     objs = scene.meta.get("objects", {})
     if objs:
         print(f"split      {objs['split']}: {objs['modelled']} objects as modelled -> {objs['objects']}; {objs['why']}")
-    print(f"memory     {scene.nbytes / 2**20:.1f} MiB in arrays ({scene.nbytes / max(scene.n_triangles, 1):.1f} B/triangle), peak RSS {peak:.0f} MiB")
-    print(f"load       {info['seconds']:.3f} s ({'cache hit' if info['cached'] else 'built'}{', ' + info['cache'] if info['cache'] else ''})")
+    per_tri = scene.nbytes / max(scene.n_triangles, 1)
+    print(f"memory     {scene.nbytes / 2**20:.1f} MiB in arrays ({per_tri:.1f} B/triangle), peak RSS {peak:.0f} MiB")
+    where = ", " + info["cache"] if info["cache"] else ""
+    print(f"load       {info['seconds']:.3f} s ({'cache hit' if info['cached'] else 'built'}{where})")
     for w in scene.meta.get("warnings", []):
         print(f"warning    {w}")
     return 0

@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+
 from multigpu.errors import InputError
 from multigpu.scene.models import SceneSpec
+from multigpu.scene.paths import DEFAULT_FRAMES  # noqa: F401  (frames of generated paths; re-exported for the CLI)
 from multigpu.strategies import REGISTRY
 
-
-from multigpu.scene.paths import DEFAULT_FRAMES  # noqa: F401  (frames of generated paths; re-exported for the CLI)
 #: rank 0 rewrites summary.json every this many frames (and whenever the run ends)
 SUMMARY_EVERY = 50
 #: setup (building a scene cache, loading a big model) may take this long on a live rank;

@@ -7,14 +7,13 @@ import pytest
 
 from multigpu.core.balance import partition
 from multigpu.core.bounds import BoxProjector, SphereProjector
-from multigpu.core.camera import Camera
-from multigpu.errors import InputError
-from multigpu.scene.models import SceneSpec, load_scene, load_model
-from multigpu.scene.paths import walkthrough
+from multigpu.core.camera import Camera, frame_matrices
 from multigpu.core.regions import overlaps, pixel_spans
-from multigpu.core.camera import frame_matrices
-from multigpu.gpu.render import RegionRenderer, choose_method, create_context
 from multigpu.core.triangles import triangle_objects, triangle_rects
+from multigpu.errors import InputError
+from multigpu.gpu.render import RegionRenderer, choose_method, create_context
+from multigpu.scene.models import SceneSpec, load_model, load_scene
+from multigpu.scene.paths import walkthrough
 
 SIZE = (160, 120)
 GRID = (2, 2)

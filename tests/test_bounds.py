@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from multigpu.core.bounds import BoxProjector, SphereProjector, project_boxes, project_spheres
-from multigpu.core.memory import keep_heap
 from multigpu.core.camera import look_at, perspective
 
 V = look_at([0, -10, 2], [0, 0, 0], [0, 0, 1])

@@ -5,13 +5,13 @@ import pytest
 
 from multigpu.core.balance import partition
 from multigpu.core.bounds import BoxProjector
-from multigpu.scene.cluster import split_objects
+from multigpu.core.camera import frame_matrices
+from multigpu.core.triangles import triangle_objects
 from multigpu.errors import InputError
+from multigpu.gpu.render import RegionRenderer, create_context
+from multigpu.scene.cluster import split_objects
 from multigpu.scene.models import SceneSpec, load_scene
 from multigpu.scene.paths import walkthrough
-from multigpu.core.camera import frame_matrices
-from multigpu.gpu.render import RegionRenderer, create_context
-from multigpu.core.triangles import triangle_objects
 
 
 @pytest.fixture(scope="module")

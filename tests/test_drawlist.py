@@ -1,7 +1,8 @@
 """Run-merged draw commands draw exactly the triangles of the masked objects."""
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from multigpu.core.drawlist import DrawList, morton_order
 from multigpu.scene.plant import generate_plant

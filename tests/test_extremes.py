@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from multigpu.core.balance import partition, partition_tiles
-from multigpu.studies.bench import synthetic_objects
 from multigpu.core.bounds import BoxProjector, SphereProjector
 from multigpu.core.camera import look_at, perspective
+from multigpu.studies.bench import synthetic_objects
 
 BMIN, BMAX, CENTERS, RADII, TRIS = synthetic_objects(3000, seed=9)
 EYE, TARGET = np.array([-40.0, -60, 40]), np.array([100.0, 60, 0])

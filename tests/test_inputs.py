@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from multigpu.errors import InputError, as_flags, check_file
+from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, write_json
 from multigpu.scene.models import SceneSpec, load_scene
 from multigpu.scene.paths import load_path
-from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, write_json
 
 
 def _path_file(tmp_path, text):
@@ -26,9 +26,11 @@ KEYS = [{"position": [0, 0, 0], "target": [1, 0, 0]}, {"position": [0, 1, 0], "t
 
 @pytest.mark.parametrize("doc,needle", [
     ('{"frames": %s, "keyframes": %s}' % ("9" * 400, json.dumps(KEYS)), "field 'frames' must be an integer"),
-    ('{"frames": 1000000000000, "keyframes": %s}' % json.dumps(KEYS), "field 'frames' must be an integer in 1..10000000"),
+    ('{"frames": 1000000000000, "keyframes": %s}' % json.dumps(KEYS),
+     "field 'frames' must be an integer in 1..10000000"),
     ('{"frames": 1e12, "keyframes": %s}' % json.dumps(KEYS), "field 'frames' must be an integer"),
-    ('{"keyframes": [{"position": [%s, 0, 0], "target": [1, 0, 0]}]}' % ("1" * 400), "position must be 3 finite numbers"),
+    ('{"keyframes": [{"position": [%s, 0, 0], "target": [1, 0, 0]}]}' % ("1" * 400),
+     "position must be 3 finite numbers"),
     ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
     ('{"fov": %s, "keyframes": %s}' % ("9" * 5000, json.dumps(KEYS)), "not a camera path"),
 ])

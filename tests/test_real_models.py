@@ -1,22 +1,19 @@
 """Models as users bring them: any scale, their own up axis, one big mesh, truncated files,
 and the model shipped in models/ (issue: real models)."""
 
-import io
-import json
-from contextlib import redirect_stdout
 from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
+from multigpu.cli import main as cli
 from multigpu.core.bounds import make_projector
 from multigpu.core.camera import frame_matrices
-from multigpu.cli import main as cli
 from multigpu.errors import InputError
+from multigpu.parallel.report import COLUMNS, summarize
 from multigpu.scene.models import SceneSpec, axis_name, load_scene
 from multigpu.scene.paths import orbit, walkthrough
-from multigpu.parallel.report import COLUMNS, summarize
 
 ROOT = Path(__file__).resolve().parents[1]
 PUMP = ROOT / "models" / "pump.glb"

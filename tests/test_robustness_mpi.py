@@ -7,9 +7,9 @@ import signal
 import time
 
 import pytest
+from mpirun import SMALL, run_mpi, start_mpi
 
 from multigpu.parallel.report import read_timings
-from mpirun import SMALL, run_mpi, start_mpi
 
 pytestmark = pytest.mark.mpi
 
@@ -209,8 +209,9 @@ def test_disk_full_keeps_whole_rows_and_no_temp_files(tmp_path):
     """RLIMIT_FSIZE makes writes past 20 kB fail (EFBIG, as a full disk gives ENOSPC)."""
     import subprocess
 
-    from multigpu.parallel.mpirun import find_launcher
     from mpirun import ROOT
+
+    from multigpu.parallel.mpirun import find_launcher
 
     out = tmp_path / "o"
     launcher = find_launcher()

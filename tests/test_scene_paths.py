@@ -22,10 +22,10 @@ def test_plant_deterministic_and_scales():
     assert tris.max() > 50 * np.median(tris)  # heavy tail
     two = generate_plant(60_000, copies=2)
     assert two.bounds[1, 0] - two.bounds[0, 0] > 1.8 * (a.bounds[1, 0] - a.bounds[0, 0])
-    # layout: one indirect command per object, indices within each object's vertices
-    cmd = big.draw_commands()
-    assert cmd.shape == (big.n_objects, 5) and (cmd[:, 4] == np.arange(big.n_objects)).all()
-    assert big.indices.max() < big.vertices.shape[0]
+    # layout: each object's index range lies in the index buffer, its indices within the vertices
+    assert (big.first_index + big.index_count <= big.indices.size).all() and (big.index_count % 3 == 0).all()
+    assert (np.diff(big.first_index) == big.index_count[:-1]).all()  # contiguous, in object order
+    assert (big.indices.astype(np.int64) + np.repeat(big.base_vertex, big.index_count)).max() < big.vertices.shape[0]
 
 
 def _mesh():

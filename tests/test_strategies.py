@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from multigpu.core.balance import partition, tree_partition
+from multigpu.core.regions import pixel_spans
 from multigpu.core.splits import fill_prefix, strip_chooser
 from multigpu.strategies import REGISTRY, Adaptive, CostModel, TimeFeedback, make_strategy, rank_pixels
-from multigpu.core.regions import pixel_spans
 
 
 def workload(n=400, seed=0):

@@ -7,7 +7,8 @@ from multigpu.core.balance import partition
 from multigpu.core.regions import tile_regions, transfers
 from multigpu.core.tree import GpuTree
 
-SHAPES = [(1, 1), (1, 2), (2, 1), (2, 2), (1, 3), (3, 1), (1, 5), (5, 1), (1, 7), (7, 1), (2, 3), (3, 2), (4, 4), (3, 5)]
+SHAPES = [(1, 1), (1, 2), (2, 1), (2, 2), (1, 3), (3, 1), (1, 5), (5, 1), (1, 7), (7, 1), (2, 3), (3, 2), (4, 4),
+          (3, 5)]
 
 
 @pytest.mark.parametrize("rows,cols", SHAPES)

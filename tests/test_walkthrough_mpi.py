@@ -5,9 +5,9 @@ import json
 
 import numpy as np
 import pytest
+from mpirun import SMALL, read_png, run_mpi
 
 from multigpu.parallel.report import COLUMNS
-from mpirun import SMALL, read_png, run_mpi
 
 pytestmark = pytest.mark.mpi
 W, H = 120, 96
@@ -103,7 +103,8 @@ def test_strips_regions_tile_display_and_exchange_bytes(tmp_path):
 
 
 def test_rank_count_mismatch_is_a_clear_error(tmp_path):
-    res = run_mpi(3, ["walkthrough", *SMALL, "--grid", "2x2", "--frames", "2", "--out", str(tmp_path / "x")], timeout=60)
+    args = ["walkthrough", *SMALL, "--grid", "2x2", "--frames", "2", "--out", str(tmp_path / "x")]
+    res = run_mpi(3, args, timeout=60)
     assert res.returncode != 0
     assert "--grid 2x2 needs 4 ranks but the job has 3" in res.stderr
     assert res.stderr.count("needs 4 ranks") == 1 and "Traceback" not in res.stderr

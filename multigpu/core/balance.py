@@ -87,7 +87,7 @@ def validate_inputs(rects, tris, grid, size, strips) -> tuple[np.ndarray, np.nda
     if tris.size and tris.min() < 0:
         raise ValueError("tris must be non-negative (a negative triangle count was given)")
     if tris.dtype.kind == "i" and tris.size and int(tris.sum(dtype=np.uint64)) >= MAX_TOTAL:
-        raise ValueError(f"the triangle total exceeds 2**62 (sums could overflow int64)")
+        raise ValueError("the triangle total exceeds 2**62 (sums could overflow int64)")
     with np.errstate(invalid="ignore"):
         if np.any(rects[:, 0] > rects[:, 2]) or np.any(rects[:, 1] > rects[:, 3]):
             raise ValueError("rects has inverted rows (xmin > xmax or ymin > ymax)")

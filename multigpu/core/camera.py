@@ -64,15 +64,6 @@ def frustum(left: float, right: float, bottom: float, top: float, near: float, f
     return m
 
 
-def sub_frustum(fov_deg: float, aspect: float, near: float, far: float, region, size) -> np.ndarray:
-    """Off-axis projection of a pixel region ``[x0, y0, x1, y1)`` of a ``size`` display."""
-    W, H = size
-    t = near * np.tan(np.radians(fov_deg) / 2.0)
-    r = t * aspect
-    x0, y0, x1, y1 = region
-    return frustum(-r + 2 * r * x0 / W, -r + 2 * r * x1 / W, -t + 2 * t * y0 / H, -t + 2 * t * y1 / H, near, far)
-
-
 def region_clip(region, size) -> np.ndarray:
     """4x4 clip-space map taking the full display's NDC over ``region`` to [-1, 1]^2: applied
     after the full projection it gives the region's off-axis sub-frustum (glFrustum over the

@@ -30,10 +30,6 @@ class ParInfo:
     side: str
     node: int
 
-    @property
-    def bal_ratio(self) -> float:
-        return self.nc_l / self.nc_r
-
 
 @dataclass
 class Node:

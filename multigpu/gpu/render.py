@@ -19,8 +19,8 @@ import os
 
 import numpy as np
 
-from multigpu.core.drawlist import DrawList
 from multigpu.core.camera import model_view, region_clip
+from multigpu.core.drawlist import DrawList
 from multigpu.errors import InputError
 
 EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL drivers "
@@ -99,7 +99,8 @@ def create_context(device: int | None = None):
     try:
         ctx = moderngl.create_standalone_context(backend="egl", require=430, device_index=index)
     except Exception as exc:
-        raise EglUnavailable(f"{EGL_HELP} ({exc.__class__.__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''})") from None
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise EglUnavailable(f"{EGL_HELP} ({exc.__class__.__name__}: {why})") from None
     return ctx, index
 
 
@@ -183,7 +184,8 @@ class RegionRenderer:
         if need[0] <= fw and need[1] <= fh:
             return
         if self.method != "scissor":
-            need = (min(self.chunk, max(need[0], fw, need[0] * 5 // 4)), min(self.chunk, max(need[1], fh, need[1] * 5 // 4)))
+            grow = lambda n, f: min(self.chunk, max(n, f, n * 5 // 4))
+            need = (grow(need[0], fw), grow(need[1], fh))
         if self.fbo is not None:
             for att in (*self.fbo.color_attachments, self.fbo.depth_attachment):
                 att.release()

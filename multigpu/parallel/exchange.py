@@ -96,7 +96,8 @@ def broadcast_partition(comm, part, k: int, n: int, timeout: float):
     head = 8 * (ints + floats)
     buf = np.empty(head + (k * n + 7) // 8, dtype=np.uint8)
     if comm.Get_rank() == 0:
-        buf[:8 * ints] = np.concatenate([part.regions.ravel(), part.loads, part.split_pixels]).astype(np.int64).view(np.uint8)
+        head_ints = np.concatenate([part.regions.ravel(), part.loads, part.split_pixels]).astype(np.int64)
+        buf[:8 * ints] = head_ints.view(np.uint8)
         buf[8 * ints:head] = np.asarray(part.splits, dtype=np.float64).view(np.uint8)
         buf[head:] = np.packbits(part.visible.ravel())
     wait_all([comm.Ibcast([buf, MPI.BYTE], root=0)], timeout, "partition broadcast")

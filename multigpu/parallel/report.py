@@ -54,7 +54,8 @@ class TimingWriter:
                 os.ftruncate(self.fd, self.size)
             except OSError:
                 pass
-            raise OSError(exc.errno, f"{exc.strerror}: writing {self.path} (kept {self.size} bytes of whole rows)") from None
+            kept = f"kept {self.size} bytes of whole rows"
+            raise OSError(exc.errno, f"{exc.strerror}: writing {self.path} ({kept})") from None
         self.size += len(data)
 
     def close(self) -> None:
@@ -122,7 +123,8 @@ def table(summary: dict, title: str = "") -> str:
     w = summary["wall"]
     head = f"{'Frame(ms)':>10} {'FPS':>7} {'LoadBal':>8} {'Render':>8} {'Sync':>8} {'Exchange':>9} {'Display':>8}"
     row = (f"{summary['frame_ms']:10.2f} {summary['fps']:7.2f} {w['load_balancing_ms']:8.2f} "
-           f"{w['rendering_ms']:8.2f} {w['synchronization_ms']:8.2f} {w['frame_exchange_ms']:9.2f} {w['display_ms']:8.2f}")
+           f"{w['rendering_ms']:8.2f} {w['synchronization_ms']:8.2f} {w['frame_exchange_ms']:9.2f} "
+           f"{w['display_ms']:8.2f}")
     c = summary["cpu"]
     lines = [title] if title else []
     lines += [f"{summary['frames']} frames x {summary['ranks']} ranks. Wall-clock per-rank means (ms):", head, row,

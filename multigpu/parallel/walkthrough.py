@@ -15,21 +15,20 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
+from multigpu.config import SUMMARY_EVERY, WalkConfig, setup_timeout
 from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
 from multigpu.core.camera import frame_matrices
-from multigpu.config import SUMMARY_EVERY, WalkConfig, setup_timeout
+from multigpu.core.regions import tile_regions, transfers
 from multigpu.errors import InputError, as_flags
 from multigpu.parallel.exchange import barrier, broadcast_partition, exchange, wait_all
-from multigpu.scene.models import axis_name, load_scene
 from multigpu.parallel.mosaic import overlay, save_png, stitch
 from multigpu.parallel.outdir import OutputDir
-from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
-from multigpu.core.regions import tile_regions, transfers
 from multigpu.parallel.report import COLUMNS, TimingWriter, summarize, table, write_json
+from multigpu.scene.models import axis_name, load_scene
+from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 from multigpu.strategies import make_strategy
 
 ERROR_BYTES = 1024  # an agreed setup error travels as a fixed-size buffer

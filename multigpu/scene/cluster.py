@@ -14,10 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from multigpu.core.drawlist import morton_codes
+from multigpu.core.triangles import triangle_objects
 from multigpu.errors import InputError
 from multigpu.scene.layout import Scene
-from multigpu.core.triangles import triangle_objects
-
 
 #: automatic clusters are never smaller than this (tiny pieces only add per-object cost)
 MIN_CLUSTER = 256

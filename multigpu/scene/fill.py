@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.scene.plant import box, instance, uv_sphere, z_rotation
 from multigpu.scene.layout import Scene, assemble
+from multigpu.scene.plant import box, instance, uv_sphere, z_rotation
 
 
 def generate_fill(triangles: int, panels: int = 24, seed: int = 0) -> Scene:

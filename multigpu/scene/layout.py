@@ -91,17 +91,6 @@ class Scene:
         """(V, 3) float64 vertex positions in world space."""
         return self.vertices[:, :3].astype(np.float64) + self.origin
 
-    def draw_commands(self) -> np.ndarray:
-        """(N, 5) uint32 indirect commands (count, instances, first, base vertex, base instance)."""
-        n = self.n_objects
-        cmd = np.empty((n, 5), dtype=np.uint32)
-        cmd[:, 0] = self.index_count
-        cmd[:, 1] = 1
-        cmd[:, 2] = self.first_index
-        cmd[:, 3] = self.base_vertex
-        cmd[:, 4] = np.arange(n, dtype=np.uint32)
-        return cmd
-
     def save(self, path: Path) -> None:
         """Write the scene as one .npz, atomically (temp file, then rename)."""
         path = Path(path)

@@ -59,7 +59,8 @@ class SceneSpec:
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
-            raise InputError.of("scene", f"must be one of {', '.join(BUILTIN)} (or give a model file), got '{self.scene}'")
+            known = ", ".join(BUILTIN)
+            raise InputError.of("scene", f"must be one of {known} (or give a model file), got '{self.scene}'")
         if not re.fullmatch(r"auto|components|grid:[1-9][0-9]*", self.split):
             raise InputError.of("split", f"must be 'auto', 'components' or 'grid:N' with N >= 1, got '{self.split}'")
         if self.up is not None and not re.fullmatch(r"[+-]?[xyz]", self.up):
@@ -92,7 +93,8 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
     if spec.model is not None:
         src = check_file(spec.model, "model", "model file")
         if src.suffix.lower() not in FORMATS:
-            raise InputError.of("model", f"{src}: unsupported extension '{src.suffix}' (use {', '.join(sorted(FORMATS))})")
+            known = ", ".join(sorted(FORMATS))
+            raise InputError.of("model", f"{src}: unsupported extension '{src.suffix}' (use {known})")
         st = src.stat()
         key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, cluster, wall)
         name = f"{src.stem}-{key}.npz"
@@ -184,7 +186,8 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
         why = str(exc).splitlines()[0] if str(exc) else "corrupt file"
         promise = (f"; the header promises {declared[0]} vertices and {declared[1]} faces: truncated or corrupt"
                    if declared and declared[0] >= 0 else "")
-        raise InputError.of("model", f"{path}: cannot read as {kind} ({exc.__class__.__name__}: {why}){promise}") from None
+        what = f"{exc.__class__.__name__}: {why}"
+        raise InputError.of("model", f"{path}: cannot read as {kind} ({what}){promise}") from None
     warnings: list[str] = []
     if isinstance(loaded, trimesh.Scene):
         meshes = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh)]

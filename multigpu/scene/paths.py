@@ -75,7 +75,8 @@ def catmull_rom(points: np.ndarray, t: np.ndarray) -> np.ndarray:
     i = np.clip(np.floor(t).astype(int), 0, k - 2)
     u = (t - i)[:, None]
     p0, p1, p2, p3 = ext[i], ext[i + 1], ext[i + 2], ext[i + 3]
-    return 0.5 * ((2 * p1) + (-p0 + p2) * u + (2 * p0 - 5 * p1 + 4 * p2 - p3) * u**2 + (-p0 + 3 * p1 - 3 * p2 + p3) * u**3)
+    a, b = 2 * p0 - 5 * p1 + 4 * p2 - p3, -p0 + 3 * p1 - 3 * p2 + p3
+    return 0.5 * ((2 * p1) + (-p0 + p2) * u + a * u**2 + b * u**3)
 
 
 def from_keyframes(keys: list[dict], frames: int, defaults: dict) -> CameraPath:
@@ -305,7 +306,8 @@ def look_at_something(path: CameraPath, scene, aspect: float = 1.0) -> CameraPat
             if ((r[:, 2] >= 0) & (r[:, 0] <= 1) & (r[:, 3] >= 0) & (r[:, 1] <= 1)).any():
                 continue
         d = np.linalg.norm(scene.centers - path.position[f], axis=1) - scene.radii
-        near = int(np.argmin(np.where(d > path.near[f] * 2, d, np.inf)) if (d > path.near[f] * 2).any() else np.argmin(d))
+        ahead = d > path.near[f] * 2  # objects not already at the eye
+        near = int(np.argmin(np.where(ahead, d, np.inf)) if ahead.any() else np.argmin(d))
         path.target[f] = scene.centers[near]
     return path
 

@@ -187,6 +187,15 @@ def generate_plant(triangles: int, copies: int = 1, seed: int = 0) -> Scene:
 
 
 def _one_plant(rng, budget: float, origin: np.ndarray) -> list:
+    """One plant's parts; the generator's draws happen in a fixed order (deterministic)."""
+    parts = _landmarks(rng, budget, origin)
+    n = _piping(rng, budget, origin, parts)
+    _structure(rng, n, origin, parts)
+    return parts
+
+
+def _landmarks(rng, budget: float, origin: np.ndarray) -> list:
+    """The few huge machines (the heavy tail) and the boiler tower with its chimney."""
     parts = []
     # heavy tail: a few huge machines (turbine casings, generators), up to 1e5 triangles each
     big_tris = int(np.clip(budget * 0.04, 200, 100_000))
@@ -205,7 +214,12 @@ def _one_plant(rng, budget: float, origin: np.ndarray) -> list:
     t0 = np.r_[TOWER, 0.0] + origin
     parts.append(instance(cyl, np.array([[6.0, 6.0, 60.0], [2.5, 2.5, 95.0]]), np.stack([_AXES[0]] * 2),
                           np.stack([t0, t0 + [14, 0, 0]]), np.array([[0.75, 0.72, 0.68], [0.6, 0.3, 0.25]])))
+    return parts
 
+
+def _piping(rng, budget: float, origin: np.ndarray, parts: list) -> dict:
+    """Pipes at heavy-tailed tessellation levels, elbows, valves and tanks; returns the part
+    counts of every kind (the structure uses the rest)."""
     # heavy-tailed tessellation levels for pipes and tanks
     levels = np.array([6, 8, 12, 16, 24, 32, 48, 64, 128])
     probs = 1.0 / levels**1.6
@@ -249,7 +263,11 @@ def _one_plant(rng, budget: float, origin: np.ndarray) -> list:
     r = rng.uniform(1, 4, m)
     parts.append(instance(cylinder(48), np.c_[r, r, rng.uniform(3, 12, m)], np.tile(_AXES[0], (m, 1, 1)), pos,
                           _palette(rng, m, [0.8, 0.8, 0.78])))
+    return n
 
+
+def _structure(rng, n: dict, origin: np.ndarray, parts: list) -> None:
+    """Machinery housings, hall girders, the tower frame, stairs, railings and the ground slab."""
     # boxes: machinery housings in the halls, sheds and containers in the yards
     m = n["box"]
     pos = _zone_points(rng, m, 0.5, 0.0, origin)
@@ -290,4 +308,3 @@ def _one_plant(rng, budget: float, origin: np.ndarray) -> list:
     # the ground slab of the plant
     slab = np.r_[FOOTPRINT / 2, -0.25] + origin
     parts.append(instance(box(), np.array([[*FOOTPRINT, 0.5]]), _AXES[:1], slab[None], np.array([[0.35, 0.37, 0.35]])))
-    return parts

@@ -11,6 +11,7 @@ from multigpu.core.balance import Partition, partition
 from multigpu.strategies.base import rank_pixels
 from multigpu.strategies.cost import CostModel
 
+
 @dataclass
 class Adaptive(CostModel):
     """``cost`` whose per-object costs are corrected by what each rank measured.

@@ -11,6 +11,7 @@ import numpy as np
 from multigpu.core.balance import Partition, partition
 from multigpu.strategies.base import Configured, rank_pixels
 
+
 @dataclass
 class CostModel(Configured):
     """Balance ``a*triangles + b*pixels``, the coefficients fitted online from measured times.

@@ -7,6 +7,7 @@ import numpy as np
 from multigpu.core.balance import Partition, partition_tiles
 from multigpu.strategies.base import Configured
 
+
 class NoBalance(Configured):
     """The paper's baseline: each rank renders exactly its own display tile."""
 

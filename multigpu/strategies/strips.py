@@ -7,6 +7,7 @@ import numpy as np
 from multigpu.core.balance import Partition, partition
 from multigpu.strategies.base import Configured
 
+
 class Strips(Configured):
     """Dong & Peng's GPU-tree strip balancer on triangle counts."""
 

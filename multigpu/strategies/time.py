@@ -11,6 +11,7 @@ from multigpu.core.balance import Partition, partition, tree_partition
 from multigpu.core.splits import time_chooser
 from multigpu.strategies.base import Configured
 
+
 @dataclass
 class TimeFeedback(Configured):
     """Equalizer's load equalizer, as the state-of-the-art baseline: no scene knowledge, the

@@ -25,8 +25,8 @@ import numpy as np
 
 from multigpu.core.balance import partition
 from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
-from multigpu.studies.bench import median_ms
 from multigpu.core.regions import overlaps, pixel_spans
+from multigpu.studies.bench import median_ms
 from multigpu.studies.tables import md_table, write_csv
 
 
@@ -125,7 +125,8 @@ def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
     vw, vh = limits["viewport"]
     rb = limits["renderbuffer"]
     big = (2 * rb, 1024)
-    beyond = ", ".join(f"{m}: {_try_method(choose_method, m, big, limits)}" for m in ("auto", "scissor", "viewport", "offaxis"))
+    methods = ("auto", "scissor", "viewport", "offaxis")
+    beyond = ", ".join(f"{m}: {_try_method(choose_method, m, big, limits)}" for m in methods)
     return "\n".join([
         f"The default plant ({scene.n_triangles} triangles), {len(frames)} walkthrough frames, balanced with "
         "`strips`; each rank's region rendered with its own draw list and composed, against a one-rank render "
@@ -324,7 +325,6 @@ def table_offsets(s: Sizes, ctx, out: Path) -> str:
                    ("same_partition", "Same partition", "")])])
 
 
-TABLES = ("subfrustum", "balance", "needed", "offsets")
 
 
 def run(out: Path, page: Path | None, quick: bool = False) -> int:
@@ -338,7 +338,8 @@ def run(out: Path, page: Path | None, quick: bool = False) -> int:
     ctx, _ = create_context()
     sections = []
     t_all = time.perf_counter()
-    for name, fn, title in (("subfrustum", lambda: table_subfrustum(s, ctx, out), "1. Sub-frustum rendering: pixels against speed"),
+    for name, fn, title in (("subfrustum", lambda: table_subfrustum(s, ctx, out),
+                             "1. Sub-frustum rendering: pixels against speed"),
                             ("balance", lambda: table_balance(s, out), "2. Balance accuracy against balancer cost"),
                             ("needed", lambda: table_needed(s, out), "3. Only what a scene requires"),
                             ("offsets", lambda: table_offsets(s, ctx, out), "4. Coordinates far from the origin")):
@@ -346,7 +347,8 @@ def run(out: Path, page: Path | None, quick: bool = False) -> int:
         print(f"accuracy: {name} ...", flush=True)
         md = fn()
         dt = time.perf_counter() - t
-        sections.append(f"## {title}\n\n{md}\n\n_{dt:.0f} s wall; data: `{os.path.relpath(out / (name + '.csv'), page.parent)}`._\n")
+        data = os.path.relpath(out / (name + ".csv"), page.parent)
+        sections.append(f"## {title}\n\n{md}\n\n_{dt:.0f} s wall; data: `{data}`._\n")
         print(f"accuracy: {name}: {dt:.0f} s", flush=True)
     cmd = "launch/accuracy" + (" --quick" if quick else "")
     page.parent.mkdir(parents=True, exist_ok=True)

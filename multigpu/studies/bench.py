@@ -52,7 +52,8 @@ def bench_balance(quick: bool) -> list[dict]:
     heap = keep_heap()
     print("per-frame wall time, median of 7; bounds prepared once per scene (not timed); "
           f"allocator: {'heap kept (memory.keep_heap)' if heap else 'glibc default (MULTIGPU_MALLOC=default)'}")
-    print(f"{'objects':>9} {'grid':>5} {'bounds':>7} {'project ms':>11} {'partition ms':>13} {'total ms':>9} {'target ms':>10}")
+    print(f"{'objects':>9} {'grid':>5} {'bounds':>7} {'project ms':>11} {'partition ms':>13} {'total ms':>9} "
+          f"{'target ms':>10}")
     for n in sizes:
         bmin, bmax, c, r, tris = synthetic_objects(n)
         for grid in [(2, 2), (4, 4)]:
@@ -83,16 +84,17 @@ print(json.dumps({"seconds": dt, "cached": info["cached"], "triangles": scene.n_
 
 def bench_scene(quick: bool) -> list[dict]:
     """First (built) and cached load of the plant, each in a fresh process for honest peak memory."""
-    import os
     import tempfile
 
     sizes = [100_000, 1_000_000] if quick else [1_000_000, 10_000_000]
     rows = []
-    base = json.loads(subprocess.run([sys.executable, "-c", "import resource, json, multigpu.scene.models, multigpu.scene.plant;"
+    base = json.loads(subprocess.run([sys.executable, "-c",
+                                      "import resource, json, multigpu.scene.models, multigpu.scene.plant;"
                                       "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)"],
                                      capture_output=True, text=True, check=True).stdout)
     print(f"interpreter + imports peak RSS: {base / 2**20:.0f} MiB")
-    print(f"{'target tris':>12} {'triangles':>10} {'load':>7} {'seconds':>8} {'arrays MiB':>11} {'B/tri':>6} {'peak RSS MiB':>13} {'(RSS-base)/tri':>15}")
+    print(f"{'target tris':>12} {'triangles':>10} {'load':>7} {'seconds':>8} {'arrays MiB':>11} {'B/tri':>6} "
+          f"{'peak RSS MiB':>13} {'(RSS-base)/tri':>15}")
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "MULTIGPU_CACHE": cache}
         for n in sizes:

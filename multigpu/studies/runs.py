@@ -1,0 +1,131 @@
+"""What the experiments share: their settings, the walkthrough jobs they launch (each under a
+hard timeout, through ``parallel.mpirun``), reading a run's timings back, the paper's figures
+quoted for comparison, and the matplotlib setup.
+
+Figures and what they are (see parallel/report.py): component columns are wall-clock means per
+rank; "emulated" figures use each rank's process CPU time and take the slowest rank per frame,
+the frame time the run would have with one core (GPU) per rank. Ranks outnumber cores here, so
+speedups and efficiencies are computed from emulated figures only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.parallel.mpirun import JobTimeout, run_multigpu
+from multigpu.parallel.report import COLUMNS, read_timings
+
+# Dong & Peng 2019, Section 7 (quoted for comparison, not measured here)
+PAPER = {
+    "balance_speedup": 20.95 / 15.95,  # Fig. 7: mean FPS with / without balancing
+    "gpus_frame_ms_1": 52.36,  # Table 1: one GPU, 6 power plants
+    "gpus_frame_ms_4": 31.89,  # Table 1: four GPUs
+    "balancer_share_max": 0.13,  # Fig. 8: balancer at most 13 % of the frame
+    "triangles": 254_000_000,
+}
+
+
+@dataclass
+class Settings:
+    """Sizes of one experiment run; ``quick`` shrinks everything for smoke tests."""
+
+    quick: bool = False
+    triangles: int = 100_000  # one plant (the CLI's default scene)
+    frames: int = 240  # camera path frames per run (the path is resampled, not cut)
+    copies: tuple[int, ...] = (1, 2, 3, 4)
+    resolutions: tuple[int, ...] = (512, 1024, 2048, 4096)
+    res_frames: int = 40
+    strip_frames: int = 120
+    timeout: int = 900  # seconds per mpiexec job
+    strategies: tuple[str, ...] = field(default_factory=tuple)
+
+    @classmethod
+    def make(cls, quick: bool) -> "Settings":
+        from multigpu.strategies import REGISTRY
+
+        s = cls(quick=quick, strategies=tuple(REGISTRY))
+        if quick:
+            s.triangles, s.frames, s.copies = 20_000, 12, (1, 2)
+            s.resolutions, s.res_frames, s.strip_frames, s.timeout = (128, 256), 6, 8, 240
+        return s
+
+
+@dataclass
+class Run:
+    """One finished walkthrough job: its summary and its per-(frame, rank) timing rows."""
+
+    summary: dict
+    rows: np.ndarray  # (F, K, C) complete frames only
+    out: Path
+
+    def col(self, name: str) -> np.ndarray:
+        return self.rows[:, :, COLUMNS.index(name)]
+
+    @property
+    def render_max_cpu(self) -> np.ndarray:
+        """Per frame, the slowest rank's rendering CPU time (the emulated render component)."""
+        return self.col("rendering_cpu_ms").max(axis=1)
+
+
+def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str], timeout: int) -> Run:
+    """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``; kill it on timeout."""
+    import json
+
+    k = grid[0] * grid[1]
+    out.mkdir(parents=True, exist_ok=True)
+    args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
+            "--no-progress", *args]
+    try:
+        job = run_multigpu(k, args, timeout, merge_stderr=True)
+    except JobTimeout:
+        raise RuntimeError(f"experiment job timed out after {timeout} s: multigpu {' '.join(args)}") from None
+    log = job.stdout
+    (out / "log.txt").write_text(log)
+    if job.returncode != 0:
+        tail = "\n".join(log.strip().splitlines()[-5:])
+        raise RuntimeError(f"experiment job failed (exit {job.returncode}): multigpu {' '.join(args)}\n{tail}")
+    summary = json.loads((out / "summary.json").read_text())
+    rows = read_timings(out / "timings.csv")
+    rows = rows[np.lexsort((rows[:, 1], rows[:, 0]))]
+    frames = rows.shape[0] // k
+    return Run(summary, rows[: frames * k].reshape(frames, k, len(COLUMNS)), out)
+
+
+def _scene_args(s: Settings, copies: int = 1) -> list[str]:
+    """``copies`` plants side by side, each of ``s.triangles`` (so the scene grows with copies)."""
+    return ["--triangles", str(s.triangles * copies), "--copies", str(copies)]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _breakdown(run: Run) -> dict:
+    s = run.summary
+    w = s["wall"]
+    return {
+        "lb_ms": w["load_balancing_ms"], "render_ms": w["rendering_ms"], "sync_ms": w["synchronization_ms"],
+        "exchange_ms": w["frame_exchange_ms"], "display_ms": w["display_ms"], "frame_ms": s["frame_ms"],
+        "fps": s["fps"], "lb_cpu_ms": s["cpu"]["load_balancing_cpu_ms"],
+        "render_cpu_max_ms": s["render_cpu_max_ms"], "exchange_cpu_ms": s["cpu"]["frame_exchange_cpu_ms"],
+        "emulated_ms": s["emulated_frame_ms"], "emulated_fps": s["emulated_fps"],
+        "imb_tris": s["imbalance_triangles"], "imb_render": s["imbalance_render_cpu"],
+        "bytes_per_frame": s["bytes_sent_per_frame"],
+    }
+
+
+BREAKDOWN_COLS = [("lb_ms", "LB", ".2f"), ("render_ms", "Render", ".2f"), ("sync_ms", "Sync", ".2f"),
+                  ("exchange_ms", "Exchange", ".2f"), ("display_ms", "Display", ".2f"),
+                  ("frame_ms", "Frame (wall)", ".2f"), ("fps", "FPS (wall)", ".1f"),
+                  ("emulated_ms", "Frame (emulated)", ".2f"), ("emulated_fps", "FPS (emulated)", ".1f")]
+
+
+# --------------------------------------------------------------------------- experiments
