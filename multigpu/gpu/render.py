@@ -14,8 +14,8 @@ a few differing edge pixels. docs/ACCURACY.md measures all three.
 
 from __future__ import annotations
 
-import ctypes
 import os
+import re
 
 import numpy as np
 
@@ -62,46 +62,37 @@ class EglUnavailable(RuntimeError):
     """No headless EGL context could be made on this machine."""
 
 
-def egl_device_count() -> int:
-    """Number of EGL devices (``eglQueryDevicesEXT``), 1 when the extension is missing."""
-    try:
-        egl = ctypes.CDLL("libEGL.so.1")
-        egl.eglGetProcAddress.restype = ctypes.c_void_p
-        egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
-        addr = egl.eglGetProcAddress(b"eglQueryDevicesEXT")
-        if not addr:
-            return 1
-        query = ctypes.CFUNCTYPE(ctypes.c_uint, ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_int))(addr)
-        n = ctypes.c_int(0)
-        if not query(0, None, ctypes.byref(n)):
-            return 1
-        return max(1, n.value)
-    except OSError:
-        raise EglUnavailable(EGL_HELP + " (libEGL.so.1 not found)") from None
+def create_context(device: int | None = None, local_rank: int = 0):
+    """A standalone EGL context, and the device index it is on.
 
-
-def local_rank() -> int:
-    for var in ("MPI_LOCALRANKID", "OMPI_COMM_WORLD_LOCAL_RANK", "SLURM_LOCALID", "PMI_LOCAL_RANK"):
-        if var in os.environ:
-            return int(os.environ[var])
-    return 0
-
-
-def create_context(device: int | None = None):
-    """A standalone EGL context on ``device`` (default: local rank modulo the device count)."""
+    ``device`` picks an EGL device explicitly (``--device``); by default a rank takes
+    ``local_rank`` modulo the machine's device count, so the ranks of one node spread over its
+    GPUs. glcontext selects the device (``device_index``; its ``GLCONTEXT_DEVICE_INDEX``
+    variable overrides both) and reports the device count when an index is out of range,
+    which is all the counting needed."""
     os.environ.setdefault("LP_NUM_THREADS", "1")  # llvmpipe: a rank's raster work is its own CPU time
     import moderngl
 
-    count = egl_device_count()
-    index = local_rank() % count if device is None else device
-    if device is not None and not (0 <= device < count):
-        raise InputError.of("device", f"{device}: this machine has {count} EGL device(s) (0..{count - 1})")
+    index = local_rank if device is None else device
+
+    def make(i: int):
+        return moderngl.create_standalone_context(backend="egl", require=430, device_index=i)
+
     try:
-        ctx = moderngl.create_standalone_context(backend="egl", require=430, device_index=index)
+        return make(index), index
     except Exception as exc:
+        found = re.search(r"found (\d+) devices", str(exc))
+        if found and int(found.group(1)) > 0:
+            count = int(found.group(1))
+            if device is not None:
+                raise InputError.of("device", f"{device}: this machine has {count} EGL device(s) "
+                                              f"(0..{count - 1})") from None
+            try:
+                return make(index % count), index % count
+            except Exception as again:
+                exc = again
         why = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         raise EglUnavailable(f"{EGL_HELP} ({exc.__class__.__name__}: {why})") from None
-    return ctx, index
 
 
 METHODS = ("auto", "viewport", "scissor", "offaxis")

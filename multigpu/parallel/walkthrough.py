@@ -107,6 +107,17 @@ def _fault(rank: int, where: int | str) -> None:
             raise RuntimeError(f"injected fault at {'frame ' if isinstance(where, int) else ''}{where}")
 
 
+def node_rank(comm) -> int:
+    """This rank's index among the ranks on its node (MPI's shared-memory split: any launcher)."""
+    from mpi4py import MPI
+
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    try:
+        return node.Get_rank()
+    finally:
+        node.Free()
+
+
 def _check_video() -> None:
     try:
         import imageio.v2  # noqa: F401
@@ -148,7 +159,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 scene, path, load_info = load_world(cfg)
             from multigpu.gpu.render import RegionRenderer, create_context
 
-            ctx, device = create_context(cfg.device)
+            ctx, device = create_context(cfg.device, local_rank=node_rank(comm))
             renderer = RegionRenderer(ctx, scene, cfg.size, cfg.subfrustum)
         except (InputError, RuntimeError) as exc:
             error = as_flags(exc)

@@ -8,7 +8,7 @@ one after another, so per-rank figures are honest process CPU times with ``LP_NU
 2. balance accuracy against balancer cost: strips from 2 to the pixel width, box against sphere
    bounds, float32 against float64 box corners, at 10^4, 10^5 and 10^6 objects;
 3. only what a scene requires: per rank, triangles submitted against triangles its region
-   needs (per-triangle projection, ``triangles.py``) and the whole scene; needed objects missed;
+   needs (per-triangle projection, ``core/triangles.py``) and the whole scene; needed objects missed;
 4. coordinates far from the origin (1e4..1e8): our float64 origin against float32 world
    coordinates, images against the scene at its own coordinates.
 """
@@ -258,7 +258,7 @@ def table_needed(s: Sizes, out: Path) -> str:
         f"frames on a 2x2 wall of {size[0]}x{size[1]}, `strips` balancing. Per rank and frame (means): triangles "
         "submitted (the rank's draw list), triangles of the objects that have at least one triangle in the "
         "region (what object-granular culling can at best submit), and triangles that themselves touch the "
-        "region (each triangle projected and near-clipped, `multigpu/triangles.py`, counted with the balancer's "
+        "region (each triangle projected and near-clipped, `multigpu/core/triangles.py`, counted with the balancer's "
         "own pixel-span rule). `Objects not needed`: share of submitted objects without any triangle in the "
         "region (loose bounds). `Missed`: objects with a triangle in the region that the rank did not draw, "
         "summed over all frames and ranks: it must be 0 (a missing object would be a hole in the image).", "",
@@ -317,7 +317,7 @@ def table_offsets(s: Sizes, ctx, out: Path) -> str:
         f"The plant and its walkthrough moved by (d, d, 0), {len(frames)} frames on a 2x2 wall of "
         f"{size[0]}x{size[1]}, each composed from 4 ranks' regions, against the scene at its own coordinates. "
         "Ours: float32 vertices relative to the scene's float64 origin, which the camera absorbs in float64 "
-        "(`render.model_view`). The alternative stores float32 world coordinates (what a renderer without an "
+        "(`core/camera.py: model_view`). The alternative stores float32 world coordinates (what a renderer without an "
         "origin does). `Same partition`: frames whose regions and draw lists equal those at offset 0 (bounds "
         "projected with float64 centres).", "",
         md_table(rows, [("offset", "Offset d", ""), ("vertices", "Vertices", ""), ("mismatch_px", "Mismatching px", ""),
