@@ -74,29 +74,14 @@ def _spec(a, **override):
     return SceneSpec(**{**fields, **override})
 
 
-class Parser(argparse.ArgumentParser):
-    """argparse that speaks once per MPI job: only launcher rank 0 prints usage, help and
-    errors (every rank parses the same argv and exits the same way)."""
-
-    def _print_message(self, message, file=None):
-        from multigpu.parallel.job import launcher_rank
-
-        if launcher_rank() == 0:
-            super()._print_message(message, file)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    ap = Parser(prog="multigpu", description=__doc__.split("\n")[0])
-    sub = ap.add_subparsers(dest="cmd", required=True)
-
+def _walkthrough_args(w: argparse.ArgumentParser) -> None:
+    """The walkthrough's own flags; defaults from ``WalkConfig``, choices from the registries."""
     from multigpu.config import DEFAULT_FRAMES, WalkConfig
     from multigpu.gpu.render import METHODS
     from multigpu.strategies import REGISTRY, describe
 
     d = _defaults(WalkConfig)
     pair = lambda v: f"{v[0]}x{v[1]}"
-    w = sub.add_parser("walkthrough", help="render a camera path on a display wall (run under mpiexec)")
-    _scene_args(w)
     w.add_argument("--path", help="camera path JSON file (default: generated walkthrough)")
     w.add_argument("--path-kind", default=d["path_kind"], help=f"generated path: {' | '.join(DEFAULT_FRAMES)}")
     w.add_argument("--frames", type=int, help="frames to render (default: the whole path; generated: "
@@ -106,6 +91,20 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--strips", type=int, default=d["strips"], help="strips per split axis (>= 2)")
     w.add_argument("--balance", default=d["balance"],
                    help=f"balancing strategy, one of {' | '.join(REGISTRY)} (default %(default)s). {describe()}")
+    from multigpu.decompositions import PATTERNS, RANGES
+    from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
+
+    w.add_argument("--decomposition", default=d["decomposition"],
+                   help=f"how a frame is divided: {' | '.join(DECOMPOSITIONS)} (default %(default)s): screen = the "
+                        "paper's screen partition (balanced by --balance); db = sort-last database decomposition, "
+                        "depth-composited; bins = static bin patterns, no balancer")
+    w.add_argument("--bin-size", type=int, default=d["bin_size"],
+                   help="bins: pixels per bin side (default %(default)s)")
+    w.add_argument("--bin-pattern", default=d["bin_pattern"],
+                   help=f"bins: which rank owns a bin: {' | '.join(PATTERNS)} (default %(default)s)")
+    w.add_argument("--db-ranges", default=d["db_ranges"],
+                   help=f"db: {' | '.join(RANGES)}: object ranges rebalanced over the visible objects every frame, "
+                        "or fixed by all triangles (default %(default)s)")
     w.add_argument("--bounds", default=d["bounds"], help="object bounds: box (8 corners) | sphere")
     w.add_argument("--out", default=d["out"], help="output directory (README: Outputs)")
     w.add_argument("--mosaic-every", type=int, default=d["mosaic_every"],
@@ -124,6 +123,26 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds without a heartbeat before a rank counts as stopped and the job ends "
                         "(default %(default)s; 0: off, timeouts only)")
     w.add_argument("--no-progress", action="store_true")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that speaks once per MPI job: only launcher rank 0 prints usage, help and
+    errors (every rank parses the same argv and exits the same way)."""
+
+    def _print_message(self, message, file=None):
+        from multigpu.parallel.job import launcher_rank
+
+        if launcher_rank() == 0:
+            super()._print_message(message, file)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = Parser(prog="multigpu", description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+
+    w = sub.add_parser("walkthrough", help="render a camera path on a display wall (run under mpiexec)")
+    _scene_args(w)
+    _walkthrough_args(w)
 
     s = sub.add_parser("scene", help="scene tools")
     ssub = s.add_subparsers(dest="scmd", required=True)
@@ -236,6 +255,8 @@ def walk_config(a):
                       balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
                       overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
                       partition=a.partition, offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
+                      decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
+                      db_ranges=a.db_ranges,
                       liveness=a.liveness, progress=not a.no_progress)
 
 

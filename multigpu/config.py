@@ -64,6 +64,10 @@ class WalkConfig:
     device: int | None = None
     subfrustum: str = "auto"
     partition: str = "redundant"
+    decomposition: str = "screen"
+    bin_size: int = 64
+    bin_pattern: str = "diagonal"
+    db_ranges: str = "visible"
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     timeout: float = 120.0
     liveness: float = 30.0
@@ -88,6 +92,20 @@ class WalkConfig:
             raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{self.subfrustum}'")
         if self.partition not in ("redundant", "broadcast"):
             raise InputError(f"--partition must be 'redundant' or 'broadcast', got '{self.partition}'")
+        from multigpu.decompositions import PATTERNS, RANGES
+        from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
+
+        if self.decomposition not in DECOMPOSITIONS:
+            raise InputError(f"--decomposition must be one of {', '.join(DECOMPOSITIONS)}, got '{self.decomposition}'")
+        if self.bin_pattern not in PATTERNS:
+            raise InputError(f"--bin-pattern must be one of {', '.join(PATTERNS)}, got '{self.bin_pattern}'")
+        if not 1 <= self.bin_size <= 4096:
+            raise InputError(f"--bin-size must be 1..4096 pixels, got {self.bin_size}")
+        if self.db_ranges not in RANGES:
+            raise InputError(f"--db-ranges must be one of {', '.join(RANGES)}, got '{self.db_ranges}'")
+        if self.partition == "broadcast" and (self.decomposition != "screen" or self.balance == "cross"):
+            raise InputError("--partition broadcast works with --decomposition screen and a one-region strategy "
+                             f"(got --decomposition {self.decomposition}, --balance {self.balance})")
         if len(self.offset) != 3 or not all(math.isfinite(v) and abs(v) <= 1e15 for v in self.offset):
             raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
         if self.device is not None and self.device < 0:
@@ -101,6 +119,14 @@ class WalkConfig:
             raise InputError(f"--tile {tw}x{th}: tiles above 16384 pixels per side are not supported")
         if self.size[0] > 32768 or self.size[1] > 32768:
             raise InputError(f"--grid/--tile: a {self.size[0]}x{self.size[1]} wall exceeds 32768 pixels per side")
+        if self.decomposition == "bins":
+            bins = -(-self.size[0] // self.bin_size) * -(-self.size[1] // self.bin_size)
+            if bins < self.ranks:
+                raise InputError(f"--bin-size {self.bin_size}: a {self.size[0]}x{self.size[1]} wall has {bins} bins, "
+                                 f"fewer than the {self.ranks} ranks")
+            if bins > 65536:
+                raise InputError(f"--bin-size {self.bin_size}: {bins} bins on a {self.size[0]}x{self.size[1]} wall "
+                                 "(at most 65536: every bin is a draw per frame)")
 
     @property
     def ranks(self) -> int:

@@ -171,7 +171,7 @@ def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
     (["--tile", "0x5"], "--tile must be positive"),
     (["--grid", "two"], "--grid must look like"),
     (["--frames", "0"], "--frames must be >= 1"),
-    (["--balance", "magic"], "--balance must be one of strips, cost, time, adaptive, none"),
+    (["--balance", "magic"], "--balance must be one of strips, cost, time, adaptive, cross, none"),
     (["--subfrustum", "tiles"], "--subfrustum must be one of"),
     (["--partition", "gossip"], "--partition must be 'redundant' or 'broadcast'"),
     (["--cluster", "-3"], "--cluster must be >= 0"),
@@ -218,3 +218,21 @@ def test_setup_stage_errors_name_their_flag(tmp_path):
         choose_method("scissor", (16384 * 4, 64), gl_limits(ctx))
     assert "--subfrustum scissor: a 65536x64 display exceeds this GL's maximum framebuffer" in as_flags(e.value)
     ctx.release()
+
+
+@pytest.mark.parametrize("flags,needle", [
+    (["--decomposition", "sortlast"], "--decomposition must be one of screen, db, bins"),
+    (["--decomposition", "bins", "--bin-pattern", "sudoku"], "--bin-pattern must be one of scanline, diagonal"),
+    (["--decomposition", "bins", "--bin-size", "0"], "--bin-size must be 1..4096"),
+    (["--decomposition", "bins", "--bin-size", "4000", "--tile", "64x64"], "fewer than the 4 ranks"),
+    (["--decomposition", "bins", "--bin-size", "1", "--tile", "512x512"], "at most 65536"),
+    (["--decomposition", "db", "--db-ranges", "random"], "--db-ranges must be one of visible, static"),
+    (["--decomposition", "db", "--partition", "broadcast"], "--partition broadcast works with --decomposition screen"),
+    (["--balance", "cross", "--partition", "broadcast"], "--partition broadcast works with"),
+])
+def test_decomposition_flags_are_validated_at_the_door(flags, needle):
+    from multigpu.cli import build_parser, walk_config
+
+    with pytest.raises(InputError) as e:
+        walk_config(build_parser().parse_args(["walkthrough", *flags]))
+    assert needle in as_flags(e.value)

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 PKG = Path(__file__).resolve().parents[1] / "multigpu"
-PURE = ("core", "strategies", "scene")
+PURE = ("core", "strategies", "scene", "decompositions")
 
 
 def _imports(path: Path) -> set[str]:

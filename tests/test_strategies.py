@@ -6,7 +6,16 @@ import pytest
 from multigpu.core.balance import partition, tree_partition
 from multigpu.core.regions import pixel_spans
 from multigpu.core.splits import fill_prefix, strip_chooser
-from multigpu.strategies import REGISTRY, Adaptive, CostModel, TimeFeedback, make_strategy, rank_pixels
+from multigpu.strategies import (
+    REGISTRY,
+    Adaptive,
+    CostModel,
+    CrossSegment,
+    TimeFeedback,
+    describe,
+    make_strategy,
+    rank_pixels,
+)
 
 
 def workload(n=400, seed=0):
@@ -135,7 +144,8 @@ def test_time_feedback_converges_and_tiles():
 
 
 def test_registry_and_unknown_name():
-    assert set(REGISTRY) == {"strips", "cost", "time", "adaptive", "none"}
+    assert set(REGISTRY) == {"strips", "cost", "time", "adaptive", "cross", "none"}
+    assert all(name in describe() for name in REGISTRY)
     with pytest.raises(ValueError, match="unknown balancing strategy"):
         make_strategy("magic", (2, 2), (64, 64), 16)
 
@@ -178,10 +188,12 @@ def test_every_registered_strategy_keeps_the_contract(name):
         runs.append(simulate(strategy, rects, tris, time_of, frames=12))
         doc = strategy.report()
         assert doc["name"] == name and json.loads(json.dumps(doc)) == doc
+    from multigpu.core.work import from_partition, pieces_tile_display
+
     for p in runs[0]:
-        r = p.regions
-        assert ((r[:, 2] - r[:, 0]) * (r[:, 3] - r[:, 1])).sum() == size[0] * size[1]
-        np.testing.assert_array_equal(p.loads, p.visible @ tris)
+        assert pieces_tile_display(from_partition(p, tris), size)
+        if p.pieces is None:
+            np.testing.assert_array_equal(p.loads, p.visible @ tris)
         assert p.spans is not None and p.spans.shape == (4, len(tris))
     if REGISTRY[name].reproducible:
         for a, b in zip(*runs):
@@ -194,3 +206,28 @@ def test_rank_pixels_uses_the_partition_spans():
     p = partition(rects, tris, (2, 2), (128, 128), 64)
     np.testing.assert_array_equal(rank_pixels(rects, p.visible, p.regions, (128, 128)),
                                   rank_pixels(rects, p.visible, p.regions, (128, 128), spans=p.spans))
+
+
+def test_cross_segment_moves_resources_to_the_heavy_segment():
+    """Objects pile up in one display tile: the view equalizer gives that segment more than one
+    rank's share, its helpers render pieces of it, and time imbalance falls below `none`."""
+    rng = np.random.default_rng(9)
+    lo = np.c_[rng.uniform(0.0, 0.45, 500), rng.uniform(0.55, 0.95, 500)]  # top-left tile (rank 0)
+    rects = np.r_[np.c_[lo, lo + 0.02], np.c_[rng.uniform(0, 0.95, (100, 2)), rng.uniform(0, 0.95, (100, 2)) + 0.03]]
+    rects[:, 2:] = np.maximum(rects[:, 2:], rects[:, :2])
+    tris = np.full(len(rects), 100)
+    size = (256, 256)
+
+    def time_of(p):
+        return np.array([(m.astype(float) @ tris).sum() for m in (p.piece_visible or p.visible[:, None, :])]) * 1e-3
+
+    parts = simulate(CrossSegment((2, 2), size, 256), rects, tris, time_of, frames=20)
+    last = parts[-1]
+    cross = CrossSegment((2, 2), size, 256)
+    assert last.pieces is not None
+    helpers = [k for k in range(4) if any(((r[:2] >= [0, 128]) & (r[2:] <= [128, 256])).all() for r in last.pieces[k])]
+    assert len(helpers) >= 2  # the crowded top-left segment (rank 0's tile) is shared
+    none = make_strategy("none", (2, 2), size, 256).plan(rects, tris)
+    imb = lambda t: t.max() / t.mean()
+    assert imb(time_of(last)) < 0.8 * imb(time_of(none))
+    assert cross.report()["name"] == "cross"

@@ -147,3 +147,25 @@ def test_shipped_model_composite_equals_one_rank(tmp_path):
     s = json.loads((four / "summary.json").read_text())
     assert s["config"]["scene"]["up"] == "+y" and s["config"]["scene"]["objects_from"]["split"] == "nodes"
     assert s["empty_frames"] == 0
+
+
+def test_launch_script_runs_the_job(tmp_path):
+    """launch/walkthrough as the README gives it (venv, MPI detection, rank count from --grid)."""
+    import os
+    import signal
+    import subprocess
+
+    from mpirun import ROOT
+
+    out = tmp_path / "o"
+    proc = subprocess.Popen([str(ROOT / "launch" / "walkthrough"), "--grid", "1x2", "--triangles", "20000",
+                             "--frames", "3", "--no-progress", "--out", str(out)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] and s["frames"] == 3 and s["ranks"] == 2

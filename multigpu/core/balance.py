@@ -38,6 +38,9 @@ class Partition:
     spans : (4, N) int32 or None  every object's inclusive pixel span ``[x0, y0, x1, y1]``,
         computed once per frame by the tree walk and carried here so later stages (the cost
         model's pixel counts, reports) need not recompute it; None where not known.
+    pieces, piece_visible : None, or per rank the (M_k, 4) rects it renders and their (M_k, N)
+        masks, for strategies that give a rank more than one rect (cross-segment); then
+        ``regions`` holds each rank's bounding box and the pieces tile the display.
     """
 
     regions: np.ndarray
@@ -46,6 +49,8 @@ class Partition:
     splits: np.ndarray
     split_pixels: np.ndarray
     spans: np.ndarray | None = None
+    pieces: tuple | None = None
+    piece_visible: tuple | None = None
 
     @property
     def imbalance(self) -> float:

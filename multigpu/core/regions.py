@@ -1,4 +1,5 @@
-"""Integer pixel rectangles: display tiles, object footprints, and the Alg. 3 transfer plan.
+"""Integer pixel rectangles: display tiles and object footprints (the Alg. 3 transfer plan is
+``core.work.transfers``).
 
 Rectangles are half-open ``[x0, y0, x1, y1)`` in pixels, origin bottom-left. An object's
 normalized rect maps to the inclusive pixel span ``[floor(xmin*W), floor(xmax*W)]`` clipped to the
@@ -7,8 +8,6 @@ zero-area rect still lands in exactly one pixel. Everything here is pure numpy.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,42 +58,3 @@ def overlaps(spans: np.ndarray, region) -> np.ndarray:
     """(N,) bool: which inclusive pixel spans touch the half-open region ``[x0, y0, x1, y1)``."""
     x0, y0, x1, y1 = (int(v) for v in region)
     return (spans[:, 0] < x1) & (spans[:, 2] >= x0) & (spans[:, 1] < y1) & (spans[:, 3] >= y0)
-
-
-def area(rect) -> int:
-    x0, y0, x1, y1 = (int(v) for v in rect)
-    return max(0, x1 - x0) * max(0, y1 - y0)
-
-
-@dataclass(frozen=True)
-class Transfer:
-    """One Alg. 3 message: ``sender`` rendered ``rect`` that ``receiver`` displays."""
-
-    sender: int
-    receiver: int
-    rect: tuple[int, int, int, int]
-
-    @property
-    def pixels(self) -> int:
-        return area(self.rect)
-
-
-def transfers(regions: np.ndarray, tiles: np.ndarray, include_self: bool = False) -> list[Transfer]:
-    """Every non-empty intersection of a rank's render region with a display tile.
-
-    Sorted by (sender, receiver). At most one rect per pair (two rects meet in one rect), so a
-    pair's message needs no sequence number. With ``include_self`` the local copies
-    (sender == receiver) are listed too.
-    """
-    R = np.asarray(regions, dtype=np.int64)[:, None, :]
-    T = np.asarray(tiles, dtype=np.int64)[None, :, :]
-    lo = np.maximum(R[..., :2], T[..., :2])
-    hi = np.minimum(R[..., 2:], T[..., 2:])
-    nonempty = (hi > lo).all(axis=-1)
-    if not include_self:
-        np.fill_diagonal(nonempty, False)
-    out = []
-    for s, r in zip(*np.nonzero(nonempty)):  # K x K pairs, not objects
-        rect = (int(lo[s, r, 0]), int(lo[s, r, 1]), int(hi[s, r, 0]), int(hi[s, r, 1]))
-        out.append(Transfer(int(s), int(r), rect))
-    return out

@@ -1,9 +1,5 @@
-"""Frame exchange (Alg. 3) over MPI, and waits that never hang. The MPI edge of the system.
-
-Each rank sends the parts of its rendered region that other ranks display, receives the parts
-of its own tile that others rendered, and copies its own part locally. Messages are raw
-contiguous uint8 buffers (no pickling); there is at most one message per (sender, receiver)
-pair per frame, so a fixed tag and MPI's per-pair ordering keep frames apart.
+"""Waits that never hang, the synchronization barrier and the partition broadcast: the MPI
+primitives the frame loop uses (the frame exchange itself is ``composite.py``).
 
 Waiting polls with short sleeps instead of MPI's busy-wait, so ranks that wait do not steal a
 core from ranks still rendering when ranks outnumber cores, and every wait is bounded: a peer
@@ -15,8 +11,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-
-from multigpu.core.regions import Transfer
 
 TAG = 7
 #: checks every bounded wait runs while it polls (``job.Job.check``: stalled or failed peers,
@@ -48,40 +42,6 @@ def wait_all(requests, timeout: float, what: str) -> None:
 def barrier(comm, timeout: float) -> None:
     """A bounded, non-spinning barrier (the paper's GPU-GPU synchronization)."""
     wait_all([comm.Ibarrier()], timeout, "synchronization")
-
-
-def exchange(comm, me: int, pixels: np.ndarray, region, tile, plan: list[Transfer], timeout: float,
-             out: np.ndarray) -> int:
-    """Compose rank ``me``'s display tile into ``out`` (th, tw, 3); return bytes sent.
-
-    ``pixels`` is the rank's rendered ``region`` (rows bottom-up), ``plan`` the frame's transfer
-    list (``regions.transfers(..., include_self=True)``).
-    """
-    from mpi4py import MPI
-
-    rx0, ry0 = int(region[0]), int(region[1])
-    tx0, ty0 = int(tile[0]), int(tile[1])
-    requests, keep, inbox = [], [], []
-    sent = 0
-    for t in plan:  # K x K pairs at most, not objects
-        x0, y0, x1, y1 = t.rect
-        if t.sender == me:
-            part = pixels[y0 - ry0:y1 - ry0, x0 - rx0:x1 - rx0]
-            if t.receiver == me:
-                out[y0 - ty0:y1 - ty0, x0 - tx0:x1 - tx0] = part
-                continue
-            buf = np.ascontiguousarray(part)
-            keep.append(buf)
-            requests.append(comm.Isend([buf, MPI.BYTE], dest=t.receiver, tag=TAG))
-            sent += buf.nbytes
-        elif t.receiver == me:
-            buf = np.empty((y1 - y0, x1 - x0, 3), dtype=np.uint8)
-            inbox.append((buf, t.rect))
-            requests.append(comm.Irecv([buf, MPI.BYTE], source=t.sender, tag=TAG))
-    wait_all(requests, timeout, "frame exchange")
-    for buf, (x0, y0, x1, y1) in inbox:
-        out[y0 - ty0:y1 - ty0, x0 - tx0:x1 - tx0] = buf
-    return sent
 
 
 def broadcast_partition(comm, part, k: int, n: int, timeout: float):

@@ -22,11 +22,13 @@ def stitch(tiles: np.ndarray, tile_rects: np.ndarray, size) -> np.ndarray:
     return img[::-1]
 
 
-def overlay(img: np.ndarray, regions: np.ndarray, alpha: float = 0.18) -> np.ndarray:
-    """Tint each rank's render region with its colour and draw the region borders."""
+def overlay(img: np.ndarray, rects, alpha: float = 0.18) -> np.ndarray:
+    """Tint each rank's pieces with its colour and draw their borders; ``rects[k]`` is rank
+    k's (M_k, 4) pieces (or one (4,) region)."""
     H = img.shape[0]
     out = img.astype(np.float32)
-    for k, (x0, y0, x1, y1) in enumerate(regions):  # K regions
+    boxes = [(k, r) for k, rs in enumerate(rects) for r in np.asarray(rs, dtype=np.int64).reshape(-1, 4)]
+    for k, (x0, y0, x1, y1) in boxes:  # pieces, not objects
         top, bot = H - y1, H - y0
         c = PALETTE[k % len(PALETTE)]
         out[top:bot, x0:x1] = out[top:bot, x0:x1] * (1 - alpha) + c * alpha

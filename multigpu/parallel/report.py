@@ -20,9 +20,9 @@ import numpy as np
 COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms", "frame_ms",
            "load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
-           "bytes_sent", "objects"]
+           "bytes_sent", "objects", "pieces", "depth_bytes", "load_cv"]
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
-INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects"}
+INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes"}
 
 
 class TimingWriter:
@@ -110,6 +110,8 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "empty_frames": int((~drawn).sum()),
         "triangles_per_frame": float(tri.sum(axis=1).mean()),
         "bytes_sent_per_frame": float(get("bytes_sent").sum(axis=1).mean()),
+        "depth_bytes_per_frame": float(get("depth_bytes").sum(axis=1).mean()),
+        "load_cv": float(get("load_cv")[:, 0].mean()),  # std/mean of per-rank triangles (Kerbl's c_v)
         "per_frame_emulated_ms": emulated.round(3).tolist(),
         "per_frame_wall_ms": frame_ms.round(3).tolist(),
     }

@@ -21,15 +21,17 @@ import numpy as np
 from multigpu.config import SUMMARY_EVERY, WalkConfig, setup_timeout
 from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
 from multigpu.core.camera import frame_matrices
-from multigpu.core.regions import tile_regions, transfers
+from multigpu.core.regions import tile_regions
+from multigpu.core.work import Work, transfers
+from multigpu.decompositions import make_decomposition
 from multigpu.errors import InputError, as_flags
-from multigpu.parallel.exchange import barrier, broadcast_partition, exchange, wait_all
+from multigpu.parallel.composite import composite
+from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
 from multigpu.parallel.mosaic import overlay, save_png, stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.report import COLUMNS, TimingWriter, summarize, table, write_json
 from multigpu.scene.models import axis_name, load_scene
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
-from multigpu.strategies import make_strategy
 
 ERROR_BYTES = 1024  # an agreed setup error travels as a fixed-size buffer
 
@@ -200,11 +202,15 @@ class Frames:
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         tw, th = cfg.tile
         self.tiles = tile_regions(cfg.grid[0], cfg.grid[1], tw, th)
-        self.strategy = make_strategy(cfg.balance, cfg.grid, cfg.size, cfg.strips)
-        self.broadcast = cfg.partition == "broadcast" and self.K > 1
+        self.decomposition = make_decomposition(cfg.decomposition, cfg.grid, cfg.size, cfg.strips, scene,
+                                                cfg.balance, cfg.bin_size, cfg.bin_pattern, cfg.db_ranges)
+        self.broadcast = cfg.partition == "broadcast" and self.K > 1  # screen only (checked at the door)
         self.project = projector(cfg, scene)
-        self.coverage = np.ones(scene.n_objects) if self.strategy.needs_coverage else None
+        self.coverage = np.ones(scene.n_objects) if self.decomposition.needs_coverage else None
         self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
+        self.zback = np.ones((th, tw), dtype=np.float32) if self.decomposition.depth else None
+        self.background = renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
+                                          np.zeros(scene.n_objects, dtype=bool))[0, 0]  # the clear colour
         self.front = np.zeros_like(self.back)  # what the rank's monitor shows
         self.col = {c: i for i, c in enumerate(COLUMNS)}
         self.row = np.zeros(len(COLUMNS) + 1)  # + stop flag
@@ -219,27 +225,49 @@ class Frames:
 
     # -- phases of one frame
     def plan(self, f: int):
+        """This frame's work (every rank plans the same, or rank 0 plans and broadcasts)."""
         view, proj, light = frame_matrices(self.path.camera(f), self.cfg.size)
-        part = None
-        if self.rank == 0 or not self.broadcast:  # redundant: every rank plans the same partition
-            if self.coverage is None:
-                part = self.strategy.plan(self.project(view, proj), self.scene.tris)
-            else:
-                part = self.strategy.plan(self.project(view, proj, self.coverage), self.scene.tris, self.coverage)
+        tris, d = self.scene.tris, self.decomposition
         if self.broadcast:
+            part = None
+            if self.rank == 0:
+                cov = self.coverage
+                part = d.strategy.plan(self.project(view, proj, cov) if cov is not None else self.project(view, proj),
+                                       tris, cov)
             part = broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
-        return part, (view, proj, light)
+            return d.plan_from(part, tris), (view, proj, light)
+        if self.coverage is None:
+            return d.plan(f, self.project(view, proj), tris), (view, proj, light)
+        return d.plan(f, self.project(view, proj, self.coverage), tris, self.coverage), (view, proj, light)
 
-    def record(self, f: int, part, t: Timer, sent: int, mask) -> None:
+    def render(self, work: Work, view, proj, light) -> list:
+        """Every piece this rank renders: (rgb, depth or None)."""
+        out = []
+        for rect, mask in zip(work.rects[self.rank], work.masks[self.rank]):  # pieces, not objects
+            got = self.renderer.render(view, proj, light, rect, mask, depth=work.depth)
+            out.append(got if work.depth else (got, None))
+        return out
+
+    def compose(self, work: Work, rendered: list) -> tuple[int, int]:
+        """Frame exchange: the pieces travel to their tile owners, who copy or depth-merge them."""
+        if work.depth:
+            self.back[:] = self.background
+            self.zback[:] = 1.0
+        plan = transfers(work, self.tiles)
+        return composite(self.comm, self.rank, work.rects, rendered, plan, self.tiles[self.rank], self.cfg.timeout,
+                         self.back, self.zback if work.depth else None)
+
+    def record(self, f: int, work: Work, t: Timer, sent: tuple[int, int]) -> None:
         """This rank's row by column name, gathered so every rank sees every rank's row."""
-        region = part.regions[self.rank]
-        values = {"frame": f, "rank": self.rank, "triangles": part.loads[self.rank],
-                  "x0": region[0], "y0": region[1], "x1": region[2], "y1": region[3],
+        box = work.bounds(self.rank)
+        values = {"frame": f, "rank": self.rank, "triangles": work.loads[self.rank],
+                  "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
                   "load_balancing_ms": t.ms(0, 1), "rendering_ms": t.ms(1, 2), "synchronization_ms": t.ms(2, 3),
                   "frame_exchange_ms": t.ms(3, 4), "display_ms": t.ms(4, 5), "frame_ms": t.ms(0, 5),
                   "load_balancing_cpu_ms": t.ms(0, 1, True), "rendering_cpu_ms": t.ms(1, 2, True),
                   "frame_exchange_cpu_ms": t.ms(3, 4, True), "display_cpu_ms": t.ms(4, 5, True),
-                  "bytes_sent": sent, "objects": int(mask.sum())}
+                  "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
+                  "depth_bytes": sent[1], "load_cv": work.load_cv}
         for c, v in values.items():
             self.row[self.col[c]] = v
         self.row[-1] = float(self.job.signum or 0)  # a signal seen here stops every rank after this frame
@@ -258,7 +286,7 @@ class Frames:
         if mosaic_due:
             save_png(img, self.out.path / "mosaic" / f"frame_{f:05d}.png")
             if cfg.overlay:
-                save_png(overlay(img, part.regions), self.out.path / "mosaic" / f"frame_{f:05d}_partition.png")
+                save_png(overlay(img, part.rects), self.out.path / "mosaic" / f"frame_{f:05d}_partition.png")
         if self.video is not None:
             self.video.append_data(img)
 
@@ -266,26 +294,24 @@ class Frames:
         t = Timer()
         t.mark()
         _fault(self.rank, f)
-        part, (view, proj, light) = self.plan(f)
+        work, (view, proj, light) = self.plan(f)
         t.mark()
-        region, mask = part.regions[self.rank], part.visible[self.rank]
-        pixels = self.renderer.render(view, proj, light, region, mask)
+        rendered = self.render(work, view, proj, light)
         t.mark()
         barrier(self.comm, self.cfg.timeout)
         t.mark()
-        plan = transfers(part.regions, self.tiles, include_self=True)
-        sent = exchange(self.comm, self.rank, pixels, region, self.tiles[self.rank], plan, self.cfg.timeout, self.back)
+        sent = self.compose(work, rendered)
         t.mark()
         np.copyto(self.front, self.back)  # present the composed tile
         t.mark()
-        self.record(f, part, t, sent, mask)
-        self.strategy.observe(f, part, self.allrows[:, self.col["rendering_cpu_ms"]])
+        self.record(f, work, t, sent)
+        self.decomposition.observe(f, work, self.allrows[:, self.col["rendering_cpu_ms"]])
         if self.rank == 0:  # rows first: the summary always matches the CSV
             rows = self.allrows[:, :len(COLUMNS)]
             self.writer.write(rows)
             self.history.append(rows.copy())
         self.done = f + 1
-        self.show(f, part)
+        self.show(f, work)
         if self.rank == 0:
             if self.bar is not None:
                 self.bar.update(1)
@@ -321,11 +347,19 @@ class Frames:
         rows = np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS)))
         summary = summarize(rows, self.K)
         doc = {"complete": complete, "frames_written": self.done, "config": self.config_doc,
-               "strategy": self.strategy.report(), **summary}
+               "decomposition": self.decomposition.report(), **summary}
         if stopped_by:
             doc["stopped_by"] = stopped_by
         write_json(self.out.path / "summary.json", doc)
         return summary
+
+    def _what(self) -> str:
+        cfg = self.cfg
+        if cfg.decomposition == "screen":
+            return f"balance={cfg.balance}"
+        if cfg.decomposition == "bins":
+            return f"bins {cfg.bin_pattern} {cfg.bin_size}px"
+        return f"db ({cfg.db_ranges} ranges)"
 
     def run(self) -> dict | None:
         if self.rank == 0:
@@ -355,14 +389,18 @@ class Frames:
         state = "" if complete else f" (stopped after {self.done} of {self.n_frames} frames)"
         print(table(summary, f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in "
                              f"{scene.n_objects} objects, {cfg.grid[0]}x{cfg.grid[1]} wall of {cfg.size[0]}x"
-                             f"{cfg.size[1]}, balance={cfg.balance}{state}"), flush=True)
+                             f"{cfg.size[1]}, {self._what()}{state}"), flush=True)
         print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
         return summary
 
 
 def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dict:
     return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
-            "balance": cfg.balance, "bounds": cfg.bounds, "frames_planned": n_frames,
+            "decomposition": cfg.decomposition, "balance": cfg.balance if cfg.decomposition == "screen" else None,
+            "bin_size": cfg.bin_size if cfg.decomposition == "bins" else None,
+            "bin_pattern": cfg.bin_pattern if cfg.decomposition == "bins" else None,
+            "db_ranges": cfg.db_ranges if cfg.decomposition == "db" else None, "bounds": cfg.bounds,
+            "frames_planned": n_frames,
             "subfrustum": renderer_method, "offset": list(cfg.offset), "partition": cfg.partition,
             "scene": {"name": scene.name, "objects": scene.n_objects, "triangles": scene.n_triangles,
                       "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],

@@ -9,11 +9,13 @@ from __future__ import annotations
 from multigpu.strategies.adaptive import Adaptive
 from multigpu.strategies.base import Configured, Strategy, rank_pixels
 from multigpu.strategies.cost import CostModel
+from multigpu.strategies.cross import CrossSegment
 from multigpu.strategies.none import NoBalance
 from multigpu.strategies.strips import Strips
 from multigpu.strategies.time import TimeFeedback
 
-REGISTRY: dict[str, type] = {cls.name: cls for cls in (Strips, CostModel, TimeFeedback, Adaptive, NoBalance)}
+REGISTRY: dict[str, type] = {cls.name: cls for cls in (Strips, CostModel, TimeFeedback, Adaptive, CrossSegment,
+                                                      NoBalance)}
 
 
 def describe() -> str:
@@ -28,4 +30,4 @@ def make_strategy(name: str, grid, size, strips: int) -> Strategy:
 
 
 __all__ = ["REGISTRY", "Strategy", "Configured", "make_strategy", "describe", "rank_pixels",
-           "Strips", "CostModel", "TimeFeedback", "Adaptive", "NoBalance"]
+           "Strips", "CostModel", "TimeFeedback", "Adaptive", "CrossSegment", "NoBalance"]

@@ -1,0 +1,110 @@
+"""One frame's work, whatever the decomposition: who renders which pixels with which objects,
+and where the pixels go. Pure numpy.
+
+A rank renders one or more pixel rects ("pieces"), each with its own object mask: one rect per
+rank for the paper's screen partition, a rank's bins for static bin patterns, a rect per
+display segment it helps for cross-segment balancing, and for sort-last (database)
+decomposition the rect where its objects project, rendered with depth. Every piece is cut by
+the display tiles it overlaps, and each part travels to the tile's owner (``transfers``).
+Colour-only pieces tile the display exactly and are copied; depth pieces overlap and the
+owner keeps the nearest fragment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multigpu.core.balance import Partition
+
+
+@dataclass(frozen=True)
+class Work:
+    """rects[k] : (M_k, 4) int64 ``[x0, y0, x1, y1)`` pieces rank k renders.
+    masks[k] : (M_k, N) bool  objects each piece draws.
+    loads : (K,) int64  triangles each rank processes (an object drawn in two pieces counts twice).
+    depth : whether pieces carry depth and are composited by the nearest fragment (sort-last).
+    partition : the screen strategy's partition (for its ``observe`` and reports), if any."""
+
+    rects: tuple
+    masks: tuple
+    loads: np.ndarray
+    depth: bool = False
+    partition: Partition | None = None
+
+    @property
+    def ranks(self) -> int:
+        return len(self.rects)
+
+    def bounds(self, k: int) -> np.ndarray:
+        """(4,) bounding box of rank k's pieces (zeros when it renders nothing)."""
+        r = self.rects[k]
+        if len(r) == 0:
+            return np.zeros(4, dtype=np.int64)
+        return np.array([r[:, 0].min(), r[:, 1].min(), r[:, 2].max(), r[:, 3].max()], dtype=np.int64)
+
+    def objects(self, k: int) -> int:
+        """Distinct objects rank k draws."""
+        m = self.masks[k]
+        return int(m.any(axis=0).sum()) if len(m) else 0
+
+    @property
+    def load_cv(self) -> float:
+        """Coefficient of variation of the per-rank loads, std/mean (Kerbl et al.'s c_v)."""
+        mean = float(np.mean(self.loads))
+        return float(np.std(self.loads)) / mean if mean > 0 else 0.0
+
+
+def from_partition(part: Partition, tris: np.ndarray) -> Work:
+    """A screen partition as work: one piece per rank, or the partition's own pieces."""
+    if part.pieces is not None:
+        loads = np.array([int((m @ np.asarray(tris, np.int64)).sum()) if len(m) else 0 for m in part.piece_visible])
+        return Work(tuple(part.pieces), tuple(part.piece_visible), loads, False, part)
+    rects = tuple(part.regions[k:k + 1] for k in range(len(part.regions)))
+    masks = tuple(part.visible[k:k + 1] for k in range(len(part.regions)))
+    return Work(rects, masks, np.asarray(part.loads), False, part)
+
+
+@dataclass(frozen=True)
+class Piece:
+    """Part ``rect`` of sender's piece ``index`` that lands on receiver's tile."""
+
+    sender: int
+    receiver: int
+    index: int
+    rect: tuple[int, int, int, int]
+
+    @property
+    def pixels(self) -> int:
+        x0, y0, x1, y1 = self.rect
+        return (x1 - x0) * (y1 - y0)
+
+
+def transfers(work: Work, tiles: np.ndarray) -> list[Piece]:
+    """Every non-empty (piece, tile) intersection, sorted by (sender, receiver, piece index):
+    the order both ends pack and unpack one pair's message in."""
+    T = np.asarray(tiles, dtype=np.int64)
+    out = []
+    for k, rects in enumerate(work.rects):  # ranks, then their pieces: not objects
+        if len(rects) == 0:
+            continue
+        R = np.asarray(rects, dtype=np.int64)[:, None, :]
+        lo = np.maximum(R[..., :2], T[None, :, :2])
+        hi = np.minimum(R[..., 2:], T[None, :, 2:])
+        ok = (hi > lo).all(axis=-1)  # (M, K)
+        for j, t in zip(*np.nonzero(ok)):
+            out.append(Piece(k, int(t), int(j), (int(lo[j, t, 0]), int(lo[j, t, 1]), int(hi[j, t, 0]),
+                                                  int(hi[j, t, 1]))))
+    out.sort(key=lambda p: (p.sender, p.receiver, p.index))
+    return out
+
+
+def pieces_tile_display(work: Work, size) -> bool:
+    """Whether colour pieces cover the display exactly once (the screen/bins invariant)."""
+    W, H = size
+    cover = np.zeros((H, W), dtype=np.int32)
+    for rects in work.rects:
+        for x0, y0, x1, y1 in np.asarray(rects, dtype=np.int64).reshape(-1, 4):
+            cover[y0:y1, x0:x1] += 1
+    return bool((cover == 1).all())
