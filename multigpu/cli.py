@@ -172,7 +172,8 @@ def build_parser() -> argparse.ArgumentParser:
     dp.add_argument("--size", default="1024x1024", help="display WxH in pixels")
     dp.add_argument("--out", default="out/depth", help="output directory")
     e = sub.add_parser("experiment", help="the paper's evaluation: tables, plots, Markdown")
-    e.add_argument("name", help="all | gpus | resolution | balance | strips | orbit | overlap | cost | speedup")
+    e.add_argument("name", help="all | gpus | resolution | balance | strips | orbit | overlap | cost | speedup | "
+                                "partition | compare")
     e.add_argument("--quick", action="store_true", help="tiny sizes: the same code in a few minutes")
     e.add_argument("--out", default="out/experiments", help="output directory")
     e.add_argument("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)")
