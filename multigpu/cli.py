@@ -173,7 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     dp.add_argument("--out", default="out/depth", help="output directory")
     e = sub.add_parser("experiment", help="the paper's evaluation: tables, plots, Markdown")
     e.add_argument("name", help="all | gpus | resolution | balance | strips | orbit | overlap | cost | speedup | "
-                                "partition | compare")
+                                "partition | compare | payoff | walls")
     e.add_argument("--quick", action="store_true", help="tiny sizes: the same code in a few minutes")
     e.add_argument("--out", default="out/experiments", help="output directory")
     e.add_argument("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)")
@@ -182,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--out", default="out/accuracy", help="directory for the CSV tables")
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
-    b.add_argument("what", help="balance | scene | render")
+    b.add_argument("what", help="balance | scene | render | frame | growth")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     return ap
 

@@ -148,8 +148,8 @@ def test_single_mesh_is_cut_for_the_wall(tmp_path, ranks):
     scene, _ = load_scene(SceneSpec(model=str(f), ranks=ranks), use_cache=False)
     tris = scene.tris
     assert scene.meta["objects"]["modelled"] == 1
-    assert tris.max() / tris.sum() <= 1 / (4 * ranks) + 1e-9 or tris.max() <= 256
-    assert scene.n_objects >= min(8 * ranks, tris.sum() // 256)
+    assert tris.max() / tris.sum() <= 1 / (4 * ranks) + 1e-9 or tris.max() <= 64
+    assert scene.n_objects >= min(8 * ranks, tris.sum() // 64)
     whole, _ = load_scene(SceneSpec(model=str(f), ranks=ranks, cluster=0), use_cache=False)
     assert whole.n_objects == 1 and whole.meta["objects"]["cluster"] == 0
 
@@ -209,3 +209,12 @@ def test_the_shipped_pump_model():
     assert axis_name(scene.meta["up"]) == "+y" and scene.meta["objects"]["split"] == "nodes"
     assert scene.meta["objects"]["modelled"] == 53 and scene.n_objects > 53  # the casing is cut for 4 ranks
     assert (visible_share(scene, walkthrough(scene, frames=120)) > 0).all()
+
+
+def test_big_walls_cut_big_objects_small_walls_keep_them():
+    from multigpu.scene.cluster import auto_cluster
+
+    tris = np.r_[np.full(2000, 30), np.full(20, 2000)]  # balanced: largest 0.04 % ... 2 %
+    assert auto_cluster(tris, 4)[0] == 0
+    size, why = auto_cluster(tris, 16)
+    assert size == max(64, -(-int(tris.sum()) // (64 * 16))) and "16-rank wall" in why

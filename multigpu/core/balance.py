@@ -19,7 +19,7 @@ import numpy as np
 
 from multigpu.core.regions import MAX_PIXELS, overlaps, pixel_spans, tile_regions
 from multigpu.core.splits import SplitTask, strip_chooser
-from multigpu.core.tree import VERTICAL, GpuTree
+from multigpu.core.tree import VERTICAL, GpuTree, gpu_tree
 
 MAX_TOTAL = 2**62
 
@@ -96,7 +96,7 @@ def validate_inputs(rects, tris, grid, size, strips) -> tuple[np.ndarray, np.nda
     with np.errstate(invalid="ignore"):
         if np.any(rects[:, 0] > rects[:, 2]) or np.any(rects[:, 1] > rects[:, 3]):
             raise ValueError("rects has inverted rows (xmin > xmax or ymin > ymax)")
-    return rects, tris, GpuTree(rows, cols), (W, H)
+    return rects, tris, gpu_tree(rows, cols), (W, H)
 
 
 def tree_partition(rects, tris, grid, size, strips: int, choose) -> Partition:
@@ -137,7 +137,7 @@ def tree_partition(rects, tris, grid, size, strips: int, choose) -> Partition:
         hi_px = spans[axis + 2].take(idx)
         task = SplitTask(n, node, reg, axis, a, b, q, nl, nr, idx, lo_px, hi_px, cuts, valid, target,
                          W if axis == 0 else H, tris)
-        cut = int(np.clip(int(choose(task, spans)), a + need_lo, b - need_hi))
+        cut = min(max(int(choose(task, spans)), a + need_lo), b - need_hi)
         splits[n] = (cut - a) / length
         split_pixels[n] = cut
 

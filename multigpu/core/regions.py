@@ -46,7 +46,8 @@ def pixel_spans(rects: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, n
         onscreen = (rt[2] >= 0.0) & (rt[0] <= 1.0) & (rt[3] >= 0.0) & (rt[1] <= 1.0)
         # (False for NaN rows: every comparison with NaN is False)
         c = np.multiply(rt, np.array([[W], [H], [W], [H]], dtype=np.float64))
-        np.clip(c, 0.0, np.array([[W - 1], [H - 1], [W - 1], [H - 1]], dtype=np.float64), out=c)
+        np.maximum(c, 0.0, out=c)
+        np.minimum(c, np.array([[W - 1], [H - 1], [W - 1], [H - 1]], dtype=np.float64), out=c)
         if not onscreen.all():
             c[:, ~onscreen] = 0.0
         spans_t = c.astype(SPAN_DTYPE)  # truncation is floor: every value is >= 0 here

@@ -78,12 +78,12 @@ def _strip_index(px: np.ndarray, a: int, length: int, q: int, extent: int) -> np
     """
     if extent <= _TABLE_MAX:
         table = (np.arange(1 - a, extent + 1 - a, dtype=np.int64) * q - 1) // length
-        return np.clip(table, 0, q - 1).astype(np.intp).take(px)
+        return np.minimum(np.maximum(table, 0, out=table), q - 1, out=table).astype(np.intp).take(px)
     o = px.astype(np.int64) - (a - 1)
     o *= q
     o -= 1
     o //= length
-    return np.clip(o, 0, q - 1, out=o)
+    return np.minimum(np.maximum(o, 0, out=o), q - 1, out=o)
 
 
 def choose_split(s: np.ndarray, e: np.ndarray, ratio: float, cuts: np.ndarray, valid: np.ndarray, target: int,

@@ -9,6 +9,7 @@ HIGH row indices. Pure Python, no numpy, MPI or GL: the tree is tiny (K - 1 inte
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -162,3 +163,10 @@ def _leaves(node: Node) -> list[Node]:
     if node.is_leaf:
         return [node]
     return _leaves(node.low) + _leaves(node.high)
+
+
+@functools.lru_cache(maxsize=64)
+def gpu_tree(rows: int, cols: int) -> GpuTree:
+    """The (immutable in use) GPU tree of a wall, built once per shape: the balancer asks for
+    it every frame."""
+    return GpuTree(rows, cols)

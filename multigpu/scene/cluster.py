@@ -19,17 +19,23 @@ from multigpu.errors import InputError
 from multigpu.scene.layout import Scene
 
 #: automatic clusters are never smaller than this (tiny pieces only add per-object cost)
-MIN_CLUSTER = 256
+MIN_CLUSTER = 64
+#: walls of at least this many ranks always cut big objects (overlap grows with the wall)
+BIG_WALL = 9
 
 
 def auto_cluster(tris: np.ndarray, ranks: int) -> tuple[int, str]:
     """Cluster size that makes a scene balanceable on ``ranks`` ranks, and why (0: keep).
 
     The balancer moves whole objects, so one object holding a share ``s`` of the triangles
-    bounds the triangle imbalance below by ``s * K``, and a scene of few objects leaves the
-    splits few places to go. Objects are cut when one holds more than 1/(4K) of the triangles
-    or when there are fewer than 8 objects per rank; the clusters then hold at most 1/(16K)
-    of the triangles (and at least ``MIN_CLUSTER``)."""
+    bounds the triangle imbalance below by ``s * K``, a scene of few objects leaves the splits
+    few places to go, and an object straddling a split is drawn by both sides. Objects are cut
+    when one holds more than 1/(4K) of the triangles, when there are fewer than 8 objects per
+    rank, or on walls of ``BIG_WALL`` ranks or more, where straddling objects multiply (the
+    plant at 4x4: overlap 3.21 whole, 2.77 / 2.47 with clusters of 333 / 64 triangles,
+    ``multigpu experiment walls``). Clusters then hold at most 1/(64K) of the triangles (and
+    at least ``MIN_CLUSTER``). Smaller walls keep scenes as modelled otherwise, so their
+    objects (and draw order) do not depend on the wall."""
     tris = np.asarray(tris, dtype=np.int64)
     total, k = int(tris.sum()), int(ranks)
     if total == 0:
@@ -40,9 +46,11 @@ def auto_cluster(tris: np.ndarray, ranks: int) -> tuple[int, str]:
         reasons.append(f"one object holds {share:.1%} of the triangles (more than 1/(4K) = {1 / (4 * k):.1%})")
     if tris.size < 8 * k:
         reasons.append(f"{tris.size} objects for {k} ranks (fewer than 8 per rank)")
+    if k >= BIG_WALL:
+        reasons.append(f"a {k}-rank wall (objects straddling splits multiply)")
     if not reasons:
         return 0, f"kept as modelled: largest object {share:.1%} of the triangles, {tris.size} objects for {k} ranks"
-    size = max(MIN_CLUSTER, -(-total // (16 * k)))
+    size = max(MIN_CLUSTER, -(-total // (64 * k)))
     if tris.max() <= size:
         return 0, "kept as modelled: " + "; ".join(reasons) + f", but no object exceeds {size} triangles"
     return size, f"objects above {size} triangles cut into clusters for {k} ranks: " + "; ".join(reasons)

@@ -19,7 +19,7 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4  # 4: meta records objects/up decisions and scene routes
 
 
 @dataclass

@@ -7,9 +7,10 @@ idea) apply to any file, scene graphs included. With components, pieces under ``
 triangles are merged by grid cell so object counts stay sane. Then, for the wall the scene is
 loaded for (``ranks``), objects too big to balance are cut into spatial clusters
 (``cluster.auto_cluster``: no object above 1/(4K) of the triangles, at least 8 objects per
-rank), unless ``--cluster N`` (explicit size, 0 = never) says otherwise. ``meta['objects']``
-records what was done and why. Faces with non-finite vertices and degenerate faces are dropped
-and counted (``scene.meta['warnings']``); a file shorter than its header promises is refused.
+rank, and on walls of 9+ ranks no object above 1/(64K)), unless ``--cluster N`` (explicit
+size, 0 = never) says otherwise. ``meta['objects']`` records what was done and why. Faces
+with non-finite vertices and degenerate faces are dropped and counted
+(``scene.meta['warnings']``); a file shorter than its header promises is refused.
 
 Up axis (``meta['up']``, used by generated camera paths): ``--up`` if given; glTF's +Y by its
 specification; for a flat scene (smallest extent under 0.35 of the largest: a city, a track) its thin axis; else
@@ -165,9 +166,16 @@ def _fill(spec: SceneSpec) -> Scene:
     return generate_fill(spec.triangles, panels=24 * spec.copies, seed=spec.seed)
 
 
-# built-in scenes: the plant (triangle-bound, the paper's kind) and a fill-bound contrast;
-# for ``fill``, ``--copies`` multiplies the 24 panels (depth complexity)
-BUILTIN = {"plant": _plant, "fill": _fill}
+def _city(spec: SceneSpec) -> Scene:
+    from multigpu.scene.city import generate_city
+
+    return generate_city(spec.triangles, spec.seed)
+
+
+# built-in scenes: the plant (triangle-bound, the paper's kind), a fill-bound contrast, and a
+# city of many small objects on big ground pieces (per-frame overhead); for ``fill``,
+# ``--copies`` multiplies the 24 panels (depth complexity)
+BUILTIN = {"plant": _plant, "fill": _fill, "city": _city}
 
 
 # ---------------------------------------------------------------- model files

@@ -225,6 +225,7 @@ def walkthrough(scene, frames: int = 1200, fov: float = 60.0) -> CameraPath:
     """A camera path that sees the scene in every frame, at any scale (every length is a
     fraction of the scene's size).
 
+    A scene whose meta holds a ``route`` (keyframes: the city's streets) is driven along it.
     Wide scenes (a plant, a city, a track): fly through, low through the densest of 6 x 6
     ground cells and high over sparse ones (so the screen distribution of load changes
     strongly over time), starting and ending with an overview. Compact scenes (ground under
@@ -233,6 +234,10 @@ def walkthrough(scene, frames: int = 1200, fov: float = 60.0) -> CameraPath:
     ``meta['up']`` (its sign included).
     """
     lo, hi, up, diag = _frame_of(scene)
+    if scene.meta.get("route"):  # a scene that knows a real-looking route (the city's streets)
+        keys = scene.meta["route"]
+        path = from_keyframes(keys, frames, {"fov": fov, "near": diag * 1e-4, "far": 3 * diag, "up": up.tolist()})
+        return look_at_something(path, scene)
     ax = int(np.argmax(np.abs(up)))
     g = [a for a in range(3) if a != ax]
     span = np.maximum(hi - lo, 1e-300)

@@ -190,7 +190,10 @@ def bench_render(quick: bool) -> list[dict]:
 
 
 def main(what: str, quick: bool = False) -> int:
-    fns = {"balance": bench_balance, "scene": bench_scene, "render": bench_render}
+    from multigpu.studies.frame_bench import bench_frame, bench_growth
+
+    fns = {"balance": bench_balance, "scene": bench_scene, "render": bench_render, "frame": bench_frame,
+           "growth": bench_growth}
     if what not in fns:
         raise InputError(f"bench: unknown benchmark '{what}' (known: {', '.join(fns)})")
     fns[what](quick)

@@ -1,0 +1,126 @@
+"""``multigpu bench frame``: where one rank's per-frame CPU goes, phase by phase, outside GL.
+
+One process plays rank 0 of a 2x2 wall along the scene's walkthrough: project the bounds,
+plan (strategy: tree walk, masks, loads), the frame's work, the draw list (run-merged
+commands of the rank's mask), the transfer plan and the timing row. Each phase is timed with
+``time.process_time`` (CPU) and ``time.perf_counter`` (wall) per frame; medians are printed.
+Rendering and MPI waits are not in it: this is the fixed CPU cost balancing adds to a frame.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+PHASES = ("project", "plan", "work", "drawlist", "transfers", "row")
+
+
+def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), frames: int = 60) -> dict:
+    """Median CPU ms of each per-frame phase (and their total) for rank 0."""
+    from multigpu.core.bounds import make_projector
+    from multigpu.core.camera import frame_matrices
+    from multigpu.core.drawlist import DrawList
+    from multigpu.core.regions import tile_regions
+    from multigpu.core.work import from_partition, transfers
+    from multigpu.parallel.report import COLUMNS
+    from multigpu.scene.paths import generate
+    from multigpu.strategies import make_strategy
+
+    size = (grid[1] * tile[0], grid[0] * tile[1])
+    path = generate("walkthrough", scene, frames)
+    project = make_projector(scene, "box")
+    strat = make_strategy(strategy, grid, size, 2048)
+    draws = DrawList(scene)
+    tiles = tile_regions(grid[0], grid[1], *tile)
+    cov = np.ones(scene.n_objects) if strat.needs_coverage else None
+    row = np.zeros(len(COLUMNS) + 1)
+    col = {c: i for i, c in enumerate(COLUMNS)}
+    times = {p: [] for p in PHASES}
+    rng = np.random.default_rng(0)
+    for f in range(len(path)):  # frames, not objects
+        view, proj, _ = frame_matrices(path.camera(f), size)
+        marks = [time.process_time()]
+        rects = project(view, proj, cov) if cov is not None else project(view, proj)
+        marks.append(time.process_time())
+        part = strat.plan(rects, scene.tris, cov)
+        marks.append(time.process_time())
+        work = from_partition(part, scene.tris)
+        marks.append(time.process_time())
+        for m in work.masks[0]:
+            draws.commands(m)
+        marks.append(time.process_time())
+        transfers(work, tiles)
+        marks.append(time.process_time())
+        values = {"frame": f, "rank": 0, "triangles": work.loads[0], "objects": work.objects(0),
+                  "pieces": len(work.rects[0]), "load_cv": work.load_cv}
+        for c, v in values.items():
+            row[col[c]] = v
+        marks.append(time.process_time())
+        strat.observe(f, part, 1.0 + rng.random(len(tiles)))
+        for p, a, b in zip(PHASES, marks[:-1], marks[1:]):
+            times[p].append((b - a) * 1e3)
+    med = {p: float(np.median(v)) for p, v in times.items()}
+    med["total"] = float(np.median(np.sum([times[p] for p in PHASES], axis=0)))
+    return med
+
+
+def bench_frame(quick: bool) -> list[dict]:
+    from multigpu.scene.models import SceneSpec, load_scene
+
+    scenes = [("plant", SceneSpec(triangles=20_000 if quick else 100_000)),
+              ("city", SceneSpec(scene="city", triangles=20_000 if quick else 100_000))]
+    frames = 20 if quick else 120
+    rows = []
+    print("per-frame CPU ms of rank 0 on a 2x2 wall of 512x512 (process CPU time, median over frames)")
+    print(f"{'scene':>6} {'objects':>8} {'strategy':>9} " + " ".join(f"{p:>9}" for p in (*PHASES, "total")))
+    for name, spec in scenes:
+        scene, _ = load_scene(spec)
+        for strategy in ("strips", "cost", "adaptive", "none"):
+            med = frame_phases(scene, strategy, frames=frames)
+            rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med})
+            figures = " ".join(f"{med[p]:9.3f}" for p in (*PHASES, "total"))
+            print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures}")
+    return rows
+
+
+def bench_growth(quick: bool) -> list[dict]:
+    """Per-frame balancer cost (projection + partition, wall ms, median of 5) and peak memory
+    against objects, ranks and strips, with the fitted growth."""
+    import tracemalloc
+
+    from multigpu.core.balance import partition
+    from multigpu.core.bounds import BoxProjector
+    from multigpu.core.camera import look_at, perspective
+    from multigpu.studies.bench import median_ms, synthetic_objects
+
+    sizes = [1_000, 10_000, 100_000] if quick else [1_000, 10_000, 100_000, 1_000_000]
+    grids = [(2, 2), (3, 3), (4, 4)]
+    view = look_at([-40, -60, 40], [100, 60, 0], [0, 0, 1])
+    proj = perspective(60, 1.0, 0.1, 1000)
+    rows = []
+    print(f"{'objects':>9} {'ranks':>5} {'strips':>6} {'ms':>9} {'peak MiB':>9} {'B/object':>9}")
+    for n in sizes:
+        bmin, bmax, _, _, tris = synthetic_objects(n)
+        project = BoxProjector(bmin, bmax)
+        for g in grids:
+            size = (g[1] * 512, g[0] * 512)
+            for strips in (64, 2048):
+                run = lambda: partition(project(view, proj), tris, g, size, strips)
+                ms = median_ms(run, 3 if n >= 1_000_000 else 5)
+                tracemalloc.start()
+                run()
+                peak = tracemalloc.get_traced_memory()[1]
+                tracemalloc.stop()
+                rows.append({"objects": n, "ranks": g[0] * g[1], "strips": strips, "ms": ms, "peak_bytes": peak})
+                print(f"{n:9d} {g[0] * g[1]:5d} {strips:6d} {ms:9.3f} {peak / 2**20:9.2f} {peak / n:9.1f}")
+    for k in (4, 9, 16):
+        r = [x for x in rows if x["ranks"] == k and x["strips"] == 2048]
+        big = [x for x in r if x["objects"] >= 10_000]
+        slope = np.polyfit(np.log([x["objects"] for x in big]), np.log([x["ms"] for x in big]), 1)[0]
+        print(f"ranks {k:2d}: time grows as objects^{slope:.2f} from 10^4 objects up (fixed cost below)")
+    for n in sizes:
+        t = {x["ranks"]: x["ms"] for x in rows if x["objects"] == n and x["strips"] == 2048}
+        print(f"{n:9d} objects: 16 ranks / 4 ranks = {t[16] / t[4]:.2f}x "
+              f"(tree levels 4 / 2 = 2.00x, ranks 16 / 4 = 4.00x)")
+    return rows

@@ -1,0 +1,111 @@
+"""Does balancing pay? Frame time of every strategy against ``none`` on the plant and the
+city, alternated in rounds (``payoff``); overlap and render efficiency as walls grow, with
+objects kept whole or cut by the automatic cluster rule (``walls``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.studies.runs import Settings, _plt, walk
+from multigpu.studies.tables import md_table, write_csv
+
+SCENES = {"plant": ["--scene", "plant"], "city": ["--scene", "city"]}
+
+
+def exp_payoff(s: Settings, out: Path) -> str:
+    """Emulated frame of each strategy over ``none``, same scene and path, alternated rounds."""
+    rounds = 1 if s.quick else 3
+    strategies = ("strips", "cost", "time", "adaptive", "cross", "none")
+    runs: dict = {}
+    for r in range(rounds):  # rounds alternate the strategies, so drift hits all alike
+        for scene, flags in SCENES.items():
+            for name in strategies:
+                run = walk(out / f"{scene}_{name}_{r}", (2, 2), (256, 256), [
+                    *flags, "--triangles", str(s.triangles), "--frames", str(s.frames), "--balance", name,
+                    "--mosaic-every", "0"], s.timeout)
+                runs.setdefault((scene, name), []).append(run)
+    rows = []
+    for scene in SCENES:
+        none = np.median([r.summary["emulated_frame_ms"] for r in runs[(scene, "none")]])
+        for name in strategies:
+            rs = runs[(scene, name)]
+            em = [r.summary["emulated_frame_ms"] for r in rs]
+            lb = [r.summary["cpu"]["load_balancing_cpu_ms"] for r in rs]
+            rows.append({"scene": scene, "objects": rs[0].summary["config"]["scene"]["objects"], "balance": name,
+                         "emulated_ms": float(np.median(em)), "speedup_vs_none": float(none / np.median(em)),
+                         "speedup_min": float(none / max(em)), "speedup_max": float(none / min(em)),
+                         "imb_render": float(np.median([r.summary["imbalance_render_cpu"] for r in rs])),
+                         "imb_tris": float(np.median([r.summary["imbalance_triangles"] for r in rs])),
+                         "lb_cpu_ms": float(np.median(lb)), "lb_share": float(np.median(lb) / np.median(em)),
+                         "render_max_ms": float(np.median([r.summary["render_cpu_max_ms"] for r in rs]))})
+    write_csv(out / "payoff.csv", rows)
+    return "\n".join([
+        f"2x2 wall of 256x256 tiles, {s.frames} walkthrough frames (the city drives its streets), {rounds} "
+        "alternating rounds; medians over rounds (min..max of the speedup beside). Emulated parallel frame = "
+        "slowest rank's CPU time per frame; `LB share` = load-balancing CPU per rank / emulated frame.", "",
+        md_table(rows, [("scene", "Scene", ""), ("objects", "Objects", "d"), ("balance", "Balance", ""),
+                        ("emulated_ms", "Frame (emulated) ms", ".2f"), ("speedup_vs_none", "vs none", ".2f"),
+                        ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f"),
+                        ("render_max_ms", "Slowest render ms", ".2f"), ("imb_render", "Imb. render", ".3f"),
+                        ("imb_tris", "Imb. tris", ".3f"), ("lb_cpu_ms", "LB CPU ms", ".2f"),
+                        ("lb_share", "LB share", ".1%")])])
+
+
+def exp_walls(s: Settings, out: Path) -> str:
+    """Overlap and render efficiency on 2x2, 3x3 and 4x4 walls, objects whole or clustered."""
+    grids = ((2, 2), (3, 3)) if s.quick else ((2, 2), (3, 3), (4, 4))
+    frames = max(6, s.frames // 4)
+    tile = 128 if s.quick else 256
+    rows = []
+    for cluster in ("0", "auto"):
+        one = walk(out / f"one_{cluster}", (1, 1), (tile * 4, tile * 4), [
+            "--triangles", str(s.triangles), "--frames", str(frames), "--cluster", cluster, "--mosaic-every", "0"],
+            s.timeout)
+        for g in grids:
+            k = g[0] * g[1]
+            run = walk(out / f"{g[0]}x{g[1]}_{cluster}", g, (tile * 4 // g[1], tile * 4 // g[0]), [
+                "--triangles", str(s.triangles), "--frames", str(frames), "--cluster", cluster, "--mosaic-every", "0"],
+                s.timeout)
+            n = min(len(one.rows), len(run.rows))
+            tris_sum = run.col("triangles")[:n].sum(axis=1)
+            visible = one.col("triangles")[:n, 0]
+            ok = visible > 0
+            speed = one.render_max_cpu[:n].mean() / run.render_max_cpu[:n].mean()
+            rows.append({"grid": f"{g[0]}x{g[1]}", "ranks": k, "cluster": cluster,
+                         "objects": run.summary["config"]["scene"]["objects"],
+                         "overlap": float((tris_sum[ok] / visible[ok]).mean()),
+                         "render_speedup": float(speed), "render_efficiency": float(speed / k),
+                         "imb_render": run.summary["imbalance_render_cpu"],
+                         "emulated_ms": run.summary["emulated_frame_ms"]})
+    write_csv(out / "walls.csv", rows)
+    _plot_walls(rows, out / "walls.png")
+    return "\n".join([
+        f"The default plant, {frames} walkthrough frames, a {tile * 4}x{tile * 4} display as 1 rank and as "
+        "2x2 / 3x3 / 4x4 walls; objects as modelled (`--cluster 0`) or cut by the automatic rule for the wall "
+        "(`--cluster auto`, the default: on walls of 9+ ranks objects above 1/(64K) of the triangles are cut). "
+        "Overlap = triangles drawn summed over ranks / triangles of the 1-rank frame; render speedup = "
+        "1-rank render CPU / slowest rank's render CPU (emulated), efficiency = speedup / ranks.", "",
+        md_table(rows, [("grid", "Wall", ""), ("cluster", "Cluster", ""), ("objects", "Objects", "d"),
+                        ("overlap", "Overlap", ".3f"), ("render_speedup", "Render speedup", ".2f"),
+                        ("render_efficiency", "Efficiency", ".1%"), ("imb_render", "Imb. render", ".3f"),
+                        ("emulated_ms", "Frame (emulated) ms", ".2f")]), "",
+        "![overlap and efficiency against wall size](walls.png)"])
+
+
+def _plot_walls(rows: list[dict], path: Path) -> None:
+    plt = _plt()
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
+    for cluster in ("0", "auto"):
+        r = [x for x in rows if x["cluster"] == cluster]
+        ax[0].plot([x["ranks"] for x in r], [x["overlap"] for x in r], "o-", label=f"--cluster {cluster}")
+        ax[1].plot([x["ranks"] for x in r], [x["render_efficiency"] for x in r], "o-", label=f"--cluster {cluster}")
+    ax[0].set(xlabel="ranks", ylabel="overlap (triangles drawn / visible)", title="Duplicated triangle work")
+    ax[1].set(xlabel="ranks", ylabel="render efficiency (emulated)", title="Render efficiency")
+    for a in ax:
+        a.legend()
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
