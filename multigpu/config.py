@@ -55,7 +55,7 @@ class WalkConfig:
     grid: tuple[int, int] = (2, 2)
     tile: tuple[int, int] = (256, 256)
     strips: int = 2048
-    balance: str = "strips"
+    balance: str = "time"  # measured best over none on average (docs/RESULTS.md, payoff + compare)
     bounds: str = "box"
     out: str = "out"
     mosaic_every: int = 100

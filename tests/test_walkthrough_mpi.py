@@ -58,7 +58,7 @@ def test_far_from_origin_and_offaxis_runs_match_the_reference(tmp_path, referenc
 
 def test_broadcast_partition_equals_redundant(tmp_path, reference):
     """--partition broadcast (rank 0 plans, MPI_Bcast) gives the same regions, loads and images."""
-    outs = {m: walk(tmp_path, m, (2, 2), ["--partition", m]) for m in ("redundant", "broadcast")}
+    outs = {m: walk(tmp_path, m, (2, 2), ["--partition", m, "--balance", "strips"]) for m in ("redundant", "broadcast")}
     for got, ref in zip(frames_of(outs["broadcast"]), reference):
         assert (got == ref).all()
     cols = ("frame", "rank", "triangles", "x0", "y0", "x1", "y1", "objects")

@@ -21,8 +21,10 @@ REGISTRY: dict[str, type] = {cls.name: cls for cls in (Screen, Database, Bins)}
 
 
 def make_decomposition(name: str, grid, size, strips: int, scene, balance: str = "strips",
-                       bin_size: int = 64, bin_pattern: str = "diagonal", db_ranges: str = "visible") -> Decomposition:
-    """The decomposition ``name`` for a scene on a ``grid`` wall of ``size`` pixels."""
+                       bin_size: int = 64, bin_pattern: str = "diagonal", db_ranges: str = "visible",
+                       rank: int | None = None) -> Decomposition:
+    """The decomposition ``name`` for a scene on a ``grid`` wall of ``size`` pixels; ``rank``
+    (when given) lets a decomposition compute only what that rank draws."""
     if name == "screen":
         from multigpu.strategies import make_strategy
 
@@ -30,7 +32,7 @@ def make_decomposition(name: str, grid, size, strips: int, scene, balance: str =
     if name == "db":
         return Database(grid, size, scene.centers, scene.tris, db_ranges)
     if name == "bins":
-        return Bins(grid, size, bin_size, bin_pattern)
+        return Bins(grid, size, bin_size, bin_pattern, rank)
     raise ValueError(f"unknown decomposition '{name}' (known: {', '.join(REGISTRY)})")
 
 

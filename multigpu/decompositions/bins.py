@@ -19,26 +19,38 @@ class Bins:
     depth = False
     needs_coverage = False
 
-    def __init__(self, grid, size, bin_size: int = 64, pattern: str = "diagonal"):
+    def __init__(self, grid, size, bin_size: int = 64, pattern: str = "diagonal", rank: int | None = None):
         self.k = int(grid[0]) * int(grid[1])
         self.size = tuple(size)
         self.bin_size, self.pattern = int(bin_size), pattern
+        self.rank = rank  # whose masks to compute (None: every rank's, for tests and reports)
         rects, bx, by = bin_rects(self.size, self.bin_size)
-        who = owner(pattern, bx, by, self.k)
-        self.rects = tuple(rects[who == k] for k in range(self.k))
+        self.nx, self.ny = int(bx.max()) + 1, int(by.max()) + 1
+        self.who = owner(pattern, bx, by, self.k)
+        self.rects = tuple(rects[self.who == k] for k in range(self.k))
+        self.bins = tuple((bx[self.who == k], by[self.who == k]) for k in range(self.k))
 
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
         spans, onscreen = pixel_spans(rects, self.size)
-        sp = spans.T[:, onscreen]  # (4, n) visible objects only
         idx = np.flatnonzero(onscreen)
+        b = self.bin_size
+        bx0, by0, bx1, by1 = (spans.T[i, onscreen].astype(np.int64) // b for i in range(4))
         tris = np.asarray(tris, dtype=np.int64)
-        masks, loads = [], np.zeros(self.k, dtype=np.int64)
-        for k, r in enumerate(self.rects):  # ranks, not objects: one (bins x objects) test each
-            touch = ((sp[0] < r[:, 2:3]) & (sp[2] >= r[:, 0:1]) & (sp[1] < r[:, 3:4]) & (sp[3] >= r[:, 1:2]))
-            m = np.zeros((len(r), len(tris)), dtype=bool)
-            m[:, idx] = touch
+        t = tris[idx]
+        # triangles per bin (an object counts in every bin it touches) from one 2-D difference
+        # array over the bin grid: four bincounts and two prefix sums, whatever the bin count
+        w = self.nx + 1
+        diff = np.zeros((self.ny + 1) * w)
+        for yy, xx, sign in ((by0, bx0, 1), (by0, bx1 + 1, -1), (by1 + 1, bx0, -1), (by1 + 1, bx1 + 1, 1)):
+            diff += sign * np.bincount(yy * w + xx, weights=t, minlength=diff.size)
+        per_bin = diff.reshape(self.ny + 1, w).cumsum(0).cumsum(1)[:self.ny, :self.nx].ravel()
+        loads = np.bincount(self.who, weights=per_bin, minlength=self.k).round().astype(np.int64)
+        masks = []
+        for k, (kx, ky) in enumerate(self.bins):  # ranks, not objects
+            m = np.zeros((len(kx) if self.rank in (None, k) else 0, len(tris)), dtype=bool)
+            if len(m):  # this rank's bins x visible objects: which object touches which bin
+                m[:, idx] = ((bx0 <= kx[:, None]) & (bx1 >= kx[:, None]) & (by0 <= ky[:, None]) & (by1 >= ky[:, None]))
             masks.append(m)
-            loads[k] = int((touch.astype(np.int64) @ tris[idx]).sum()) if len(r) and idx.size else 0
         return Work(self.rects, tuple(masks), loads, False, None)
 
     def observe(self, frame: int, work: Work, times: np.ndarray) -> None:

@@ -64,7 +64,18 @@ def make_path(cfg: WalkConfig, scene) -> CameraPath:
             path = CameraPath(*(a[:cfg.frames] for a in (path.position, path.target, path.up, path.fov,
                                                            path.near, path.far)))
         return path
-    return generate(cfg.path_kind, scene, cfg.frames)
+    return generate(cfg.path_kind, modelled(cfg, scene), cfg.frames)
+
+
+def modelled(cfg: WalkConfig, scene):
+    """The scene as modelled (not cut into clusters for this wall): generated paths follow it,
+    so a wall of any size, and its one-rank reference, fly the same camera."""
+    if not scene.meta.get("objects", {}).get("cluster"):
+        return scene
+    import dataclasses
+
+    whole, _ = load_scene(dataclasses.replace(cfg.scene, cluster=0))
+    return whole.translated(cfg.offset) if any(cfg.offset) else whole
 
 
 def load_world(cfg: WalkConfig):
@@ -203,7 +214,8 @@ class Frames:
         tw, th = cfg.tile
         self.tiles = tile_regions(cfg.grid[0], cfg.grid[1], tw, th)
         self.decomposition = make_decomposition(cfg.decomposition, cfg.grid, cfg.size, cfg.strips, scene,
-                                                cfg.balance, cfg.bin_size, cfg.bin_pattern, cfg.db_ranges)
+                                                cfg.balance, cfg.bin_size, cfg.bin_pattern, cfg.db_ranges,
+                                                rank=self.rank)
         self.broadcast = cfg.partition == "broadcast" and self.K > 1  # screen only (checked at the door)
         self.project = projector(cfg, scene)
         self.coverage = np.ones(scene.n_objects) if self.decomposition.needs_coverage else None

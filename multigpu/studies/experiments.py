@@ -56,17 +56,33 @@ def run(name: str, out: Path, quick: bool = False, results: Path | None = None) 
         page.parent.mkdir(parents=True, exist_ok=True)
         page.write_text(_results_page(sections, out, page, s, time.perf_counter() - t_all))
         print(f"results page: {page}")
+    elif results and Path(results).is_file():  # one experiment rerun: replace its section in place
+        page = Path(results)
+        page.write_text(_replace_section(page.read_text(), name, _relink(sections[0][1], out, page, name)))
+        print(f"results page: {page} (section {name} replaced)")
     return 0
+
+
+def _relink(md: str, out: Path, page: Path, name: str) -> str:
+    """A fragment's image links, relative to OUT/NAME/, made relative to the results page."""
+    rel = os.path.relpath(out, page.parent)
+    return md.replace("](", f"]({rel}/{name}/").replace(f"]({rel}/{name}/http", "](http")
+
+
+def _replace_section(text: str, name: str, section: str) -> str:
+    """``text`` with its ``## name`` section (up to the next ``## ``) replaced, or appended."""
+    head = f"## {name}\n"
+    start = text.find(head)
+    if start < 0:
+        return text.rstrip() + "\n\n" + section
+    end = text.find("\n## ", start + len(head))
+    return text[:start] + section.rstrip() + "\n" + (text[end:] if end >= 0 else "")
 
 
 def _results_page(sections, out: Path, page: Path, s: Settings, seconds: float) -> str:
     import platform
 
-    rel = os.path.relpath(out, page.parent)
-    body = []
-    for n, md in sections:
-        # image links in the fragments are relative to OUT/NAME/
-        body.append(md.replace("](", f"]({rel}/{n}/").replace(f"]({rel}/{n}/http", "](http"))
+    body = [_relink(md, out, page, n) for n, md in sections]  # links in fragments are relative to OUT/NAME/
     cmd = "launch/experiments" + (" --quick" if s.quick else "")
     return "\n".join([
         "# Results", "",
