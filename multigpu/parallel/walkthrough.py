@@ -108,7 +108,8 @@ def _check_path(cfg, scene, path) -> None:
 
 def _fault(rank: int, where: int | str) -> None:
     """Test-only fault injection: MULTIGPU_FAULT='RANK:WHERE[:stop]' with WHERE a frame
-    number or 'setup' raises there, or with ':stop' stops the rank (SIGSTOP: a frozen rank)."""
+    number or 'setup' raises there, or with ':stop' stops the rank (SIGSTOP: a frozen rank; if
+    something continues it, it carries on as if nothing happened)."""
     spec = os.environ.get("MULTIGPU_FAULT")
     if spec:
         r, w, *action = spec.split(":")
@@ -117,6 +118,7 @@ def _fault(rank: int, where: int | str) -> None:
                 import signal
 
                 os.kill(os.getpid(), signal.SIGSTOP)
+                return
             raise RuntimeError(f"injected fault at {'frame ' if isinstance(where, int) else ''}{where}")
 
 
