@@ -198,7 +198,7 @@ def exp_partition(s: Settings, out: Path) -> str:
             for mode in ("redundant", "broadcast"):
                 run = walk(out / f"c{copies}-r{rnd}-{mode}", (2, 2), (W // 2, H // 2),
                            _scene_args(s, copies) + ["--frames", str(s.frames), "--mosaic-every", "0",
-                                                     "--partition", mode], s.timeout)
+                                                     "--partition", mode, "--balance", "strips"], s.timeout)
                 b = _breakdown(run)
                 acc.setdefault((copies, mode), []).append(
                     (float(run.col("load_balancing_ms").mean()), float(run.col("load_balancing_cpu_ms").mean()),

@@ -69,7 +69,8 @@ def exp_resolution(s: Settings, out: Path) -> str:
     rows = []
     for res in s.resolutions:
         run = walk(out / f"r{res}", (2, 2), (res // 2, res // 2),
-                   _scene_args(s) + ["--frames", str(s.res_frames), "--strips", str(res), "--mosaic-every", "0"],
+                   _scene_args(s) + ["--frames", str(s.res_frames), "--strips", str(res), "--balance", "strips",
+                                     "--mosaic-every", "0"],
                    s.timeout)
         rows.append({"display": f"{res}x{res}", "pixels": res * res, **_breakdown(run)})
     write_csv(out / "resolution.csv", rows)
@@ -151,7 +152,8 @@ def exp_strips(s: Settings, out: Path) -> str:
     rows = []
     for q in counts:
         run = walk(out / f"s{q}", (2, 2), (W // 2, W // 2), _scene_args(s) + [
-            "--frames", str(s.strip_frames), "--strips", str(q), "--mosaic-every", "0"], s.timeout)
+            "--frames", str(s.strip_frames), "--strips", str(q), "--balance", "strips", "--mosaic-every", "0"],
+            s.timeout)
         b = _breakdown(run)
         rows.append({"strips": q, **b, "balancer_share": b["lb_cpu_ms"] / b["emulated_ms"]})
     write_csv(out / "strips.csv", rows)

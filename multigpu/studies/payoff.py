@@ -66,8 +66,8 @@ def exp_walls(s: Settings, out: Path) -> str:
         for g in grids:
             k = g[0] * g[1]
             run = walk(out / f"{g[0]}x{g[1]}_{cluster}", g, (tile * 4 // g[1], tile * 4 // g[0]), [
-                "--triangles", str(s.triangles), "--frames", str(frames), "--cluster", cluster, "--mosaic-every", "0"],
-                s.timeout)
+                "--triangles", str(s.triangles), "--frames", str(frames), "--cluster", cluster, "--balance", "time",
+                "--mosaic-every", "0"], s.timeout)
             n = min(len(one.rows), len(run.rows))
             tris_sum = run.col("triangles")[:n].sum(axis=1)
             visible = one.col("triangles")[:n, 0]
@@ -86,7 +86,8 @@ def exp_walls(s: Settings, out: Path) -> str:
         "2x2 / 3x3 / 4x4 walls; objects as modelled (`--cluster 0`) or cut by the automatic rule for the wall "
         "(`--cluster auto`, the default: on walls of 9+ ranks objects above 1/(64K) of the triangles are cut). "
         "Overlap = triangles drawn summed over ranks / triangles of the 1-rank frame; render speedup = "
-        "1-rank render CPU / slowest rank's render CPU (emulated), efficiency = speedup / ranks.", "",
+        "1-rank render CPU / slowest rank's render CPU (emulated), efficiency = speedup / ranks. Balance: `time`.",
+        "",
         md_table(rows, [("grid", "Wall", ""), ("cluster", "Cluster", ""), ("objects", "Objects", "d"),
                         ("overlap", "Overlap", ".3f"), ("render_speedup", "Render speedup", ".2f"),
                         ("render_efficiency", "Efficiency", ".1%"), ("imb_render", "Imb. render", ".3f"),
