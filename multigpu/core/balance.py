@@ -93,8 +93,9 @@ def validate_inputs(rects, tris, grid, size, strips) -> tuple[np.ndarray, np.nda
         raise ValueError("tris must be non-negative (a negative triangle count was given)")
     if tris.dtype.kind == "i" and tris.size and int(tris.sum(dtype=np.uint64)) >= MAX_TOTAL:
         raise ValueError("the triangle total exceeds 2**62 (sums could overflow int64)")
+    rt = rects.T  # coordinate-major rows (projectors return views of (4, N) arrays)
     with np.errstate(invalid="ignore"):
-        if np.any(rects[:, 0] > rects[:, 2]) or np.any(rects[:, 1] > rects[:, 3]):
+        if (rt[:2] > rt[2:]).any():
             raise ValueError("rects has inverted rows (xmin > xmax or ymin > ymax)")
     return rects, tris, gpu_tree(rows, cols), (W, H)
 

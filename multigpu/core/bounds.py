@@ -36,24 +36,23 @@ def _check(view, proj) -> np.ndarray:
     return proj @ view
 
 
-def _write_rects(out, idx, xmin, ymin, xmax, ymax, widen: float = 0.0) -> None:
-    """NDC extents to clipped normalized rects in ``out`` (4, N) at columns ``idx`` (an index
-    array or a slice), each side moved outwards by ``widen`` (NDC units); rects that miss the
-    screen become NaN. The extent arrays are overwritten."""
-    for v, shift in ((xmin, 0.5 - widen * 0.5), (ymin, 0.5 - widen * 0.5),
-                     (xmax, 0.5 + widen * 0.5), (ymax, 0.5 + widen * 0.5)):
-        np.multiply(v, 0.5, out=v)
-        v += shift
-    off = (xmax < 0.0) | (xmin > 1.0) | (ymax < 0.0) | (ymin > 1.0)
-    for row, v in enumerate((xmin, ymin, xmax, ymax)):
-        if isinstance(idx, slice):
-            np.clip(v, 0.0, 1.0, out=out[row, idx])
-        else:
-            np.clip(v, 0.0, 1.0, out=v)
-            out[row, idx] = v
+_SHIFT = np.array([[0.5], [0.5], [0.5], [0.5]])
+_WIDEN = np.array([[-0.5], [-0.5], [0.5], [0.5]])
+
+
+def _write_rects(out, idx, ext, widen: float = 0.0) -> None:
+    """NDC extents ``ext`` (4, m) ``[xmin, ymin, xmax, ymax]`` to clipped normalized rects in
+    ``out`` (4, N) at columns ``idx`` (an index array or a slice), each side moved outwards by
+    ``widen`` (NDC units); rects that miss the screen become NaN. ``ext`` is overwritten."""
+    np.multiply(ext, 0.5, out=ext)
+    ext += _SHIFT + widen * _WIDEN if widen else _SHIFT
+    off = (ext[2] < 0.0) | (ext[0] > 1.0) | (ext[3] < 0.0) | (ext[1] > 1.0)
+    if isinstance(idx, slice):
+        np.clip(ext, 0.0, 1.0, out=out[:, idx])
+    else:
+        out[:, idx] = np.clip(ext, 0.0, 1.0, out=ext)
     if off.any():
-        cols = np.arange(out.shape[1])[idx][off]
-        out[:, cols] = np.nan
+        out[:, np.flatnonzero(off) if isinstance(idx, slice) else idx[off]] = np.nan
 
 
 class BoxProjector:
@@ -98,16 +97,15 @@ class BoxProjector:
 _FACES = np.array([[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]])
 
 
+_NEXT = np.roll(_FACES, -1, axis=1)  # each face corner's successor around the cycle
+
+
 def _silhouette_fraction(x: np.ndarray, y: np.ndarray, ext) -> np.ndarray:
     """Projected area of a box (half the summed |area| of its 6 projected faces: front and
     back faces each cover the silhouette once) over the area of its bounding rect."""
-    area = np.zeros(x.shape[1], dtype=np.float64)
-    for f in _FACES:  # 6 faces, not objects
-        a = np.zeros(x.shape[1], dtype=np.float64)
-        for i in range(4):
-            j, k = f[i], f[(i + 1) % 4]
-            a += x[j] * y[k] - x[k] * y[j]
-        area += np.abs(a)
+    cross = x[_FACES] * y[_NEXT]  # (6, 4, m) shoelace terms
+    cross -= x[_NEXT] * y[_FACES]
+    area = np.abs(cross.sum(axis=1)).sum(axis=0)
     area *= 0.25  # 1/2 for the shoelace, 1/2 for front + back
     rect = (ext[2] - ext[0]).astype(np.float64) * (ext[3] - ext[1])
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -153,97 +151,86 @@ def _far_slack(proj: np.ndarray) -> float:
     return np.inf if not k < 1.0 else 1.0 / (1.0 - k) - 1.0
 
 
+# the 6 frustum planes as combinations of clip rows (x, y, z, w): inside means >= 0
+_PLANES = np.array([[1, 0, 0, 1], [-1, 0, 0, 1], [0, 1, 0, 1], [0, -1, 0, 1], [0, 0, 1, 1], [0, 0, -1, 1]],
+                   dtype=np.float64)
+_NEAR, _FAR = 4, 5
+
+
 def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
     """Rects of one block: ``center``/``half64`` (3, n) float64, ``half`` (3, n) in ``dtype``;
-    silhouette fractions into ``coverage`` when given."""
-    if coverage is not None:
-        coverage[:] = 1.0
+    silhouette fractions into ``coverage`` when given.
+
+    A plane distance is affine in the corner, so each box's extreme distance to the 6 frustum
+    planes needs no corners: boxes wholly outside one plane are culled first (one pass), and
+    only the rest get their 8 corners projected.
+    """
     clip_c = np.dot(M[:, :3], center)  # (4, n) float64, camera-relative
     clip_c += M[:, 3:]
-    # the near/far plane distances are affine in the corner: their extremes need no corners
-    near_row, far_row = M[2] + M[3], M[3] - M[2]
-    near_c, far_c = clip_c[2] + clip_c[3], clip_c[3] - clip_c[2]
-    near_r = np.dot(np.abs(near_row[:3]), half64)
-    far_r = np.dot(np.abs(far_row[:3]), half64)
-    w_r = np.dot(np.abs(M[3, :3]), half64)
-    all_front = near_c >= near_r
+    rows = np.abs(np.concatenate([_PLANES @ M[:, :3], M[3:, :3]]))  # plane normals, and w's
+    reach = rows @ half64  # (7, n): how far each box reaches along each plane (and in w)
+    dist = _PLANES @ clip_c  # (6, n) plane distances of the centres
+    far_slack = FAR_TOL * (np.abs(clip_c[3]) + reach[6])
     # beyond the far plane only by more than the GPU's float32 clip test can tell (FAR_TOL)
-    invisible = (near_c + near_r < 0) | (far_c + far_r < -FAR_TOL * (np.abs(clip_c[3]) + w_r))
-    fast = all_front & ~invisible
-    if fast.all():
-        fast = slice(None)
-    else:
-        out[:, invisible] = np.nan
-        fast = np.flatnonzero(fast) if fast.any() else None
-    if fast is not None:
-        hx, hy, hz = half[0, fast], half[1, fast], half[2, fast]
-        cx, cy, cw = (_corners(clip_c[r, fast].astype(dtype), hx, hy, hz, M[r, :3].astype(dtype))
-                      for r in (0, 1, 3))
-        x = np.divide(cx, cw, out=cx)
-        y = np.divide(cy, cw, out=cy)
-        ext = [np.minimum.reduce(x), np.minimum.reduce(y), np.maximum.reduce(x), np.maximum.reduce(y)]
-        if coverage is not None:
-            coverage[fast] = _silhouette_fraction(x, y, ext)
+    outside = (dist[:_FAR] + reach[:_FAR] < 0).any(axis=0) | (dist[_FAR] + reach[_FAR] < -far_slack)
+    front = dist[_NEAR] >= reach[_NEAR]  # wholly in front of the near plane
+    out[:] = np.nan
+    if coverage is not None:
+        coverage[:] = 1.0
+    show = np.flatnonzero(front & ~outside)
+    if show.size:
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            x, y = _corner_ndc(clip_c[:, show], half[:, show], M, dtype)
+            ext = np.stack([x.min(axis=0), y.min(axis=0), x.max(axis=0), y.max(axis=0)]).astype(np.float64)
+            if coverage is not None:
+                coverage[show] = _silhouette_fraction(x, y, ext)
         # rounding in ``dtype`` moves a corner by a few ulps of its NDC value; only values
         # within [-1, 1] matter after clipping, so a fixed widening of 16 ulps of 1 is enough
-        _write_rects(out, fast, *ext, widen=float(np.finfo(dtype).eps) * 16)
-    slow = np.flatnonzero(~all_front & ~invisible)
-    if slow.size:
-        offs = half64[:, slow].T[:, None, :] * _SIGNS[None, :, :]  # (m, 8, 3): few boxes cross the near plane
-        cx, cy, cz, cw = (clip_c[r, slow, None] + offs @ M[r, :3] for r in range(4))
-        _clipped_rects(cx, cy, cz, cw, out, slow)
+        _write_rects(out, show, ext, widen=float(np.finfo(dtype).eps) * 16)
+    slow = np.flatnonzero(~front & ~outside)
+    if slow.size:  # few boxes cross the near plane
+        corners = (half64[:, slow].T[:, None, :] * _SIGNS) @ M[:, :3].T  # (m, 8, 4) offsets in clip space
+        corners += clip_c[:, slow].T[:, None, :]
+        _clipped_rects(corners.transpose(2, 0, 1), out, slow)
 
 
-def _corners(base, hx, hy, hz, row) -> np.ndarray:
-    """(8, m) value of one clip row at the 8 corners: base +- hx*row0 +- hy*row1 +- hz*row2.
+def _corner_ndc(clip_c, half, M, dtype) -> tuple[np.ndarray, np.ndarray]:
+    """NDC x and y, each (8, m), of the 8 corners of boxes wholly in front of the near plane.
 
-    Corner k has signs (bit 2: x, bit 1: y, bit 0: z), the same for every row. In place, no
-    temporaries beyond the three (m,) offsets.
+    Corner k of a box (signs ``_SIGNS[k]``) has clip row r = ``clip_c[r] + sum_j M[r, j] *
+    sign_kj * half_j``: one (24, 3) x (3, m) product in ``dtype`` for the x, y and w rows of
+    all 8 corners, plus the centres.
     """
-    ax, ay, az = hx * row[0], hy * row[1], hz * row[2]
-    out = np.empty((8, base.shape[0]), dtype=base.dtype)
-    np.subtract(base, ax, out=out[0])
-    np.add(base, ax, out=out[4])
-    np.add(out[0], ay, out=out[2])
-    np.add(out[4], ay, out=out[6])
-    out[0] -= ay
-    out[4] -= ay
-    np.add(out[0::2], az, out=out[1::2])
-    out[0::2] -= az
-    return out
+    A = (M[[0, 1, 3], None, :3] * _SIGNS[None]).reshape(24, 3).astype(dtype)  # (row, corner) x axis
+    c = np.dot(A, half).reshape(3, 8, -1)
+    c += clip_c[[0, 1, 3], None, :].astype(dtype)
+    np.divide(c[:2], c[2], out=c[:2])
+    return c[0], c[1]
 
 
-def _clipped_rects(cx, cy, cz, cw, out, idx) -> None:
-    """Rects of boxes that cross the near plane: the part in front of it, projected."""
-    cx, cy, cz, cw = (np.asarray(c, dtype=np.float64) for c in (cx, cy, cz, cw))
-    d = cz + cw  # signed distance to the near plane (>= 0 in front)
-    pts_x, pts_y, keep = [cx / np.where(d >= 0, cw, 1)], [cy / np.where(d >= 0, cw, 1)], [d >= 0]
-    i, j = _EDGES[:, 0], _EDGES[:, 1]
-    d0, d1 = d[:, i], d[:, j]
-    crosses = (d0 >= 0) != (d1 >= 0)
+_OFF = np.array([[2.0], [2.0], [3.0], [3.0]])  # an extent wholly off screen (becomes NaN)
+
+
+def _clipped_rects(P, out, idx) -> None:
+    """Rects of boxes that cross the near plane: the part in front of it, projected.
+
+    ``P`` (4, m, 8) holds clip x, y, z, w at each box's 8 corners; the candidate points are
+    the corners in front of the near plane and the crossings of the 12 edges with it."""
+    d = P[2] + P[3]  # signed distance to the near plane (>= 0 in front)
+    d0, d1 = d[:, _EDGES[:, 0]], d[:, _EDGES[:, 1]]
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(crosses, d0 / (d0 - d1), 0.0)
-        w = cw[:, i] + t * (cw[:, j] - cw[:, i])
-        ok = crosses & (w > 0)
-        w = np.where(ok, w, 1.0)
-        pts_x.append((cx[:, i] + t * (cx[:, j] - cx[:, i])) / w)
-        pts_y.append((cy[:, i] + t * (cy[:, j] - cy[:, i])) / w)
-    keep.append(ok)
-    px, py, k = np.concatenate(pts_x, 1), np.concatenate(pts_y, 1), np.concatenate(keep, 1)
+        t = d0 / (d0 - d1)
+        E0 = P[[0, 1, 3]][:, :, _EDGES[:, 0]]
+        crossing = E0 + t * (P[[0, 1, 3]][:, :, _EDGES[:, 1]] - E0)  # (3, m, 12) x, y, w on the plane
+        pts = np.concatenate([P[[0, 1, 3]], crossing], axis=2)  # (3, m, 20)
+        keep = np.concatenate([d >= 0, (d0 >= 0) != (d1 >= 0)], axis=1) & (pts[2] > 0)
+        xy = pts[:2] / pts[2]
     # a point on the near plane has w = near > 0, so its projection is finite; clamp wild
     # values (a near plane at 1e-7 gives huge NDC) before taking extents
-    px = np.clip(px, -4.0, 4.0)
-    py = np.clip(py, -4.0, 4.0)
-    xmin = np.where(k, px, np.inf).min(1)
-    xmax = np.where(k, px, -np.inf).max(1)
-    ymin = np.where(k, py, np.inf).min(1)
-    ymax = np.where(k, py, -np.inf).max(1)
-    visible = k.any(axis=1)
-    for arr in (xmin, ymin):
-        arr[~visible] = 2.0  # nothing in front: off screen, becomes NaN
-    for arr in (xmax, ymax):
-        arr[~visible] = 3.0
-    _write_rects(out, idx, xmin, ymin, xmax, ymax)
+    np.clip(xy, -4.0, 4.0, out=xy)
+    ext = np.concatenate([np.where(keep, xy, np.inf).min(axis=2), np.where(keep, xy, -np.inf).max(axis=2)])
+    np.copyto(ext, _OFF, where=~keep.any(axis=1))  # nothing in front: off screen
+    _write_rects(out, idx, ext)
 
 
 class SphereProjector:
@@ -322,8 +309,8 @@ def _spheres_block(center, radii, view, proj, planes, near, out) -> None:
         # ndc = P00 * x/depth - P02 (and likewise for y) for a GL perspective matrix
         nx0, nx1 = proj[0, 0] * lo_x - proj[0, 2], proj[0, 0] * hi_x - proj[0, 2]
         ny0, ny1 = proj[1, 1] * lo_y - proj[1, 2], proj[1, 1] * hi_y - proj[1, 2]
-        _write_rects(out, ok, np.minimum(nx0, nx1), np.minimum(ny0, ny1),
-                     np.maximum(nx0, nx1), np.maximum(ny0, ny1))
+        _write_rects(out, ok, np.stack([np.minimum(nx0, nx1), np.minimum(ny0, ny1),
+                                        np.maximum(nx0, nx1), np.maximum(ny0, ny1)]))
     cross = np.flatnonzero(crossing)
     if cross.size:
         r = radii[cross, None]

@@ -48,8 +48,7 @@ def pixel_spans(rects: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, n
         c = np.multiply(rt, np.array([[W], [H], [W], [H]], dtype=np.float64))
         np.maximum(c, 0.0, out=c)
         np.minimum(c, np.array([[W - 1], [H - 1], [W - 1], [H - 1]], dtype=np.float64), out=c)
-        if not onscreen.all():
-            c[:, ~onscreen] = 0.0
+        np.copyto(c, 0.0, where=~onscreen)  # off-screen (and NaN) rows
         spans_t = c.astype(SPAN_DTYPE)  # truncation is floor: every value is >= 0 here
     spans = spans_t.T  # (N, 4) view of the coordinate-major array
     return spans, onscreen
