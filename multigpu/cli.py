@@ -4,7 +4,7 @@
     multigpu scene info SCENE_OR_FILE          objects, triangles, bounds, memory, load time
     multigpu path make KIND --out FILE         write a camera path file
     multigpu tree RxC                          print the GPU tree and each rank's ParInfo
-    multigpu bench balance|scene|render        benchmarks (speed and memory figures)
+    multigpu bench balance|scene|render|frame|growth|floor  benchmarks (speed and memory figures)
     multigpu experiment NAME|all [--quick]     the paper's evaluation: CSV, plots, Markdown
     multigpu accuracy [--quick]                speed-for-accuracy trades: CSV + ACCURACY.md
 
@@ -182,8 +182,11 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--out", default="out/accuracy", help="directory for the CSV tables")
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
-    b.add_argument("what", help="balance | scene | render | frame | growth")
+    b.add_argument("what", help="balance | scene | render | frame | growth | floor")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
+    b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
+    b.add_argument("--scene", default="plant", help=argparse.SUPPRESS)
+    b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)
     return ap
 
 
@@ -219,6 +222,16 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "bench":
             from multigpu.studies import bench
 
+            if args.what == "floor" and args.worker:  # the MPI side, started by bench floor
+                from multigpu.parallel import floor
+
+                floor.main(args.scene, args.frames or 120)
+                return 0
+            if args.what == "floor":
+                from multigpu.studies.floor import bench_floor
+
+                bench_floor(args.quick, args.frames)
+                return 0
             return bench.main(args.what, quick=args.quick)
     except InputError as exc:
         print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr)

@@ -169,3 +169,13 @@ def test_launch_script_runs_the_job(tmp_path):
     assert proc.returncode == 0, stderr[-3000:]
     s = json.loads((out / "summary.json").read_text())
     assert s["complete"] and s["frames"] == 3 and s["ranks"] == 2
+
+
+def test_noise_floor_bench_measures_identical_work_on_every_rank():
+    """bench floor's MPI side: every rank renders the same work; the figures are sane."""
+    from multigpu.studies.floor import run
+
+    got = run(scenes=("plant",), ranks=2, frames=8, timeout=240)[0]
+    assert got["ranks"] == 2 and got["frames"] == 3
+    assert got["render_ms_mean"] > 0
+    assert 1.0 <= got["imbalance_floor"] < 2.0 and got["noise_cv"] >= 0.0

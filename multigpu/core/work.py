@@ -85,19 +85,19 @@ def transfers(work: Work, tiles: np.ndarray) -> list[Piece]:
     """Every non-empty (piece, tile) intersection, sorted by (sender, receiver, piece index):
     the order both ends pack and unpack one pair's message in."""
     T = np.asarray(tiles, dtype=np.int64)
-    out = []
-    for k, rects in enumerate(work.rects):  # ranks, then their pieces: not objects
-        if len(rects) == 0:
-            continue
-        R = np.asarray(rects, dtype=np.int64)[:, None, :]
-        lo = np.maximum(R[..., :2], T[None, :, :2])
-        hi = np.minimum(R[..., 2:], T[None, :, 2:])
-        ok = (hi > lo).all(axis=-1)  # (M, K)
-        for j, t in zip(*np.nonzero(ok)):
-            out.append(Piece(k, int(t), int(j), (int(lo[j, t, 0]), int(lo[j, t, 1]), int(hi[j, t, 0]),
-                                                  int(hi[j, t, 1]))))
-    out.sort(key=lambda p: (p.sender, p.receiver, p.index))
-    return out
+    counts = [len(r) for r in work.rects]
+    if not sum(counts):
+        return []
+    R = np.concatenate([np.asarray(r, dtype=np.int64).reshape(-1, 4) for r in work.rects])  # every piece
+    sender = np.repeat(np.arange(len(counts)), counts)
+    index = np.arange(len(R)) - np.repeat(np.cumsum(counts) - counts, counts)  # piece index within its rank
+    lo = np.maximum(R[:, None, :2], T[None, :, :2])
+    hi = np.minimum(R[:, None, 2:], T[None, :, 2:])
+    p, t = np.nonzero((hi > lo).all(axis=-1))  # (pieces, tiles) that meet
+    order = np.lexsort((index[p], t, sender[p]))
+    p, t = p[order], t[order]
+    cut = np.concatenate([lo[p, t], hi[p, t]], axis=1).tolist()
+    return [Piece(s, r, i, tuple(c)) for s, r, i, c in zip(sender[p].tolist(), t.tolist(), index[p].tolist(), cut)]
 
 
 def pieces_tile_display(work: Work, size) -> bool:

@@ -234,6 +234,7 @@ class Frames:
         self.done = 0
         self.out = out
         self.history: list[np.ndarray] = []
+        self.learn = None  # (frame, work, times) the strategy observes at the start of the next frame
         self.config_doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
         self.writer = self.video = self.bar = None
 
@@ -308,6 +309,9 @@ class Frames:
         t = Timer()
         t.mark()
         _fault(self.rank, f)
+        if self.learn is not None:  # the strategy learns from the last frame's times: balancing CPU too
+            self.decomposition.observe(*self.learn)
+            self.learn = None
         work, (view, proj, light) = self.plan(f)
         t.mark()
         rendered = self.render(work, view, proj, light)
@@ -319,7 +323,7 @@ class Frames:
         np.copyto(self.front, self.back)  # present the composed tile
         t.mark()
         self.record(f, work, t, sent)
-        self.decomposition.observe(f, work, self.allrows[:, self.col["rendering_cpu_ms"]])
+        self.learn = (f, work, self.allrows[:, self.col["rendering_cpu_ms"]].copy())
         if self.rank == 0:  # rows first: the summary always matches the CSV
             rows = self.allrows[:, :len(COLUMNS)]
             self.writer.write(rows)

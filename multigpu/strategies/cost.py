@@ -69,26 +69,30 @@ class CostModel(Configured):
 
     def _fit(self, data: np.ndarray) -> None:
         y = data[:, 2]
-        cols = {"triangles": data[:, 0], "pixels": data[:, 1]}
+        full = np.column_stack([data[:, 0], data[:, 1], np.ones_like(y)])  # triangles, pixels, 1
+        scale = np.maximum(np.abs(full).max(axis=0), 1e-300)
+        Xs = full / scale
+        gram, rhs, yy = Xs.T @ Xs, Xs.T @ y, float(y @ y)  # the normal equations, formed once
+        col = {"triangles": 0, "pixels": 1}
         terms = ["triangles", "pixels"]
         while True:  # drop terms until every kept one is positive, material and stable
-            X = np.column_stack([*(cols[t] for t in terms), np.ones_like(y)])
-            scale = np.maximum(np.abs(X).max(axis=0), 1e-300)
-            beta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
-            beta = beta / scale
-            dof = max(len(y) - X.shape[1], 1)
-            resid = y - X @ beta
-            sigma2 = float(resid @ resid) / dof
+            use = [col[t] for t in terms] + [2]
+            G = gram[np.ix_(use, use)]
             try:
-                cov = sigma2 * np.linalg.inv(X.T @ X)
-                se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+                inv = np.linalg.inv(G)
             except np.linalg.LinAlgError:
-                se = np.full(X.shape[1], np.inf)
-            pred = X @ beta
+                inv = np.linalg.pinv(G)
+            bs = inv @ rhs[use]
+            beta = bs / scale[use]
+            dof = max(len(y) - len(use), 1)
+            sigma2 = max(yy - 2 * bs @ rhs[use] + bs @ G @ bs, 0.0) / dof  # residual sum of squares / dof
+            se = np.sqrt(np.maximum(sigma2 * np.diag(inv), 0.0)) / scale[use]
+            means = full[:, use].mean(axis=0) * beta  # mean contribution of each term
+            pred = max(float(means.sum()), 1e-12)
             verdicts = {}
             for i, t in enumerate(terms):
-                share = float(np.mean(beta[i] * X[:, i]) / max(np.mean(pred), 1e-12))
                 rel = float(se[i] / beta[i]) if beta[i] > 0 else np.inf
+                share = float(means[i] / pred)
                 verdicts[t] = (beta[i] > 0 and share >= self.min_share and rel <= self.max_rel_se, share, rel)
             bad = [t for t in terms if not verdicts[t][0]]
             if not bad or len(terms) == 1:

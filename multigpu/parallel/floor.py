@@ -1,0 +1,72 @@
+"""The MPI side of ``multigpu bench floor``: every rank renders exactly the same work.
+
+Same region, same objects, same camera along the scene's walkthrough, synchronized per frame
+as the frame loop is; the per-rank render CPU times are compared exactly as
+``report.summarize`` compares them (per frame max/mean, averaged over frames). Whatever
+imbalance shows is this machine's measurement noise: the floor under every strategy's
+``imbalance_render_cpu``. ``studies/floor.py`` starts it and prints the table.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+MARK = "floor-json: "
+
+
+def measure(scene_name: str, frames: int, tile: int = 256) -> dict | None:
+    """The worker, on every rank of an MPI job: returns the figures on rank 0."""
+    import os
+
+    os.environ.setdefault("LP_NUM_THREADS", "1")
+    from mpi4py import MPI
+
+    from multigpu.core.bounds import make_projector
+    from multigpu.core.camera import frame_matrices
+    from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import generate
+
+    comm = MPI.COMM_WORLD
+    rank = comm.Get_rank()
+    if rank == 0:
+        load_scene(SceneSpec(scene=scene_name))  # build the cache once
+    comm.Barrier()
+    scene, _ = load_scene(SceneSpec(scene=scene_name))
+    size = (2 * tile, 2 * tile)
+    ctx, _ = create_context(local_rank=rank)
+    renderer = RegionRenderer(ctx, scene, size)
+    path = generate("walkthrough", scene, frames)
+    project = make_projector(scene)
+    region = (tile // 2, tile // 2, tile // 2 + tile, tile // 2 + tile)  # a tile-sized centre region
+    lo, hi = 0.25, 0.75
+    times = np.zeros(frames)
+    for f in range(frames):  # frames, not objects
+        view, proj, light = frame_matrices(path.camera(f), size)
+        r = project(view, proj)
+        with np.errstate(invalid="ignore"):
+            mask = (r[:, 0] < hi) & (r[:, 2] >= lo) & (r[:, 1] < hi) & (r[:, 3] >= lo)
+        comm.Barrier()
+        t0 = time.process_time()
+        renderer.render(view, proj, light, region, mask)
+        times[f] = (time.process_time() - t0) * 1e3
+    allt = np.zeros((comm.Get_size(), frames)) if rank == 0 else None
+    comm.Gather(times, allt, root=0)
+    renderer.release()
+    if rank != 0:
+        return None
+    t = allt.T[min(5, frames - 1):]  # (F, K), first frames warm up
+    return {"scene": scene_name, "ranks": int(comm.Get_size()), "frames": int(t.shape[0]),
+            "render_ms_mean": float(t.mean()),
+            "imbalance_floor": float(np.mean(t.max(axis=1) / t.mean(axis=1))),
+            "noise_cv": float(np.mean(t.std(axis=1) / t.mean(axis=1)))}
+
+
+def main(scene_name: str, frames: int) -> None:
+    """Measure and print rank 0's figures as one JSON line after ``MARK``."""
+    got = measure(scene_name, frames)
+    if got is not None:
+        print(MARK + json.dumps(got), flush=True)

@@ -1,0 +1,44 @@
+"""``multigpu bench floor``: the render imbalance a perfect balancer would still measure here.
+
+Every rank renders exactly the same work (``parallel/floor.py``, started under mpiexec), so
+any imbalance it shows is this machine's measurement noise (ranks sharing cores, caches and
+memory bandwidth): the floor under every strategy's ``imbalance_render_cpu``, and how much
+noise alone inflates the slowest-rank (emulated) frame.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from multigpu.parallel.floor import MARK
+
+
+def run(scenes: tuple[str, ...] = ("plant", "city"), ranks: int = 4, frames: int = 120,
+        timeout: float = 600) -> list[dict]:
+    """Start the worker under mpiexec for each scene; the figures it printed."""
+    from multigpu.parallel.mpirun import run_multigpu
+
+    rows = []
+    for name in scenes:
+        job = run_multigpu(ranks, ["bench", "floor", "--worker", "--scene", name, "--frames", str(frames)], timeout,
+                           merge_stderr=True)
+        lines = [ln for ln in job.stdout.splitlines() if ln.startswith(MARK)]
+        if job.returncode != 0 or not lines:
+            tail = "\n".join(job.stdout.strip().splitlines()[-5:])
+            raise RuntimeError(f"bench floor: the MPI job failed (exit {job.returncode})\n{tail}")
+        rows.append(json.loads(lines[-1][len(MARK):]))
+    return rows
+
+
+def bench_floor(quick: bool, frames: int | None = None) -> list[dict]:
+    """Run the measurement on the plant and the city; print the table."""
+    frames = frames or (20 if quick else 120)
+    rows = run(frames=frames)
+    print("identical work on every rank (same region, objects and camera), process CPU time per rank:")
+    print(f"{'scene':>6} {'ranks':>5} {'frames':>6} {'render ms':>9} {'imbalance floor':>15} {'noise c_v':>9}")
+    for r in rows:
+        print(f"{r['scene']:>6} {r['ranks']:5d} {r['frames']:6d} {r['render_ms_mean']:9.2f} "
+              f"{r['imbalance_floor']:15.3f} {r['noise_cv']:9.3f}")
+    sys.stdout.flush()
+    return rows
