@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multigpu.core.balance import Partition, partition
-from multigpu.strategies.base import rank_pixels
+from multigpu.strategies.base import coverage_of, rank_pixels
 from multigpu.strategies.cost import CostModel
 
 
@@ -44,7 +44,7 @@ class Adaptive(CostModel):
         if self.corr is None or len(self.corr) != n:
             self.corr = np.ones(n)
         a, b, c = self.coef
-        cov = np.ones(n) if coverage is None else np.nan_to_num(np.asarray(coverage, np.float64))
+        cov = coverage_of(coverage, n)
         use_px = "pixels" in self.kept and b > 0
         weights = tris * self.corr * (1.0 if a > 0 or not use_px else 0.0)
         fill = cov * self.corr * (b / a if a > 0 else 1.0) if use_px else None

@@ -56,6 +56,14 @@ class Configured:
         return {"name": self.name}
 
 
+def coverage_of(coverage: np.ndarray | None, n: int) -> np.ndarray:
+    """Per-object silhouette coverage as float64 (1 where unknown or not finite)."""
+    if coverage is None:
+        return np.ones(n)
+    cov = np.asarray(coverage, dtype=np.float64)
+    return cov if np.isfinite(cov).all() else np.nan_to_num(cov, nan=1.0, posinf=1.0, neginf=0.0)
+
+
 def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, size,
                 coverage: np.ndarray | None = None, spans: np.ndarray | None = None) -> np.ndarray:
     """(K,) pixels each rank fills by the rect estimate: its visible objects' rects clipped to

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multigpu.core.balance import Partition, partition
-from multigpu.strategies.base import Configured, rank_pixels
+from multigpu.strategies.base import Configured, coverage_of, rank_pixels
 
 
 @dataclass
@@ -45,7 +45,7 @@ class CostModel(Configured):
 
     def plan(self, rects, tris, coverage: np.ndarray | None = None):
         a, b = self.coef[0], self.coef[1]
-        cov = np.ones(len(tris)) if coverage is None else np.nan_to_num(np.asarray(coverage, np.float64))
+        cov = coverage_of(coverage, len(tris))
         if "pixels" in self.kept and b > 0:
             # only the ratio matters: a triangle weighs 1 and a covered pixel b / a triangles
             weights, fill = (tris, cov * (b / a)) if a > 0 else (np.zeros(len(tris)), cov)

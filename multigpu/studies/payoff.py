@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.floor import run as floor_run
 from multigpu.studies.runs import Settings, _plt, walk
 from multigpu.studies.tables import md_table, write_csv
 
@@ -19,7 +20,10 @@ def exp_payoff(s: Settings, out: Path) -> str:
     rounds = 1 if s.quick else 3
     strategies = ("strips", "cost", "time", "adaptive", "cross", "none")
     runs: dict = {}
+    floors: dict = {}
     for r in range(rounds):  # rounds alternate the strategies, so drift hits all alike
+        for got in floor_run(tuple(SCENES), 4, min(s.frames, 120), s.timeout):
+            floors.setdefault(got["scene"], []).append(got["imbalance_floor"])
         for scene, flags in SCENES.items():
             for name in strategies:
                 run = walk(out / f"{scene}_{name}_{r}", (2, 2), (256, 256), [
@@ -41,16 +45,44 @@ def exp_payoff(s: Settings, out: Path) -> str:
                          "lb_cpu_ms": float(np.median(lb)), "lb_share": float(np.median(lb) / np.median(em)),
                          "render_max_ms": float(np.median([r.summary["render_cpu_max_ms"] for r in rs]))})
     write_csv(out / "payoff.csv", rows)
+    bounds = [ceiling(scene, runs[(scene, "none")], float(np.median(floors[scene])),
+                      max(x["speedup_vs_none"] for x in rows if x["scene"] == scene and x["balance"] != "none"))
+              for scene in SCENES]
+    write_csv(out / "payoff_ceiling.csv", bounds)
     return "\n".join([
         f"2x2 wall of 256x256 tiles, {s.frames} walkthrough frames (the city drives its streets), {rounds} "
         "alternating rounds; medians over rounds (min..max of the speedup beside). Emulated parallel frame = "
-        "slowest rank's CPU time per frame; `LB share` = load-balancing CPU per rank / emulated frame.", "",
+        "slowest rank's CPU time per frame; `LB share` = load-balancing CPU per rank (projection, plan, learning "
+        "from the last frame's times) / emulated frame.", "",
         md_table(rows, [("scene", "Scene", ""), ("objects", "Objects", "d"), ("balance", "Balance", ""),
                         ("emulated_ms", "Frame (emulated) ms", ".2f"), ("speedup_vs_none", "vs none", ".2f"),
                         ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f"),
                         ("render_max_ms", "Slowest render ms", ".2f"), ("imb_render", "Imb. render", ".3f"),
                         ("imb_tris", "Imb. tris", ".3f"), ("lb_cpu_ms", "LB CPU ms", ".2f"),
-                        ("lb_share", "LB share", ".1%")])])
+                        ("lb_share", "LB share", ".1%")]), "",
+        "How far balancing can go here. `Floor` = the render imbalance of identical work on every rank "
+        "(`multigpu bench floor`, measured in every round beside the runs: this machine's noise, which a perfect "
+        "balancer would still show). `Ideal frame` = `none`'s frame with its balancing, exchange and display CPU "
+        "kept but its render time replaced by the mean rank's render time times the floor: a balancer that is "
+        "free, perfect to the noise floor and adds no exchange or overlap. `Ceiling` = `none`'s frame / ideal "
+        "frame: no strategy can beat it on this machine.", "",
+        md_table(bounds, [("scene", "Scene", ""), ("floor", "Floor", ".3f"), ("none_ms", "none frame ms", ".2f"),
+                          ("render_mean_ms", "Mean render ms", ".2f"), ("render_max_ms", "Slowest render ms", ".2f"),
+                          ("ideal_ms", "Ideal frame ms", ".2f"), ("ceiling", "Ceiling vs none", ".2f"),
+                          ("best", "Best measured vs none", ".2f")])])
+
+
+def ceiling(scene: str, none_runs: list, floor: float, best: float) -> dict:
+    """The most any balancer could gain over ``none`` here: ``none``'s frame with its render time
+    replaced by the mean rank's render time times the noise floor (medians over rounds)."""
+    med = lambda f: float(np.median([f(r.summary) for r in none_runs]))
+    cpu = lambda c: med(lambda x: x["cpu"][c])
+    fixed = cpu("load_balancing_cpu_ms") + cpu("frame_exchange_cpu_ms") + cpu("display_cpu_ms")
+    ideal = fixed + cpu("rendering_cpu_ms") * floor
+    none_ms = med(lambda x: x["emulated_frame_ms"])
+    return {"scene": scene, "floor": floor, "none_ms": none_ms, "render_mean_ms": cpu("rendering_cpu_ms"),
+            "render_max_ms": med(lambda x: x["render_cpu_max_ms"]), "ideal_ms": ideal, "ceiling": none_ms / ideal,
+            "best": best}
 
 
 def exp_walls(s: Settings, out: Path) -> str:
