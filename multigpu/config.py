@@ -55,7 +55,7 @@ class WalkConfig:
     grid: tuple[int, int] = (2, 2)
     tile: tuple[int, int] = (256, 256)
     strips: int = 2048
-    balance: str = "time"  # measured best over none on average (docs/RESULTS.md, payoff + compare)
+    balance: str = "cross"  # measured best over none on average (docs/RESULTS.md, payoff)
     bounds: str = "box"
     out: str = "out"
     mosaic_every: int = 100
@@ -103,9 +103,9 @@ class WalkConfig:
             raise InputError(f"--bin-size must be 1..4096 pixels, got {self.bin_size}")
         if self.db_ranges not in RANGES:
             raise InputError(f"--db-ranges must be one of {', '.join(RANGES)}, got '{self.db_ranges}'")
-        if self.partition == "broadcast" and (self.decomposition != "screen" or self.balance == "cross"):
-            raise InputError("--partition broadcast works with --decomposition screen and a one-region strategy "
-                             f"(got --decomposition {self.decomposition}, --balance {self.balance})")
+        if self.partition == "broadcast" and self.decomposition != "screen":
+            raise InputError("--partition broadcast works with --decomposition screen (the balancer's partition), "
+                             f"got --decomposition {self.decomposition}")
         if len(self.offset) != 3 or not all(math.isfinite(v) and abs(v) <= 1e15 for v in self.offset):
             raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
         if self.device is not None and self.device < 0:

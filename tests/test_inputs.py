@@ -228,7 +228,6 @@ def test_setup_stage_errors_name_their_flag(tmp_path):
     (["--decomposition", "bins", "--bin-size", "1", "--tile", "512x512"], "at most 65536"),
     (["--decomposition", "db", "--db-ranges", "random"], "--db-ranges must be one of visible, static"),
     (["--decomposition", "db", "--partition", "broadcast"], "--partition broadcast works with --decomposition screen"),
-    (["--balance", "cross", "--partition", "broadcast"], "--partition broadcast works with"),
 ])
 def test_decomposition_flags_are_validated_at_the_door(flags, needle):
     from multigpu.cli import build_parser, walk_config

@@ -70,6 +70,18 @@ def test_broadcast_partition_equals_redundant(tmp_path, reference):
     assert json.loads((outs["broadcast"] / "summary.json").read_text())["config"]["partition"] == "broadcast"
 
 
+def test_broadcast_partition_carries_pieces(tmp_path, reference):
+    """cross (the default) under --partition broadcast: rank 0's pieces reach every rank, and the
+    wall still equals the one-rank render."""
+    out = walk(tmp_path, "bcast_cross", (2, 2), ["--partition", "broadcast", "--balance", "cross"])
+    for got, ref in zip(frames_of(out), reference):
+        assert (got == ref).all()
+    with open(out / "timings.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert all(float(r["pieces"]) >= 1 for r in rows if int(r["frame"]) > 0)
+    assert json.loads((out / "summary.json").read_text())["decomposition"]["strategy"]["name"] == "cross"
+
+
 def test_none_and_strips_give_same_images_and_schema(tmp_path, reference):
     out = walk(tmp_path, "none", (2, 2), ["--balance", "none"])
     for got, ref in zip(frames_of(out), reference):
@@ -90,7 +102,7 @@ def test_none_and_strips_give_same_images_and_schema(tmp_path, reference):
 
 
 def test_strips_regions_tile_display_and_exchange_bytes(tmp_path):
-    out = walk(tmp_path, "strips", (2, 2))
+    out = walk(tmp_path, "strips", (2, 2), ["--balance", "strips"])
     with open(out / "timings.csv") as fh:
         rows = list(csv.DictReader(fh))
     for f in range(FRAMES):

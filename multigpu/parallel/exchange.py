@@ -52,18 +52,38 @@ def broadcast_partition(comm, part, k: int, n: int, timeout: float):
     from multigpu.core.balance import Partition
 
     m = max(k - 1, 0)
-    ints, floats = 5 * k + m, m  # regions, loads, split pixels (int64); splits (float64)
+    ints, floats = 5 * k + m + 1, m  # regions, loads, split pixels, piece count (int64); splits (float64)
     head = 8 * (ints + floats)
     buf = np.empty(head + (k * n + 7) // 8, dtype=np.uint8)
-    if comm.Get_rank() == 0:
-        head_ints = np.concatenate([part.regions.ravel(), part.loads, part.split_pixels]).astype(np.int64)
+    root = comm.Get_rank() == 0
+    if root:
+        pieces = 0 if part.pieces is None else sum(len(p) for p in part.pieces)
+        head_ints = np.concatenate([part.regions.ravel(), part.loads, part.split_pixels, [pieces]]).astype(np.int64)
         buf[:8 * ints] = head_ints.view(np.uint8)
         buf[8 * ints:head] = np.asarray(part.splits, dtype=np.float64).view(np.uint8)
         buf[head:] = np.packbits(part.visible.ravel())
     wait_all([comm.Ibcast([buf, MPI.BYTE], root=0)], timeout, "partition broadcast")
-    if comm.Get_rank() == 0:
-        return part
     i = buf[:8 * ints].view(np.int64)
+    total = int(i[-1])
+    if total:  # a strategy that gives ranks several pieces (cross): counts, rects, packed masks
+        more = np.empty(8 * (k + 4 * total) + (total * n + 7) // 8, dtype=np.uint8)
+        if root:
+            counts = [len(p) for p in part.pieces]
+            rects = np.concatenate([np.asarray(p, np.int64).reshape(-1, 4) for p in part.pieces])
+            more[:8 * (k + 4 * total)] = np.concatenate([counts, rects.ravel()]).astype(np.int64).view(np.uint8)
+            more[8 * (k + 4 * total):] = np.packbits(np.concatenate(part.piece_visible).ravel())
+        wait_all([comm.Ibcast([more, MPI.BYTE], root=0)], timeout, "partition broadcast")
+    if root:
+        return part
     visible = np.unpackbits(buf[head:], count=k * n).reshape(k, n).view(bool)
-    return Partition(i[:4 * k].reshape(k, 4).copy(), i[4 * k:5 * k].copy(), visible,
-                     buf[8 * ints:head].view(np.float64).copy(), i[5 * k:].copy())
+    regions, loads = i[:4 * k].reshape(k, 4).copy(), i[4 * k:5 * k].copy()
+    splits, split_pixels = buf[8 * ints:head].view(np.float64).copy(), i[5 * k:-1].copy()
+    if not total:
+        return Partition(regions, loads, visible, splits, split_pixels)
+    head_p = more[:8 * (k + 4 * total)].view(np.int64)
+    at = np.concatenate([[0], np.cumsum(head_p[:k])])
+    rects = head_p[k:].reshape(total, 4)
+    masks = np.unpackbits(more[8 * (k + 4 * total):], count=total * n).reshape(total, n).view(bool)
+    return Partition(regions, loads, visible, splits, split_pixels, None,
+                     tuple(rects[at[r]:at[r + 1]].copy() for r in range(k)),
+                     tuple(masks[at[r]:at[r + 1]].copy() for r in range(k)))

@@ -3,9 +3,10 @@
 A strategy has three hooks: ``plan`` before the frame (object rects and triangle counts in, a
 ``Partition`` out), ``observe`` after it (the frame's measured per-rank render times, for
 strategies that learn), ``report`` for summary.json. Strategies are pure (no MPI, no GL).
-Every rank runs its own copy on the same gathered inputs, so all copies decide alike; all
-but ``adaptive`` are also bit-reproducible across reruns (``adaptive`` follows measured
-times, which differ from run to run).
+Every rank runs its own copy on the same gathered inputs, so all copies decide alike.
+Strategies that learn from measured times (``cost``, ``time``, ``adaptive``, ``cross``) are
+not bit-reproducible across reruns, since the times differ from run to run; the others
+(``strips``, ``none``) are, and each strategy's ``reproducible`` flag says which.
 """
 
 from __future__ import annotations
