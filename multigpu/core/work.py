@@ -58,9 +58,8 @@ class Work:
 
 def from_partition(part: Partition, tris: np.ndarray) -> Work:
     """A screen partition as work: one piece per rank, or the partition's own pieces."""
-    if part.pieces is not None:
-        loads = np.array([int((m @ np.asarray(tris, np.int64)).sum()) if len(m) else 0 for m in part.piece_visible])
-        return Work(tuple(part.pieces), tuple(part.piece_visible), loads, False, part)
+    if part.pieces is not None:  # the partition's loads already count an object once per piece
+        return Work(tuple(part.pieces), tuple(part.piece_visible), np.asarray(part.loads), False, part)
     rects = tuple(part.regions[k:k + 1] for k in range(len(part.regions)))
     masks = tuple(part.visible[k:k + 1] for k in range(len(part.regions)))
     return Work(rects, masks, np.asarray(part.loads), False, part)

@@ -105,20 +105,25 @@ class CrossSegment(Configured):
 
     def _partition(self, pieces, rects, tris) -> Partition:
         spans, onscreen = pixel_spans(rects, self.size)
+        on = np.flatnonzero(onscreen)
         sp = spans.T
+        lo_x, lo_y, hi_x, hi_y = (sp[i].take(on) for i in range(4))  # on-screen objects only
         tris = np.asarray(tris, dtype=np.int64)
+        tris_on = tris.take(on)
         k, n = len(pieces), len(tris)
         prects, pvis, regions = [], [], np.zeros((k, 4), dtype=np.int64)
         loads, visible = np.zeros(k, dtype=np.int64), np.zeros((k, n), dtype=bool)
         for r, plist in enumerate(pieces):  # ranks, not objects
             pr = np.array(plist, dtype=np.int64).reshape(-1, 4)
-            m = onscreen & (sp[0] < pr[:, 2:3]) & (sp[2] >= pr[:, 0:1]) & (sp[1] < pr[:, 3:4]) & (sp[3] >= pr[:, 1:2])
+            hit = (lo_x < pr[:, 2:3]) & (hi_x >= pr[:, 0:1]) & (lo_y < pr[:, 3:4]) & (hi_y >= pr[:, 1:2])
+            m = np.zeros((len(pr), n), dtype=bool)
+            m[:, on] = hit
             prects.append(pr)
             pvis.append(m)
             if len(pr):
                 regions[r] = [pr[:, 0].min(), pr[:, 1].min(), pr[:, 2].max(), pr[:, 3].max()]
-                visible[r] = m.any(axis=0)
-                loads[r] = int((m.astype(np.int64) @ tris).sum())
+                visible[r, on] = hit.any(axis=0)
+                loads[r] = int(np.broadcast_to(tris_on, hit.shape).sum(where=hit))
         return Partition(regions, loads, visible, np.zeros(max(k - 1, 0)), np.zeros(max(k - 1, 0), dtype=np.int64),
                          np.ascontiguousarray(sp), tuple(prects), tuple(pvis))
 

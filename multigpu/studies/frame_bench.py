@@ -76,7 +76,7 @@ def bench_frame(quick: bool) -> list[dict]:
     print(f"{'scene':>6} {'objects':>8} {'strategy':>9} " + " ".join(f"{p:>9}" for p in (*PHASES, "total")))
     for name, spec in scenes:
         scene, _ = load_scene(spec)
-        for strategy in ("strips", "cost", "adaptive", "none"):
+        for strategy in ("strips", "time", "cross", "cost", "adaptive", "none"):
             med = frame_phases(scene, strategy, frames=frames)
             rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med})
             figures = " ".join(f"{med[p]:9.3f}" for p in (*PHASES, "total"))
