@@ -12,7 +12,15 @@ from multigpu.studies.floor import run as floor_run
 from multigpu.studies.runs import Settings, _plt, walk
 from multigpu.studies.tables import md_table, write_csv
 
-SCENES = {"plant": ["--scene", "plant"], "city": ["--scene", "city"]}
+FLOOR_SCENES = ("plant", "city")  # built-in scenes at their defaults: bench floor measures them
+
+
+def scenes(s: Settings) -> dict[str, list[str]]:
+    """The plant walkthrough, the city drive, and the paper's Section 7 setup (plants, orbit)."""
+    copies = 2 if s.quick else 4
+    return {"plant": ["--scene", "plant", "--triangles", str(s.triangles)],
+            "city": ["--scene", "city", "--triangles", str(s.triangles)],
+            "orbit": ["--triangles", str(s.triangles * copies), "--copies", str(copies), "--path-kind", "orbit"]}
 
 
 def exp_payoff(s: Settings, out: Path) -> str:
@@ -21,14 +29,14 @@ def exp_payoff(s: Settings, out: Path) -> str:
     strategies = ("strips", "cost", "time", "adaptive", "cross", "none")
     runs: dict = {}
     floors: dict = {}
+    SCENES = scenes(s)
     for r in range(rounds):  # rounds alternate the strategies, so drift hits all alike
-        for got in floor_run(tuple(SCENES), 4, min(s.frames, 120), s.timeout):
+        for got in floor_run(FLOOR_SCENES, 4, min(s.frames, 120), s.timeout):
             floors.setdefault(got["scene"], []).append(got["imbalance_floor"])
         for scene, flags in SCENES.items():
             for name in strategies:
                 run = walk(out / f"{scene}_{name}_{r}", (2, 2), (256, 256), [
-                    *flags, "--triangles", str(s.triangles), "--frames", str(s.frames), "--balance", name,
-                    "--mosaic-every", "0"], s.timeout)
+                    *flags, "--frames", str(s.frames), "--balance", name, "--mosaic-every", "0"], s.timeout)
                 runs.setdefault((scene, name), []).append(run)
     rows = []
     for scene in SCENES:
@@ -47,11 +55,15 @@ def exp_payoff(s: Settings, out: Path) -> str:
     write_csv(out / "payoff.csv", rows)
     bounds = [ceiling(scene, runs[(scene, "none")], float(np.median(floors[scene])),
                       max(x["speedup_vs_none"] for x in rows if x["scene"] == scene and x["balance"] != "none"))
-              for scene in SCENES]
+              for scene in FLOOR_SCENES]
     write_csv(out / "payoff_ceiling.csv", bounds)
+    ranking, verdict = rank_strategies(rows, tuple(SCENES))
+    write_csv(out / "payoff_ranking.csv", ranking)
     return "\n".join([
-        f"2x2 wall of 256x256 tiles, {s.frames} walkthrough frames (the city drives its streets), {rounds} "
-        "alternating rounds; medians over rounds (min..max of the speedup beside). Emulated parallel frame = "
+        f"2x2 wall of 256x256 tiles, {s.frames} frames per run: the plant walkthrough, the city drive along its "
+        f"streets, and {scenes(s)['orbit'][3]} plants on an orbit keeping them all in view (the paper's Section 7 "
+        f"setup); {rounds} alternating rounds; medians over rounds (min..max of the speedup beside). Emulated "
+        "parallel frame = "
         "slowest rank's CPU time per frame; `LB share` = load-balancing CPU per rank (projection, plan, learning "
         "from the last frame's times) / emulated frame.", "",
         md_table(rows, [("scene", "Scene", ""), ("objects", "Objects", "d"), ("balance", "Balance", ""),
@@ -69,7 +81,32 @@ def exp_payoff(s: Settings, out: Path) -> str:
         md_table(bounds, [("scene", "Scene", ""), ("floor", "Floor", ".3f"), ("none_ms", "none frame ms", ".2f"),
                           ("render_mean_ms", "Mean render ms", ".2f"), ("render_max_ms", "Slowest render ms", ".2f"),
                           ("ideal_ms", "Ideal frame ms", ".2f"), ("ceiling", "Ceiling vs none", ".2f"),
-                          ("best", "Best measured vs none", ".2f")])])
+                          ("best", "Best measured vs none", ".2f")]), "",
+        "Which strategy pays best over all three scenes (speedup over `none`, emulated frame; geometric mean and "
+        "worst case):", "",
+        md_table(ranking, [("balance", "Balance", ""), *[(sc, sc, ".2f") for sc in SCENES],
+                           ("geomean", "Geometric mean", ".3f"), ("worst", "Worst", ".2f")]), "",
+        verdict])
+
+
+def rank_strategies(rows: list[dict], names: tuple[str, ...]) -> tuple[list[dict], str]:
+    """Strategies by geometric-mean speedup over ``none`` across the scenes, and a sentence on
+    whether the configured default is the best of them."""
+    from multigpu.config import WalkConfig
+
+    out = []
+    for name in dict.fromkeys(r["balance"] for r in rows if r["balance"] != "none"):
+        sp = {r["scene"]: r["speedup_vs_none"] for r in rows if r["balance"] == name}
+        vals = [sp[sc] for sc in names]
+        out.append({"balance": name, **sp, "geomean": float(np.exp(np.mean(np.log(vals)))), "worst": min(vals)})
+    out.sort(key=lambda r: -r["geomean"])
+    default = WalkConfig().balance
+    best = out[0]["balance"]
+    verdict = (f"Measured best on average here: `{best}`; the configured default (`WalkConfig.balance`) is "
+               f"`{default}`" + (", the same." if best == default else
+                                 f" (geometric mean {next(r['geomean'] for r in out if r['balance'] == default):.3f} "
+                                 f"against {out[0]['geomean']:.3f} in this run)."))
+    return out, verdict
 
 
 def ceiling(scene: str, none_runs: list, floor: float, best: float) -> dict:
