@@ -1,7 +1,8 @@
 """``multigpu bench frame``: where one rank's per-frame CPU goes, phase by phase, outside GL.
 
-One process plays rank 0 of a 2x2 wall along the scene's walkthrough: project the bounds,
-plan (strategy: tree walk, masks, loads), the frame's work, the draw list (run-merged
+One process plays rank 0 of a 2x2 wall along the scene's walkthrough: learn (the strategy
+observes the last frame's per-rank times, random here), project the bounds, plan (strategy:
+tree walk, masks, loads), the frame's work, the draw list (run-merged
 commands of the rank's mask), the transfer plan and the timing row. Each phase is timed with
 ``time.process_time`` (CPU) and ``time.perf_counter`` (wall) per frame; medians are printed.
 Rendering and MPI waits are not in it: this is the fixed CPU cost balancing adds to a frame.
@@ -13,7 +14,7 @@ import time
 
 import numpy as np
 
-PHASES = ("project", "plan", "work", "drawlist", "transfers", "row")
+PHASES = ("learn", "project", "plan", "work", "drawlist", "transfers", "row")
 
 
 def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), frames: int = 60) -> dict:
@@ -38,9 +39,13 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
     col = {c: i for i, c in enumerate(COLUMNS)}
     times = {p: [] for p in PHASES}
     rng = np.random.default_rng(0)
+    part = None
     for f in range(len(path)):  # frames, not objects
         view, proj, _ = frame_matrices(path.camera(f), size)
         marks = [time.process_time()]
+        if part is not None:  # the last frame's (random) times, observed where the frame loop does
+            strat.observe(f - 1, part, 1.0 + rng.random(len(tiles)))
+        marks.append(time.process_time())
         rects = project(view, proj, cov) if cov is not None else project(view, proj)
         marks.append(time.process_time())
         part = strat.plan(rects, scene.tris, cov)
@@ -57,7 +62,6 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
         for c, v in values.items():
             row[col[c]] = v
         marks.append(time.process_time())
-        strat.observe(f, part, 1.0 + rng.random(len(tiles)))
         for p, a, b in zip(PHASES, marks[:-1], marks[1:]):
             times[p].append((b - a) * 1e3)
     med = {p: float(np.median(v)) for p, v in times.items()}
