@@ -47,10 +47,8 @@ def _write_rects(out, idx, ext, widen: float = 0.0) -> None:
     np.multiply(ext, 0.5, out=ext)
     ext += _SHIFT + widen * _WIDEN if widen else _SHIFT
     off = (ext[2] < 0.0) | (ext[0] > 1.0) | (ext[3] < 0.0) | (ext[1] > 1.0)
-    if isinstance(idx, slice):
-        np.clip(ext, 0.0, 1.0, out=out[:, idx])
-    else:
-        out[:, idx] = np.clip(ext, 0.0, 1.0, out=ext)
+    np.minimum(np.maximum(ext, 0.0, out=ext), 1.0, out=ext)
+    out[:, idx] = ext
     if off.any():
         out[:, np.flatnonzero(off) if isinstance(idx, slice) else idx[off]] = np.nan
 
@@ -155,30 +153,47 @@ def _far_slack(proj: np.ndarray) -> float:
 _PLANES = np.array([[1, 0, 0, 1], [-1, 0, 0, 1], [0, 1, 0, 1], [0, -1, 0, 1], [0, 0, 1, 1], [0, 0, -1, 1]],
                    dtype=np.float64)
 _NEAR, _FAR = 4, 5
+SIDE_CULL_MAX = 16384  # blocks up to this many boxes are culled by the side planes too
 
 
 def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
     """Rects of one block: ``center``/``half64`` (3, n) float64, ``half`` (3, n) in ``dtype``;
     silhouette fractions into ``coverage`` when given.
 
-    A plane distance is affine in the corner, so each box's extreme distance to the 6 frustum
-    planes needs no corners: boxes wholly outside one plane are culled first (one pass), and
-    only the rest get their 8 corners projected.
+    A plane distance is affine in the corner, so each box's extreme distance to a frustum plane
+    needs no corners: boxes wholly outside a plane are culled first, and only the rest get
+    their 8 corners projected.
     """
     clip_c = np.dot(M[:, :3], center)  # (4, n) float64, camera-relative
     clip_c += M[:, 3:]
-    rows = np.abs(np.concatenate([_PLANES @ M[:, :3], M[3:, :3]]))  # plane normals, and w's
-    reach = rows @ half64  # (7, n): how far each box reaches along each plane (and in w)
-    dist = _PLANES @ clip_c  # (6, n) plane distances of the centres
-    far_slack = FAR_TOL * (np.abs(clip_c[3]) + reach[6])
-    # beyond the far plane only by more than the GPU's float32 clip test can tell (FAR_TOL)
-    outside = (dist[:_FAR] + reach[:_FAR] < 0).any(axis=0) | (dist[_FAR] + reach[_FAR] < -far_slack)
-    front = dist[_NEAR] >= reach[_NEAR]  # wholly in front of the near plane
-    out[:] = np.nan
+    w_r = np.dot(np.abs(M[3, :3]), half64)
+    outside = np.zeros(clip_c.shape[1], dtype=bool)
+    front = outside
+    # small blocks: cull by all 6 planes (numpy calls cost more than arithmetic there, and the
+    # corners of boxes off to the sides are skipped); large blocks: near and far only (6 plane
+    # passes cost more than the corners they save when most boxes are in view). Same rects.
+    planes = range(6) if clip_c.shape[1] <= SIDE_CULL_MAX else (_NEAR, _FAR)
+    for i in planes:  # planes, not objects: one pass each over the block
+        plane = _PLANES[i]
+        centre = np.dot(plane, clip_c)  # the centre's distance
+        reach = np.dot(np.abs(plane @ M[:, :3]), half64)  # how far the box reaches along the normal
+        if i == _NEAR:
+            front = centre >= reach  # wholly in front of the near plane
+        centre += reach  # the box's farthest point inside
+        if i == _FAR:  # beyond the far plane only by more than the GPU's float32 clip test can tell
+            outside |= centre < -FAR_TOL * (np.abs(clip_c[3]) + w_r)
+        else:
+            outside |= centre < 0
+    shown = front & ~outside
+    count = int(np.count_nonzero(shown))
+    # most boxes shown: project the whole block (no gathers) and blank the rest afterwards;
+    # few shown: gather them first
+    show = slice(None) if 2 * count > shown.size else np.flatnonzero(shown)
+    if isinstance(show, np.ndarray):
+        out[:] = np.nan
     if coverage is not None:
         coverage[:] = 1.0
-    show = np.flatnonzero(front & ~outside)
-    if show.size:
+    if count:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             x, y = _corner_ndc(clip_c[:, show], half[:, show], M, dtype)
             ext = np.stack([x.min(axis=0), y.min(axis=0), x.max(axis=0), y.max(axis=0)]).astype(np.float64)
@@ -187,6 +202,10 @@ def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
         # rounding in ``dtype`` moves a corner by a few ulps of its NDC value; only values
         # within [-1, 1] matter after clipping, so a fixed widening of 16 ulps of 1 is enough
         _write_rects(out, show, ext, widen=float(np.finfo(dtype).eps) * 16)
+    if isinstance(show, slice) and count < shown.size:
+        out[:, ~shown] = np.nan
+        if coverage is not None:
+            coverage[~shown] = 1.0
     slow = np.flatnonzero(~front & ~outside)
     if slow.size:  # few boxes cross the near plane
         corners = (half64[:, slow].T[:, None, :] * _SIGNS) @ M[:, :3].T  # (m, 8, 4) offsets in clip space
@@ -195,17 +214,31 @@ def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
 
 
 def _corner_ndc(clip_c, half, M, dtype) -> tuple[np.ndarray, np.ndarray]:
-    """NDC x and y, each (8, m), of the 8 corners of boxes wholly in front of the near plane.
+    """NDC x and y, each (8, m), of the 8 corners of boxes wholly in front of the near plane."""
+    cx, cy, cw = (_corners(clip_c[r].astype(dtype), half[0], half[1], half[2], M[r, :3].astype(dtype))
+                  for r in (0, 1, 3))
+    np.divide(cx, cw, out=cx)
+    np.divide(cy, cw, out=cy)
+    return cx, cy
 
-    Corner k of a box (signs ``_SIGNS[k]``) has clip row r = ``clip_c[r] + sum_j M[r, j] *
-    sign_kj * half_j``: one (24, 3) x (3, m) product in ``dtype`` for the x, y and w rows of
-    all 8 corners, plus the centres.
+
+def _corners(base, hx, hy, hz, row) -> np.ndarray:
+    """(8, m) value of one clip row at the 8 corners: base +- hx*row0 +- hy*row1 +- hz*row2.
+
+    Corner k has signs (bit 2: x, bit 1: y, bit 0: z), the same for every row. In place, no
+    temporaries beyond the three (m,) offsets: contiguous passes that stay fast at 10^6 boxes.
     """
-    A = (M[[0, 1, 3], None, :3] * _SIGNS[None]).reshape(24, 3).astype(dtype)  # (row, corner) x axis
-    c = np.dot(A, half).reshape(3, 8, -1)
-    c += clip_c[[0, 1, 3], None, :].astype(dtype)
-    np.divide(c[:2], c[2], out=c[:2])
-    return c[0], c[1]
+    ax, ay, az = hx * row[0], hy * row[1], hz * row[2]
+    out = np.empty((8, base.shape[0]), dtype=base.dtype)
+    np.subtract(base, ax, out=out[0])
+    np.add(base, ax, out=out[4])
+    np.add(out[0], ay, out=out[2])
+    np.add(out[4], ay, out=out[6])
+    out[0] -= ay
+    out[4] -= ay
+    np.add(out[0::2], az, out=out[1::2])
+    out[0::2] -= az
+    return out
 
 
 _OFF = np.array([[2.0], [2.0], [3.0], [3.0]])  # an extent wholly off screen (becomes NaN)
