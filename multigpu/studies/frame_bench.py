@@ -4,12 +4,15 @@ One process plays rank 0 of a 2x2 wall along the scene's walkthrough: learn (the
 observes the last frame's per-rank times, random here), project the bounds, plan (strategy:
 tree walk, masks, loads), the frame's work, the draw list (run-merged
 commands of the rank's mask), the transfer plan and the timing row. Each phase is timed with
-``time.process_time`` (CPU) and ``time.perf_counter`` (wall) per frame; medians are printed.
+``time.process_time`` (CPU) per frame; medians are printed, with the C-level calls (numpy
+functions and methods, builtins) one frame makes, counted with ``sys.setprofile`` on every
+tenth frame (left out of the times).
 Rendering and MPI waits are not in it: this is the fixed CPU cost balancing adds to a frame.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 
 import numpy as np
@@ -40,7 +43,18 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
     times = {p: [] for p in PHASES}
     rng = np.random.default_rng(0)
     part = None
+    calls = [0]
+    counted = []
+
+    def count(frame, event, arg):  # C-level calls (numpy functions and methods, builtins)
+        if event == "c_call":
+            calls[0] += 1
+
     for f in range(len(path)):  # frames, not objects
+        counting = f % 10 == 9  # every 10th frame counts its calls and is left out of the times
+        if counting:
+            calls[0] = 0
+            sys.setprofile(count)
         view, proj, _ = frame_matrices(path.camera(f), size)
         marks = [time.process_time()]
         if part is not None:  # the last frame's (random) times, observed where the frame loop does
@@ -62,9 +76,14 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
         for c, v in values.items():
             row[col[c]] = v
         marks.append(time.process_time())
+        if counting:
+            sys.setprofile(None)
+            counted.append(calls[0])
+            continue
         for p, a, b in zip(PHASES, marks[:-1], marks[1:]):
             times[p].append((b - a) * 1e3)
     med = {p: float(np.median(v)) for p, v in times.items()}
+    med["calls"] = int(np.median(counted)) if counted else 0
     med["total"] = float(np.median(np.sum([times[p] for p in PHASES], axis=0)))
     return med
 
@@ -77,14 +96,15 @@ def bench_frame(quick: bool) -> list[dict]:
     frames = 20 if quick else 120
     rows = []
     print("per-frame CPU ms of rank 0 on a 2x2 wall of 512x512 (process CPU time, median over frames)")
-    print(f"{'scene':>6} {'objects':>8} {'strategy':>9} " + " ".join(f"{p:>9}" for p in (*PHASES, "total")))
+    print(f"{'scene':>6} {'objects':>8} {'strategy':>9} " + " ".join(f"{p:>9}" for p in (*PHASES, "total"))
+          + f" {'calls':>6}")
     for name, spec in scenes:
         scene, _ = load_scene(spec)
         for strategy in ("strips", "time", "cross", "cost", "adaptive", "none"):
             med = frame_phases(scene, strategy, frames=frames)
             rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med})
             figures = " ".join(f"{med[p]:9.3f}" for p in (*PHASES, "total"))
-            print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures}")
+            print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures} {med['calls']:6d}")
     return rows
 
 
