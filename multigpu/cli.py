@@ -115,6 +115,10 @@ def _walkthrough_args(w: argparse.ArgumentParser) -> None:
                    help=f"how a rank renders its region: {' | '.join(METHODS)} (docs/ACCURACY.md)")
     w.add_argument("--partition", default=d["partition"],
                    help="who computes the partition: redundant (every rank) | broadcast (rank 0, then MPI_Bcast)")
+    w.add_argument("--exchange", default=d["exchange"],
+                   help="frame exchange: messages (point-to-point) | shared (an MPI shared-memory window when all "
+                        "ranks run on one machine, else messages; Open MPI backs it with a file in its session "
+                        "directory)")
     w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
     w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
     w.add_argument("--timeout", type=float, default=d["timeout"],
@@ -268,7 +272,8 @@ def walk_config(a):
                       grid=parse_pair(a.grid, "--grid"), tile=parse_pair(a.tile, "--tile"), strips=a.strips,
                       balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
                       overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
-                      partition=a.partition, offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
+                      partition=a.partition, exchange=a.exchange, offset=parse_vec3(a.offset, "--offset"),
+                      timeout=a.timeout,
                       decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
                       db_ranges=a.db_ranges,
                       liveness=a.liveness, progress=not a.no_progress)

@@ -64,6 +64,7 @@ class WalkConfig:
     device: int | None = None
     subfrustum: str = "auto"
     partition: str = "redundant"
+    exchange: str = "messages"  # or "shared": a node-shared MPI window when every rank is on one node
     decomposition: str = "screen"
     bin_size: int = 64
     bin_pattern: str = "diagonal"
@@ -90,6 +91,8 @@ class WalkConfig:
 
         if self.subfrustum not in METHODS:
             raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{self.subfrustum}'")
+        if self.exchange not in ("messages", "shared"):
+            raise InputError(f"--exchange must be 'messages' or 'shared', got '{self.exchange}'")
         if self.partition not in ("redundant", "broadcast"):
             raise InputError(f"--partition must be 'redundant' or 'broadcast', got '{self.partition}'")
         from multigpu.decompositions import PATTERNS, RANGES

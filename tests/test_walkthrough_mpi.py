@@ -70,6 +70,19 @@ def test_broadcast_partition_equals_redundant(tmp_path, reference):
     assert json.loads((outs["broadcast"] / "summary.json").read_text())["config"]["partition"] == "broadcast"
 
 
+@pytest.mark.parametrize("extra", [["--balance", "cross"], ["--decomposition", "db"]])
+def test_shared_window_and_messages_compose_the_same(tmp_path, reference, extra):
+    """One node: --exchange shared goes through a shared window, --exchange messages (the default)
+    sends messages. Both compose the one-rank render (colour pieces and depth-merged ones)."""
+    for mode in ("shared", "messages"):
+        out = walk(tmp_path, f"x_{mode}", (2, 2), ["--exchange", mode, *extra])
+        for got, ref in zip(frames_of(out), reference):
+            assert (got == ref).all()
+        doc = json.loads((out / "summary.json").read_text())
+        assert doc["config"]["exchange"] == mode
+        assert doc["bytes_sent_per_frame"] > 0
+
+
 def test_broadcast_partition_carries_pieces(tmp_path, reference):
     """cross (the default) under --partition broadcast: rank 0's pieces reach every rank, and the
     wall still equals the one-rank render."""

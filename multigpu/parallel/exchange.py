@@ -1,5 +1,5 @@
-"""Waits that never hang, the synchronization barrier and the partition broadcast: the MPI
-primitives the frame loop uses (the frame exchange itself is ``composite.py``).
+"""Waits that never hang, the setup agreement, the synchronization barrier and the partition
+broadcast: the MPI primitives the frame loop uses (the frame exchange itself is ``composite.py``).
 
 Waiting polls with short sleeps instead of MPI's busy-wait, so ranks that wait do not steal a
 core from ranks still rendering when ranks outnumber cores, and every wait is bounded: a peer
@@ -87,3 +87,25 @@ def broadcast_partition(comm, part, k: int, n: int, timeout: float):
     return Partition(regions, loads, visible, splits, split_pixels, None,
                      tuple(rects[at[r]:at[r + 1]].copy() for r in range(k)),
                      tuple(masks[at[r]:at[r + 1]].copy() for r in range(k)))
+
+
+ERROR_BYTES = 1024  # an agreed setup error travels as a fixed-size buffer
+
+
+def agree(comm, error: str | None, timeout: float) -> str | None:
+    """Every rank's setup outcome; the first error (with its rank) or None, on all ranks.
+
+    Non-blocking and bounded: a fixed-size buffer per rank in one ``Iallgather``, so a rank
+    that never arrives ends the wait (timeout, or sooner through the job's liveness check)."""
+    K = comm.Get_size()
+    mine = np.zeros(ERROR_BYTES, dtype=np.uint8)
+    msg = (error or "").encode("utf-8")[:ERROR_BYTES - 1]
+    mine[:len(msg)] = np.frombuffer(msg, dtype=np.uint8)
+    allbuf = np.zeros((K, ERROR_BYTES), dtype=np.uint8)
+    wait_all([comm.Iallgather(mine, allbuf)], timeout, "setup")
+    errors = [bytes(b).rstrip(b"\0").decode("utf-8", "replace") for b in allbuf]
+    bad = [(r, e) for r, e in enumerate(errors) if e]
+    if not bad:
+        return None
+    r, e = bad[0]
+    return e if len(set(e for _, e in bad)) == 1 else f"rank {r}: {e}"

@@ -26,33 +26,13 @@ from multigpu.core.work import Work, transfers
 from multigpu.decompositions import make_decomposition
 from multigpu.errors import InputError, as_flags
 from multigpu.parallel.composite import composite
-from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
+from multigpu.parallel.exchange import agree, barrier, broadcast_partition, wait_all
 from multigpu.parallel.mosaic import overlay, save_png, stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.report import COLUMNS, TimingWriter, summarize, table, write_json
+from multigpu.parallel.shared import SharedPieces, composite_shared
 from multigpu.scene.models import axis_name, load_scene
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
-
-ERROR_BYTES = 1024  # an agreed setup error travels as a fixed-size buffer
-
-
-def agree(comm, error: str | None, timeout: float) -> str | None:
-    """Every rank's setup outcome; the first error (with its rank) or None, on all ranks.
-
-    Non-blocking and bounded: a fixed-size buffer per rank in one ``Iallgather``, so a rank
-    that never arrives ends the wait (timeout, or sooner through the job's liveness check)."""
-    K = comm.Get_size()
-    mine = np.zeros(ERROR_BYTES, dtype=np.uint8)
-    msg = (error or "").encode("utf-8")[:ERROR_BYTES - 1]
-    mine[:len(msg)] = np.frombuffer(msg, dtype=np.uint8)
-    allbuf = np.zeros((K, ERROR_BYTES), dtype=np.uint8)
-    wait_all([comm.Iallgather(mine, allbuf)], timeout, "setup")
-    errors = [bytes(b).rstrip(b"\0").decode("utf-8", "replace") for b in allbuf]
-    bad = [(r, e) for r, e in enumerate(errors) if e]
-    if not bad:
-        return None
-    r, e = bad[0]
-    return e if len(set(e for _, e in bad)) == 1 else f"rank {r}: {e}"
 
 
 def make_path(cfg: WalkConfig, scene) -> CameraPath:
@@ -185,8 +165,16 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         if out is not None:
             out.abandon()
         raise
+    frames = None
     try:
-        return Frames(cfg, comm, job, scene, path, renderer, out, load_info, device).run()
+        frames = Frames(cfg, comm, job, scene, path, renderer, out, load_info, device)
+        summary = frames.run()
+        frames.release(collective=True)  # every rank left the frame loop after the same frame
+        return summary
+    except BaseException:
+        if frames is not None:
+            frames.release(collective=False)  # a failing rank must not wait in a collective free
+        raise
     finally:
         renderer.release()
         if out is not None:
@@ -235,7 +223,10 @@ class Frames:
         self.out = out
         self.history: list[np.ndarray] = []
         self.learn = None  # (frame, work, times) the strategy observes at the start of the next frame
+        self.shared = None if cfg.exchange != "shared" else SharedPieces.make(
+            comm, cfg.size, self.decomposition.depth, cfg.timeout)
         self.config_doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
+        self.config_doc["exchange"] = "shared" if self.shared is not None else "messages"
         self.writer = self.video = self.bar = None
 
     # -- phases of one frame
@@ -263,24 +254,30 @@ class Frames:
             out.append(got if work.depth else (got, None))
         return out
 
-    def compose(self, work: Work, rendered: list) -> tuple[int, int]:
-        """Frame exchange: the pieces travel to their tile owners, who copy or depth-merge them."""
+    def compose(self, f: int, work: Work, rendered: list) -> tuple[int, int]:
+        """Frame exchange: the pieces travel to their tile owners, who copy or depth-merge them
+        (through the node-shared window when there is one, else as messages)."""
         if work.depth:
             self.back[:] = self.background
             self.zback[:] = 1.0
         plan = transfers(work, self.tiles)
-        return composite(self.comm, self.rank, work.rects, rendered, plan, self.tiles[self.rank], self.cfg.timeout,
-                         self.back, self.zback if work.depth else None)
+        zback = self.zback if work.depth else None
+        if self.shared is None:
+            return composite(self.comm, self.rank, work.rects, rendered, plan, self.tiles[self.rank],
+                             self.cfg.timeout, self.back, zback)
+        composite_shared(self.shared, f, self.rank, work.rects, plan, self.tiles[self.rank], self.back, zback)
+        px = sum(p.pixels for p in plan if p.sender == self.rank and p.receiver != self.rank)  # read by peers
+        return px * (7 if work.depth else 3), px * 4 if work.depth else 0
 
     def record(self, f: int, work: Work, t: Timer, sent: tuple[int, int]) -> None:
         """This rank's row by column name, gathered so every rank sees every rank's row."""
         box = work.bounds(self.rank)
         values = {"frame": f, "rank": self.rank, "triangles": work.loads[self.rank],
                   "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
-                  "load_balancing_ms": t.ms(0, 1), "rendering_ms": t.ms(1, 2), "synchronization_ms": t.ms(2, 3),
-                  "frame_exchange_ms": t.ms(3, 4), "display_ms": t.ms(4, 5), "frame_ms": t.ms(0, 5),
+                  "load_balancing_ms": t.ms(0, 1), "rendering_ms": t.ms(1, 2), "synchronization_ms": t.ms(3, 4),
+                  "frame_exchange_ms": t.ms(2, 3) + t.ms(4, 5), "display_ms": t.ms(5, 6), "frame_ms": t.ms(0, 6),
                   "load_balancing_cpu_ms": t.ms(0, 1, True), "rendering_cpu_ms": t.ms(1, 2, True),
-                  "frame_exchange_cpu_ms": t.ms(3, 4, True), "display_cpu_ms": t.ms(4, 5, True),
+                  "frame_exchange_cpu_ms": t.ms(2, 3, True) + t.ms(4, 5, True), "display_cpu_ms": t.ms(5, 6, True),
                   "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
                   "depth_bytes": sent[1], "load_cv": work.load_cv}
         for c, v in values.items():
@@ -316,9 +313,12 @@ class Frames:
         t.mark()
         rendered = self.render(work, view, proj, light)
         t.mark()
+        if self.shared is not None:  # pieces into the shared window before the barrier (exchange)
+            self.shared.publish(f, self.rank, rendered)
+        t.mark()
         barrier(self.comm, self.cfg.timeout)
         t.mark()
-        sent = self.compose(work, rendered)
+        sent = self.compose(f, work, rendered)
         t.mark()
         np.copyto(self.front, self.back)  # present the composed tile
         t.mark()
@@ -336,6 +336,14 @@ class Frames:
                 self.bar.set_postfix(fps=f"{1e3 / max(self.allrows[:, self.col['frame_ms']].max(), 1e-9):.1f}")
             if f % SUMMARY_EVERY == SUMMARY_EVERY - 1:
                 self.write_summary(complete=False)
+
+    def release(self, collective: bool) -> None:
+        """Give the shared window back: freed with the peers after a run every rank finished,
+        only unlocked on a failure (the job ends anyway; a collective free would wait on ranks
+        that are gone or still in the frame loop)."""
+        if self.shared is not None:
+            self.shared.close(collective)
+            self.shared = None
 
     # -- the run
     def open_outputs(self) -> None:
