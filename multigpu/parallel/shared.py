@@ -10,8 +10,8 @@ f, so a half is never overwritten while a peer still reads it. ``Win.Sync`` arou
 orders the stores and loads (MPI's unified memory model).
 
 Opt-in (``--exchange shared``): Open MPI backs the window with a file in its session directory,
-so a file-size limit or a full disk there fails the window (measured: a run under
-RLIMIT_FSIZE hangs in the window's allocation instead of ending with the disk-full error).
+so a file-size limit or a full disk there can break it (measured: with Open MPI 4.1.4 a run
+under RLIMIT_FSIZE did not end, where with messages it ends with the disk-full error).
 
 Layout of a segment half: the rank's pieces in order, each its RGB bytes, then (sort-last)
 its float32 depth.
