@@ -168,7 +168,7 @@ def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
     clip_c += M[:, 3:]
     w_r = np.dot(np.abs(M[3, :3]), half64)
     outside = np.zeros(clip_c.shape[1], dtype=bool)
-    front = outside
+    front = None  # set by the near plane, which every block tests
     # small blocks: cull by all 6 planes (numpy calls cost more than arithmetic there, and the
     # corners of boxes off to the sides are skipped); large blocks: near and far only (6 plane
     # passes cost more than the corners they save when most boxes are in view). Same rects.

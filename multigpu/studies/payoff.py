@@ -15,9 +15,14 @@ from multigpu.studies.tables import md_table, write_csv
 FLOOR_SCENES = ("plant", "city")  # built-in scenes at their defaults: bench floor measures them
 
 
+def orbit_copies(s: Settings) -> int:
+    """Plants in the orbit scene (the paper's Section 7 setup)."""
+    return 2 if s.quick else 4
+
+
 def scenes(s: Settings) -> dict[str, list[str]]:
     """The plant walkthrough, the city drive, and the paper's Section 7 setup (plants, orbit)."""
-    copies = 2 if s.quick else 4
+    copies = orbit_copies(s)
     return {"plant": ["--scene", "plant", "--triangles", str(s.triangles)],
             "city": ["--scene", "city", "--triangles", str(s.triangles)],
             "orbit": ["--triangles", str(s.triangles * copies), "--copies", str(copies), "--path-kind", "orbit"]}
@@ -61,7 +66,7 @@ def exp_payoff(s: Settings, out: Path) -> str:
     write_csv(out / "payoff_ranking.csv", ranking)
     return "\n".join([
         f"2x2 wall of 256x256 tiles, {s.frames} frames per run: the plant walkthrough, the city drive along its "
-        f"streets, and {scenes(s)['orbit'][3]} plants on an orbit keeping them all in view (the paper's Section 7 "
+        f"streets, and {orbit_copies(s)} plants on an orbit keeping them all in view (the paper's Section 7 "
         f"setup); {rounds} alternating rounds; medians over rounds (min..max of the speedup beside). Emulated "
         "parallel frame = "
         "slowest rank's CPU time per frame; `LB share` = load-balancing CPU per rank (projection, plan, learning "
