@@ -86,8 +86,15 @@ def _walkthrough_args(w: argparse.ArgumentParser) -> None:
     w.add_argument("--path-kind", default=d["path_kind"], help=f"generated path: {' | '.join(DEFAULT_FRAMES)}")
     w.add_argument("--frames", type=int, help="frames to render (default: the whole path; generated: "
                                               + ", ".join(f"{k} {v}" for k, v in DEFAULT_FRAMES.items()) + ")")
-    w.add_argument("--grid", default=pair(WalkConfig.grid), help="display wall ROWSxCOLS (ranks = rows*cols)")
-    w.add_argument("--tile", default=pair(WalkConfig.tile), help="pixels per display tile WxH (default %(default)s)")
+    w.add_argument("--grid", help=f"display wall ROWSxCOLS (ranks = rows*cols; default {pair(WalkConfig.grid)})")
+    w.add_argument("--tile", help=f"pixels per display tile WxH (default {pair(WalkConfig.tile)})")
+    w.add_argument("--mullion", help="pixels hidden behind the bezels between tiles MXxMY: the camera spans them, "
+                                     f"nobody renders them (default {pair(WalkConfig.mullion)})")
+    w.add_argument("--wall", help="wall file (JSON): grid, tile, mullions, each rank's X display and window position; "
+                                  "flags override it (docs/USAGE.md: On a real wall)")
+    w.add_argument("--present", default=d["present"],
+                   help="headless (default) | window: every rank shows its composed tile in a borderless window "
+                        "on its X display, all tiles swapped in step")
     w.add_argument("--strips", type=int, default=d["strips"], help="strips per split axis (>= 2)")
     w.add_argument("--balance", default=d["balance"],
                    help=f"balancing strategy, one of {' | '.join(REGISTRY)} (default %(default)s). {describe()}")
@@ -267,9 +274,21 @@ def _depth(a) -> int:
 def walk_config(a):
     """The walkthrough's flags as a validated configuration (no MPI: testable in one process)."""
     from multigpu.config import WalkConfig, parse_pair, parse_vec3
+    from multigpu.core.canvas import parse_mullion
+    from multigpu.wall import Wall, check_ranks, load_wall
 
+    wall = load_wall(a.wall) if a.wall else Wall("")
+    pick = lambda flag, text, parse, default: parse(text, flag) if text is not None else default
+    grid = pick("--grid", a.grid, parse_pair, wall.grid or WalkConfig.grid)
+    check_ranks(wall, grid[0] * grid[1])
+    ranks = range(grid[0] * grid[1])
     return WalkConfig(scene=_spec(a), path=a.path, path_kind=a.path_kind, frames=a.frames,
-                      grid=parse_pair(a.grid, "--grid"), tile=parse_pair(a.tile, "--tile"), strips=a.strips,
+                      grid=grid, tile=pick("--tile", a.tile, parse_pair, wall.tile or WalkConfig.tile),
+                      mullion=pick("--mullion", a.mullion, parse_mullion, wall.mullion or WalkConfig.mullion),
+                      present=a.present, wall=a.wall,
+                      displays=tuple(wall.displays.get(r) for r in ranks) if wall.displays else (),
+                      positions=tuple(wall.positions.get(r) for r in ranks) if wall.positions else (),
+                      strips=a.strips,
                       balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
                       overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
                       partition=a.partition, exchange=a.exchange, offset=parse_vec3(a.offset, "--offset"),

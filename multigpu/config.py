@@ -6,6 +6,7 @@ import math
 import re
 from dataclasses import dataclass, field
 
+from multigpu.core.canvas import Canvas
 from multigpu.errors import InputError
 from multigpu.scene.models import SceneSpec
 from multigpu.scene.paths import DEFAULT_FRAMES  # noqa: F401  (frames of generated paths; re-exported for the CLI)
@@ -16,6 +17,8 @@ SUMMARY_EVERY = 50
 #: setup (building a scene cache, loading a big model) may take this long on a live rank;
 #: a stopped rank is caught by the liveness check long before
 SETUP_SECONDS = 1800.0
+#: where composed tiles go besides the outputs: nowhere, or a window on each rank's display
+PRESENTERS = ("headless", "window")
 
 
 def setup_timeout(cfg: "WalkConfig") -> float:
@@ -73,6 +76,11 @@ class WalkConfig:
     timeout: float = 120.0
     liveness: float = 30.0
     progress: bool = True
+    mullion: tuple[int, int] = (0, 0)  # pixels hidden behind the bezels between tiles (MX, MY)
+    present: str = "headless"  # or "window": every rank shows its tile in a window on its display
+    wall: str | None = None  # the wall file the grid/tile/mullion/displays came from
+    displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY
+    positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place
 
     def __post_init__(self):
         if self.frames is not None and self.frames < 1:
@@ -117,11 +125,16 @@ class WalkConfig:
             raise InputError(f"--timeout must be > 0 seconds, got {self.timeout}")
         if not (self.liveness >= 0 and math.isfinite(self.liveness)):
             raise InputError(f"--liveness must be >= 0 seconds (0: off), got {self.liveness}")
+        if self.present not in PRESENTERS:
+            raise InputError(f"--present must be one of {', '.join(PRESENTERS)}, got '{self.present}'")
+        if len(self.mullion) != 2 or min(self.mullion) < 0 or max(self.mullion) > 4096:
+            raise InputError(f"--mullion must be two pixel counts 0..4096, got {self.mullion}")
         tw, th = self.tile
         if tw > 16384 or th > 16384:
             raise InputError(f"--tile {tw}x{th}: tiles above 16384 pixels per side are not supported")
-        if self.size[0] > 32768 or self.size[1] > 32768:
-            raise InputError(f"--grid/--tile: a {self.size[0]}x{self.size[1]} wall exceeds 32768 pixels per side")
+        W, H = self.canvas.size
+        if W > 32768 or H > 32768:
+            raise InputError(f"--grid/--tile/--mullion: a {W}x{H} wall exceeds 32768 pixels per side")
         if self.decomposition == "bins":
             bins = -(-self.size[0] // self.bin_size) * -(-self.size[1] // self.bin_size)
             if bins < self.ranks:
@@ -137,4 +150,10 @@ class WalkConfig:
 
     @property
     def size(self) -> tuple[int, int]:
+        """The visible pixels (W, H): where partitions are planned."""
         return self.grid[1] * self.tile[0], self.grid[0] * self.tile[1]
+
+    @property
+    def canvas(self) -> Canvas:
+        """The wall with its mullions: the camera's frustum, the renderers' framebuffer, the mosaic."""
+        return Canvas(self.grid, self.tile, self.mullion)

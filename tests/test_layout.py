@@ -60,7 +60,9 @@ def test_gl_and_mpi_live_at_their_edges():
         rel = f.relative_to(PKG)
         mods = {m.split(".")[0] for m in _imports(f)}
         if "moderngl" in mods:
-            assert rel.parts[0] == "gpu", f"{rel} imports moderngl"
+            assert rel.parts[0] in ("gpu", "display"), f"{rel} imports moderngl"
+        if "glfw" in mods:
+            assert rel.parts[0] == "display", f"{rel} imports glfw"
         if "mpi4py" in mods:
             assert rel.parts[0] == "parallel" or rel.name == "cli.py", f"{rel} imports mpi4py"
 

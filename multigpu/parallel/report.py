@@ -6,7 +6,11 @@ Figures and what they are:
   honest when ranks outnumber cores;
 * ``emulated_frame_ms`` is the emulated parallel frame time: per frame, the slowest rank's CPU
   time for load balancing + rendering + exchange + display, i.e. the frame time the run would
-  have with one core (GPU) per rank.
+  have with one core (GPU) per rank;
+* presenting (``--present window``): ``present_ms`` is a rank's upload + blit + swap (wall),
+  ``swap_wait_ms`` its wait in the swap barrier, ``swap_ms`` the moment its swap returned,
+  after the frame's earliest swap (one clock per host), and ``swap_skew_ms`` the frame's latest
+  minus earliest swap return (the same on every row of a frame; 0 when headless).
 """
 
 from __future__ import annotations
@@ -20,7 +24,8 @@ import numpy as np
 COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms", "frame_ms",
            "load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
-           "bytes_sent", "objects", "pieces", "depth_bytes", "load_cv"]
+           "bytes_sent", "objects", "pieces", "depth_bytes", "load_cv",
+           "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms"]
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
 INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes"}
 
@@ -112,6 +117,11 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "bytes_sent_per_frame": float(get("bytes_sent").sum(axis=1).mean()),
         "depth_bytes_per_frame": float(get("depth_bytes").sum(axis=1).mean()),
         "load_cv": float(get("load_cv")[:, 0].mean()),  # std/mean of per-rank triangles (Kerbl's c_v)
+        "present": {"present_ms_median": float(np.median(get("present_ms"))),
+                    "present_ms_p99": float(np.percentile(get("present_ms"), 99)),
+                    "swap_skew_ms_median": float(np.median(get("swap_skew_ms")[:, 0])),
+                    "swap_skew_ms_p99": float(np.percentile(get("swap_skew_ms")[:, 0], 99)),
+                    "swap_skew_ms_max": float(get("swap_skew_ms")[:, 0].max())},
         "per_frame_emulated_ms": emulated.round(3).tolist(),
         "per_frame_wall_ms": frame_ms.round(3).tolist(),
     }

@@ -13,24 +13,23 @@ after the current frame.
 from __future__ import annotations
 
 import os
-import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from multigpu.config import SUMMARY_EVERY, WalkConfig, setup_timeout
+from multigpu.config import WalkConfig, setup_timeout
 from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
 from multigpu.core.camera import frame_matrices
-from multigpu.core.regions import tile_regions
 from multigpu.core.work import Work, transfers
 from multigpu.decompositions import make_decomposition
 from multigpu.errors import InputError, as_flags
 from multigpu.parallel.composite import composite
 from multigpu.parallel.exchange import agree, barrier, broadcast_partition, wait_all
-from multigpu.parallel.mosaic import overlay, save_png, stitch
+from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.report import COLUMNS, TimingWriter, summarize, table, write_json
+from multigpu.parallel.record import RunRecord
+from multigpu.parallel.report import COLUMNS
 from multigpu.parallel.shared import SharedPieces, composite_shared
+from multigpu.parallel.timer import Timer
 from multigpu.scene.models import axis_name, load_scene
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
@@ -80,7 +79,7 @@ def _check_path(cfg, scene, path) -> None:
     check_cameras(path, cfg.path or "the generated path")
     project = projector(cfg, scene)
     for f in np.linspace(0, len(path) - 1, min(len(path), 12)).astype(int):
-        view, proj, _ = frame_matrices(path.camera(int(f)), cfg.size)
+        view, proj, _ = frame_matrices(path.camera(int(f)), cfg.canvas.size)
         if (~np.isnan(project(view, proj)[:, 0])).any():
             return
     raise InputError(f"the camera path never sees the scene ({scene.name}): no visible triangles")
@@ -143,31 +142,36 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             _check_path(cfg, scene, path)
         except InputError as exc:
             error = as_flags(exc)
+    presenter = renderer = None
     try:
         _fault(rank, "setup")
         error = agree(comm, error, wait)
         if error:
             raise InputError(error)
-        ctx = renderer = None
         try:
             if rank != 0:
                 scene, path, load_info = load_world(cfg)
+            presenter = _presenter(cfg, rank)
             from multigpu.gpu.render import RegionRenderer, create_context
 
-            ctx, device = create_context(cfg.device, local_rank=node_rank(comm))
-            renderer = RegionRenderer(ctx, scene, cfg.size, cfg.subfrustum)
+            if presenter.context is not None:  # render in the window's context
+                ctx, device = presenter.context, f"window on {presenter.display}"
+            else:
+                ctx, device = create_context(cfg.device, local_rank=node_rank(comm))
+            renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum)
         except (InputError, RuntimeError) as exc:
             error = as_flags(exc)
         error = agree(comm, error, wait)
         if error:
             raise InputError(error)
     except BaseException:
+        _close(renderer, presenter)
         if out is not None:
             out.abandon()
         raise
     frames = None
     try:
-        frames = Frames(cfg, comm, job, scene, path, renderer, out, load_info, device)
+        frames = Frames(cfg, comm, job, scene, path, renderer, presenter, out, load_info, device)
         summary = frames.run()
         frames.release(collective=True)  # every rank left the frame loop after the same frame
         return summary
@@ -176,33 +180,45 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             frames.release(collective=False)  # a failing rank must not wait in a collective free
         raise
     finally:
-        renderer.release()
+        _close(renderer, presenter)
         if out is not None:
             out.release()
 
 
-@dataclass
-class Timer:
-    """Named phase marks of one frame: wall (perf_counter) and process CPU time."""
+def _presenter(cfg: WalkConfig, rank: int):
+    """This rank's presenter: headless, or a window at its tile's place (or the wall file's)."""
+    from multigpu.display import make_presenter
 
-    marks: list = field(default_factory=list)
+    x0, _, x1, y1 = (int(v) for v in cfg.canvas.tiles()[rank])
+    place = (x0, cfg.canvas.size[1] - y1)  # top-left of the tile on a screen holding the canvas
+    pos = cfg.positions[rank] if cfg.positions and cfg.positions[rank] is not None else place
+    display = cfg.displays[rank] if cfg.displays else None
+    where = f"wall file {cfg.wall}, rank {rank}" if cfg.wall and display else "$DISPLAY"
+    return make_presenter(cfg.present, rank, cfg.tile, pos, display, where)
 
-    def mark(self) -> None:
-        self.marks.append((time.perf_counter(), time.process_time()))
 
-    def ms(self, i: int, j: int, cpu: bool = False) -> float:
-        return (self.marks[j][1 if cpu else 0] - self.marks[i][1 if cpu else 0]) * 1e3
+def _close(renderer, presenter) -> None:
+    if renderer is not None:
+        renderer.release()
+    if presenter is not None:
+        presenter.close()
+
+
+#: the stop flag of a frame's row: > 0 a signal number, < 0 a window event (STOPS)
+STOPS = {-1: "escape key", -2: "window closed"}
 
 
 class Frames:
-    """The frame loop in named phases: plan, render, synchronize, exchange, display, record."""
+    """The frame loop in named phases: balance, render, sync, exchange, display, record."""
 
-    def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, out: OutputDir | None, load_info, device):
+    def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, presenter, out: OutputDir | None,
+                 load_info, device):
         self.cfg, self.comm, self.job = cfg, comm, job
-        self.scene, self.path, self.renderer = scene, path, renderer
+        self.scene, self.path, self.renderer, self.presenter = scene, path, renderer, presenter
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         tw, th = cfg.tile
-        self.tiles = tile_regions(cfg.grid[0], cfg.grid[1], tw, th)
+        self.canvas = cfg.canvas
+        self.tiles = self.canvas.tiles()
         self.decomposition = make_decomposition(cfg.decomposition, cfg.grid, cfg.size, cfg.strips, scene,
                                                 cfg.balance, cfg.bin_size, cfg.bin_pattern, cfg.db_ranges,
                                                 rank=self.rank)
@@ -213,38 +229,38 @@ class Frames:
         self.zback = np.ones((th, tw), dtype=np.float32) if self.decomposition.depth else None
         self.background = renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
                                           np.zeros(scene.n_objects, dtype=bool))[0, 0]  # the clear colour
-        self.front = np.zeros_like(self.back)  # what the rank's monitor shows
         self.col = {c: i for i, c in enumerate(COLUMNS)}
         self.row = np.zeros(len(COLUMNS) + 1)  # + stop flag
         self.allrows = np.zeros((self.K, len(COLUMNS) + 1))
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
         self.n_frames = len(path)
         self.done = 0
-        self.out = out
-        self.history: list[np.ndarray] = []
         self.learn = None  # (frame, work, times) the strategy observes at the start of the next frame
         self.shared = None if cfg.exchange != "shared" else SharedPieces.make(
-            comm, cfg.size, self.decomposition.depth, cfg.timeout)
-        self.config_doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
-        self.config_doc["exchange"] = "shared" if self.shared is not None else "messages"
-        self.writer = self.video = self.bar = None
+            comm, self.canvas.size, self.decomposition.depth, cfg.timeout)
+        self.window = presenter.mode == "window"
+        doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
+        doc["exchange"] = "shared" if self.shared is not None else "messages"
+        self.config_doc = doc
+        self.record = None
+        if self.rank == 0:
+            self.record = RunRecord(out, self.K, self.n_frames, doc, self.decomposition.report, cfg.video,
+                                    cfg.progress, cfg.overlay)
 
     # -- phases of one frame
     def plan(self, f: int):
-        """This frame's work (every rank plans the same, or rank 0 plans and broadcasts)."""
-        view, proj, light = frame_matrices(self.path.camera(f), self.cfg.size)
-        tris, d = self.scene.tris, self.decomposition
+        """This frame's work (every rank plans the same, or rank 0 plans and broadcasts),
+        planned over the visible pixels and moved onto the canvas."""
+        view, proj, light = frame_matrices(self.path.camera(f), self.canvas.size)
+        tris, d, cov, canvas = self.scene.tris, self.decomposition, self.coverage, self.canvas
+        rects = canvas.to_visible(self.project(view, proj, cov) if cov is not None else self.project(view, proj))
         if self.broadcast:
-            part = None
-            if self.rank == 0:
-                cov = self.coverage
-                part = d.strategy.plan(self.project(view, proj, cov) if cov is not None else self.project(view, proj),
-                                       tris, cov)
+            part = d.strategy.plan(rects, tris, cov) if self.rank == 0 else None
             part = broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
-            return d.plan_from(part, tris), (view, proj, light)
-        if self.coverage is None:
-            return d.plan(f, self.project(view, proj), tris), (view, proj, light)
-        return d.plan(f, self.project(view, proj, self.coverage), tris, self.coverage), (view, proj, light)
+            work = d.plan_from(part, tris)
+        else:
+            work = d.plan(f, rects, tris, cov) if cov is not None else d.plan(f, rects, tris)
+        return canvas.to_canvas(work, rects, tris), (view, proj, light)
 
     def render(self, work: Work, view, proj, light) -> list:
         """Every piece this rank renders: (rgb, depth or None)."""
@@ -269,73 +285,78 @@ class Frames:
         px = sum(p.pixels for p in plan if p.sender == self.rank and p.receiver != self.rank)  # read by peers
         return px * (7 if work.depth else 3), px * 4 if work.depth else 0
 
-    def record(self, f: int, work: Work, t: Timer, sent: tuple[int, int]) -> None:
+    def present(self, t: Timer) -> tuple[float, int]:
+        """Display: the composed tile into the back buffer, the swap barrier (every tile
+        composed before any swaps), the swap; then window events. Returns when the swap
+        returned and the stop flag of a window event (0: none)."""
+        with t.phase("display"):
+            self.presenter.show(self.back)
+        if self.window:
+            with t.phase("swap_wait"):
+                barrier(self.comm, self.cfg.timeout)
+        with t.phase("display"):
+            swapped = self.presenter.swap()
+            why = self.presenter.poll()
+        return swapped, next((k for k, v in STOPS.items() if v == why), 0)
+
+    def gather_row(self, f: int, work: Work, t: Timer, sent: tuple[int, int], swapped: float, stop: int) -> None:
         """This rank's row by column name, gathered so every rank sees every rank's row."""
         box = work.bounds(self.rank)
         values = {"frame": f, "rank": self.rank, "triangles": work.loads[self.rank],
                   "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
-                  "load_balancing_ms": t.ms(0, 1), "rendering_ms": t.ms(1, 2), "synchronization_ms": t.ms(3, 4),
-                  "frame_exchange_ms": t.ms(2, 3) + t.ms(4, 5), "display_ms": t.ms(5, 6), "frame_ms": t.ms(0, 6),
-                  "load_balancing_cpu_ms": t.ms(0, 1, True), "rendering_cpu_ms": t.ms(1, 2, True),
-                  "frame_exchange_cpu_ms": t.ms(2, 3, True) + t.ms(4, 5, True), "display_cpu_ms": t.ms(5, 6, True),
+                  "load_balancing_ms": t.ms("balance"), "rendering_ms": t.ms("render"),
+                  "synchronization_ms": t.ms("sync"), "frame_exchange_ms": t.ms("exchange"),
+                  "display_ms": t.ms("display", "swap_wait"), "frame_ms": t.total_ms,
+                  "load_balancing_cpu_ms": t.cpu_ms("balance"), "rendering_cpu_ms": t.cpu_ms("render"),
+                  "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
                   "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
-                  "depth_bytes": sent[1], "load_cv": work.load_cv}
+                  "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
+                  "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0}
         for c, v in values.items():
             self.row[self.col[c]] = v
-        self.row[-1] = float(self.job.signum or 0)  # a signal seen here stops every rank after this frame
+        # a signal or a window event seen here stops every rank after this frame
+        self.row[-1] = float(self.job.signum or stop)
         wait_all([self.comm.Iallgather(self.row, self.allrows)], self.cfg.timeout, "timing gather")
 
-    def show(self, f: int, part) -> None:
+    def show(self, f: int, work: Work) -> None:
         """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""
         cfg = self.cfg
         mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or f == self.n_frames - 1)
         if not (mosaic_due or cfg.video):
             return
-        wait_all([self.comm.Igather(self.front, self.gathered, root=0)], cfg.timeout, "mosaic gather")
-        if self.rank != 0:
-            return
-        img = stitch(self.gathered, self.tiles, cfg.size)
-        if mosaic_due:
-            save_png(img, self.out.path / "mosaic" / f"frame_{f:05d}.png")
-            if cfg.overlay:
-                save_png(overlay(img, part.rects), self.out.path / "mosaic" / f"frame_{f:05d}_partition.png")
-        if self.video is not None:
-            self.video.append_data(img)
+        wait_all([self.comm.Igather(self.back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
+        if self.rank == 0:
+            self.record.image(f, stitch(self.gathered, self.tiles, self.canvas.size), work.rects, mosaic_due)
 
     def frame(self, f: int) -> None:
         t = Timer()
-        t.mark()
-        _fault(self.rank, f)
-        if self.learn is not None:  # the strategy learns from the last frame's times: balancing CPU too
-            self.decomposition.observe(*self.learn)
-            self.learn = None
-        work, (view, proj, light) = self.plan(f)
-        t.mark()
-        rendered = self.render(work, view, proj, light)
-        t.mark()
-        if self.shared is not None:  # pieces into the shared window before the barrier (exchange)
-            self.shared.publish(f, self.rank, rendered)
-        t.mark()
-        barrier(self.comm, self.cfg.timeout)
-        t.mark()
-        sent = self.compose(f, work, rendered)
-        t.mark()
-        np.copyto(self.front, self.back)  # present the composed tile
-        t.mark()
-        self.record(f, work, t, sent)
+        with t.phase("balance"):
+            _fault(self.rank, f)
+            if self.learn is not None:  # the strategy learns from the last frame's times: balancing CPU too
+                self.decomposition.observe(*self.learn)
+                self.learn = None
+            work, (view, proj, light) = self.plan(f)
+        with t.phase("render"):
+            rendered = self.render(work, view, proj, light)
+        if self.shared is not None:
+            with t.phase("exchange"):  # pieces into the shared window before the barrier
+                self.shared.publish(f, self.rank, rendered)
+        with t.phase("sync"):
+            barrier(self.comm, self.cfg.timeout)
+        with t.phase("exchange"):
+            sent = self.compose(f, work, rendered)
+        swapped, stop = self.present(t)
+        self.gather_row(f, work, t, sent, swapped, stop)
         self.learn = (f, work, self.allrows[:, self.col["rendering_cpu_ms"]].copy())
         if self.rank == 0:  # rows first: the summary always matches the CSV
-            rows = self.allrows[:, :len(COLUMNS)]
-            self.writer.write(rows)
-            self.history.append(rows.copy())
+            rows = self.allrows[:, :len(COLUMNS)].copy()
+            if self.window:  # swap moments after the frame's first swap; the skew on every row
+                at = rows[:, self.col["swap_ms"]]
+                rows[:, self.col["swap_ms"]] = (at - at.min()) * 1e3
+                rows[:, self.col["swap_skew_ms"]] = (at.max() - at.min()) * 1e3
+            self.record.rows(f, rows)
         self.done = f + 1
         self.show(f, work)
-        if self.rank == 0:
-            if self.bar is not None:
-                self.bar.update(1)
-                self.bar.set_postfix(fps=f"{1e3 / max(self.allrows[:, self.col['frame_ms']].max(), 1e-9):.1f}")
-            if f % SUMMARY_EVERY == SUMMARY_EVERY - 1:
-                self.write_summary(complete=False)
 
     def release(self, collective: bool) -> None:
         """Give the shared window back: freed with the peers after a run every rank finished,
@@ -345,40 +366,6 @@ class Frames:
             self.shared.close(collective)
             self.shared = None
 
-    # -- the run
-    def open_outputs(self) -> None:
-        self.out.clear_previous()
-        self.writer = TimingWriter(self.out.path / "timings.csv")
-        self.write_summary(complete=False)
-        if self.cfg.video:
-            import imageio.v2 as imageio
-
-            self.video = imageio.get_writer(str(self.out.path / "mosaic.mp4"), fps=30, macro_block_size=1)
-        if self.cfg.progress:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=self.n_frames, unit="frame", desc=f"{self.K} ranks", dynamic_ncols=True,
-                            mininterval=1.0)
-
-    def close_outputs(self, complete: bool, stopped_by: str | None) -> dict:
-        for thing in (self.bar, self.writer, self.video):
-            if thing is not None:
-                try:
-                    thing.close()
-                except Exception:  # closing must not hide the run's own error
-                    pass
-        return self.write_summary(complete=complete, stopped_by=stopped_by)
-
-    def write_summary(self, complete: bool, stopped_by: str | None = None) -> dict:
-        rows = np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS)))
-        summary = summarize(rows, self.K)
-        doc = {"complete": complete, "frames_written": self.done, "config": self.config_doc,
-               "decomposition": self.decomposition.report(), **summary}
-        if stopped_by:
-            doc["stopped_by"] = stopped_by
-        write_json(self.out.path / "summary.json", doc)
-        return summary
-
     def _what(self) -> str:
         cfg = self.cfg
         if cfg.decomposition == "screen":
@@ -387,36 +374,45 @@ class Frames:
             return f"bins {cfg.bin_pattern} {cfg.bin_size}px"
         return f"db ({cfg.db_ranges} ranges)"
 
+    def _stopped_by(self) -> str | None:
+        flags = self.allrows[:, -1]
+        if self.job.signum:
+            import signal
+
+            return f"signal {signal.Signals(self.job.signum).name}"
+        if (flags < 0).any():
+            r = int(np.flatnonzero(flags < 0)[0])
+            return f"{STOPS[int(flags[r])]} (rank {r}'s window)"
+        return None
+
     def run(self) -> dict | None:
-        if self.rank == 0:
-            self.open_outputs()
         complete, stopped_by = False, None
         self.job.in_frames = True
         try:
             for f in range(self.n_frames):
                 self.frame(f)
-                if self.allrows[:, -1].any():  # a rank was interrupted: all stop after this frame
-                    self.job.signum = self.job.signum or int(self.allrows[:, -1].max())
+                flags = self.allrows[:, -1]
+                if flags.any():  # a rank was interrupted or its window closed: all stop after this frame
+                    if (flags > 0).any():
+                        self.job.signum = self.job.signum or int(flags.max())
                     break
             complete = self.done == self.n_frames
             if not complete:
-                import signal
-
-                stopped_by = f"signal {signal.Signals(self.job.signum).name}"
+                stopped_by = self._stopped_by()
         except BaseException as exc:
             stopped_by = f"{exc.__class__.__name__}: {exc}"
             raise
         finally:
             if self.rank == 0:
-                summary = self.close_outputs(complete, stopped_by)
+                summary = self.record.close(complete, stopped_by)
         if self.rank != 0:
             return None
         cfg, scene = self.cfg, self.scene
-        state = "" if complete else f" (stopped after {self.done} of {self.n_frames} frames)"
-        print(table(summary, f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in "
-                             f"{scene.n_objects} objects, {cfg.grid[0]}x{cfg.grid[1]} wall of {cfg.size[0]}x"
-                             f"{cfg.size[1]}, {self._what()}{state}"), flush=True)
-        print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
+        state = "" if complete else f" (stopped after {self.done} of {self.n_frames} frames: {stopped_by})"
+        W, H = self.canvas.size
+        self.record.print_table(summary, f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in "
+                                         f"{scene.n_objects} objects, {cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, "
+                                         f"{self._what()}{state}")
         return summary
 
 
@@ -432,5 +428,6 @@ def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dic
                       "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
                       "warnings": scene.meta.get("warnings", []), "objects_from": scene.meta.get("objects"),
                       "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source")},
-            "path": cfg.path or cfg.path_kind, "egl_device": device,
+            "path": cfg.path or cfg.path_kind, "egl_device": device, "present": cfg.present,
+            "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall,
             "lp_num_threads": os.environ.get("LP_NUM_THREADS")}

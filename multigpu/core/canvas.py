@@ -1,0 +1,148 @@
+"""The wall as people see it: display tiles separated by mullions (pixels hidden behind bezels).
+
+Two pixel spaces, both origin bottom-left, rects half-open ``[x0, y0, x1, y1)``:
+
+* the **canvas**, ``cols*tw + (cols-1)*MX`` by ``rows*th + (rows-1)*MY``: one camera frustum
+  spans it, so a straight line stays straight across a bezel; tile (row, col) starts at
+  ``x = col*(tw+MX)`` and, counted from the top, ``y = row*(th+MY)``;
+* the **visible** space, ``cols*tw`` by ``rows*th``: the canvas with the mullions cut out.
+  Balancers and decompositions plan here, so they split visible pixels only and a region may
+  span a bezel without paying for it.
+
+``to_visible`` maps projected object rects from the canvas into the visible space
+(conservatively: an object keeps every visible pixel it may cover; one wholly behind a bezel
+becomes invisible). ``to_canvas`` cuts a frame's work at the tile borders and moves each part
+onto the canvas, so hidden pixels are never rendered. With zero mullions both are identities
+and are skipped. Pure numpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multigpu.core.regions import overlaps, pixel_spans, tile_regions
+from multigpu.core.work import Work
+
+#: widening of mapped rects (normalized units) that absorbs the rounding of the
+#: canvas -> visible -> pixel round trip; it can only add a pixel, never drop one
+PAD = 1e-9
+
+
+@dataclass(frozen=True)
+class Canvas:
+    """A ``grid`` = (rows, cols) wall of ``tile`` = (tw, th) pixels with ``mullion`` = (MX, MY)."""
+
+    grid: tuple[int, int]
+    tile: tuple[int, int]
+    mullion: tuple[int, int] = (0, 0)
+
+    @property
+    def visible(self) -> tuple[int, int]:
+        """(W, H) of the visible pixels: where every plan is made."""
+        return self.grid[1] * self.tile[0], self.grid[0] * self.tile[1]
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(W, H) of the canvas: the camera's frustum, the renderers' framebuffer, the mosaic."""
+        (rows, cols), (tw, th), (mx, my) = self.grid, self.tile, self.mullion
+        return cols * tw + (cols - 1) * mx, rows * th + (rows - 1) * my
+
+    @property
+    def bezels(self) -> bool:
+        return any(self.mullion)
+
+    def tiles(self) -> np.ndarray:
+        """(K, 4) canvas rect of every rank label's tile (column-major labels, row 0 on top)."""
+        rows, cols = self.grid
+        t = tile_regions(rows, cols, *self.tile)
+        return t + np.repeat(self._shift(), 2, axis=0).reshape(-1, 4)
+
+    def _shift(self) -> np.ndarray:
+        """(K, 2) canvas offset of each label's tile from its place in the visible space."""
+        rows, cols = self.grid
+        labels = np.arange(rows * cols)
+        row, col = labels % rows, labels // rows
+        return np.stack([col * self.mullion[0], (rows - 1 - row) * self.mullion[1]], axis=1).astype(np.int64)
+
+    def hidden(self) -> np.ndarray:
+        """(H, W) bool of the canvas, top row first (as a PNG): the pixels behind bezels."""
+        W, H = self.size
+        mask = np.ones((H, W), dtype=bool)
+        for x0, y0, x1, y1 in self.tiles():  # K tiles
+            mask[H - y1:H - y0, x0:x1] = False
+        return mask
+
+    def to_visible(self, rects: np.ndarray) -> np.ndarray:
+        """(N, 4) normalized canvas rects -> normalized visible rects (NaN: no visible pixel)."""
+        if not self.bezels:
+            return rects
+        r = np.asarray(rects, dtype=np.float64)
+        (W, H), (VW, VH) = self.size, self.visible
+        (rows, cols), (tw, th), (mx, my) = self.grid, self.tile, self.mullion
+        out = np.empty_like(r)
+        gone = np.zeros(len(r), dtype=bool)
+        for axis, (n, t, m, full, vis) in enumerate(((cols, tw, mx, W, VW), (rows, th, my, H, VH))):
+            lo = _squeeze(r[:, axis] * full, n, t, m, low=True)
+            hi = _squeeze(r[:, axis + 2] * full, n, t, m, low=False)
+            with np.errstate(invalid="ignore"):
+                gone |= lo > hi  # both ends behind the same bezel
+            out[:, axis] = lo / vis - PAD
+            out[:, axis + 2] = hi / vis + PAD
+        out[gone] = np.nan
+        return out
+
+    def to_canvas(self, work: Work, vrects: np.ndarray, tris: np.ndarray) -> Work:
+        """``work`` planned in the visible space, cut at the tile borders and moved onto the
+        canvas. A cut part draws only the objects whose visible span touches it, and the loads
+        count what is drawn. ``vrects`` are this frame's normalized visible object rects."""
+        if not self.bezels:
+            return work
+        vtiles = tile_regions(self.grid[0], self.grid[1], *self.tile)
+        shift = self._shift()
+        spans = None
+        rects, masks, loads = [], [], np.zeros(work.ranks, dtype=np.int64)
+        for k in range(work.ranks):  # ranks, not objects
+            R = np.asarray(work.rects[k], dtype=np.int64).reshape(-1, 4)
+            lo = np.maximum(R[:, None, :2], vtiles[None, :, :2])
+            hi = np.minimum(R[:, None, 2:], vtiles[None, :, 2:])
+            p, t = np.nonzero((hi > lo).all(axis=-1))  # (piece, tile) that meet
+            cut = np.concatenate([lo[p, t], hi[p, t]], axis=1)
+            m = work.masks[k][p]
+            split = np.bincount(p, minlength=len(R))[p] > 1
+            if split.any():
+                if spans is None:
+                    spans = pixel_spans(vrects, self.visible)[0]
+                m = m.copy()
+                for i in np.flatnonzero(split):  # cut parts, a few per rank
+                    m[i] &= overlaps(spans, cut[i])
+            rects.append(cut + np.tile(shift[t], 2))
+            masks.append(m)
+            loads[k] = int((m.astype(np.int64) @ np.asarray(tris, dtype=np.int64)).sum()) if len(m) else 0
+        return Work(tuple(rects), tuple(masks), loads, work.depth, work.partition)
+
+
+def _squeeze(x: np.ndarray, n: int, t: int, m: int, low: bool) -> np.ndarray:
+    """Canvas pixel coordinates along one axis -> visible ones: the ``n`` tiles of ``t`` pixels
+    close up over the ``m``-pixel gaps; a point in a gap goes to the next tile's first pixel
+    (``low``) or the previous tile's last pixel. Outside the canvas the first and last tile
+    extend. NaN stays NaN."""
+    with np.errstate(invalid="ignore"):
+        c = np.clip(np.floor(x / (t + m)), 0, n - 1)
+        local = x - c * (t + m)
+        gap = (local >= t) & (c < n - 1)
+        edge = (c + 1) * t - (0.0 if low else 0.5)
+        return np.where(gap, edge, c * t + local)
+
+
+def parse_mullion(text: str, flag: str = "--mullion") -> tuple[int, int]:
+    """'MXxMY' (non-negative pixels) or a clear error naming ``flag``."""
+    import re
+
+    from multigpu.errors import InputError
+
+    m = re.fullmatch(r"\s*(\d+)\s*x\s*(\d+)\s*", str(text))
+    if not m:
+        raise InputError(f"{flag} must look like MXxMY with pixels >= 0 (e.g. 40x40), got '{text}'")
+    return int(m.group(1)), int(m.group(2))

@@ -1,0 +1,64 @@
+"""Where a composed tile goes: nowhere (headless) or a window on the tile's display.
+
+A presenter is the frame loop's last phase (the paper's Display component) behind one small
+interface: ``show(tile)`` puts the composed tile in the back buffer, ``swap()`` makes it visible
+and returns when it did, ``poll()`` reads window events without waiting and says why the run
+should stop (Escape, a closed window) or None. The window presenter also gives the rank its GL
+context, so rendering and presenting share one context. The frame loop puts a barrier between
+``show`` and ``swap`` (the software swap barrier), so no tile shows frame f+1 before every tile
+has composed it.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+import numpy as np
+
+
+class Presenter(Protocol):
+    mode: str
+    context: object | None  # a GL context the renderer should use, or None for its own (EGL)
+
+    def show(self, tile: np.ndarray) -> None:
+        """Put the composed (th, tw, 3) uint8 tile, row 0 at the bottom, in the back buffer."""
+
+    def swap(self) -> float:
+        """Make it visible; the wall-clock moment (``time.time()``) the swap returned."""
+
+    def poll(self) -> str | None:
+        """Window events, never waiting: why the run should stop, or None."""
+
+    def close(self) -> None:
+        """Close the window (safe to call twice)."""
+
+
+class Headless:
+    """No display: the composed tile is the run's output (mosaics, video) and nothing else."""
+
+    mode = "headless"
+    context = None
+
+    def show(self, tile: np.ndarray) -> None:
+        pass
+
+    def swap(self) -> float:
+        return time.time()
+
+    def poll(self) -> str | None:
+        return None
+
+    def close(self) -> None:
+        pass
+
+
+def make_presenter(mode: str, rank: int, tile_size: tuple[int, int], position: tuple[int, int],
+                   display: str | None, where: str) -> Presenter:
+    """The presenter of ``mode`` for rank label ``rank``; ``where`` names the wall-file entry
+    or flag behind ``display`` for error messages."""
+    if mode == "headless":
+        return Headless()
+    from multigpu.display.window import Window
+
+    return Window(rank, tile_size, position, display, where)

@@ -1,0 +1,99 @@
+"""A borderless glfw window showing one rank's tile, bit for bit.
+
+glfw (a small, well-kept C library with one job: windows, contexts and input) opens the window
+at the tile's place on its X display and makes a GL 4.3 core context, which the rank also
+renders in (an EGL context and a GLX window cannot be current in turn in one process with Mesa:
+``BadAccess`` on ``glXMakeCurrent``). ``show`` uploads the composed tile into a texture and
+blits it 1:1 into the back buffer (no filtering, no colour conversion: the screen holds the
+composite's bytes); ``swap`` swaps with vsync where the driver has it (tear-free on a monitor;
+Xvfb returns at once). Escape or a window closed by the user or a window manager ends the run
+after the current frame (``poll``).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from multigpu.errors import InputError
+
+#: hint that tells the user how to fix a missing or refused X display
+X_HELP = ("start an X server there (e.g. Xvfb for testing), set DISPLAY, give the rank a display in the "
+          "wall file, or run --present headless")
+
+
+class Window:
+    """One rank's tile window: ``context`` is the moderngl context the rank renders in."""
+
+    mode = "window"
+
+    def __init__(self, rank: int, tile_size: tuple[int, int], position: tuple[int, int], display: str | None,
+                 where: str):
+        import glfw
+        import moderngl
+
+        self.glfw = glfw
+        self.window = None
+        self.reason: str | None = None
+        errors: list[str] = []
+        glfw.set_error_callback(lambda code, text: errors.append(text.decode() if isinstance(text, bytes) else text))
+        if display:
+            os.environ["DISPLAY"] = display
+        name = os.environ.get("DISPLAY")
+        if not name:
+            raise InputError(f"--present window: rank {rank} has no X display ($DISPLAY is not set, {where}); {X_HELP}")
+        if not glfw.init():
+            why = errors[-1] if errors else "glfw could not initialise"
+            raise InputError(f"--present window: rank {rank} cannot open X display '{name}' ({where}): {why}; {X_HELP}")
+        try:
+            for hint, value in ((glfw.DECORATED, False), (glfw.RESIZABLE, False), (glfw.VISIBLE, False),
+                                (glfw.AUTO_ICONIFY, False), (glfw.FOCUS_ON_SHOW, False),
+                                (glfw.CONTEXT_VERSION_MAJOR, 4), (glfw.CONTEXT_VERSION_MINOR, 3),
+                                (glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)):
+                glfw.window_hint(hint, value)
+            tw, th = tile_size
+            self.window = glfw.create_window(tw, th, f"multigpu tile {rank}", None, None)
+            if not self.window:
+                why = errors[-1] if errors else "no window"
+                raise InputError(f"--present window: rank {rank} cannot open a {tw}x{th} GL 4.3 window on "
+                                 f"'{name}' ({where}): {why}; {X_HELP}")
+            glfw.set_window_pos(self.window, int(position[0]), int(position[1]))
+            glfw.show_window(self.window)
+            glfw.make_context_current(self.window)
+            glfw.swap_interval(1)
+            glfw.set_key_callback(self.window, self._on_key)
+            self.context = moderngl.create_context(require=430)
+            self.texture = self.context.texture((tw, th), 3, alignment=1)
+            self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self.source = self.context.framebuffer(color_attachments=[self.texture])
+            self.display = name
+        except BaseException:
+            self.close()
+            raise
+
+    def _on_key(self, window, key, scancode, action, mods) -> None:
+        if key == self.glfw.KEY_ESCAPE and action == self.glfw.PRESS:
+            self.reason = "escape key"
+            self.glfw.set_window_should_close(window, True)
+
+    def show(self, tile: np.ndarray) -> None:
+        self.texture.write(np.ascontiguousarray(tile))
+        self.context.copy_framebuffer(self.context.screen, self.source)
+
+    def swap(self) -> float:
+        self.glfw.swap_buffers(self.window)
+        return time.time()
+
+    def poll(self) -> str | None:
+        self.glfw.poll_events()
+        if self.glfw.window_should_close(self.window):
+            return self.reason or "window closed"
+        return None
+
+    def close(self) -> None:
+        if self.window is not None:
+            self.glfw.destroy_window(self.window)
+            self.window = None
+        self.glfw.terminate()

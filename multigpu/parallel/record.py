@@ -1,0 +1,83 @@
+"""Rank 0's record of a run: timings.csv, summary.json, mosaics, video and progress.
+
+Rows reach the CSV a whole frame at a time and before anything else of that frame, so the
+summary, rewritten every ``SUMMARY_EVERY`` frames and whenever the run ends, always describes
+exactly the rows written. No MPI here: the frame loop hands over the gathered rows and images.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multigpu.config import SUMMARY_EVERY
+from multigpu.parallel.mosaic import overlay, save_png
+from multigpu.parallel.outdir import OutputDir
+from multigpu.parallel.report import COLUMNS, TimingWriter, summarize, table, write_json
+
+
+class RunRecord:
+    """What a run leaves in ``--out``; ``config`` and ``report`` go into summary.json."""
+
+    def __init__(self, out: OutputDir, ranks: int, n_frames: int, config: dict, report, video: bool,
+                 progress: bool, overlay_mosaics: bool):
+        self.out, self.K, self.n_frames = out, ranks, n_frames
+        self.config, self.report = config, report
+        self.overlay = overlay_mosaics
+        self.history: list[np.ndarray] = []
+        self.done = 0
+        out.clear_previous()
+        self.writer = TimingWriter(out.path / "timings.csv")
+        self.video = self.bar = None
+        self.summary(complete=False)
+        if video:
+            import imageio.v2 as imageio
+
+            self.video = imageio.get_writer(str(out.path / "mosaic.mp4"), fps=30, macro_block_size=1)
+        if progress:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=n_frames, unit="frame", desc=f"{ranks} ranks", dynamic_ncols=True, mininterval=1.0)
+
+    def rows(self, f: int, rows: np.ndarray) -> None:
+        """Frame ``f``'s (K, len(COLUMNS)) rows: to the CSV first, then the history."""
+        self.writer.write(rows)
+        self.history.append(rows.copy())
+        self.done = f + 1
+        if self.bar is not None:
+            self.bar.update(1)
+            self.bar.set_postfix(fps=f"{1e3 / max(rows[:, COLUMNS.index('frame_ms')].max(), 1e-9):.1f}")
+        if f % SUMMARY_EVERY == SUMMARY_EVERY - 1:
+            self.summary(complete=False)
+
+    def image(self, f: int, img: np.ndarray, rects, mosaic: bool) -> None:
+        """The stitched wall of frame ``f``: a mosaic PNG (and its partition overlay) when
+        ``mosaic``, a video frame when recording one."""
+        if mosaic:
+            save_png(img, self.out.path / "mosaic" / f"frame_{f:05d}.png")
+            if self.overlay:
+                save_png(overlay(img, rects), self.out.path / "mosaic" / f"frame_{f:05d}_partition.png")
+        if self.video is not None:
+            self.video.append_data(img)
+
+    def summary(self, complete: bool, stopped_by: str | None = None) -> dict:
+        rows = np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS)))
+        summary = summarize(rows, self.K)
+        doc = {"complete": complete, "frames_written": self.done, "config": self.config,
+               "decomposition": self.report(), **summary}
+        if stopped_by:
+            doc["stopped_by"] = stopped_by
+        write_json(self.out.path / "summary.json", doc)
+        return summary
+
+    def close(self, complete: bool, stopped_by: str | None) -> dict:
+        for thing in (self.bar, self.writer, self.video):
+            if thing is not None:
+                try:
+                    thing.close()
+                except Exception:  # closing must not hide the run's own error
+                    pass
+        return self.summary(complete=complete, stopped_by=stopped_by)
+
+    def print_table(self, summary: dict, title: str) -> None:
+        print(table(summary, title), flush=True)
+        print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
