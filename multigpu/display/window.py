@@ -80,7 +80,10 @@ class Window:
 
     def show(self, tile: np.ndarray) -> None:
         self.texture.write(np.ascontiguousarray(tile))
-        self.context.copy_framebuffer(self.context.screen, self.source)
+        screen = self.context.screen
+        screen.scissor = None  # the renderer's scissor would clip the blit
+        screen.use()
+        self.context.copy_framebuffer(screen, self.source)
 
     def swap(self) -> float:
         self.glfw.swap_buffers(self.window)

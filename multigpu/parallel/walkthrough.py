@@ -351,7 +351,7 @@ class Frames:
         if self.rank == 0:  # rows first: the summary always matches the CSV
             rows = self.allrows[:, :len(COLUMNS)].copy()
             if self.window:  # swap moments after the frame's first swap; the skew on every row
-                at = rows[:, self.col["swap_ms"]]
+                at = rows[:, self.col["swap_ms"]].copy()
                 rows[:, self.col["swap_ms"]] = (at - at.min()) * 1e3
                 rows[:, self.col["swap_skew_ms"]] = (at.max() - at.min()) * 1e3
             self.record.rows(f, rows)
