@@ -172,6 +172,11 @@ def build_parser() -> argparse.ArgumentParser:
     pm.add_argument("--fov", type=float, default=60.0)
     pm.add_argument("--out", required=True, help="path file to write (JSON)")
 
+    wl = sub.add_parser("wall", help="wall file tools")
+    wsub = wl.add_subparsers(dest="wall_cmd", required=True)
+    wc = wsub.add_parser("check", help="validate a wall file and print its layout")
+    wc.add_argument("file", help="wall file (JSON: grid, tile, mullion, displays)")
+    wc.add_argument("--grid-only", action="store_true", help="print only ROWSxCOLS (for launch scripts)")
     t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
     t.add_argument("grid")
 
@@ -218,6 +223,8 @@ def main(argv: list[str] | None = None) -> int:
             return _scene_info(args)
         if args.cmd == "path":
             return _path_make(args)
+        if args.cmd == "wall":
+            return _wall_check(args)
         if args.cmd == "tree":
             return _tree(args)
         if args.cmd == "depth":
@@ -322,8 +329,25 @@ def _walkthrough(a) -> int:
         _end_failed_job(comm, job, exc)
     job.close()
     if job.signum is not None:  # every rank stopped after the same frame: exit 128 + signal, together
+        _teardown_done(comm)
         collective_exit(Interrupted(job.signum).code)
     return 0
+
+
+def _teardown_done(comm) -> None:
+    """Wait (bounded) until every rank has closed its window and GL context, deaf to further
+    SIGINT/SIGTERM: once a job is stopping, MPICH's launcher kills the ranks still busy when
+    the first exits (and reports exit 9)."""
+    import signal
+
+    from multigpu.parallel.exchange import PeerTimeout, barrier
+
+    for s in (signal.SIGINT, signal.SIGTERM):  # the launcher's forwarded copy of the signal, arriving late
+        signal.signal(s, signal.SIG_IGN)
+    try:
+        barrier(comm, 10.0)
+    except PeerTimeout:
+        pass
 
 
 def _end_failed_job(comm, job, exc: BaseException) -> None:
@@ -412,6 +436,18 @@ def _path_make(a) -> int:
     path = generate(a.kind, scene, a.frames, fov=a.fov)
     path.save(a.out)
     print(f"wrote {a.out}: {len(path)} frames ({a.kind} of {scene.name})")
+    return 0
+
+
+def _wall_check(a) -> int:
+    from multigpu.config import WalkConfig
+    from multigpu.wall import check_ranks, describe, load_wall
+
+    wall = load_wall(a.file)
+    grid, tile = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile
+    check_ranks(wall, grid[0] * grid[1])
+    WalkConfig(grid=grid, tile=tile, mullion=wall.mullion or (0, 0))  # the same limits as a run
+    print(f"{grid[0]}x{grid[1]}" if a.grid_only else describe(wall, grid, tile, wall.mullion or (0, 0)))
     return 0
 
 
