@@ -1,0 +1,99 @@
+"""``multigpu bench present``: headless against ``--present window`` on Xvfb, alternated.
+
+For each wall (2x2 of 512x512, 3x3 of 320x240) it starts one Xvfb screen of the canvas size
+and runs the same walkthrough headless and with windows, in alternating rounds, and prints the
+emulated frame (slowest rank's CPU time, median), the wall-clock frame, each rank's present
+time (upload + blit + swap, wall) and the swap skew (latest minus earliest swap return per
+frame, one clock: every rank on this host) as medians and p99. It needs Xvfb (Debian: xvfb);
+it prints figures and asserts nothing.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.errors import InputError
+
+WALLS = [((2, 2), (512, 512)), ((3, 3), (320, 240))]
+
+
+def _xvfb(size: tuple[int, int]):
+    """(process, display name) of a fresh Xvfb with one screen of ``size``."""
+    read, write = os.pipe()
+    proc = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-nolisten", "tcp", "-screen", "0",
+                             f"{size[0]}x{size[1]}x24"], pass_fds=(write,), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    os.close(write)
+    data = b""
+    deadline = time.monotonic() + 20
+    while not data.endswith(b"\n") and time.monotonic() < deadline:
+        chunk = os.read(read, 16)
+        if not chunk:
+            break
+        data += chunk
+    os.close(read)
+    if not data.strip():
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise InputError("bench present: Xvfb did not start")
+    return proc, f":{int(data)}"
+
+
+def bench_present(quick: bool) -> list[dict]:
+    from multigpu.parallel.mpirun import run_multigpu
+
+    if shutil.which("Xvfb") is None:
+        raise InputError("bench present: needs Xvfb (Debian: apt install xvfb)")
+    frames, rounds = (40, 1) if quick else (300, 2)
+    walls = [((2, 2), (128, 128))] if quick else WALLS
+    rows = []
+    print(f"bench present: headless vs --present window on Xvfb, {frames} frames, {rounds} alternated rounds; "
+          "emulated = slowest rank's CPU time (median ms), wall = wall-clock frame (median ms)")
+    print(f"{'wall':<14} {'mode':<9} {'emulated':>9} {'wall':>8} {'present':>8} {'present p99':>12} "
+          f"{'skew':>7} {'skew p99':>9}")
+    for grid, tile in walls:
+        size = (grid[1] * tile[0], grid[0] * tile[1])
+        proc, display = _xvfb(size)
+        try:
+            got: dict[str, list[dict]] = {"headless": [], "window": []}
+            with tempfile.TemporaryDirectory() as tmp:
+                for r in range(rounds):
+                    for mode in ("headless", "window") if r % 2 == 0 else ("window", "headless"):
+                        out = Path(tmp) / f"{mode}{r}"
+                        args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}",
+                                "--frames", str(frames), "--mosaic-every", "0", "--no-progress", "--present", mode,
+                                "--out", str(out)]
+                        job = run_multigpu(grid[0] * grid[1], args, 1800, env={"DISPLAY": display},
+                                           merge_stderr=True)
+                        if job.returncode != 0:
+                            raise RuntimeError(f"bench present: {mode} run failed (exit {job.returncode}):\n"
+                                               + "\n".join(job.stdout.strip().splitlines()[-5:]))
+                        got[mode].append(_figures(out))
+            for mode, runs in got.items():
+                row = {k: float(np.median([x[k] for x in runs])) for k in runs[0]}
+                row.update(wall=f"{grid[0]}x{grid[1]} {tile[0]}x{tile[1]}", mode=mode)
+                rows.append(row)
+                print(f"{row['wall']:<14} {mode:<9} {row['emulated_ms']:9.2f} {row['wall_ms']:8.2f} "
+                      f"{row['present_ms']:8.3f} {row['present_p99_ms']:12.3f} {row['skew_ms']:7.3f} "
+                      f"{row['skew_p99_ms']:9.3f}")
+        finally:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(10)
+    return rows
+
+
+def _figures(out: Path) -> dict:
+    import json
+
+    s = json.loads((out / "summary.json").read_text())
+    p = s["present"]
+    return {"emulated_ms": s["emulated_frame_ms_median"], "wall_ms": float(np.median(s["per_frame_wall_ms"])),
+            "present_ms": p["present_ms_median"], "present_p99_ms": p["present_ms_p99"],
+            "skew_ms": p["swap_skew_ms_median"], "skew_p99_ms": p["swap_skew_ms_p99"]}
