@@ -308,7 +308,7 @@ def walk_config(a):
 def _walkthrough(a) -> int:
     from mpi4py import MPI
 
-    from multigpu.parallel.job import Interrupted, Job, collective_exit
+    from multigpu.parallel.job import Interrupted, Job, collective_exit, teardown_barrier
 
     comm = MPI.COMM_WORLD
     job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else 30.0)
@@ -329,25 +329,9 @@ def _walkthrough(a) -> int:
         _end_failed_job(comm, job, exc)
     job.close()
     if job.signum is not None:  # every rank stopped after the same frame: exit 128 + signal, together
-        _teardown_done(comm)
+        teardown_barrier(comm)
         collective_exit(Interrupted(job.signum).code)
     return 0
-
-
-def _teardown_done(comm) -> None:
-    """Wait (bounded) until every rank has closed its window and GL context, deaf to further
-    SIGINT/SIGTERM: once a job is stopping, MPICH's launcher kills the ranks still busy when
-    the first exits (and reports exit 9)."""
-    import signal
-
-    from multigpu.parallel.exchange import PeerTimeout, barrier
-
-    for s in (signal.SIGINT, signal.SIGTERM):  # the launcher's forwarded copy of the signal, arriving late
-        signal.signal(s, signal.SIG_IGN)
-    try:
-        barrier(comm, 10.0)
-    except PeerTimeout:
-        pass
 
 
 def _end_failed_job(comm, job, exc: BaseException) -> None:
@@ -440,14 +424,9 @@ def _path_make(a) -> int:
 
 
 def _wall_check(a) -> int:
-    from multigpu.config import WalkConfig
-    from multigpu.wall import check_ranks, describe, load_wall
+    from multigpu.wall import check_command
 
-    wall = load_wall(a.file)
-    grid, tile = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile
-    check_ranks(wall, grid[0] * grid[1])
-    WalkConfig(grid=grid, tile=tile, mullion=wall.mullion or (0, 0))  # the same limits as a run
-    print(f"{grid[0]}x{grid[1]}" if a.grid_only else describe(wall, grid, tile, wall.mullion or (0, 0)))
+    print(check_command(a.file, a.grid_only))
     return 0
 
 

@@ -122,3 +122,15 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         disp = wall.displays.get(k) or "$DISPLAY"
         lines.append(f"{k:>4} {row:>3} {col:>3}  {disp:<10} {f'{pos[0]},{pos[1]}':<12} [{x0}, {top})")
     return "\n".join(lines)
+
+
+def check_command(path: str, grid_only: bool = False) -> str:
+    """``multigpu wall check``: the file checked with a run's own limits, then its layout (or
+    only ROWSxCOLS, for launch scripts)."""
+    from multigpu.config import WalkConfig
+
+    wall = load_wall(path)
+    grid, tile, mullion = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile, wall.mullion or (0, 0)
+    check_ranks(wall, grid[0] * grid[1])
+    WalkConfig(grid=grid, tile=tile, mullion=mullion)
+    return f"{grid[0]}x{grid[1]}" if grid_only else describe(wall, grid, tile, mullion)

@@ -31,7 +31,11 @@ class Window:
 
     def __init__(self, rank: int, tile_size: tuple[int, int], position: tuple[int, int], display: str | None,
                  where: str):
-        import glfw
+        try:
+            import glfw
+        except Exception as exc:  # the wheel bundles libglfw; a source install may lack it
+            raise InputError(f"--present window needs glfw with its library (pip install glfw; "
+                             f"Debian: apt install libglfw3): {exc.__class__.__name__}: {exc}") from None
         import moderngl
 
         self.glfw = glfw

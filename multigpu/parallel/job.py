@@ -36,6 +36,8 @@ INTERRUPT_GRACE = 3.0
 FAILURE_GRACE = 10.0
 #: pause before MPI_Abort, so the launcher forwards the last lines a rank printed
 ABORT_PAUSE = 0.3
+#: a job ending with a non-zero code: every rank leaves this long after the last reached the exit
+EXIT_PAUSE = 0.2
 #: a peer silent this long is not beating now (shorter than ``liveness``: used once a run failed)
 SILENT = 3.0
 
@@ -196,10 +198,28 @@ def collective_exit(code: int) -> None:
     ``-m mpi4py`` would abort on a non-zero ``SystemExit``)."""
     sys.stdout.flush()
     sys.stderr.flush()
+    leave = None
     try:
         from mpi4py import MPI
 
         if MPI.Is_initialized() and not MPI.Is_finalized():
+            if code:  # one moment for every rank to leave at: MPICH's launcher kills (and reports
+                # exit 9 for) the ranks still finalizing when the first exits non-zero
+                leave = MPI.COMM_WORLD.allreduce(time.time(), op=MPI.MAX) + EXIT_PAUSE
             MPI.Finalize()
     finally:
+        if leave is not None:
+            time.sleep(min(max(leave - time.time(), 0.0), 2 * EXIT_PAUSE))
         os._exit(code)
+
+
+def teardown_barrier(comm) -> None:
+    """Wait (bounded) until every rank has closed its window and GL context, deaf to further
+    SIGINT/SIGTERM, so the ranks leave together: once one exits non-zero, MPICH's launcher
+    kills those still busy (and reports exit 9)."""
+    for s in (signal.SIGINT, signal.SIGTERM):  # the launcher's forwarded copy of the signal, arriving late
+        signal.signal(s, signal.SIG_IGN)
+    try:
+        exchange.barrier(comm, 10.0)
+    except exchange.PeerTimeout:
+        pass
