@@ -84,10 +84,11 @@ class Canvas:
         out = np.empty_like(r)
         gone = np.zeros(len(r), dtype=bool)
         for axis, (n, t, m, full, vis) in enumerate(((cols, tw, mx, W, VW), (rows, th, my, H, VH))):
-            lo = _squeeze(r[:, axis] * full, n, t, m, low=True)
-            hi = _squeeze(r[:, axis + 2] * full, n, t, m, low=False)
+            lo, lo_gap, lo_tile = _squeeze(r[:, axis] * full, n, t, m, low=True)
+            hi, hi_gap, hi_tile = _squeeze(r[:, axis + 2] * full, n, t, m, low=False)
+            gone |= lo_gap & hi_gap & (lo_tile == hi_tile)  # both ends behind the same bezel
             with np.errstate(invalid="ignore"):
-                gone |= lo > hi  # both ends behind the same bezel
+                hi = np.maximum(hi, lo)  # a low end in a tile's last pixel, a high end in the gap after it
             out[:, axis] = lo / vis - PAD
             out[:, axis + 2] = hi / vis + PAD
         out[gone] = np.nan
@@ -96,7 +97,8 @@ class Canvas:
     def to_canvas(self, work: Work, vrects: np.ndarray, tris: np.ndarray) -> Work:
         """``work`` planned in the visible space, cut at the tile borders and moved onto the
         canvas. A cut part draws only the objects whose visible span touches it, and the loads
-        count what is drawn. ``vrects`` are this frame's normalized visible object rects."""
+        count what is drawn (a rank whose masks the plan left out keeps its planned load).
+        ``vrects`` are this frame's normalized visible object rects."""
         if not self.bezels:
             return work
         vtiles = tile_regions(self.grid[0], self.grid[1], *self.tile)
@@ -109,6 +111,11 @@ class Canvas:
             hi = np.minimum(R[:, None, 2:], vtiles[None, :, 2:])
             p, t = np.nonzero((hi > lo).all(axis=-1))  # (piece, tile) that meet
             cut = np.concatenate([lo[p, t], hi[p, t]], axis=1)
+            rects.append(cut + np.tile(shift[t], 2))
+            if len(work.masks[k]) != len(R):  # masks of this rank not computed here (bins: own rank only)
+                masks.append(work.masks[k])
+                loads[k] = work.loads[k]
+                continue
             m = work.masks[k][p]
             split = np.bincount(p, minlength=len(R))[p] > 1
             if split.any():
@@ -117,23 +124,22 @@ class Canvas:
                 m = m.copy()
                 for i in np.flatnonzero(split):  # cut parts, a few per rank
                     m[i] &= overlaps(spans, cut[i])
-            rects.append(cut + np.tile(shift[t], 2))
             masks.append(m)
             loads[k] = int((m.astype(np.int64) @ np.asarray(tris, dtype=np.int64)).sum()) if len(m) else 0
         return Work(tuple(rects), tuple(masks), loads, work.depth, work.partition)
 
 
-def _squeeze(x: np.ndarray, n: int, t: int, m: int, low: bool) -> np.ndarray:
+def _squeeze(x: np.ndarray, n: int, t: int, m: int, low: bool):
     """Canvas pixel coordinates along one axis -> visible ones: the ``n`` tiles of ``t`` pixels
     close up over the ``m``-pixel gaps; a point in a gap goes to the next tile's first pixel
     (``low``) or the previous tile's last pixel. Outside the canvas the first and last tile
-    extend. NaN stays NaN."""
+    extend. NaN stays NaN. Also returns which points lay in a gap, and their tile index."""
     with np.errstate(invalid="ignore"):
         c = np.clip(np.floor(x / (t + m)), 0, n - 1)
         local = x - c * (t + m)
         gap = (local >= t) & (c < n - 1)
         edge = (c + 1) * t - (0.0 if low else 0.5)
-        return np.where(gap, edge, c * t + local)
+        return np.where(gap, edge, c * t + local), gap, c
 
 
 def parse_mullion(text: str, flag: str = "--mullion") -> tuple[int, int]:
