@@ -8,12 +8,13 @@ import ctypes
 import ctypes.util
 import os
 import shutil
-import signal
 import subprocess
 import time
 
 import numpy as np
 import pytest
+
+from multigpu.display.xvfb import start_xvfb, stop_xvfb
 
 TOOLS = ("Xvfb", "xwd", "convert", "xdotool")
 
@@ -29,33 +30,16 @@ class Xvfb:
 
     def __init__(self, *screens: tuple[int, int]):
         need_tools()
-        read, write = os.pipe()
-        args = ["Xvfb", "-displayfd", str(write), "-nolisten", "tcp", "-noreset"]
-        for i, (w, h) in enumerate(screens):
-            args += ["-screen", str(i), f"{w}x{h}x24"]
-        self.proc = subprocess.Popen(args, pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                     start_new_session=True)
-        os.close(write)
-        deadline = time.monotonic() + 20
-        data = b""
-        while not data.endswith(b"\n") and time.monotonic() < deadline:
-            chunk = os.read(read, 16)
-            if not chunk:
-                break
-            data += chunk
-        os.close(read)
-        if not data.strip():
-            self.stop()
-            pytest.skip("Xvfb did not start")
-        self.name = f":{int(data)}"
+        try:
+            self.proc, self.name = start_xvfb(*screens)
+        except RuntimeError as exc:
+            pytest.skip(str(exc))
 
     def screen(self, i: int = 0) -> str:
         return f"{self.name}.{i}"
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-            self.proc.wait(10)
+        stop_xvfb(self.proc)
 
     def __enter__(self) -> "Xvfb":
         return self

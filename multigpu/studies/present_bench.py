@@ -10,40 +10,16 @@ it prints figures and asserts nothing.
 
 from __future__ import annotations
 
-import os
 import shutil
-import signal
-import subprocess
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
+from multigpu.display.xvfb import start_xvfb, stop_xvfb
 from multigpu.errors import InputError
 
 WALLS = [((2, 2), (512, 512)), ((3, 3), (320, 240))]
-
-
-def _xvfb(size: tuple[int, int]):
-    """(process, display name) of a fresh Xvfb with one screen of ``size``."""
-    read, write = os.pipe()
-    proc = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-nolisten", "tcp", "-screen", "0",
-                             f"{size[0]}x{size[1]}x24"], pass_fds=(write,), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
-    os.close(write)
-    data = b""
-    deadline = time.monotonic() + 20
-    while not data.endswith(b"\n") and time.monotonic() < deadline:
-        chunk = os.read(read, 16)
-        if not chunk:
-            break
-        data += chunk
-    os.close(read)
-    if not data.strip():
-        os.killpg(proc.pid, signal.SIGKILL)
-        raise InputError("bench present: Xvfb did not start")
-    return proc, f":{int(data)}"
 
 
 def bench_present(quick: bool) -> list[dict]:
@@ -60,7 +36,10 @@ def bench_present(quick: bool) -> list[dict]:
           f"{'skew':>7} {'skew p99':>9}")
     for grid, tile in walls:
         size = (grid[1] * tile[0], grid[0] * tile[1])
-        proc, display = _xvfb(size)
+        try:
+            proc, display = start_xvfb(size)
+        except RuntimeError as exc:
+            raise InputError(f"bench present: {exc}") from None
         try:
             got: dict[str, list[dict]] = {"headless": [], "window": []}
             with tempfile.TemporaryDirectory() as tmp:
@@ -84,8 +63,7 @@ def bench_present(quick: bool) -> list[dict]:
                       f"{row['present_ms']:8.3f} {row['present_p99_ms']:12.3f} {row['skew_ms']:7.3f} "
                       f"{row['skew_p99_ms']:9.3f}")
         finally:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(10)
+            stop_xvfb(proc)
     return rows
 
 
