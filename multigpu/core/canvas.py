@@ -57,7 +57,7 @@ class Canvas:
         """(K, 4) canvas rect of every rank label's tile (column-major labels, row 0 on top)."""
         rows, cols = self.grid
         t = tile_regions(rows, cols, *self.tile)
-        return t + np.repeat(self._shift(), 2, axis=0).reshape(-1, 4)
+        return t + np.tile(self._shift(), 2)  # both corners move by the tile's shift
 
     def _shift(self) -> np.ndarray:
         """(K, 2) canvas offset of each label's tile from its place in the visible space."""

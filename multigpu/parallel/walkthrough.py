@@ -206,6 +206,7 @@ def _close(renderer, presenter) -> None:
 
 #: the stop flag of a frame's row: > 0 a signal number, < 0 a window event (STOPS)
 STOPS = {-1: "escape key", -2: "window closed"}
+STOP_FLAG = {why: flag for flag, why in STOPS.items()}
 
 
 class Frames:
@@ -297,7 +298,7 @@ class Frames:
         with t.phase("display"):
             swapped = self.presenter.swap()
             why = self.presenter.poll()
-        return swapped, next((k for k, v in STOPS.items() if v == why), 0)
+        return swapped, STOP_FLAG.get(why, 0)
 
     def gather_row(self, f: int, work: Work, t: Timer, sent: tuple[int, int], swapped: float, stop: int) -> None:
         """This rank's row by column name, gathered so every rank sees every rank's row."""
