@@ -18,122 +18,7 @@ import sys
 
 from multigpu.core.memory import keep_heap
 from multigpu.errors import InputError, as_flags
-
-
-def _defaults(cls) -> dict:
-    """A configuration dataclass's field defaults: the one place every default lives."""
-    import dataclasses
-
-    return {f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
-
-
-def _scene_args(p: argparse.ArgumentParser) -> None:
-    from multigpu.scene.models import BUILTIN, SceneSpec
-
-    d = _defaults(SceneSpec)
-    g = p.add_argument_group("scene")
-    g.add_argument("--scene", default=d["scene"], help=f"built-in scene: {' | '.join(BUILTIN)} (default: %(default)s)")
-    g.add_argument("--model", help="model file (OBJ, PLY, STL, OFF, glTF/GLB) instead of --scene")
-    g.add_argument("--split", default=d["split"],
-                   help="objects of a model: auto (scene-graph nodes, else connected components) | components | "
-                        "grid:N (applies to any file)")
-    g.add_argument("--merge-below", type=int, default=d["merge_below"],
-                   help="merge components under this many triangles (default %(default)s)")
-    g.add_argument("--triangles", type=int, default=d["triangles"],
-                   help="built-in scene size in triangles (default %(default)s)")
-    g.add_argument("--copies", type=int, default=d["copies"], help="plants side by side (the paper used 6..20)")
-    g.add_argument("--seed", type=int, default=d["seed"])
-    g.add_argument("--cluster", default="auto",
-                   help="cut objects above N triangles into spatial clusters of at most N: auto (when an object "
-                        "is too big to balance on the wall) | N | 0 (keep objects as modelled)")
-    g.add_argument("--up", default=d["up"], help="up axis of the model: x | y | z | -x | -y | -z "
-                                                 "(default: the format's convention, see scene info)")
-
-
-def _cluster(text: str) -> int | None:
-    if str(text).strip() == "auto":
-        return None
-    try:
-        return int(text)
-    except ValueError:
-        raise InputError(f"--cluster must be 'auto' or a number of triangles (0: never), got '{text}'") from None
-
-
-def _ranks(a) -> int:
-    from multigpu.config import parse_pair
-
-    rows, cols = parse_pair(getattr(a, "grid", None) or "2x2", "--grid")
-    return rows * cols
-
-
-def _spec(a, **override):
-    from multigpu.scene.models import SceneSpec
-
-    fields = dict(scene=a.scene, model=a.model, split=a.split, merge_below=a.merge_below, triangles=a.triangles,
-                  copies=a.copies, seed=a.seed, cluster=_cluster(a.cluster), up=a.up, ranks=_ranks(a))
-    return SceneSpec(**{**fields, **override})
-
-
-def _walkthrough_args(w: argparse.ArgumentParser) -> None:
-    """The walkthrough's own flags; defaults from ``WalkConfig``, choices from the registries."""
-    from multigpu.config import DEFAULT_FRAMES, WalkConfig
-    from multigpu.gpu.render import METHODS
-    from multigpu.strategies import REGISTRY, describe
-
-    d = _defaults(WalkConfig)
-    pair = lambda v: f"{v[0]}x{v[1]}"
-    w.add_argument("--path", help="camera path JSON file (default: generated walkthrough)")
-    w.add_argument("--path-kind", default=d["path_kind"], help=f"generated path: {' | '.join(DEFAULT_FRAMES)}")
-    w.add_argument("--frames", type=int, help="frames to render (default: the whole path; generated: "
-                                              + ", ".join(f"{k} {v}" for k, v in DEFAULT_FRAMES.items()) + ")")
-    w.add_argument("--grid", help=f"display wall ROWSxCOLS (ranks = rows*cols; default {pair(WalkConfig.grid)})")
-    w.add_argument("--tile", help=f"pixels per display tile WxH (default {pair(WalkConfig.tile)})")
-    w.add_argument("--mullion", help="pixels hidden behind the bezels between tiles MXxMY: the camera spans them, "
-                                     f"nobody renders them (default {pair(WalkConfig.mullion)})")
-    w.add_argument("--wall", help="wall file (JSON): grid, tile, mullions, each rank's X display and window position; "
-                                  "flags override it (docs/USAGE.md: On a real wall)")
-    w.add_argument("--present", default=d["present"],
-                   help="headless (default) | window: every rank shows its composed tile in a borderless window "
-                        "on its X display, all tiles swapped in step")
-    w.add_argument("--strips", type=int, default=d["strips"], help="strips per split axis (>= 2)")
-    w.add_argument("--balance", default=d["balance"],
-                   help=f"balancing strategy, one of {' | '.join(REGISTRY)} (default %(default)s). {describe()}")
-    from multigpu.decompositions import PATTERNS, RANGES
-    from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
-
-    w.add_argument("--decomposition", default=d["decomposition"],
-                   help=f"how a frame is divided: {' | '.join(DECOMPOSITIONS)} (default %(default)s): screen = the "
-                        "paper's screen partition (balanced by --balance); db = sort-last database decomposition, "
-                        "depth-composited; bins = static bin patterns, no balancer")
-    w.add_argument("--bin-size", type=int, default=d["bin_size"],
-                   help="bins: pixels per bin side (default %(default)s)")
-    w.add_argument("--bin-pattern", default=d["bin_pattern"],
-                   help=f"bins: which rank owns a bin: {' | '.join(PATTERNS)} (default %(default)s)")
-    w.add_argument("--db-ranges", default=d["db_ranges"],
-                   help=f"db: {' | '.join(RANGES)}: object ranges rebalanced over the visible objects every frame, "
-                        "or fixed by all triangles (default %(default)s)")
-    w.add_argument("--bounds", default=d["bounds"], help="object bounds: box (8 corners) | sphere")
-    w.add_argument("--out", default=d["out"], help="output directory (README: Outputs)")
-    w.add_argument("--mosaic-every", type=int, default=d["mosaic_every"],
-                   help="write the full wall every N frames (0: never)")
-    w.add_argument("--no-overlay", action="store_true", help="do not write partition overlay images")
-    w.add_argument("--video", action="store_true", help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
-    w.add_argument("--subfrustum", default=d["subfrustum"],
-                   help=f"how a rank renders its region: {' | '.join(METHODS)} (docs/ACCURACY.md)")
-    w.add_argument("--partition", default=d["partition"],
-                   help="who computes the partition: redundant (every rank) | broadcast (rank 0, then MPI_Bcast)")
-    w.add_argument("--exchange", default=d["exchange"],
-                   help="frame exchange: messages (point-to-point) | shared (an MPI shared-memory window when all "
-                        "ranks run on one machine, else messages; Open MPI backs it with a file in its session "
-                        "directory)")
-    w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
-    w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
-    w.add_argument("--timeout", type=float, default=d["timeout"],
-                   help="seconds a rank waits for the others within a frame (default %(default)s)")
-    w.add_argument("--liveness", type=float, default=d["liveness"],
-                   help="seconds without a heartbeat before a rank counts as stopped and the job ends "
-                        "(default %(default)s; 0: off, timeouts only)")
-    w.add_argument("--no-progress", action="store_true")
+from multigpu.flags import scene_args, spec, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
 
 
 class Parser(argparse.ArgumentParser):
@@ -152,14 +37,14 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
 
     w = sub.add_parser("walkthrough", help="render a camera path on a display wall (run under mpiexec)")
-    _scene_args(w)
-    _walkthrough_args(w)
+    scene_args(w)
+    walkthrough_args(w)
 
     s = sub.add_parser("scene", help="scene tools")
     ssub = s.add_subparsers(dest="scmd", required=True)
     si = ssub.add_parser("info", help="print objects, triangles, bounds, memory and load time")
     si.add_argument("source", nargs="?", default="plant", help="built-in scene name or model file")
-    _scene_args(si)
+    scene_args(si)
     si.add_argument("--grid", default="2x2", help="the wall the scene is prepared for (automatic clustering)")
     si.add_argument("--no-cache", action="store_true")
 
@@ -167,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     psub = p.add_subparsers(dest="pcmd", required=True)
     pm = psub.add_parser("make", help="write a camera path file")
     pm.add_argument("kind", help="walkthrough | orbit")
-    _scene_args(pm)
+    scene_args(pm)
     pm.add_argument("--frames", type=int)
     pm.add_argument("--fov", type=float, default=60.0)
     pm.add_argument("--out", required=True, help="path file to write (JSON)")
@@ -181,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("grid")
 
     dp = sub.add_parser("depth", help="depth complexity and overdraw of one frame (images + stats)")
-    _scene_args(dp)
+    scene_args(dp)
     dp.add_argument("--path-kind", default="walkthrough", help="generated path: walkthrough | orbit")
     dp.add_argument("--frames", type=int, default=None, help="frames of the generated path")
     dp.add_argument("--frame", type=int, default=0, help="which frame of the path")
@@ -266,7 +151,7 @@ def _depth(a) -> int:
     from multigpu.scene.paths import generate
 
     size = parse_pair(a.size, "--size")
-    scene, _ = load_scene(_spec(a))
+    scene, _ = load_scene(spec(a))
     path = generate(a.path_kind, scene, a.frames)
     if not 0 <= a.frame < len(path):
         raise InputError(f"--frame must be in 0..{len(path) - 1}, got {a.frame}")
@@ -276,33 +161,6 @@ def _depth(a) -> int:
           f"model o(d) = 1 + 1/2 + ... + 1/d: {s['model_o']:.2f}")
     print(f"images and depth.json in {a.out}/")
     return 0
-
-
-def walk_config(a):
-    """The walkthrough's flags as a validated configuration (no MPI: testable in one process)."""
-    from multigpu.config import WalkConfig, parse_pair, parse_vec3
-    from multigpu.core.canvas import parse_mullion
-    from multigpu.wall import Wall, check_ranks, load_wall
-
-    wall = load_wall(a.wall) if a.wall else Wall("")
-    pick = lambda flag, text, parse, default: parse(text, flag) if text is not None else default
-    grid = pick("--grid", a.grid, parse_pair, wall.grid or WalkConfig.grid)
-    check_ranks(wall, grid[0] * grid[1])
-    ranks = range(grid[0] * grid[1])
-    return WalkConfig(scene=_spec(a), path=a.path, path_kind=a.path_kind, frames=a.frames,
-                      grid=grid, tile=pick("--tile", a.tile, parse_pair, wall.tile or WalkConfig.tile),
-                      mullion=pick("--mullion", a.mullion, parse_mullion, wall.mullion or WalkConfig.mullion),
-                      present=a.present, wall=a.wall,
-                      displays=tuple(wall.displays.get(r) for r in ranks) if wall.displays else (),
-                      positions=tuple(wall.positions.get(r) for r in ranks) if wall.positions else (),
-                      strips=a.strips,
-                      balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
-                      overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
-                      partition=a.partition, exchange=a.exchange, offset=parse_vec3(a.offset, "--offset"),
-                      timeout=a.timeout,
-                      decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
-                      db_ranges=a.db_ranges,
-                      liveness=a.liveness, progress=not a.no_progress)
 
 
 def _walkthrough(a) -> int:
@@ -384,8 +242,8 @@ def _scene_info(a) -> int:
 
     src = a.source
     is_file = Path(src).suffix != "" or Path(src).exists()
-    spec = _spec(a, scene=a.scene if is_file else src, model=src if is_file else a.model)
-    scene, info = load_scene(spec, use_cache=not a.no_cache)
+    wanted = spec(a, scene=a.scene if is_file else src, model=src if is_file else a.model)
+    scene, info = load_scene(wanted, use_cache=not a.no_cache)
     lo, hi = scene.bounds
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     tris = scene.tris
@@ -416,7 +274,7 @@ def _path_make(a) -> int:
         raise InputError(f"path kind must be one of {', '.join(GENERATORS)}, got '{a.kind}'")
     if a.frames is not None and a.frames < 1:
         raise InputError(f"--frames must be >= 1, got {a.frames}")
-    scene, _ = load_scene(_spec(a))
+    scene, _ = load_scene(spec(a))
     path = generate(a.kind, scene, a.frames, fov=a.fov)
     path.save(a.out)
     print(f"wrote {a.out}: {len(path)} frames ({a.kind} of {scene.name})")

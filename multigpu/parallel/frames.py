@@ -1,0 +1,273 @@
+"""The frame loop of one rank: plan, render, sync, exchange, present, record, in named phases.
+
+Built by ``walkthrough.run`` once setup has been agreed on every rank; every wait is bounded
+(``--timeout``), a signal or a window event stops every rank after the same frame, and rank 0's
+``RunRecord`` holds whole frames only.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from multigpu.config import WalkConfig
+from multigpu.core.bounds import make_projector
+from multigpu.core.camera import frame_matrices
+from multigpu.core.work import Work, transfers
+from multigpu.decompositions import make_decomposition
+from multigpu.parallel.composite import composite
+from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
+from multigpu.parallel.mosaic import stitch
+from multigpu.parallel.outdir import OutputDir
+from multigpu.parallel.record import RunRecord
+from multigpu.parallel.report import COLUMNS
+from multigpu.parallel.shared import SharedPieces, composite_shared
+from multigpu.parallel.timer import Timer
+from multigpu.scene.models import axis_name
+
+
+def fault(rank: int, where: int | str) -> None:
+    """Test-only fault injection: MULTIGPU_FAULT='RANK:WHERE[:stop]' with WHERE a frame
+    number or 'setup' raises there, or with ':stop' stops the rank (SIGSTOP: a frozen rank; if
+    something continues it, it carries on as if nothing happened)."""
+    spec = os.environ.get("MULTIGPU_FAULT")
+    if spec:
+        r, w, *action = spec.split(":")
+        if int(r) == rank and w == str(where):
+            if action == ["stop"]:
+                import signal
+
+                os.kill(os.getpid(), signal.SIGSTOP)
+                return
+            raise RuntimeError(f"injected fault at {'frame ' if isinstance(where, int) else ''}{where}")
+
+
+#: the stop flag of a frame's row: > 0 a signal number, < 0 a window event (STOPS)
+STOPS = {-1: "escape key", -2: "window closed"}
+STOP_FLAG = {why: flag for flag, why in STOPS.items()}
+
+
+class Frames:
+    """The frame loop in named phases: balance, render, sync, exchange, display, record."""
+
+    def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, presenter, out: OutputDir | None,
+                 load_info, device):
+        self.cfg, self.comm, self.job = cfg, comm, job
+        self.scene, self.path, self.renderer, self.presenter = scene, path, renderer, presenter
+        self.rank, self.K = comm.Get_rank(), comm.Get_size()
+        tw, th = cfg.tile
+        self.canvas = cfg.canvas
+        self.tiles = self.canvas.tiles()
+        self.decomposition = make_decomposition(cfg.decomposition, cfg.grid, cfg.size, cfg.strips, scene,
+                                                cfg.balance, cfg.bin_size, cfg.bin_pattern, cfg.db_ranges,
+                                                rank=self.rank)
+        self.broadcast = cfg.partition == "broadcast" and self.K > 1  # screen only (checked at the door)
+        self.project = make_projector(scene, cfg.bounds)
+        self.coverage = np.ones(scene.n_objects) if self.decomposition.needs_coverage else None
+        self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
+        self.zback = np.ones((th, tw), dtype=np.float32) if self.decomposition.depth else None
+        self.background = renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
+                                          np.zeros(scene.n_objects, dtype=bool))[0, 0]  # the clear colour
+        self.col = {c: i for i, c in enumerate(COLUMNS)}
+        self.row = np.zeros(len(COLUMNS) + 1)  # + stop flag
+        self.allrows = np.zeros((self.K, len(COLUMNS) + 1))
+        self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
+        self.n_frames = len(path)
+        self.done = 0
+        self.learn = None  # (frame, work, times) the strategy observes at the start of the next frame
+        self.shared = None if cfg.exchange != "shared" else SharedPieces.make(
+            comm, self.canvas.size, self.decomposition.depth, cfg.timeout)
+        self.window = presenter.mode == "window"
+        doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
+        doc["exchange"] = "shared" if self.shared is not None else "messages"
+        self.config_doc = doc
+        self.record = None
+        if self.rank == 0:
+            self.record = RunRecord(out, self.K, self.n_frames, doc, self.decomposition.report, cfg.video,
+                                    cfg.progress, cfg.overlay)
+
+    # -- phases of one frame
+    def plan(self, f: int):
+        """This frame's work (every rank plans the same, or rank 0 plans and broadcasts),
+        planned over the visible pixels and moved onto the canvas."""
+        view, proj, light = frame_matrices(self.path.camera(f), self.canvas.size)
+        tris, d, cov, canvas = self.scene.tris, self.decomposition, self.coverage, self.canvas
+        rects = canvas.to_visible(self.project(view, proj, cov) if cov is not None else self.project(view, proj))
+        if self.broadcast:
+            part = d.strategy.plan(rects, tris, cov) if self.rank == 0 else None
+            part = broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
+            work = d.plan_from(part, tris)
+        else:
+            work = d.plan(f, rects, tris, cov) if cov is not None else d.plan(f, rects, tris)
+        return canvas.to_canvas(work, rects, tris), (view, proj, light)
+
+    def render(self, work: Work, view, proj, light) -> list:
+        """Every piece this rank renders: (rgb, depth or None)."""
+        out = []
+        for rect, mask in zip(work.rects[self.rank], work.masks[self.rank]):  # pieces, not objects
+            got = self.renderer.render(view, proj, light, rect, mask, depth=work.depth)
+            out.append(got if work.depth else (got, None))
+        return out
+
+    def compose(self, f: int, work: Work, rendered: list) -> tuple[int, int]:
+        """Frame exchange: the pieces travel to their tile owners, who copy or depth-merge them
+        (through the node-shared window when there is one, else as messages)."""
+        if work.depth:
+            self.back[:] = self.background
+            self.zback[:] = 1.0
+        plan = transfers(work, self.tiles)
+        zback = self.zback if work.depth else None
+        if self.shared is None:
+            return composite(self.comm, self.rank, work.rects, rendered, plan, self.tiles[self.rank],
+                             self.cfg.timeout, self.back, zback)
+        composite_shared(self.shared, f, self.rank, work.rects, plan, self.tiles[self.rank], self.back, zback)
+        px = sum(p.pixels for p in plan if p.sender == self.rank and p.receiver != self.rank)  # read by peers
+        return px * (7 if work.depth else 3), px * 4 if work.depth else 0
+
+    def present(self, t: Timer) -> tuple[float, int]:
+        """Display: the composed tile into the back buffer, the swap barrier (every tile
+        composed before any swaps), the swap; then window events. Returns when the swap
+        returned and the stop flag of a window event (0: none)."""
+        with t.phase("display"):
+            self.presenter.show(self.back)
+        if self.window:
+            with t.phase("swap_wait"):
+                barrier(self.comm, self.cfg.timeout)
+        with t.phase("display"):
+            swapped = self.presenter.swap()
+            why = self.presenter.poll()
+        return swapped, STOP_FLAG.get(why, 0)
+
+    def gather_row(self, f: int, work: Work, t: Timer, sent: tuple[int, int], swapped: float, stop: int) -> None:
+        """This rank's row by column name, gathered so every rank sees every rank's row."""
+        box = work.bounds(self.rank)
+        values = {"frame": f, "rank": self.rank, "triangles": work.loads[self.rank],
+                  "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
+                  "load_balancing_ms": t.ms("balance"), "rendering_ms": t.ms("render"),
+                  "synchronization_ms": t.ms("sync"), "frame_exchange_ms": t.ms("exchange"),
+                  "display_ms": t.ms("display", "swap_wait"), "frame_ms": t.total_ms,
+                  "load_balancing_cpu_ms": t.cpu_ms("balance"), "rendering_cpu_ms": t.cpu_ms("render"),
+                  "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
+                  "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
+                  "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
+                  "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0}
+        for c, v in values.items():
+            self.row[self.col[c]] = v
+        # a signal or a window event seen here stops every rank after this frame
+        self.row[-1] = float(self.job.signum or stop)
+        wait_all([self.comm.Iallgather(self.row, self.allrows)], self.cfg.timeout, "timing gather")
+
+    def show(self, f: int, work: Work) -> None:
+        """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""
+        cfg = self.cfg
+        mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or f == self.n_frames - 1)
+        if not (mosaic_due or cfg.video):
+            return
+        wait_all([self.comm.Igather(self.back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
+        if self.rank == 0:
+            self.record.image(f, stitch(self.gathered, self.tiles, self.canvas.size), work.rects, mosaic_due)
+
+    def frame(self, f: int) -> None:
+        t = Timer()
+        with t.phase("balance"):
+            fault(self.rank, f)
+            if self.learn is not None:  # the strategy learns from the last frame's times: balancing CPU too
+                self.decomposition.observe(*self.learn)
+                self.learn = None
+            work, (view, proj, light) = self.plan(f)
+        with t.phase("render"):
+            rendered = self.render(work, view, proj, light)
+        if self.shared is not None:
+            with t.phase("exchange"):  # pieces into the shared window before the barrier
+                self.shared.publish(f, self.rank, rendered)
+        with t.phase("sync"):
+            barrier(self.comm, self.cfg.timeout)
+        with t.phase("exchange"):
+            sent = self.compose(f, work, rendered)
+        swapped, stop = self.present(t)
+        self.gather_row(f, work, t, sent, swapped, stop)
+        self.learn = (f, work, self.allrows[:, self.col["rendering_cpu_ms"]].copy())
+        if self.rank == 0:  # rows first: the summary always matches the CSV
+            rows = self.allrows[:, :len(COLUMNS)].copy()
+            if self.window:  # swap moments after the frame's first swap; the skew on every row
+                at = rows[:, self.col["swap_ms"]].copy()
+                rows[:, self.col["swap_ms"]] = (at - at.min()) * 1e3
+                rows[:, self.col["swap_skew_ms"]] = (at.max() - at.min()) * 1e3
+            self.record.rows(f, rows)
+        self.done = f + 1
+        self.show(f, work)
+
+    def release(self, collective: bool) -> None:
+        """Give the shared window back: freed with the peers after a run every rank finished,
+        only unlocked on a failure (the job ends anyway; a collective free would wait on ranks
+        that are gone or still in the frame loop)."""
+        if self.shared is not None:
+            self.shared.close(collective)
+            self.shared = None
+
+    def _what(self) -> str:
+        cfg = self.cfg
+        if cfg.decomposition == "screen":
+            return f"balance={cfg.balance}"
+        if cfg.decomposition == "bins":
+            return f"bins {cfg.bin_pattern} {cfg.bin_size}px"
+        return f"db ({cfg.db_ranges} ranges)"
+
+    def _stopped_by(self) -> str | None:
+        flags = self.allrows[:, -1]
+        if self.job.signum:
+            import signal
+
+            return f"signal {signal.Signals(self.job.signum).name}"
+        if (flags < 0).any():
+            r = int(np.flatnonzero(flags < 0)[0])
+            return f"{STOPS[int(flags[r])]} (rank {r}'s window)"
+        return None
+
+    def run(self) -> dict | None:
+        complete, stopped_by = False, None
+        self.job.in_frames = True
+        try:
+            for f in range(self.n_frames):
+                self.frame(f)
+                flags = self.allrows[:, -1]
+                if flags.any():  # a rank was interrupted or its window closed: all stop after this frame
+                    if (flags > 0).any():
+                        self.job.signum = self.job.signum or int(flags.max())
+                    break
+            complete = self.done == self.n_frames
+            if not complete:
+                stopped_by = self._stopped_by()
+        except BaseException as exc:
+            stopped_by = f"{exc.__class__.__name__}: {exc}"
+            raise
+        finally:
+            if self.rank == 0:
+                summary = self.record.close(complete, stopped_by)
+        if self.rank != 0:
+            return None
+        cfg, scene = self.cfg, self.scene
+        state = "" if complete else f" (stopped after {self.done} of {self.n_frames} frames: {stopped_by})"
+        W, H = self.canvas.size
+        self.record.print_table(summary, f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in "
+                                         f"{scene.n_objects} objects, {cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, "
+                                         f"{self._what()}{state}")
+        return summary
+
+
+def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dict:
+    return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
+            "decomposition": cfg.decomposition, "balance": cfg.balance if cfg.decomposition == "screen" else None,
+            "bin_size": cfg.bin_size if cfg.decomposition == "bins" else None,
+            "bin_pattern": cfg.bin_pattern if cfg.decomposition == "bins" else None,
+            "db_ranges": cfg.db_ranges if cfg.decomposition == "db" else None, "bounds": cfg.bounds,
+            "frames_planned": n_frames,
+            "subfrustum": renderer_method, "offset": list(cfg.offset), "partition": cfg.partition,
+            "scene": {"name": scene.name, "objects": scene.n_objects, "triangles": scene.n_triangles,
+                      "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
+                      "warnings": scene.meta.get("warnings", []), "objects_from": scene.meta.get("objects"),
+                      "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source")},
+            "path": cfg.path or cfg.path_kind, "egl_device": device, "present": cfg.present,
+            "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall,
+            "lp_num_threads": os.environ.get("LP_NUM_THREADS")}
