@@ -19,6 +19,10 @@ SUMMARY_EVERY = 50
 SETUP_SECONDS = 1800.0
 #: where composed tiles go besides the outputs: nowhere, or a window on each rank's display
 PRESENTERS = ("headless", "window")
+#: ``--path interactive``: the camera is flown by hand from rank 0's window
+INTERACTIVE = "interactive"
+#: ``--monitor`` without a place: right of the wall, on a screen that holds the wall's canvas
+MONITOR_BESIDE = (-1, -1)
 
 
 def setup_timeout(cfg: "WalkConfig") -> float:
@@ -81,6 +85,8 @@ class WalkConfig:
     wall: str | None = None  # the wall file the grid/tile/mullion/displays came from
     displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place
+    record: str | None = None  # write every frame's camera here, in the format --path reads
+    monitor: tuple[int, int] | None = None  # rank 0's operator view at this place (MONITOR_BESIDE: beside the wall)
 
     def __post_init__(self):
         if self.frames is not None and self.frames < 1:
@@ -127,6 +133,11 @@ class WalkConfig:
             raise InputError(f"--liveness must be >= 0 seconds (0: off), got {self.liveness}")
         if self.present not in PRESENTERS:
             raise InputError(f"--present must be one of {', '.join(PRESENTERS)}, got '{self.present}'")
+        if self.path == INTERACTIVE and self.present != "window":
+            raise InputError("--path interactive needs --present window: the keyboard and mouse are read from rank 0's "
+                             f"window (got --present {self.present})")
+        if self.monitor is not None and self.present != "window":
+            raise InputError(f"--monitor needs --present window (got --present {self.present})")
         if len(self.mullion) != 2 or min(self.mullion) < 0 or max(self.mullion) > 4096:
             raise InputError(f"--mullion must be two pixel counts 0..4096, got {self.mullion}")
         tw, th = self.tile

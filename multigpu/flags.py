@@ -70,7 +70,14 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
 
     d = defaults(WalkConfig)
     pair = lambda v: f"{v[0]}x{v[1]}"
-    w.add_argument("--path", help="camera path JSON file (default: generated walkthrough)")
+    w.add_argument("--path", help="camera path JSON file (default: generated walkthrough), or 'interactive': fly "
+                                  "by hand from rank 0's window, starting where --path-kind starts (needs --present "
+                                  "window; keys in docs/USAGE.md, H prints them)")
+    w.add_argument("--record", metavar="FILE", help="write every frame's camera to FILE, in the format --path reads "
+                                                    "(replaying it renders the same images)")
+    w.add_argument("--monitor", nargs="?", const="beside", metavar="X,Y",
+                   help="an operator view on rank 0's display: the whole wall shrunk, the partition over it, live "
+                        "(at X,Y; default: right of the wall)")
     w.add_argument("--path-kind", default=d["path_kind"], help=f"generated path: {' | '.join(DEFAULT_FRAMES)}")
     w.add_argument("--frames", type=int, help="frames to render (default: the whole path; generated: "
                                               + ", ".join(f"{k} {v}" for k, v in DEFAULT_FRAMES.items()) + ")")
@@ -148,4 +155,19 @@ def walk_config(a):
                       timeout=a.timeout,
                       decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
                       db_ranges=a.db_ranges,
-                      liveness=a.liveness, progress=not a.no_progress)
+                      liveness=a.liveness, progress=not a.no_progress, record=a.record,
+                      monitor=_monitor(a.monitor))
+
+
+def _monitor(text: str | None) -> tuple[int, int] | None:
+    """``--monitor`` [X,Y] as a window place (None: no monitor)."""
+    from multigpu.config import MONITOR_BESIDE
+
+    if text is None:
+        return None
+    if text == "beside":
+        return MONITOR_BESIDE
+    x, y = str(text).split(",", 1) if "," in str(text) else (text, "")
+    if not (x.strip().isdigit() and y.strip().isdigit()):
+        raise InputError(f"--monitor must look like X,Y (pixels from the display's top-left corner), got '{text}'")
+    return int(x), int(y)

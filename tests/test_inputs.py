@@ -130,6 +130,7 @@ def test_timing_rows_are_whole_after_a_failed_write(tmp_path, monkeypatch):
     """A write that fails part way (disk full) leaves the file at the last whole frame."""
     w = TimingWriter(tmp_path / "timings.csv")
     rows = np.arange(2 * len(COLUMNS), dtype=float).reshape(2, len(COLUMNS))
+    rows[:, COLUMNS.index("balance")] = [0, 1]  # by name in the file, its index when read back
     w.write(rows)
     real = os.pwrite
 
@@ -141,13 +142,18 @@ def test_timing_rows_are_whole_after_a_failed_write(tmp_path, monkeypatch):
 
     monkeypatch.setattr(os, "pwrite", half_then_full)
     with pytest.raises(OSError, match="No space left on device: writing .*timings.csv"):
-        w.write(rows + 100)
+        w.write(rows)
     monkeypatch.setattr(os, "pwrite", real)
-    w.write(rows + 200)  # the run could go on: appends after the last whole frame
+    later = rows.copy()
+    later[:, 0] += 200
+    w.write(later)  # the run could go on: appends after the last whole frame
     w.close()
     got = read_timings(tmp_path / "timings.csv")
     assert got.shape == (4, len(COLUMNS))
     assert (got[2:, 0] == rows[:, 0] + 200).all()
+    assert (got[:, COLUMNS.index("balance")] == [0, 1, 0, 1]).all()
+    names = [line.rsplit(",", 1)[1] for line in (tmp_path / "timings.csv").read_text().splitlines()[1:]]
+    assert names == ["strips", "cost"] * 2
 
 
 def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):

@@ -62,3 +62,43 @@ def make_presenter(mode: str, rank: int, tile_size: tuple[int, int], position: t
     from multigpu.display.window import Window
 
     return Window(rank, tile_size, position, display, where)
+
+
+class Monitor:
+    """Rank 0's operator view (``--monitor``): one more window, with its own GL context; it
+    never waits for vertical sync (the wall's swaps set the pace) and gives the rank's GL
+    context back to ``tile`` after each frame."""
+
+    def __init__(self, size: tuple[int, int], position: tuple[int, int], tile):
+        from multigpu.display.window import Window
+
+        self.tile = tile
+        self.window = Window(0, size, position, None, "--monitor", title="multigpu monitor", vsync=False)
+        tile.current()
+
+    def present(self, img: np.ndarray) -> None:
+        """Show ``img`` (bottom row first) at once."""
+        self.window.current()
+        try:
+            self.window.show(img)
+            self.window.swap()
+        finally:
+            self.tile.current()
+
+    def poll(self) -> str | None:
+        return self.window.poll()
+
+    def close(self) -> None:
+        self.window.close()
+
+
+def take_input(*windows):
+    """Controls that collect the keys and mouse of ``windows`` (rank 0's tile and monitor)."""
+    import glfw
+
+    from multigpu.display.controls import Controls
+
+    controls = Controls(glfw)
+    for w in windows:
+        w.take_input(controls)
+    return controls

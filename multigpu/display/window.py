@@ -24,13 +24,18 @@ X_HELP = ("start an X server there (e.g. Xvfb for testing), set DISPLAY, give th
           "wall file, or run --present headless")
 
 
+#: glfw windows open in this process (glfw is terminated when the last one closes)
+_OPEN = [0]
+
+
 class Window:
-    """One rank's tile window: ``context`` is the moderngl context the rank renders in."""
+    """One rank's tile window (or rank 0's monitor): ``context`` is the moderngl context of
+    the window, which the rank renders in."""
 
     mode = "window"
 
     def __init__(self, rank: int, tile_size: tuple[int, int], position: tuple[int, int], display: str | None,
-                 where: str):
+                 where: str, title: str | None = None, vsync: bool = True):
         try:
             import glfw
         except Exception as exc:  # the wheel bundles libglfw; a source install may lack it
@@ -40,6 +45,7 @@ class Window:
 
         self.glfw = glfw
         self.window = None
+        self.counted = False
         self.reason: str | None = None
         errors: list[str] = []
         glfw.set_error_callback(lambda code, text: errors.append(text.decode() if isinstance(text, bytes) else text))
@@ -51,6 +57,9 @@ class Window:
         if not glfw.init():
             why = errors[-1] if errors else "glfw could not initialise"
             raise InputError(f"--present window: rank {rank} cannot open X display '{name}' ({where}): {why}; {X_HELP}")
+        _OPEN[0] += 1
+        self.counted = True
+        self.controls = None
         try:
             for hint, value in ((glfw.DECORATED, False), (glfw.RESIZABLE, False), (glfw.VISIBLE, False),
                                 (glfw.AUTO_ICONIFY, False), (glfw.FOCUS_ON_SHOW, False),
@@ -58,7 +67,7 @@ class Window:
                                 (glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)):
                 glfw.window_hint(hint, value)
             tw, th = tile_size
-            self.window = glfw.create_window(tw, th, f"multigpu tile {rank}", None, None)
+            self.window = glfw.create_window(tw, th, title or f"multigpu tile {rank}", None, None)
             if not self.window:
                 why = errors[-1] if errors else "no window"
                 raise InputError(f"--present window: rank {rank} cannot open a {tw}x{th} GL 4.3 window on "
@@ -66,7 +75,7 @@ class Window:
             glfw.set_window_pos(self.window, int(position[0]), int(position[1]))
             glfw.show_window(self.window)
             glfw.make_context_current(self.window)
-            glfw.swap_interval(1)
+            glfw.swap_interval(1 if vsync else 0)
             glfw.set_key_callback(self.window, self._on_key)
             self.context = moderngl.create_context(require=430)
             self.texture = self.context.texture((tw, th), 3, alignment=1)
@@ -81,6 +90,17 @@ class Window:
         if key == self.glfw.KEY_ESCAPE and action == self.glfw.PRESS:
             self.reason = "escape key"
             self.glfw.set_window_should_close(window, True)
+        elif self.controls is not None:
+            self.controls.on_key(window, key, scancode, action, mods)
+
+    def take_input(self, controls) -> None:
+        """Send this window's keys and mouse to ``controls`` (rank 0's windows)."""
+        self.controls = controls
+        controls.attach_mouse(self.window)
+
+    def current(self) -> None:
+        """Make this window's GL context current (a process with a monitor has two)."""
+        self.glfw.make_context_current(self.window)
 
     def show(self, tile: np.ndarray) -> None:
         self.texture.write(np.ascontiguousarray(tile))
@@ -103,4 +123,8 @@ class Window:
         if self.window is not None:
             self.glfw.destroy_window(self.window)
             self.window = None
-        self.glfw.terminate()
+        if self.counted:
+            self.counted = False
+            _OPEN[0] -= 1
+            if _OPEN[0] == 0:
+                self.glfw.terminate()

@@ -7,13 +7,14 @@ Built by ``walkthrough.run`` once setup has been agreed on every rank; every wai
 
 from __future__ import annotations
 
+import itertools
 import os
 
 import numpy as np
 
 from multigpu.config import WalkConfig
 from multigpu.core.bounds import make_projector
-from multigpu.core.camera import frame_matrices
+from multigpu.core.camera import Camera, frame_matrices
 from multigpu.core.work import Work, transfers
 from multigpu.decompositions import make_decomposition
 from multigpu.parallel.composite import composite
@@ -21,10 +22,11 @@ from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
 from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.record import RunRecord
-from multigpu.parallel.report import COLUMNS
+from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
 from multigpu.parallel.shared import SharedPieces, composite_shared
 from multigpu.parallel.timer import Timer
 from multigpu.scene.models import axis_name
+from multigpu.strategies import REGISTRY as STRATEGIES
 
 
 def fault(rank: int, where: int | str) -> None:
@@ -44,7 +46,7 @@ def fault(rank: int, where: int | str) -> None:
 
 
 #: the stop flag of a frame's row: > 0 a signal number, < 0 a window event (STOPS)
-STOPS = {-1: "escape key", -2: "window closed"}
+STOPS = {-1: "escape key", -2: "window closed", -3: "escape key (the monitor)", -4: "window closed (the monitor)"}
 STOP_FLAG = {why: flag for flag, why in STOPS.items()}
 
 
@@ -52,19 +54,21 @@ class Frames:
     """The frame loop in named phases: balance, render, sync, exchange, display, record."""
 
     def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, presenter, out: OutputDir | None,
-                 load_info, device):
+                 load_info, device, monitor=None):
         self.cfg, self.comm, self.job = cfg, comm, job
         self.scene, self.path, self.renderer, self.presenter = scene, path, renderer, presenter
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         tw, th = cfg.tile
         self.canvas = cfg.canvas
         self.tiles = self.canvas.tiles()
-        self.decomposition = make_decomposition(cfg.decomposition, cfg.grid, cfg.size, cfg.strips, scene,
-                                                cfg.balance, cfg.bin_size, cfg.bin_pattern, cfg.db_ranges,
-                                                rank=self.rank)
+        # what B cycles through: every strategy of the screen decomposition (others: just that one)
+        self.balances = list(STRATEGIES) if cfg.decomposition == "screen" else [cfg.decomposition]
+        self.planners: dict = {}  # decomposition per strategy, built at its first frame (the same on every rank)
+        self.using = self.balances.index(cfg.balance) if cfg.decomposition == "screen" else 0
+        self.decomposition = self._planner(self.using)
         self.broadcast = cfg.partition == "broadcast" and self.K > 1  # screen only (checked at the door)
         self.project = make_projector(scene, cfg.bounds)
-        self.coverage = np.ones(scene.n_objects) if self.decomposition.needs_coverage else None
+        self.coverage = np.ones(scene.n_objects)  # per-object silhouette coverage, for strategies that use it
         self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
         self.zback = np.ones((th, tw), dtype=np.float32) if self.decomposition.depth else None
         self.background = renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
@@ -73,26 +77,50 @@ class Frames:
         self.row = np.zeros(len(COLUMNS) + 1)  # + stop flag
         self.allrows = np.zeros((self.K, len(COLUMNS) + 1))
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
-        self.n_frames = len(path)
+        self.interactive = cfg.path == "interactive"
+        self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
         self.done = 0
-        self.learn = None  # (frame, work, times) the strategy observes at the start of the next frame
+        self.learn = None  # (planner, frame, work, times): observed at the start of the next frame
         self.shared = None if cfg.exchange != "shared" else SharedPieces.make(
             comm, self.canvas.size, self.decomposition.depth, cfg.timeout)
         self.window = presenter.mode == "window"
+        self.live = None
+        if self.window:
+            from multigpu.parallel.live import Live
+
+            controls = start = None
+            if self.rank == 0:  # rank 0's windows take the keyboard and mouse
+                from multigpu.display import take_input
+
+                controls = take_input(presenter, *([monitor.window] if monitor is not None else []))
+                if self.interactive:
+                    start = _unshifted(path.camera(0), cfg.offset)
+            self.live = Live(cfg, comm, scene, self.balances, self.using, controls, monitor, start)
         doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
         doc["exchange"] = "shared" if self.shared is not None else "messages"
         self.config_doc = doc
         self.record = None
         if self.rank == 0:
-            self.record = RunRecord(out, self.K, self.n_frames, doc, self.decomposition.report, cfg.video,
-                                    cfg.progress, cfg.overlay)
+            self.record = RunRecord(out, self.K, self.n_frames, doc, lambda: self.decomposition.report(), cfg.video,
+                                    cfg.progress, cfg.overlay, cfg.record)
+
+    def _planner(self, i: int):
+        """The decomposition planning with strategy ``balances[i]`` (built once, on every rank)."""
+        if i not in self.planners:
+            cfg = self.cfg
+            balance = self.balances[i] if cfg.decomposition == "screen" else cfg.balance
+            self.planners[i] = make_decomposition(cfg.decomposition, cfg.grid, cfg.size, cfg.strips, self.scene,
+                                                  balance, cfg.bin_size, cfg.bin_pattern, cfg.db_ranges,
+                                                  rank=self.rank)
+        return self.planners[i]
 
     # -- phases of one frame
-    def plan(self, f: int):
+    def plan(self, f: int, camera):
         """This frame's work (every rank plans the same, or rank 0 plans and broadcasts),
         planned over the visible pixels and moved onto the canvas."""
-        view, proj, light = frame_matrices(self.path.camera(f), self.canvas.size)
-        tris, d, cov, canvas = self.scene.tris, self.decomposition, self.coverage, self.canvas
+        view, proj, light = frame_matrices(camera, self.canvas.size)
+        tris, d, canvas = self.scene.tris, self.decomposition, self.canvas
+        cov = self.coverage if d.needs_coverage else None
         rects = canvas.to_visible(self.project(view, proj, cov) if cov is not None else self.project(view, proj))
         if self.broadcast:
             part = d.strategy.plan(rects, tris, cov) if self.rank == 0 else None
@@ -125,18 +153,24 @@ class Frames:
         px = sum(p.pixels for p in plan if p.sender == self.rank and p.receiver != self.rank)  # read by peers
         return px * (7 if work.depth else 3), px * 4 if work.depth else 0
 
-    def present(self, t: Timer) -> tuple[float, int]:
-        """Display: the composed tile into the back buffer, the swap barrier (every tile
-        composed before any swaps), the swap; then window events. Returns when the swap
-        returned and the stop flag of a window event (0: none)."""
+    def present(self, t: Timer, work: Work, control) -> tuple[float, int]:
+        """Display: the composed tile (and the overlays that are on) into the back buffer, the
+        swap barrier (every tile composed before any swaps), the swap; then window events and
+        the operator's monitor. Returns when the swap returned and the stop flag of a window
+        event (0: none)."""
         with t.phase("display"):
-            self.presenter.show(self.back)
+            shown = self.back if self.live is None else self.live.tile(self.back, work, control, self.allrows)
+            self.presenter.show(shown)
         if self.window:
             with t.phase("swap_wait"):
                 barrier(self.comm, self.cfg.timeout)
         with t.phase("display"):
             swapped = self.presenter.swap()
             why = self.presenter.poll()
+            if self.live is not None:
+                seen = self.live.show_monitor(self.back, work, control, self.allrows)
+                if seen and not why:
+                    return swapped, STOP_FLAG[f"{seen} (the monitor)"]
         return swapped, STOP_FLAG.get(why, 0)
 
     def gather_row(self, f: int, work: Work, t: Timer, sent: tuple[int, int], swapped: float, stop: int) -> None:
@@ -151,7 +185,8 @@ class Frames:
                   "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
                   "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
                   "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
-                  "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0}
+                  "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
+                  "input_ms": t.ms("input"), "balance": self._balance_index()}
         for c, v in values.items():
             self.row[self.col[c]] = v
         # a signal or a window event seen here stops every rank after this frame
@@ -161,21 +196,41 @@ class Frames:
     def show(self, f: int, work: Work) -> None:
         """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""
         cfg = self.cfg
-        mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or f == self.n_frames - 1)
+        last = self.n_frames is not None and f == self.n_frames - 1
+        mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or last)
         if not (mosaic_due or cfg.video):
             return
         wait_all([self.comm.Igather(self.back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
         if self.rank == 0:
             self.record.image(f, stitch(self.gathered, self.tiles, self.canvas.size), work.rects, mosaic_due)
 
+    def _balance_index(self) -> int:
+        return BALANCE_NAMES.index(self.balances[self.using])
+
+    def _camera(self, f: int, t: Timer):
+        """The input phase of a window run (every rank the same camera and settings), then
+        this frame's camera: the hand-flown one, or the path's."""
+        control = None
+        if self.live is not None:
+            with t.phase("input"):
+                control = self.live.control()
+            if control.balance != self.using:  # every rank switches at this frame
+                self.using = control.balance
+                self.decomposition = self._planner(self.using)
+                self.learn = None  # a strategy learns only from the work it planned
+        camera = control.camera if control is not None and control.camera is not None else self.path.camera(f)
+        return camera, control
+
     def frame(self, f: int) -> None:
         t = Timer()
+        camera, control = self._camera(f, t)
         with t.phase("balance"):
             fault(self.rank, f)
             if self.learn is not None:  # the strategy learns from the last frame's times: balancing CPU too
-                self.decomposition.observe(*self.learn)
+                planner, *seen = self.learn
+                planner.observe(*seen)
                 self.learn = None
-            work, (view, proj, light) = self.plan(f)
+            work, (view, proj, light) = self.plan(f, camera)
         with t.phase("render"):
             rendered = self.render(work, view, proj, light)
         if self.shared is not None:
@@ -185,15 +240,18 @@ class Frames:
             barrier(self.comm, self.cfg.timeout)
         with t.phase("exchange"):
             sent = self.compose(f, work, rendered)
-        swapped, stop = self.present(t)
+        swapped, stop = self.present(t, work, control)
         self.gather_row(f, work, t, sent, swapped, stop)
-        self.learn = (f, work, self.allrows[:, self.col["rendering_cpu_ms"]].copy())
+        self.learn = (self.decomposition, f, work, self.allrows[:, self.col["rendering_cpu_ms"]].copy())
         if self.rank == 0:  # rows first: the summary always matches the CSV
             rows = self.allrows[:, :len(COLUMNS)].copy()
             if self.window:  # swap moments after the frame's first swap; the skew on every row
                 at = rows[:, self.col["swap_ms"]].copy()
                 rows[:, self.col["swap_ms"]] = (at - at.min()) * 1e3
                 rows[:, self.col["swap_skew_ms"]] = (at.max() - at.min()) * 1e3
+            if self.cfg.record:  # the camera first: a rewritten path file never lags the rows
+                live = self.live.recorded() if self.live is not None and self.interactive else None
+                self.record.camera(live if live is not None else _unshifted(camera, self.cfg.offset))
             self.record.rows(f, rows)
         self.done = f + 1
         self.show(f, work)
@@ -222,14 +280,15 @@ class Frames:
             return f"signal {signal.Signals(self.job.signum).name}"
         if (flags < 0).any():
             r = int(np.flatnonzero(flags < 0)[0])
-            return f"{STOPS[int(flags[r])]} (rank {r}'s window)"
+            why = STOPS[int(flags[r])]
+            return why if why.endswith("(the monitor)") else f"{why} (rank {r}'s window)"
         return None
 
     def run(self) -> dict | None:
         complete, stopped_by = False, None
         self.job.in_frames = True
         try:
-            for f in range(self.n_frames):
+            for f in itertools.count() if self.n_frames is None else range(self.n_frames):
                 self.frame(f)
                 flags = self.allrows[:, -1]
                 if flags.any():  # a rank was interrupted or its window closed: all stop after this frame
@@ -248,7 +307,8 @@ class Frames:
         if self.rank != 0:
             return None
         cfg, scene = self.cfg, self.scene
-        state = "" if complete else f" (stopped after {self.done} of {self.n_frames} frames: {stopped_by})"
+        planned = "" if self.n_frames is None else f" of {self.n_frames}"
+        state = "" if complete else f" (stopped after {self.done}{planned} frames: {stopped_by})"
         W, H = self.canvas.size
         self.record.print_table(summary, f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in "
                                          f"{scene.n_objects} objects, {cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, "
@@ -271,3 +331,12 @@ def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dic
             "path": cfg.path or cfg.path_kind, "egl_device": device, "present": cfg.present,
             "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall,
             "lp_num_threads": os.environ.get("LP_NUM_THREADS")}
+
+
+def _unshifted(camera: Camera, offset) -> Camera:
+    """``camera`` in path-file coordinates (before ``--offset``)."""
+    off = np.asarray(offset, dtype=np.float64)
+    if not off.any():
+        return camera
+    return Camera(tuple(np.asarray(camera.position) - off), tuple(np.asarray(camera.target) - off), camera.up,
+                  camera.fov, camera.near, camera.far)

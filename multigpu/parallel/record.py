@@ -1,16 +1,20 @@
-"""Rank 0's record of a run: timings.csv, summary.json, mosaics, video and progress.
+"""Rank 0's record of a run: timings.csv, summary.json, mosaics, video, progress and ``--record``.
 
 Rows reach the CSV a whole frame at a time and before anything else of that frame, so the
 summary, rewritten every ``SUMMARY_EVERY`` frames and whenever the run ends, always describes
-exactly the rows written. No MPI here: the frame loop hands over the gathered rows and images.
+exactly the rows written; the recorded camera path (``--record``) is rewritten with it, holding
+the camera of every frame written. No MPI here: the frame loop hands over the gathered rows and images.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from multigpu.config import SUMMARY_EVERY
-from multigpu.parallel.mosaic import overlay, save_png
+from multigpu.display.hud import overlay
+from multigpu.parallel.mosaic import save_png
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.report import COLUMNS, TimingWriter, summarize, table, write_json
 
@@ -19,11 +23,14 @@ class RunRecord:
     """What a run leaves in ``--out``; ``config`` and ``report`` go into summary.json."""
 
     def __init__(self, out: OutputDir, ranks: int, n_frames: int, config: dict, report, video: bool,
-                 progress: bool, overlay_mosaics: bool):
+                 progress: bool, overlay_mosaics: bool, record: str | None = None):
         self.out, self.K, self.n_frames = out, ranks, n_frames
         self.config, self.report = config, report
         self.overlay = overlay_mosaics
         self.history: list[np.ndarray] = []
+        self.record_to = Path(record) if record else None
+        self.cameras: list = []  # (F, 12): position, target, up, fov, near, far of each frame written
+        self.recorded = 0  # frames in the path file on disk
         self.done = 0
         out.clear_previous()
         self.writer = TimingWriter(out.path / "timings.csv")
@@ -38,6 +45,20 @@ class RunRecord:
 
             self.bar = tqdm(total=n_frames, unit="frame", desc=f"{ranks} ranks", dynamic_ncols=True, mininterval=1.0)
 
+    def camera(self, cam) -> None:
+        """The next frame's camera (path-file coordinates), kept for ``--record``."""
+        self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far])
+
+    def _save_path(self) -> None:
+        """Rewrite the ``--record`` file (atomically) with the camera of every frame written."""
+        if self.record_to is None or not self.done or self.recorded == self.done:
+            return
+        from multigpu.scene.paths import CameraPath
+
+        c = np.array(self.cameras[:self.done], dtype=np.float64)
+        CameraPath(c[:, 0:3], c[:, 3:6], c[:, 6:9], c[:, 9], c[:, 10], c[:, 11]).save(self.record_to)
+        self.recorded = self.done
+
     def rows(self, f: int, rows: np.ndarray) -> None:
         """Frame ``f``'s (K, len(COLUMNS)) rows: to the CSV first, then the history."""
         self.writer.write(rows)
@@ -48,6 +69,8 @@ class RunRecord:
             self.bar.set_postfix(fps=f"{1e3 / max(rows[:, COLUMNS.index('frame_ms')].max(), 1e-9):.1f}")
         if f % SUMMARY_EVERY == SUMMARY_EVERY - 1:
             self.summary(complete=False)
+            if self.done - self.recorded >= max(SUMMARY_EVERY, self.done // 10):  # linear in frames overall
+                self._save_path()
 
     def image(self, f: int, img: np.ndarray, rects, mosaic: bool) -> None:
         """The stitched wall of frame ``f``: a mosaic PNG (and its partition overlay) when
@@ -70,6 +93,10 @@ class RunRecord:
         return summary
 
     def close(self, complete: bool, stopped_by: str | None) -> dict:
+        try:
+            self._save_path()
+        except OSError as exc:  # the timings and summary are still written
+            print(f"multigpu: could not write the recorded path {self.record_to}: {exc}", flush=True)
         for thing in (self.bar, self.writer, self.video):
             if thing is not None:
                 try:
@@ -81,3 +108,5 @@ class RunRecord:
     def print_table(self, summary: dict, title: str) -> None:
         print(table(summary, title), flush=True)
         print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
+        if self.record_to is not None:
+            print(f"camera path of the {self.recorded} frames written in {self.record_to} (replay: --path)", flush=True)

@@ -10,7 +10,10 @@ Figures and what they are:
 * presenting (``--present window``): ``present_ms`` is a rank's upload + blit + swap (wall),
   ``swap_wait_ms`` its wait in the swap barrier, ``swap_ms`` the moment its swap returned,
   after the frame's earliest swap (one clock per host), and ``swap_skew_ms`` the frame's latest
-  minus earliest swap return (the same on every row of a frame; 0 when headless).
+  minus earliest swap return (the same on every row of a frame; 0 when headless);
+* ``input_ms``: the frame's input phase (rank 0 reads keys and mouse, the camera and commands
+  reach every rank in one broadcast; 0 when headless); ``balance``: the strategy (screen) or
+  decomposition that planned the frame, by name (it may change at a key press).
 """
 
 from __future__ import annotations
@@ -21,12 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
+from multigpu.strategies import REGISTRY as STRATEGIES
+
 COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms", "frame_ms",
            "load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
            "bytes_sent", "objects", "pieces", "depth_bytes", "load_cv",
-           "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms"]
+           "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms", "input_ms", "balance"]
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
+#: what the ``balance`` column can name: a strategy of the screen decomposition, or another decomposition
+BALANCE_NAMES = (*STRATEGIES, *(d for d in DECOMPOSITIONS if d != "screen"))
 INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes"}
 
 
@@ -45,8 +53,7 @@ class TimingWriter:
         self._append((",".join(COLUMNS) + "\n").encode())
 
     def write(self, rows: np.ndarray) -> None:
-        text = "".join(",".join(str(int(v)) if c in INT_COLUMNS else f"{v:.4f}" for c, v in zip(COLUMNS, row)) + "\n"
-                       for row in rows)  # K rows per frame
+        text = "".join(",".join(_cell(c, v) for c, v in zip(COLUMNS, row)) + "\n" for row in rows)  # K rows
         self._append(text.encode())
 
     def _append(self, data: bytes) -> None:
@@ -69,9 +76,17 @@ class TimingWriter:
             self.fd = None
 
 
+def _cell(column: str, v: float) -> str:
+    if column == "balance":
+        return BALANCE_NAMES[int(v)]
+    return str(int(v)) if column in INT_COLUMNS else f"{v:.4f}"
+
+
 def read_timings(path: Path) -> np.ndarray:
-    """timings.csv back to an (R, len(COLUMNS)) float array."""
-    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    """timings.csv back to an (R, len(COLUMNS)) float array (``balance`` as its index in
+    ``BALANCE_NAMES``)."""
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2,
+                      converters={COLUMNS.index("balance"): lambda s: float(BALANCE_NAMES.index(s))})
     return data.reshape(-1, len(COLUMNS))
 
 
@@ -122,6 +137,9 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
                     "swap_skew_ms_median": float(np.median(get("swap_skew_ms")[:, 0])),
                     "swap_skew_ms_p99": float(np.percentile(get("swap_skew_ms")[:, 0], 99)),
                     "swap_skew_ms_max": float(get("swap_skew_ms")[:, 0].max())},
+        "balance_frames": {BALANCE_NAMES[int(i)]: int(n) for i, n in zip(*np.unique(get("balance")[:, 0],
+                                                                                   return_counts=True))},
+        "input_ms_median": float(np.median(get("input_ms"))),
         "per_frame_emulated_ms": emulated.round(3).tolist(),
         "per_frame_wall_ms": frame_ms.round(3).tolist(),
     }

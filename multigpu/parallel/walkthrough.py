@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.config import WalkConfig, setup_timeout
+from multigpu.config import INTERACTIVE, MONITOR_BESIDE, WalkConfig, setup_timeout
 from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
 from multigpu.core.camera import frame_matrices
 from multigpu.errors import InputError, as_flags
@@ -26,7 +26,9 @@ from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
 
 def make_path(cfg: WalkConfig, scene) -> CameraPath:
-    if cfg.path:
+    """The path file's cameras, or a generated path (``--path interactive``: where the
+    hand-flown camera starts)."""
+    if cfg.path and cfg.path != INTERACTIVE:
         path = load_path(cfg.path)
         if cfg.frames is not None:
             if cfg.frames > len(path):
@@ -34,7 +36,7 @@ def make_path(cfg: WalkConfig, scene) -> CameraPath:
             path = CameraPath(*(a[:cfg.frames] for a in (path.position, path.target, path.up, path.fov,
                                                            path.near, path.far)))
         return path
-    return generate(cfg.path_kind, modelled(cfg, scene), cfg.frames)
+    return generate(cfg.path_kind, modelled(cfg, scene), None if cfg.path == INTERACTIVE else cfg.frames)
 
 
 def modelled(cfg: WalkConfig, scene):
@@ -55,7 +57,7 @@ def load_world(cfg: WalkConfig):
     if any(cfg.offset):
         scene = scene.translated(cfg.offset)
     path = make_path(cfg, scene)
-    if cfg.path and any(cfg.offset):
+    if cfg.path and cfg.path != INTERACTIVE and any(cfg.offset):
         path = path.translated(cfg.offset)
     return scene, path, load_info
 
@@ -113,11 +115,13 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             out = OutputDir(cfg.out)
             if cfg.video:
                 _check_video()
+            if cfg.record:
+                check_record(cfg.record)
             scene, path, load_info = load_world(cfg)
             _check_path(cfg, scene, path)
         except InputError as exc:
             error = as_flags(exc)
-    presenter = renderer = None
+    presenter = renderer = monitor = None
     try:
         fault(rank, "setup")
         error = agree(comm, error, wait)
@@ -127,6 +131,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             if rank != 0:
                 scene, path, load_info = load_world(cfg)
             presenter = _presenter(cfg, rank)
+            if rank == 0 and cfg.monitor is not None:
+                monitor = _monitor(cfg, presenter)
             from multigpu.gpu.render import RegionRenderer, create_context
 
             if presenter.context is not None:  # render in the window's context
@@ -140,13 +146,13 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         if error:
             raise InputError(error)
     except BaseException:
-        _close(renderer, presenter)
+        _close(renderer, presenter, monitor)
         if out is not None:
             out.abandon()
         raise
     frames = None
     try:
-        frames = Frames(cfg, comm, job, scene, path, renderer, presenter, out, load_info, device)
+        frames = Frames(cfg, comm, job, scene, path, renderer, presenter, out, load_info, device, monitor)
         summary = frames.run()
         frames.release(collective=True)  # every rank left the frame loop after the same frame
         return summary
@@ -155,7 +161,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             frames.release(collective=False)  # a failing rank must not wait in a collective free
         raise
     finally:
-        _close(renderer, presenter)
+        _close(renderer, presenter, monitor)
         if out is not None:
             out.release()
 
@@ -172,8 +178,33 @@ def _presenter(cfg: WalkConfig, rank: int):
     return make_presenter(cfg.present, rank, cfg.tile, pos, display, where)
 
 
-def _close(renderer, presenter) -> None:
+def _monitor(cfg: WalkConfig, presenter):
+    """Rank 0's operator view on its display, at ``--monitor X,Y`` (default: right of the wall)."""
+    from multigpu.display import Monitor
+    from multigpu.parallel.live import monitor_size
+
+    where = cfg.monitor if cfg.monitor != MONITOR_BESIDE else (cfg.canvas.size[0], 0)
+    return Monitor(monitor_size(cfg.canvas.size, cfg.canvas.tiles(), cfg.tile), where, presenter)
+
+
+def check_record(record: str) -> None:
+    """``--record FILE`` can be written: its directory exists and takes files."""
+    import os
+    from pathlib import Path
+
+    where = Path(record).expanduser().absolute()
+    if where.is_dir():
+        raise InputError.of("record", f"{record}: is a directory, not a path file")
+    if not where.parent.is_dir():
+        raise InputError.of("record", f"{record}: the directory {where.parent} does not exist")
+    if not os.access(where.parent, os.W_OK):
+        raise InputError.of("record", f"{record}: cannot write in {where.parent} (permission denied)")
+
+
+def _close(renderer, presenter, monitor=None) -> None:
     if renderer is not None:
         renderer.release()
+    if monitor is not None:
+        monitor.close()
     if presenter is not None:
         presenter.close()

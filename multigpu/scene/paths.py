@@ -137,7 +137,8 @@ def _check_camera(cam, where: str, defaults: dict, need_up: bool = False) -> dic
     out["fov"] = _number(cam.get("fov", defaults["fov"]), f"{where}.fov", 0.0, 180.0)
     out["near"] = _number(cam.get("near", defaults["near"]), f"{where}.near", 0.0, float("inf"))
     out["far"] = _number(cam.get("far", defaults["far"]), f"{where}.far", out["near"], float("inf"))
-    if np.allclose(out["position"], out["target"]):
+    eye, tgt = np.array(out["position"]), np.array(out["target"])
+    if not np.linalg.norm(tgt - eye) > 1e-12 * max(np.abs(eye).max(), np.abs(tgt).max(), 1.0):  # as check_cameras
         raise InputError(f"{where}: position and target coincide")
     return out
 

@@ -1,0 +1,120 @@
+"""A window run's live side: input each frame, overlays on the tiles, the operator's monitor.
+
+Around the frame loop of ``--present window``: the input phase (``steer.Steering``: rank 0's
+keys and mouse, one broadcast), what a tile shows besides the picture (the partition tinted
+and outlined when P is on; the statistics panel on rank 0's tile, top left of the wall, when I
+is on), and ``--monitor``: every rank sends its tile shrunk ``scale`` times to rank 0, which
+shows the whole wall with the partition over it in one more window. The composed tile itself
+is never changed: mosaics, video and replays see the picture only.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from multigpu.core.navigate import Navigator
+from multigpu.core.work import Work
+from multigpu.display.hud import overlay, paste, stats_panel
+from multigpu.parallel.exchange import wait_all
+from multigpu.parallel.mosaic import stitch
+from multigpu.parallel.report import COLUMNS
+from multigpu.parallel.steer import Control, Steering
+
+#: the monitor shows the wall shrunk by a whole factor to fit in this many pixels
+MONITOR_FIT = (640, 480)
+
+
+def monitor_scale(size) -> int:
+    """The whole factor the monitor shrinks a ``size`` (W, H) wall by."""
+    return max(1, math.ceil(max(size[0] / MONITOR_FIT[0], size[1] / MONITOR_FIT[1])))
+
+
+def monitor_size(size, tiles: np.ndarray, tile_size) -> tuple[int, int]:
+    """The monitor's pixels: every shrunk tile at its shrunk place."""
+    s = monitor_scale(size)
+    w, h = -(-tile_size[0] // s), -(-tile_size[1] // s)
+    return int((tiles[:, 0] // s).max() + w), int((tiles[:, 1] // s).max() + h)
+
+
+class Live:
+    """The live side of one rank's window run. ``monitor`` and ``controls`` exist on rank 0
+    only; ``start`` (rank 0, ``--path interactive``) is where the hand-flown camera begins."""
+
+    def __init__(self, cfg, comm, scene, balances: list[str], balance: int, controls=None, monitor=None,
+                 start=None):
+        self.comm, self.cfg = comm, cfg
+        self.rank, self.K = comm.Get_rank(), comm.Get_size()
+        self.balances = balances
+        navigator = None
+        if start is not None:  # flown in path-file coordinates (before --offset): see steer.py
+            off = np.asarray(cfg.offset, dtype=np.float64)
+            lo, hi = scene.bounds
+            navigator = Navigator(lo - off, hi - off, start)
+        self.steering = Steering(comm, cfg.timeout, len(balances), balance, controls, navigator, cfg.offset,
+                                 interactive=cfg.path == "interactive")
+        self.monitor = monitor
+        self.tiles = cfg.canvas.tiles()
+        self.scale = monitor_scale(cfg.canvas.size) if cfg.monitor is not None else 0
+        if self.scale:
+            s = self.scale
+            tw, th = cfg.tile
+            self.small = np.zeros((-(-th // s), -(-tw // s), 3), dtype=np.uint8)
+            self.small_tiles = np.zeros((self.K, *self.small.shape), dtype=np.uint8) if self.rank == 0 else None
+            h, w = self.small.shape[:2]
+            self.small_rects = np.stack([self.tiles[:, 0] // s, self.tiles[:, 1] // s,
+                                         self.tiles[:, 0] // s + w, self.tiles[:, 1] // s + h], axis=1)
+            self.monitor_size = monitor_size(cfg.canvas.size, self.tiles, cfg.tile)
+        self.fps, self.last = 0.0, None
+        self.col = {c: i for i, c in enumerate(COLUMNS)}
+
+    def control(self) -> Control:
+        """The input phase: this frame's camera and settings, the same on every rank."""
+        return self.steering.next()
+
+    def recorded(self):
+        """Rank 0: the hand-flown camera of this frame in path-file coordinates (or None)."""
+        return self.steering.recorded
+
+    def _panel(self, control: Control, rows: np.ndarray) -> np.ndarray:
+        get = lambda c: rows[:, self.col[c]]
+        phases = np.stack([get("load_balancing_cpu_ms"), get("rendering_cpu_ms"), get("frame_exchange_cpu_ms")], 1)
+        mode = ("orbit" if control.orbiting else "walk") if self.cfg.path == "interactive" else "path"
+        return stats_panel(self.fps, self.balances[control.balance], phases, get("triangles"), mode,
+                           width=min(220, self.cfg.tile[0]))
+
+    def tile(self, back: np.ndarray, work: Work, control: Control, rows: np.ndarray) -> np.ndarray:
+        """What this rank's window shows: the composed tile, with the overlays that are on.
+        ``rows`` are the last frame's gathered timing rows."""
+        if self.rank == 0:
+            now = time.perf_counter()
+            if self.last is not None:  # frames per second, smoothed over the last few frames
+                rate = 1.0 / max(now - self.last, 1e-6)
+                self.fps = 0.8 * self.fps + 0.2 * rate if self.fps else rate
+            self.last = now
+        shown = back
+        if control.partition:
+            x0, y0 = int(self.tiles[self.rank][0]), int(self.tiles[self.rank][1])
+            shown = overlay(back[::-1], work.rects, origin=(x0, y0))[::-1]
+        if control.stats and self.rank == 0:
+            shown = paste(shown, self._panel(control, rows))
+        return shown
+
+    def show_monitor(self, back: np.ndarray, work: Work, control: Control, rows: np.ndarray) -> str | None:
+        """``--monitor``: every rank's shrunk tile to rank 0, which shows the wall with the
+        partition over it; rank 0 returns why the monitor wants the run to stop, or None."""
+        if not self.scale:
+            return None
+        s = self.scale
+        np.copyto(self.small, back[::s, ::s])
+        wait_all([self.comm.Igather(self.small, self.small_tiles, root=0)], self.cfg.timeout, "monitor gather")
+        if self.rank != 0:
+            return None
+        img = overlay(stitch(self.small_tiles, self.small_rects, self.monitor_size), work.rects, scale=s)
+        shown = img[::-1]
+        if control.stats:
+            shown = paste(shown, self._panel(control, rows))
+        self.monitor.present(shown)
+        return self.monitor.poll()
