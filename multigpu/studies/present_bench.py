@@ -1,11 +1,14 @@
-"""``multigpu bench present``: headless against ``--present window`` on Xvfb, alternated.
+"""``multigpu bench present``: headless against ``--present window`` (and with the operator's
+``--monitor``) on Xvfb, alternated.
 
-For each wall (2x2 of 512x512, 3x3 of 320x240) it starts one Xvfb screen of the canvas size
-and runs the same walkthrough headless and with windows, in alternating rounds, and prints the
-emulated frame (slowest rank's CPU time, median), the wall-clock frame, each rank's present
-time (upload + blit + swap, wall) and the swap skew (latest minus earliest swap return per
-frame, one clock: every rank on this host) as medians and p99. It needs Xvfb (Debian: xvfb);
-it prints figures and asserts nothing.
+For each wall (2x2 of 512x512, 3x3 of 320x240) it starts one Xvfb screen holding the canvas and
+the monitor beside it, and runs the same walkthrough headless, with windows, and with windows
+and the monitor, in rotating order over the rounds; it prints the emulated frame (slowest
+rank's CPU time, median), the wall-clock frame, each rank's present time (upload + blit + swap,
+wall; with the monitor also its gather and window), the input phase (rank 0's events and the
+one broadcast, wall) and the swap skew (latest minus earliest swap return per frame, one clock:
+every rank on this host) as medians and p99. It needs Xvfb (Debian: xvfb); it prints figures
+and asserts nothing.
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ from multigpu.display.xvfb import start_xvfb, stop_xvfb
 from multigpu.errors import InputError
 
 WALLS = [((2, 2), (512, 512)), ((3, 3), (320, 240))]
+#: headless; a window per rank; windows and rank 0's operator monitor (its gather and window)
+MODES = ("headless", "window", "monitor")
 
 
 def bench_present(quick: bool) -> list[dict]:
@@ -27,28 +32,29 @@ def bench_present(quick: bool) -> list[dict]:
 
     if shutil.which("Xvfb") is None:
         raise InputError("bench present: needs Xvfb (Debian: apt install xvfb)")
-    frames, rounds = (40, 1) if quick else (300, 2)
+    frames, rounds = (40, 1) if quick else (300, 3)
     walls = [((2, 2), (128, 128))] if quick else WALLS
     rows = []
     print(f"bench present: headless vs --present window on Xvfb, {frames} frames, {rounds} alternated rounds; "
           "emulated = slowest rank's CPU time (median ms), wall = wall-clock frame (median ms)")
     print(f"{'wall':<14} {'mode':<9} {'emulated':>9} {'wall':>8} {'present':>8} {'present p99':>12} "
-          f"{'skew':>7} {'skew p99':>9}")
+          f"{'input':>7} {'skew':>7} {'skew p99':>9}")
     for grid, tile in walls:
         size = (grid[1] * tile[0], grid[0] * tile[1])
         try:
-            proc, display = start_xvfb(size)
+            proc, display = start_xvfb((size[0] + 660, max(size[1], 480)))  # the monitor fits beside
         except RuntimeError as exc:
             raise InputError(f"bench present: {exc}") from None
         try:
-            got: dict[str, list[dict]] = {"headless": [], "window": []}
+            got: dict[str, list[dict]] = {m: [] for m in MODES}
             with tempfile.TemporaryDirectory() as tmp:
                 for r in range(rounds):
-                    for mode in ("headless", "window") if r % 2 == 0 else ("window", "headless"):
+                    for mode in MODES[r % len(MODES):] + MODES[:r % len(MODES)]:
                         out = Path(tmp) / f"{mode}{r}"
                         args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}",
-                                "--frames", str(frames), "--mosaic-every", "0", "--no-progress", "--present", mode,
-                                "--out", str(out)]
+                                "--frames", str(frames), "--mosaic-every", "0", "--no-progress", "--present",
+                                "headless" if mode == "headless" else "window", "--out", str(out)]
+                        args += ["--monitor"] if mode == "monitor" else []
                         job = run_multigpu(grid[0] * grid[1], args, 1800, env={"DISPLAY": display},
                                            merge_stderr=True)
                         if job.returncode != 0:
@@ -60,8 +66,8 @@ def bench_present(quick: bool) -> list[dict]:
                 row.update(wall=f"{grid[0]}x{grid[1]} {tile[0]}x{tile[1]}", mode=mode)
                 rows.append(row)
                 print(f"{row['wall']:<14} {mode:<9} {row['emulated_ms']:9.2f} {row['wall_ms']:8.2f} "
-                      f"{row['present_ms']:8.3f} {row['present_p99_ms']:12.3f} {row['skew_ms']:7.3f} "
-                      f"{row['skew_p99_ms']:9.3f}")
+                      f"{row['present_ms']:8.3f} {row['present_p99_ms']:12.3f} {row['input_ms']:7.3f} "
+                      f"{row['skew_ms']:7.3f} {row['skew_p99_ms']:9.3f}")
         finally:
             stop_xvfb(proc)
     return rows
@@ -74,4 +80,4 @@ def _figures(out: Path) -> dict:
     p = s["present"]
     return {"emulated_ms": s["emulated_frame_ms_median"], "wall_ms": float(np.median(s["per_frame_wall_ms"])),
             "present_ms": p["present_ms_median"], "present_p99_ms": p["present_ms_p99"],
-            "skew_ms": p["swap_skew_ms_median"], "skew_p99_ms": p["swap_skew_ms_p99"]}
+            "skew_ms": p["swap_skew_ms_median"], "skew_p99_ms": p["swap_skew_ms_p99"], "input_ms": s["input_ms_median"]}
