@@ -329,7 +329,8 @@ def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dic
                       "warnings": scene.meta.get("warnings", []), "objects_from": scene.meta.get("objects"),
                       "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source")},
             "path": cfg.path or cfg.path_kind, "egl_device": device, "present": cfg.present,
-            "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall,
+            "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,
+            "monitor": cfg.monitor is not None,
             "lp_num_threads": os.environ.get("LP_NUM_THREADS")}
 
 
