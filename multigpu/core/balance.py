@@ -159,7 +159,7 @@ def tree_partition(rects, tris, grid, size, strips: int, choose) -> Partition:
     return Partition(regions, loads, visible, splits, split_pixels, spans)
 
 
-def partition(rects, tris, grid, size, strips: int = 2048, fill=None) -> Partition:
+def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: bool | None = None) -> Partition:
     """Balance ``tris`` over a ``rows x cols`` wall by splitting the screen along the GPU tree.
 
     Parameters
@@ -174,7 +174,18 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None) -> Partiti
     fill : optional (N,) non-negative float, or a scalar: cost per covered pixel of each
         object's rect (the cost model's fragment term). None balances ``tris`` alone, exactly
         the paper's Alg. 2.
+    compiled : the paper's Alg. 2 (no ``fill``) as one compiled call (``core/kernel.py``: the
+        same partition, bit for bit); None uses it where numba is installed, False runs this
+        module's numpy reference.
     """
+    if fill is None and compiled is not False:
+        from multigpu.core import kernel
+
+        if kernel.available():
+            rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips)
+            return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips)))
+        if compiled:
+            raise ValueError("compiled=True needs numba (pip install numba)")
     rects_a = np.asarray(rects)
     density = None
     if fill is not None:

@@ -13,6 +13,7 @@ import os
 import numpy as np
 
 from multigpu.config import WalkConfig
+from multigpu.core import kernel
 from multigpu.core.bounds import make_projector
 from multigpu.core.camera import Camera, frame_matrices
 from multigpu.core.work import Work, transfers
@@ -331,7 +332,9 @@ def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dic
             "path": cfg.path or cfg.path_kind, "egl_device": device, "present": cfg.present,
             "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,
             "monitor": cfg.monitor is not None,
-            "lp_num_threads": os.environ.get("LP_NUM_THREADS")}
+            "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
+            "kernel": {"compiled": kernel.available(),
+                       "warm_seconds": round(load_info.get("kernel_seconds", 0.0), 3)}}
 
 
 def _unshifted(camera: Camera, offset) -> Camera:

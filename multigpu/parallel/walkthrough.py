@@ -140,6 +140,9 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             else:
                 ctx, device = create_context(cfg.device, local_rank=node_rank(comm))
             renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum)
+            from multigpu.core import kernel
+
+            load_info = {**load_info, "kernel_seconds": kernel.warm()}  # compiled here, never in a frame
         except (InputError, RuntimeError) as exc:
             error = as_flags(exc)
         error = agree(comm, error, wait)

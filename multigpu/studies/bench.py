@@ -52,8 +52,12 @@ def bench_balance(quick: bool) -> list[dict]:
     heap = keep_heap()
     print("per-frame wall time, median of 7; bounds prepared once per scene (not timed); "
           f"allocator: {'heap kept (memory.keep_heap)' if heap else 'glibc default (MULTIGPU_MALLOC=default)'}")
-    print(f"{'objects':>9} {'grid':>5} {'bounds':>7} {'project ms':>11} {'partition ms':>13} {'total ms':>9} "
-          f"{'target ms':>10}")
+    from multigpu.core import kernel
+
+    print(f"compiled kernel (numba): {'compiled/loaded in %.2f s' % kernel.warm() if kernel.available() else 'absent'}"
+          "; 'numpy ms' is the reference partition, 'partition ms' the one runs use")
+    print(f"{'objects':>9} {'grid':>5} {'bounds':>7} {'project ms':>11} {'numpy ms':>9} {'partition ms':>13} "
+          f"{'total ms':>9} {'target ms':>10}")
     for n in sizes:
         bmin, bmax, c, r, tris = synthetic_objects(n)
         for grid in [(2, 2), (4, 4)]:
@@ -62,12 +66,15 @@ def bench_balance(quick: bool) -> list[dict]:
                 project = BoxProjector(bmin, bmax) if kind == "box" else SphereProjector(c, r)
                 rects = project(view, proj)
                 t_proj = median_ms(lambda: project(view, proj), 7)
+                t_ref = median_ms(lambda: partition(rects, tris, grid, size, 2048, compiled=False), 7)
                 t_part = median_ms(lambda: partition(rects, tris, grid, size, 2048), 7)
                 t_all = median_ms(lambda: partition(project(view, proj), tris, grid, size, 2048), 7)
                 target = 15 * n / 100_000 if grid == (2, 2) else None
                 rows.append({"objects": n, "grid": f"{grid[0]}x{grid[1]}", "bounds": kind, "project_ms": t_proj,
-                             "partition_ms": t_part, "total_ms": t_all, "target_ms": target, "heap_kept": heap})
-                print(f"{n:9d} {grid[0]}x{grid[1]:<3} {kind:>7} {t_proj:11.1f} {t_part:13.1f} {t_all:9.1f} "
+                             "numpy_ms": t_ref, "partition_ms": t_part, "total_ms": t_all, "target_ms": target,
+                             "heap_kept": heap})
+                print(f"{n:9d} {grid[0]}x{grid[1]:<3} {kind:>7} {t_proj:11.1f} {t_ref:9.1f} {t_part:13.1f} "
+                      f"{t_all:9.1f} "
                       f"{'' if target is None else f'{target:.0f}':>10}")
     return rows
 

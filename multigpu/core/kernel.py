@@ -1,0 +1,187 @@
+"""The paper's balancer compiled: pixel spans, the GPU-tree walk with the strip chooser (Start/End
+arrays, prefix and postfix sums, the split closest to balRatio), T' masks and loads in ONE numba
+call per frame, where the numpy reference (``balance.partition``) makes hundreds of C-level calls.
+
+Same rules, same order of every sum as the reference (sequential, as ``np.bincount`` and
+``np.cumsum`` add), so partitions, masks, loads and splits are identical, which the tests check
+on random and extreme inputs. Compiled once per machine (``cache=True``: numba keeps the machine
+code beside this file) and loaded afterwards; ``warm()`` compiles at setup, never in a frame.
+Without numba the reference runs (``available()`` says which).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+try:
+    import numba
+
+    _jit = numba.njit(cache=True, nogil=True)
+except ImportError:  # the numpy reference runs instead
+    numba = None
+    _jit = None
+
+
+def available() -> bool:
+    return numba is not None
+
+
+def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray]:
+    """The GPU tree as arrays. One row per internal node in breadth-first order: split axis,
+    ranks low and high, pixels each child needs along the axis, the node's slot and its
+    children's slots (slot 0 is the root); then each leaf's slot by rank label."""
+    slot = {tree.root.id: 0}
+    for node in tree.internal:
+        slot[node.low.id], slot[node.high.id] = len(slot), len(slot) + 1
+    rows = []
+    for node in tree.internal:
+        axis = 0 if node.method == "vertical" else 1
+        need = (node.low.ncols, node.high.ncols) if axis == 0 else (node.low.nrows, node.high.nrows)
+        rows.append((axis, node.low.count, node.high.count, *need, slot[node.id], slot[node.low.id],
+                     slot[node.high.id]))
+    nodes = np.array(rows, dtype=np.int64).reshape(-1, 8)
+    leaves = np.array([slot[leaf.id] for leaf in tree.leaves], dtype=np.int64)
+    return nodes, leaves
+
+
+def _spans(rects, W, H):
+    """``regions.pixel_spans``: inclusive pixel spans (4, N) and which rects are on screen."""
+    n = rects.shape[0]
+    spans = np.zeros((4, n), dtype=np.int32)
+    on = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        x0, y0, x1, y1 = rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3]
+        if x1 >= 0.0 and x0 <= 1.0 and y1 >= 0.0 and y0 <= 1.0:  # False for NaN rows
+            on[i] = True
+            for c in range(4):
+                size = W if c % 2 == 0 else H
+                v = min(max(rects[i, c] * size, 0.0), size - 1.0)
+                spans[c, i] = np.int32(v)  # truncation is floor: v >= 0
+    return spans, on
+
+
+def _choose(s, e, ratio, a, length, q, need_lo, need_hi, target):
+    """``splits.choose_split`` on Start/End arrays ``s``/``e`` (turned into prefix/postfix sums
+    in place): the valid cut with the least Diff, ties and the all-infinite case nearest
+    ``target`` (then the lower cut); ``target`` itself when no cut is valid."""
+    for i in range(1, q):
+        s[i] += s[i - 1]
+    for i in range(q - 2, -1, -1):
+        e[i] += e[i + 1]
+    best = np.inf
+    for i in range(q - 1):
+        cut = a + ((i + 1) * length) // q
+        if cut - a >= need_lo and a + length - cut >= need_hi and s[i] > 0 and e[i + 1] > 0:
+            best = min(best, abs(s[i] / e[i + 1] - ratio))
+    pick, pick_dist = -1, 0
+    for i in range(q - 1):
+        cut = a + ((i + 1) * length) // q
+        if cut - a < need_lo or a + length - cut < need_hi:
+            continue
+        if best < np.inf and not (s[i] > 0 and e[i + 1] > 0 and abs(s[i] / e[i + 1] - ratio) == best):
+            continue
+        dist = abs(cut - target)
+        if pick < 0 or dist < pick_dist:
+            pick, pick_dist = cut, dist
+    return pick if pick >= 0 else target
+
+
+def _split(idx, spans, axis, cut):
+    """The objects of ``idx`` that touch the low side of ``cut``, and those touching the high side."""
+    nlow = nhigh = 0
+    for t in range(idx.shape[0]):
+        nlow += spans[axis, idx[t]] < cut
+        nhigh += spans[axis + 2, idx[t]] >= cut
+    lo = np.empty(nlow, dtype=np.int64)
+    hi = np.empty(nhigh, dtype=np.int64)
+    p = r = 0
+    for t in range(idx.shape[0]):
+        o = idx[t]
+        if spans[axis, o] < cut:
+            lo[p] = o
+            p += 1
+        if spans[axis + 2, o] >= cut:
+            hi[r] = o
+            r += 1
+    return lo, hi
+
+
+def _walk(rects, tris, W, H, strips, nodes, leaves):
+    """``balance.tree_partition`` with the strip chooser, in one call."""
+    n = rects.shape[0]
+    K = leaves.shape[0]
+    spans, on = _spans(rects, W, H)
+    regs = np.zeros((2 * K - 1, 4), dtype=np.int64)
+    regs[0, 2], regs[0, 3] = W, H
+    members = [np.flatnonzero(on).astype(np.int64)]
+    for _ in range(2 * K - 2):
+        members.append(members[0][:0])
+    splits = np.zeros(K - 1, dtype=np.float64)
+    split_pixels = np.zeros(K - 1, dtype=np.int64)
+    for m in range(nodes.shape[0]):
+        axis, nl, nr, need_lo, need_hi = nodes[m, 0], nodes[m, 1], nodes[m, 2], nodes[m, 3], nodes[m, 4]
+        me, low, high = nodes[m, 5], nodes[m, 6], nodes[m, 7]
+        idx = members[me]
+        a, b = regs[me, axis], regs[me, axis + 2]
+        length = b - a
+        q = min(strips, length)
+        s = np.zeros(q, dtype=tris.dtype)
+        e = np.zeros(q, dtype=tris.dtype)
+        for t in range(idx.shape[0]):  # Start/End arrays: each object at its first and last strip
+            o = idx[t]
+            f = ((spans[axis, o] - a + 1) * q - 1) // length
+            g = ((spans[axis + 2, o] - a + 1) * q - 1) // length
+            s[min(max(f, 0), q - 1)] += tris[o]
+            e[min(max(g, 0), q - 1)] += tris[o]
+        target = a + (length * nl) // (nl + nr)
+        cut = _choose(s, e, nl / nr, a, length, q, need_lo, need_hi, target)
+        cut = min(max(cut, a + need_lo), b - need_hi)
+        splits[m] = (cut - a) / length
+        split_pixels[m] = cut
+        regs[low] = regs[me]
+        regs[high] = regs[me]
+        regs[low, axis + 2] = cut
+        regs[high, axis] = cut
+        members[low], members[high] = _split(idx, spans, axis, cut)
+    regions = np.zeros((K, 4), dtype=np.int64)
+    visible = np.zeros((K, n), dtype=np.bool_)
+    for label in range(K):
+        regions[label] = regs[leaves[label]]
+        idx = members[leaves[label]]
+        for t in range(idx.shape[0]):
+            visible[label, idx[t]] = True
+    return regions, visible, splits, split_pixels, spans
+
+
+if _jit is not None:
+    _spans, _choose, _split, _walk = (_jit(f) for f in (_spans, _choose, _split, _walk))
+
+
+def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int):
+    """The compiled walk on validated inputs (``balance.validate_inputs``): regions, loads,
+    T' masks, splits in p-pos and pixels, spans (4, N). Loads are summed by numpy as the
+    reference sums them (pairwise for float weights)."""
+    nodes, leaves = _TREES.get((tree.rows, tree.cols)) or _TREES.setdefault((tree.rows, tree.cols), tree_arrays(tree))
+    rects = np.ascontiguousarray(rects, dtype=np.float64)
+    regions, visible, splits, split_pixels, spans = _walk(rects, tris, int(size[0]), int(size[1]), int(strips),
+                                                          nodes, leaves)
+    loads = np.array([tris[v].sum() for v in visible], dtype=tris.dtype)  # K ranks, not objects
+    return regions, loads, visible, splits, split_pixels, spans
+
+
+_TREES: dict = {}
+
+
+def warm() -> float:
+    """Compile (or load from numba's cache) every signature a run uses; seconds it took."""
+    if not available():
+        return 0.0
+    from multigpu.core.tree import gpu_tree
+
+    t0 = time.perf_counter()
+    rects = np.array([[0.1, 0.1, 0.6, 0.7], [0.5, 0.2, 0.9, 0.9], [np.nan] * 4])
+    for tris in (np.array([3, 5, 7], dtype=np.int64), np.array([3.0, 5.0, 7.0])):
+        strip_partition(rects, tris, gpu_tree(2, 2), (64, 64), 16)
+    return time.perf_counter() - t0

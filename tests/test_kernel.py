@@ -1,0 +1,60 @@
+"""The compiled balancer (core/kernel.py) against the numpy reference (core/balance.py): the same
+regions, loads, T' masks, splits and spans, bit for bit, on random and extreme inputs."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from multigpu.core import kernel
+from multigpu.core.balance import partition
+
+pytestmark = pytest.mark.skipif(not kernel.available(), reason="numba is not installed (pip install numba)")
+FIELDS = ("regions", "loads", "visible", "splits", "split_pixels", "spans")
+
+
+def same(rects, tris, grid, size, strips):
+    ref = partition(rects, tris, grid, size, strips, compiled=False)
+    got = partition(rects, tris, grid, size, strips, compiled=True)
+    for name in FIELDS:
+        a, b = getattr(got, name), getattr(ref, name)
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        assert np.array_equal(a, b), f"{name} differs: {a} vs {b}"
+    return got
+
+
+coord = st.one_of(st.floats(-2.0, 3.0, allow_nan=False), st.sampled_from([0.0, 1.0, -0.0, 1e-300, 1 - 1e-16,
+                                                                          -1e300, 1e300, np.nan]))
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.data(), rows=st.integers(1, 4), cols=st.integers(1, 4), n=st.integers(0, 60),
+       integer=st.booleans(), strips=st.sampled_from([2, 3, 7, 64, 2048, 100_000]))
+def test_compiled_equals_the_reference(data, rows, cols, n, integer, strips):
+    W = data.draw(st.integers(cols, 700))
+    H = data.draw(st.integers(rows, 700))
+    pts = np.array(data.draw(st.lists(st.tuples(coord, coord, coord, coord), min_size=n, max_size=n)),
+                   dtype=np.float64).reshape(-1, 4)
+    with np.errstate(invalid="ignore"):
+        lo, hi = np.minimum(pts[:, :2], pts[:, 2:]), np.maximum(pts[:, :2], pts[:, 2:])
+    rects = np.concatenate([lo, hi], axis=1)
+    rects[np.isnan(rects).any(axis=1)] = np.nan
+    if integer:
+        tris = np.array(data.draw(st.lists(st.integers(0, 10**6), min_size=n, max_size=n)), dtype=np.int64)
+    else:
+        tris = np.array(data.draw(st.lists(st.floats(0, 1e6), min_size=n, max_size=n)), dtype=np.float64)
+    same(rects, tris, (rows, cols), (W, H), strips)
+
+
+def test_extremes_equal_the_reference():
+    rng = np.random.default_rng(7)
+    n = 5000
+    lo = rng.uniform(-0.2, 1.0, (n, 2))
+    rects = np.concatenate([lo, lo + rng.exponential(0.05, (n, 2))], axis=1)
+    for tris in (rng.integers(0, 2**40, n),  # sums past 2**53: the reference splits weights into halves
+                 np.zeros(n, dtype=np.int64),  # nothing to balance: area-proportional splits
+                 np.full(n, 1e-300), rng.pareto(1.2, n) * 1e6):
+        for grid, size in (((4, 4), (4096, 2048)), ((1, 16), (16, 5)), ((3, 1), (7, 3)), ((2, 2), (32768, 32768))):
+            same(rects, tris, grid, size, 2048)
+    same(np.full((10, 4), np.nan), np.ones(10, dtype=np.int64), (2, 2), (64, 64), 16)  # nothing visible
+    same(np.zeros((0, 4)), np.zeros(0, dtype=np.int64), (2, 3), (64, 64), 16)
