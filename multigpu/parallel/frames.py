@@ -264,6 +264,8 @@ class Frames:
         if self.shared is not None:
             self.shared.close(collective)
             self.shared = None
+        if self.live is not None:
+            self.live.close(collective)
 
     def _what(self) -> str:
         cfg = self.cfg

@@ -4,8 +4,11 @@ Around the frame loop of ``--present window``: the input phase (``steer.Steering
 keys and mouse, one broadcast), what a tile shows besides the picture (the partition tinted
 and outlined when P is on; the statistics panel on rank 0's tile, top left of the wall, when I
 is on), and ``--monitor``: every rank sends its tile shrunk ``scale`` times to rank 0, which
-shows the whole wall with the partition over it in one more window. The composed tile itself
-is never changed: mosaics, video and replays see the picture only.
+shows the whole wall with the partition over it in one more window. The monitor never holds up
+the wall: the shrunk tiles go as non-blocking messages on a communicator of their own, and rank
+0 shows frame f when frame f+1 is shown (by then they have arrived), so no rank waits for
+another one's swap. The composed tile itself is never changed: mosaics, video and replays see
+the picture only.
 """
 
 from __future__ import annotations
@@ -67,6 +70,9 @@ class Live:
             self.small_rects = np.stack([self.tiles[:, 0] // s, self.tiles[:, 1] // s,
                                          self.tiles[:, 0] // s + w, self.tiles[:, 1] // s + h], axis=1)
             self.monitor_size = monitor_size(cfg.canvas.size, self.tiles, cfg.tile)
+            self.mcomm = comm.Dup()  # the monitor's messages never meet the frame exchange's
+            self.pending: list = []  # this rank's requests of the last frame's tiles
+            self.last_rects = None  # rank 0: the partition of the frame in flight
         self.fps, self.last = 0.0, None
         self.col = {c: i for i, c in enumerate(COLUMNS)}
 
@@ -108,13 +114,28 @@ class Live:
         if not self.scale:
             return None
         s = self.scale
-        np.copyto(self.small, back[::s, ::s])
-        wait_all([self.comm.Igather(self.small, self.small_tiles, root=0)], self.cfg.timeout, "monitor gather")
+        wait_all(self.pending, self.cfg.timeout, "monitor tiles")  # the last frame's: long arrived
         if self.rank != 0:
+            np.copyto(self.small, back[::s, ::s])
+            self.pending = [self.mcomm.Isend(self.small, dest=0, tag=1)]
             return None
-        img = overlay(stitch(self.small_tiles, self.small_rects, self.monitor_size), work.rects, scale=s)
-        shown = img[::-1]
-        if control.stats:
-            shown = paste(shown, self._panel(control, rows))
-        self.monitor.present(shown)
+        if self.last_rects is not None:  # the last frame, whole
+            img = overlay(stitch(self.small_tiles, self.small_rects, self.monitor_size), self.last_rects, scale=s)
+            shown = img[::-1]
+            if control.stats:
+                shown = paste(shown, self._panel(control, rows))
+            self.monitor.present(shown)
+        np.copyto(self.small_tiles[0], back[::s, ::s])
+        self.pending = [self.mcomm.Irecv(self.small_tiles[k], source=k, tag=1) for k in range(1, self.K)]
+        self.last_rects = work.rects
         return self.monitor.poll()
+
+    def close(self, finished: bool) -> None:
+        """Complete the monitor's last messages after a run every rank finished (nothing is
+        left unreceived at the end); after a failure the job ends anyway."""
+        if self.scale:
+            if finished:  # (freeing is collective: not after a failure)
+                wait_all(self.pending, self.cfg.timeout, "monitor tiles")
+                self.mcomm.Free()
+            self.pending = []
+            self.scale = 0

@@ -32,7 +32,7 @@ def bench_present(quick: bool) -> list[dict]:
 
     if shutil.which("Xvfb") is None:
         raise InputError("bench present: needs Xvfb (Debian: apt install xvfb)")
-    frames, rounds = (40, 1) if quick else (300, 3)
+    frames, rounds = (40, 1) if quick else (300, 2)
     walls = [((2, 2), (128, 128))] if quick else WALLS
     rows = []
     print(f"bench present: headless vs --present window on Xvfb, {frames} frames, {rounds} alternated rounds; "
