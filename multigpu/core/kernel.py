@@ -46,18 +46,18 @@ def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray]:
     return nodes, leaves
 
 
-def _spans(rects, W, H):
-    """``regions.pixel_spans``: inclusive pixel spans (4, N) and which rects are on screen."""
-    n = rects.shape[0]
+def _spans(rt, W, H):
+    """``regions.pixel_spans`` of coordinate-major rects ``rt`` (4, N): inclusive pixel spans
+    (4, N) and which rects are on screen."""
+    n = rt.shape[1]
     spans = np.zeros((4, n), dtype=np.int32)
     on = np.zeros(n, dtype=np.bool_)
     for i in range(n):
-        x0, y0, x1, y1 = rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3]
-        if x1 >= 0.0 and x0 <= 1.0 and y1 >= 0.0 and y0 <= 1.0:  # False for NaN rows
+        if rt[2, i] >= 0.0 and rt[0, i] <= 1.0 and rt[3, i] >= 0.0 and rt[1, i] <= 1.0:  # False for NaN rows
             on[i] = True
             for c in range(4):
                 size = W if c % 2 == 0 else H
-                v = min(max(rects[i, c] * size, 0.0), size - 1.0)
+                v = min(max(rt[c, i] * size, 0.0), size - 1.0)
                 spans[c, i] = np.int32(v)  # truncation is floor: v >= 0
     return spans, on
 
@@ -90,12 +90,8 @@ def _choose(s, e, ratio, a, length, q, need_lo, need_hi, target):
 
 def _split(idx, spans, axis, cut):
     """The objects of ``idx`` that touch the low side of ``cut``, and those touching the high side."""
-    nlow = nhigh = 0
-    for t in range(idx.shape[0]):
-        nlow += spans[axis, idx[t]] < cut
-        nhigh += spans[axis + 2, idx[t]] >= cut
-    lo = np.empty(nlow, dtype=np.int64)
-    hi = np.empty(nhigh, dtype=np.int64)
+    lo = np.empty(idx.shape[0], dtype=np.int64)
+    hi = np.empty(idx.shape[0], dtype=np.int64)
     p = r = 0
     for t in range(idx.shape[0]):
         o = idx[t]
@@ -105,14 +101,14 @@ def _split(idx, spans, axis, cut):
         if spans[axis + 2, o] >= cut:
             hi[r] = o
             r += 1
-    return lo, hi
+    return lo[:p].copy(), hi[:r].copy()
 
 
-def _walk(rects, tris, W, H, strips, nodes, leaves):
-    """``balance.tree_partition`` with the strip chooser, in one call."""
-    n = rects.shape[0]
+def _walk(rt, tris, W, H, strips, nodes, leaves):
+    """``balance.tree_partition`` with the strip chooser, in one call (``rt``: (4, N) rects)."""
+    n = rt.shape[1]
     K = leaves.shape[0]
-    spans, on = _spans(rects, W, H)
+    spans, on = _spans(rt, W, H)
     regs = np.zeros((2 * K - 1, 4), dtype=np.int64)
     regs[0, 2], regs[0, 3] = W, H
     members = [np.flatnonzero(on).astype(np.int64)]
@@ -147,12 +143,16 @@ def _walk(rects, tris, W, H, strips, nodes, leaves):
         members[low], members[high] = _split(idx, spans, axis, cut)
     regions = np.zeros((K, 4), dtype=np.int64)
     visible = np.zeros((K, n), dtype=np.bool_)
+    loads = np.zeros(K, dtype=tris.dtype)
     for label in range(K):
         regions[label] = regs[leaves[label]]
         idx = members[leaves[label]]
+        total = loads[label]
         for t in range(idx.shape[0]):
             visible[label, idx[t]] = True
-    return regions, visible, splits, split_pixels, spans
+            total += tris[idx[t]]
+        loads[label] = total
+    return regions, loads, visible, splits, split_pixels, spans
 
 
 if _jit is not None:
@@ -161,13 +161,14 @@ if _jit is not None:
 
 def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int):
     """The compiled walk on validated inputs (``balance.validate_inputs``): regions, loads,
-    T' masks, splits in p-pos and pixels, spans (4, N). Loads are summed by numpy as the
-    reference sums them (pairwise for float weights)."""
+    T' masks, splits in p-pos and pixels, spans (4, N). Integer loads are exact sums; float
+    loads are summed again by numpy as the reference sums them (pairwise)."""
     nodes, leaves = _TREES.get((tree.rows, tree.cols)) or _TREES.setdefault((tree.rows, tree.cols), tree_arrays(tree))
-    rects = np.ascontiguousarray(rects, dtype=np.float64)
-    regions, visible, splits, split_pixels, spans = _walk(rects, tris, int(size[0]), int(size[1]), int(strips),
-                                                          nodes, leaves)
-    loads = np.array([tris[v].sum() for v in visible], dtype=tris.dtype)  # K ranks, not objects
+    rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
+    regions, loads, visible, splits, split_pixels, spans = _walk(rt, tris, int(size[0]), int(size[1]),
+                                                                 int(strips), nodes, leaves)
+    if tris.dtype.kind == "f":
+        loads = np.array([tris[v].sum() for v in visible], dtype=tris.dtype)  # K ranks, not objects
     return regions, loads, visible, splits, split_pixels, spans
 
 
