@@ -163,7 +163,10 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
     """The compiled walk on validated inputs (``balance.validate_inputs``): regions, loads,
     T' masks, splits in p-pos and pixels, spans (4, N). Integer loads are exact sums; float
     loads are summed again by numpy as the reference sums them (pairwise)."""
-    nodes, leaves = _TREES.get((tree.rows, tree.cols)) or _TREES.setdefault((tree.rows, tree.cols), tree_arrays(tree))
+    shape = (tree.rows, tree.cols)
+    if shape not in _TREES:
+        _TREES[shape] = tree_arrays(tree)
+    nodes, leaves = _TREES[shape]
     rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
     regions, loads, visible, splits, split_pixels, spans = _walk(rt, tris, int(size[0]), int(size[1]),
                                                                  int(strips), nodes, leaves)

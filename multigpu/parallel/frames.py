@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-from multigpu.config import WalkConfig
+from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core import kernel
 from multigpu.core.bounds import make_projector
 from multigpu.core.camera import Camera, frame_matrices
@@ -66,6 +66,7 @@ class Frames:
         self.balances = list(STRATEGIES) if cfg.decomposition == "screen" else [cfg.decomposition]
         self.planners: dict = {}  # decomposition per strategy, built at its first frame (the same on every rank)
         self.using = self.balances.index(cfg.balance) if cfg.decomposition == "screen" else 0
+        self.balance_ids = [BALANCE_NAMES.index(b) for b in self.balances]  # the CSV's balance column
         self.decomposition = self._planner(self.using)
         self.broadcast = cfg.partition == "broadcast" and self.K > 1  # screen only (checked at the door)
         self.project = make_projector(scene, cfg.bounds)
@@ -78,7 +79,7 @@ class Frames:
         self.row = np.zeros(len(COLUMNS) + 1)  # + stop flag
         self.allrows = np.zeros((self.K, len(COLUMNS) + 1))
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
-        self.interactive = cfg.path == "interactive"
+        self.interactive = cfg.path == INTERACTIVE
         self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
         self.done = 0
         self.learn = None  # (planner, frame, work, times): observed at the start of the next frame
@@ -187,7 +188,7 @@ class Frames:
                   "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
                   "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
                   "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
-                  "input_ms": t.ms("input"), "balance": self._balance_index()}
+                  "input_ms": t.ms("input"), "balance": self.balance_ids[self.using]}
         for c, v in values.items():
             self.row[self.col[c]] = v
         # a signal or a window event seen here stops every rank after this frame
@@ -204,9 +205,6 @@ class Frames:
         wait_all([self.comm.Igather(self.back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
         if self.rank == 0:
             self.record.image(f, stitch(self.gathered, self.tiles, self.canvas.size), work.rects, mosaic_due)
-
-    def _balance_index(self) -> int:
-        return BALANCE_NAMES.index(self.balances[self.using])
 
     def _camera(self, f: int, t: Timer):
         """The input phase of a window run (every rank the same camera and settings), then

@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from multigpu.config import INTERACTIVE
 from multigpu.core.navigate import Navigator
 from multigpu.core.work import Work
 from multigpu.display.hud import overlay, paste, stats_panel
@@ -57,7 +58,7 @@ class Live:
             lo, hi = scene.bounds
             navigator = Navigator(lo - off, hi - off, start)
         self.steering = Steering(comm, cfg.timeout, len(balances), balance, controls, navigator, cfg.offset,
-                                 interactive=cfg.path == "interactive")
+                                 interactive=cfg.path == INTERACTIVE)
         self.monitor = monitor
         self.tiles = cfg.canvas.tiles()
         self.scale = monitor_scale(cfg.canvas.size) if cfg.monitor is not None else 0
@@ -87,7 +88,7 @@ class Live:
     def _panel(self, control: Control, rows: np.ndarray) -> np.ndarray:
         get = lambda c: rows[:, self.col[c]]
         phases = np.stack([get("load_balancing_cpu_ms"), get("rendering_cpu_ms"), get("frame_exchange_cpu_ms")], 1)
-        mode = ("orbit" if control.orbiting else "walk") if self.cfg.path == "interactive" else "path"
+        mode = ("orbit" if control.orbiting else "walk") if self.cfg.path == INTERACTIVE else "path"
         return stats_panel(self.fps, self.balances[control.balance], phases, get("triangles"), mode,
                            width=min(220, self.cfg.tile[0]))
 
