@@ -58,3 +58,51 @@ def test_extremes_equal_the_reference():
             same(rects, tris, grid, size, 2048)
     same(np.full((10, 4), np.nan), np.ones(10, dtype=np.int64), (2, 2), (64, 64), 16)  # nothing visible
     same(np.zeros((0, 4)), np.zeros(0, dtype=np.int64), (2, 3), (64, 64), 16)
+
+
+# -- the compiled box projection (core/kernel/project.py) against bounds.py's numpy reference
+
+def same_rects(bmin, bmax, view, proj, dtype):
+    from multigpu.core.bounds import BoxProjector
+
+    n = len(bmin)
+    ref_cov, got_cov = np.full(n, -1.0), np.full(n, -2.0)
+    ref = BoxProjector(bmin, bmax, dtype, compiled=False)(view, proj, ref_cov)
+    got = BoxProjector(bmin, bmax, dtype, compiled=True)(view, proj, got_cov)
+    assert np.array_equal(ref, got, equal_nan=True), np.flatnonzero(~np.isclose(ref, got, equal_nan=True).all(1))
+    assert np.array_equal(ref_cov, got_cov)
+    plain = BoxProjector(bmin, bmax, dtype, compiled=True)(view, proj)  # without coverage: the same rects
+    assert np.array_equal(plain, got, equal_nan=True)
+
+
+scale = st.sampled_from([1e-3, 1.0, 50.0, 1e4, 1e8])
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=st.data(), n=st.integers(0, 40), s=scale, dtype=st.sampled_from([np.float32, np.float64]),
+       near=st.sampled_from([1e-6, 0.1, 1.0]), fov=st.floats(5.0, 150.0))
+def test_compiled_projection_equals_the_reference(data, n, s, dtype, near, fov):
+    from multigpu.core.camera import look_at, perspective
+
+    f = st.floats(-3.0, 3.0, allow_nan=False)
+    c = np.array(data.draw(st.lists(st.tuples(f, f, f), min_size=n, max_size=n)), dtype=np.float64).reshape(-1, 3)
+    h = np.abs(np.array(data.draw(st.lists(st.tuples(f, f, f), min_size=n, max_size=n)),
+                        dtype=np.float64).reshape(-1, 3)) * data.draw(st.sampled_from([0.0, 1e-9, 0.1, 1.0]))
+    eye = np.array(data.draw(st.tuples(f, f, f))) * s + data.draw(st.sampled_from([0.0, 1e7]))
+    look = eye + np.array(data.draw(st.tuples(f, f, f))) + [1e-3, 0, 0]
+    view = look_at(eye, look, [0, 0, 1] if abs(look[2] - eye[2]) < 1 else [0, 1, 0])
+    proj = perspective(fov, data.draw(st.sampled_from([0.25, 1.0, 3.0])), near * s, 1e3 * s)
+    centre = eye + c * s
+    same_rects(centre - h * s, centre + h * s, view, proj, dtype)
+
+
+def test_compiled_projection_on_a_walkthrough():
+    from multigpu.core.camera import frame_matrices
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import generate
+
+    scene, _ = load_scene(SceneSpec(triangles=20_000))
+    path = generate("walkthrough", scene, 24)
+    for f in range(len(path)):
+        view, proj, _ = frame_matrices(path.camera(f), (512, 512))
+        same_rects(scene.bmin, scene.bmax, view, proj, np.float32)

@@ -60,7 +60,7 @@ class BoxProjector:
     ``BoxProjector(bmin, bmax)(view, proj)`` equals ``project_boxes(bmin, bmax, view, proj)``.
     """
 
-    def __init__(self, bmin, bmax, dtype=np.float32, chunk: int = 1 << 15):
+    def __init__(self, bmin, bmax, dtype=np.float32, chunk: int = 1 << 15, compiled: bool | None = None):
         bmin = np.asarray(bmin, dtype=np.float64)
         bmax = np.asarray(bmax, dtype=np.float64)
         if bmin.ndim != 2 or bmin.shape[1] != 3 or bmax.shape != bmin.shape:
@@ -70,6 +70,13 @@ class BoxProjector:
         self.center = np.ascontiguousarray(((bmin + bmax) * 0.5).T)  # (3, N) float64
         self.half64 = np.ascontiguousarray(np.abs(bmax - bmin).T * 0.5)  # (3, N) float64
         self.half = self.half64.astype(self.dtype)  # per-corner offsets in ``dtype``
+        from multigpu.core import kernel
+
+        if compiled and not kernel.available():
+            raise ValueError("compiled=True needs numba (pip install numba)")
+        # the compiled projection (core/kernel/project.py: the same rects, bit for bit) where
+        # numba is installed, unless compiled=False asks for this module's numpy reference
+        self.compiled = kernel.available() if compiled is None else bool(compiled)
 
     def __len__(self) -> int:
         return self.center.shape[1]
@@ -84,6 +91,12 @@ class BoxProjector:
         M = _check(view, proj)
         n = len(self)
         out = np.empty((4, n))
+        if self.compiled:
+            from multigpu.core.kernel import project_boxes
+
+            project_boxes(self.center, self.half, self.half64, M, reach_rows(M), float(np.finfo(self.dtype).eps) * 16,
+                          FAR_TOL, _SIGNS, _EDGES, _FACES, _NEXT, out, coverage)
+            return out.T
         for s in range(0, n, self.chunk):  # blocks of objects, not objects
             e = min(n, s + self.chunk)
             _boxes_block(self.center[:, s:e], self.half[:, s:e], self.half64[:, s:e], M, self.dtype, out[:, s:e],
@@ -153,7 +166,29 @@ def _far_slack(proj: np.ndarray) -> float:
 _PLANES = np.array([[1, 0, 0, 1], [-1, 0, 0, 1], [0, 1, 0, 1], [0, -1, 0, 1], [0, 0, 1, 1], [0, 0, -1, 1]],
                    dtype=np.float64)
 _NEAR, _FAR = 4, 5
-SIDE_CULL_MAX = 16384  # blocks up to this many boxes are culled by the side planes too
+
+
+def _affine(M: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(4, n) clip coordinates of points ``p`` (3, n): ((m0*x + m1*y) + m2*z) + m3 per row,
+    added left to right (no BLAS: the compiled kernel forms every value the same way)."""
+    out = M[:, 0:1] * p[0]
+    out += M[:, 1:2] * p[1]
+    out += M[:, 2:3] * p[2]
+    out += M[:, 3:]
+    return out
+
+
+def _dot3(a: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """(n,) a0*h0 + a1*h1 + a2*h2 for ``h`` (3, n), added left to right."""
+    out = a[0] * h[0]
+    out += a[1] * h[1]
+    out += a[2] * h[2]
+    return out
+
+
+def reach_rows(M: np.ndarray) -> np.ndarray:
+    """(6, 3) |plane @ M[:, :3]|: how far a box's half extents reach along each plane's normal."""
+    return np.abs(_PLANES @ M[:, :3])
 
 
 def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
@@ -164,19 +199,16 @@ def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
     needs no corners: boxes wholly outside a plane are culled first, and only the rest get
     their 8 corners projected.
     """
-    clip_c = np.dot(M[:, :3], center)  # (4, n) float64, camera-relative
-    clip_c += M[:, 3:]
-    w_r = np.dot(np.abs(M[3, :3]), half64)
+    clip_c = _affine(M, center)  # (4, n) float64, camera-relative
+    w_r = _dot3(np.abs(M[3, :3]), half64)
     outside = np.zeros(clip_c.shape[1], dtype=bool)
-    front = None  # set by the near plane, which every block tests
-    # small blocks: cull by all 6 planes (numpy calls cost more than arithmetic there, and the
-    # corners of boxes off to the sides are skipped); large blocks: near and far only (6 plane
-    # passes cost more than the corners they save when most boxes are in view). Same rects.
-    planes = range(6) if clip_c.shape[1] <= SIDE_CULL_MAX else (_NEAR, _FAR)
-    for i in planes:  # planes, not objects: one pass each over the block
-        plane = _PLANES[i]
-        centre = np.dot(plane, clip_c)  # the centre's distance
-        reach = np.dot(np.abs(plane @ M[:, :3]), half64)  # how far the box reaches along the normal
+    front = None  # set by the near plane
+    reach_all = reach_rows(M)
+    for i in range(6):  # planes, not objects: one pass each over the block
+        axis = i // 2
+        # the centre's distance (a plane adds or subtracts one row to w: exact in any order)
+        centre = clip_c[axis] + clip_c[3] if i % 2 == 0 else -clip_c[axis] + clip_c[3]
+        reach = _dot3(reach_all[i], half64)  # how far the box reaches along the normal
         if i == _NEAR:
             front = centre >= reach  # wholly in front of the near plane
         centre += reach  # the box's farthest point inside
@@ -208,9 +240,14 @@ def _boxes_block(center, half, half64, M, dtype, out, coverage=None) -> None:
             coverage[~shown] = 1.0
     slow = np.flatnonzero(~front & ~outside)
     if slow.size:  # few boxes cross the near plane
-        corners = (half64[:, slow].T[:, None, :] * _SIGNS) @ M[:, :3].T  # (m, 8, 4) offsets in clip space
-        corners += clip_c[:, slow].T[:, None, :]
-        _clipped_rects(corners.transpose(2, 0, 1), out, slow)
+        off = half64[:, slow].T[:, None, :] * _SIGNS  # (m, 8, 3) corner offsets
+        corners = np.empty((4,) + off.shape[:2])
+        for r in range(4):  # clip rows, each ((ox*m0 + oy*m1) + oz*m2) + centre
+            corners[r] = off[..., 0] * M[r, 0]
+            corners[r] += off[..., 1] * M[r, 1]
+            corners[r] += off[..., 2] * M[r, 2]
+            corners[r] += clip_c[r, slow][:, None]
+        _clipped_rects(corners, out, slow)
 
 
 def _corner_ndc(clip_c, half, M, dtype) -> tuple[np.ndarray, np.ndarray]:

@@ -11,21 +11,9 @@ Without numba the reference runs (``available()`` says which).
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
-try:
-    import numba
-
-    _jit = numba.njit(cache=True, nogil=True)
-except ImportError:  # the numpy reference runs instead
-    numba = None
-    _jit = None
-
-
-def available() -> bool:
-    return numba is not None
+from multigpu.core.kernel.jit import compile_all
 
 
 def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray]:
@@ -155,8 +143,7 @@ def _walk(rt, tris, W, H, strips, nodes, leaves):
     return regions, loads, visible, splits, split_pixels, spans
 
 
-if _jit is not None:
-    _spans, _choose, _split, _walk = (_jit(f) for f in (_spans, _choose, _split, _walk))
+compile_all(globals(), ("_spans", "_choose", "_split", "_walk"))
 
 
 def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int):
@@ -176,16 +163,3 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
 
 
 _TREES: dict = {}
-
-
-def warm() -> float:
-    """Compile (or load from numba's cache) every signature a run uses; seconds it took."""
-    if not available():
-        return 0.0
-    from multigpu.core.tree import gpu_tree
-
-    t0 = time.perf_counter()
-    rects = np.array([[0.1, 0.1, 0.6, 0.7], [0.5, 0.2, 0.9, 0.9], [np.nan] * 4])
-    for tris in (np.array([3, 5, 7], dtype=np.int64), np.array([3.0, 5.0, 7.0])):
-        strip_partition(rects, tris, gpu_tree(2, 2), (64, 64), 16)
-    return time.perf_counter() - t0

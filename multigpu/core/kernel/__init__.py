@@ -1,0 +1,59 @@
+"""The compiled frame kernel (numba, nopython, ``cache=True``): the per-frame steps of balancing
+as a few compiled calls where their numpy references (``bounds``, ``balance``, ``drawlist``...)
+make hundreds of C-level calls.
+
+* ``project.py``: box projection with frustum culling, near-plane clipping and coverage;
+* ``walk.py``: the paper's balancer: pixel spans, GPU-tree walk with the strip chooser (Start/End
+  arrays, prefix/postfix sums, the split nearest balRatio), T' masks and loads.
+
+Every kernel forms its values with the same operations in the same order as its reference, so
+results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
+compiles (first run on a machine) or loads every signature at setup, never in a frame; without
+numba the references run (``available()`` says which).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from multigpu.core.kernel.jit import numba
+from multigpu.core.kernel.walk import strip_partition, tree_arrays
+
+
+def available() -> bool:
+    """Whether numba is installed (the kernels run compiled)."""
+    return numba is not None
+
+
+def project_boxes(center, half, half64, M, reach, widen, far_tol, signs, edges, faces, nxt, out,
+                  coverage=None) -> None:
+    """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage."""
+    from multigpu.core.kernel.project import _project
+
+    cov = np.empty(0) if coverage is None else coverage
+    _project(center, half, half64, M, np.ascontiguousarray(M[[0, 1, 3], :3], dtype=half.dtype), reach, widen,
+             far_tol, signs, edges, faces, nxt, out, cov, coverage is not None)
+
+
+def warm() -> float:
+    """Compile (or load from numba's cache) every signature a run uses; seconds it took."""
+    if not available():
+        return 0.0
+    from multigpu.core.bounds import BoxProjector
+    from multigpu.core.camera import look_at, perspective
+    from multigpu.core.tree import gpu_tree
+
+    t0 = time.perf_counter()
+    rects = np.array([[0.1, 0.1, 0.6, 0.7], [0.5, 0.2, 0.9, 0.9], [np.nan] * 4])
+    for tris in (np.array([3, 5, 7], dtype=np.int64), np.array([3.0, 5.0, 7.0])):
+        strip_partition(rects, tris, gpu_tree(2, 2), (64, 64), 16)
+    view, proj = look_at([0, -5, 1], [0, 0, 0], [0, 0, 1]), perspective(60, 1.0, 0.1, 100)
+    box = BoxProjector(np.array([[-1.0, -1, -1], [0, -6, 0]]), np.array([[1.0, 1, 1], [1, -4, 2]]), compiled=True)
+    box(view, proj)
+    box(view, proj, np.empty(2))
+    return time.perf_counter() - t0
+
+
+__all__ = ["available", "warm", "strip_partition", "tree_arrays", "project_boxes"]
