@@ -106,3 +106,42 @@ def test_compiled_projection_on_a_walkthrough():
     for f in range(len(path)):
         view, proj, _ = frame_matrices(path.camera(f), (512, 512))
         same_rects(scene.bmin, scene.bmax, view, proj, np.float32)
+
+
+# -- cross-segment balancing compiled (core/kernel/pieces.py) against strategies/cross.py
+
+def same_partition(a, b):
+    for name in FIELDS:
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype and np.array_equal(x, y), name
+    assert (a.pieces is None) == (b.pieces is None)
+    if a.pieces is not None:
+        for pa, pb, ma, mb in zip(a.pieces, b.pieces, a.piece_visible, b.piece_visible):
+            assert np.array_equal(np.asarray(pa).reshape(-1, 4), np.asarray(pb).reshape(-1, 4))
+            assert ma.shape == mb.shape and np.array_equal(ma, mb)
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data(), rows=st.integers(1, 4), cols=st.integers(1, 4), n=st.integers(0, 50), frames=st.integers(2, 6))
+def test_compiled_cross_equals_the_reference(data, rows, cols, n, frames):
+    from multigpu.strategies.cross import CrossSegment
+
+    tw, th = data.draw(st.integers(1, 80)), data.draw(st.integers(1, 80))
+    size = (cols * tw, rows * th)
+    k = rows * cols
+    ref = CrossSegment((rows, cols), size, data.draw(st.sampled_from([2, 7, 2048])), compiled=False)
+    got = CrossSegment(ref.grid, size, ref.strips, compiled=True)
+    for f in range(frames):
+        pts = np.array(data.draw(st.lists(st.tuples(coord, coord, coord, coord), min_size=n, max_size=n)),
+                       dtype=np.float64).reshape(-1, 4)
+        with np.errstate(invalid="ignore"):
+            rects = np.concatenate([np.minimum(pts[:, :2], pts[:, 2:]), np.maximum(pts[:, :2], pts[:, 2:])], axis=1)
+        rects[np.isnan(rects).any(axis=1)] = np.nan
+        tris = np.array(data.draw(st.lists(st.integers(0, 10**6), min_size=n, max_size=n)), dtype=np.int64)
+        a, b = ref.plan(rects, tris), got.plan(rects, tris)
+        same_partition(a, b)
+        assert np.array_equal(ref.shares, got.shares)
+        times = np.array(data.draw(st.lists(st.sampled_from([0.0, 1e-9, 0.5, 1.0, 3.0, 40.0]), min_size=k,
+                                            max_size=k)))
+        ref.observe(f, a, times)
+        got.observe(f, b, times)

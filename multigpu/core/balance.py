@@ -41,6 +41,9 @@ class Partition:
     pieces, piece_visible : None, or per rank the (M_k, 4) rects it renders and their (M_k, N)
         masks, for strategies that give a rank more than one rect (cross-segment); then
         ``regions`` holds each rank's bounding box and the pieces tile the display.
+    features : None, or what the strategy that planned it needs to learn from its measured
+        times (the cost model's per-rank triangles, pixels and prediction): a strategy's
+        ``observe`` reads the partition it is given, never state a later ``plan`` changed.
     """
 
     regions: np.ndarray
@@ -51,6 +54,7 @@ class Partition:
     spans: np.ndarray | None = None
     pieces: tuple | None = None
     piece_visible: tuple | None = None
+    features: dict | None = None
 
     @property
     def imbalance(self) -> float:
@@ -178,14 +182,11 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
         same partition, bit for bit); None uses it where numba is installed, False runs this
         module's numpy reference.
     """
-    if fill is None and compiled is not False:
-        from multigpu.core import kernel
+    from multigpu.core import kernel
 
-        if kernel.available():
-            rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips)
-            return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips)))
-        if compiled:
-            raise ValueError("compiled=True needs numba (pip install numba)")
+    if fill is None and kernel.use(compiled):
+        rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips)
+        return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips)))
     rects_a = np.asarray(rects)
     density = None
     if fill is not None:

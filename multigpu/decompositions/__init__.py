@@ -20,20 +20,14 @@ from multigpu.decompositions.screen import Screen
 REGISTRY: dict[str, type] = {cls.name: cls for cls in (Screen, Database, Bins)}
 
 
-def make_decomposition(name: str, grid, size, strips: int, scene, balance: str = "strips",
-                       bin_size: int = 64, bin_pattern: str = "diagonal", db_ranges: str = "visible",
-                       rank: int | None = None) -> Decomposition:
-    """The decomposition ``name`` for a scene on a ``grid`` wall of ``size`` pixels; ``rank``
-    (when given) lets a decomposition compute only what that rank draws."""
-    if name == "screen":
-        from multigpu.strategies import make_strategy
-
-        return Screen(make_strategy(balance, grid, size, strips))
-    if name == "db":
-        return Database(grid, size, scene.centers, scene.tris, db_ranges)
-    if name == "bins":
-        return Bins(grid, size, bin_size, bin_pattern, rank)
-    raise ValueError(f"unknown decomposition '{name}' (known: {', '.join(REGISTRY)})")
+def make_decomposition(cfg, scene, balance: str | None = None, rank: int | None = None) -> Decomposition:
+    """The decomposition ``cfg.decomposition`` built from the configuration (a ``WalkConfig``:
+    grid, visible size, strips and the decomposition's own settings) for ``scene``, balancing
+    with ``balance`` (default ``cfg.balance``) where it balances; ``rank`` (when given) lets a
+    decomposition compute only what that rank draws."""
+    if cfg.decomposition not in REGISTRY:
+        raise ValueError(f"unknown decomposition '{cfg.decomposition}' (known: {', '.join(REGISTRY)})")
+    return REGISTRY[cfg.decomposition].from_config(cfg, scene, balance or cfg.balance, rank)
 
 
 __all__ = ["REGISTRY", "PATTERNS", "RANGES", "Decomposition", "Screen", "Database", "Bins", "make_decomposition"]

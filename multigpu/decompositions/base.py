@@ -1,6 +1,7 @@
 """The decomposition contract: what every rank draws each frame and where its pixels go.
 
-A decomposition turns a frame's object rects into ``core.work.Work`` (``plan``), learns from
+A decomposition builds itself from the configuration (``from_config``: a new one is one file
+and one line in the registry), turns a frame's object rects into ``core.work.Work`` (``plan``), learns from
 the measured per-rank render times if it wants to (``observe``), and says what it did
 (``report``). Pure: no MPI, no GL; every rank runs its own copy on the same inputs.
 """
@@ -19,6 +20,10 @@ class Decomposition(Protocol):
     name: ClassVar[str]
     depth: ClassVar[bool]  # pieces carry depth and are composited by the nearest fragment
     needs_coverage: bool  # whether ``plan`` wants per-object silhouette coverage
+
+    @classmethod
+    def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Decomposition":
+        """Built from a ``WalkConfig`` (the registry's one way in: ``make_decomposition``)."""
 
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
         """This frame's work from (N, 4) normalized object rects and (N,) triangle counts."""

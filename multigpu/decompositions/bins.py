@@ -30,6 +30,10 @@ class Bins:
         self.rects = tuple(rects[self.who == k] for k in range(self.k))
         self.bins = tuple((bx[self.who == k], by[self.who == k]) for k in range(self.k))
 
+    @classmethod
+    def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Bins":
+        return cls(cfg.grid, cfg.size, cfg.bin_size, cfg.bin_pattern, rank)
+
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
         spans, onscreen = pixel_spans(rects, self.size)
         idx = np.flatnonzero(onscreen)

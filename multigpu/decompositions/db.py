@@ -53,6 +53,10 @@ class Database:
         self.ranges = ranges
         self.static_owner = ranges_by_weight(self.order, tris, self.k)
 
+    @classmethod
+    def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Database":
+        return cls(cfg.grid, cfg.size, scene.centers, scene.tris, cfg.db_ranges)
+
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
         spans, onscreen = pixel_spans(rects, self.size)
         tris = np.asarray(tris, dtype=np.int64)

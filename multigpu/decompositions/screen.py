@@ -19,11 +19,23 @@ class Screen:
         self.strategy = strategy
         self.needs_coverage = strategy.needs_coverage
 
-    def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
-        return from_partition(self.strategy.plan(rects, tris, coverage), tris)
+    @classmethod
+    def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Screen":
+        from multigpu.strategies import make_strategy
 
-    def plan_from(self, part, tris) -> Work:
-        """Work from a partition planned elsewhere (``--partition broadcast``)."""
+        return cls(make_strategy(balance, cfg.grid, cfg.size, cfg.strips))
+
+    def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
+        return from_partition(self.partition(rects, tris, coverage), tris)
+
+    def partition(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None):
+        """The strategy's partition alone (``--partition broadcast``: rank 0 plans it, every
+        rank turns it into work with ``from_partition``)."""
+        return self.strategy.plan(rects, tris, coverage)
+
+    @staticmethod
+    def from_partition(part, tris) -> Work:
+        """Work from a partition planned elsewhere."""
         return from_partition(part, tris)
 
     def observe(self, frame: int, work: Work, times: np.ndarray) -> None:

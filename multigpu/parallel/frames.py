@@ -14,10 +14,9 @@ import numpy as np
 
 from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core import kernel
-from multigpu.core.bounds import make_projector
-from multigpu.core.camera import Camera, frame_matrices
+from multigpu.core.camera import Camera
+from multigpu.core.planner import Planner
 from multigpu.core.work import Work, transfers
-from multigpu.decompositions import make_decomposition
 from multigpu.parallel.composite import composite
 from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
 from multigpu.parallel.mosaic import stitch
@@ -27,7 +26,6 @@ from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
 from multigpu.parallel.shared import SharedPieces, composite_shared
 from multigpu.parallel.timer import Timer
 from multigpu.scene.models import axis_name
-from multigpu.strategies import REGISTRY as STRATEGIES
 
 
 def fault(rank: int, where: int | str) -> None:
@@ -62,17 +60,12 @@ class Frames:
         tw, th = cfg.tile
         self.canvas = cfg.canvas
         self.tiles = self.canvas.tiles()
-        # what B cycles through: every strategy of the screen decomposition (others: just that one)
-        self.balances = list(STRATEGIES) if cfg.decomposition == "screen" else [cfg.decomposition]
-        self.planners: dict = {}  # decomposition per strategy, built at its first frame (the same on every rank)
-        self.using = self.balances.index(cfg.balance) if cfg.decomposition == "screen" else 0
-        self.balance_ids = [BALANCE_NAMES.index(b) for b in self.balances]  # the CSV's balance column
-        self.decomposition = self._planner(self.using)
-        self.broadcast = cfg.partition == "broadcast" and self.K > 1  # screen only (checked at the door)
-        self.project = make_projector(scene, cfg.bounds)
-        self.coverage = np.ones(scene.n_objects)  # per-object silhouette coverage, for strategies that use it
+        self.planner = Planner(cfg, scene, self.rank)  # MPI-free: projection, strategy, decomposition
+        self.balance_ids = [BALANCE_NAMES.index(b) for b in self.planner.balances]  # the CSV's balance column
+        self.relay = self._relay if cfg.partition == "broadcast" and self.K > 1 else None  # screen only (door)
+        depth = self.planner.decomposition.depth
         self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
-        self.zback = np.ones((th, tw), dtype=np.float32) if self.decomposition.depth else None
+        self.zback = np.ones((th, tw), dtype=np.float32) if depth else None
         self.background = renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
                                           np.zeros(scene.n_objects, dtype=bool))[0, 0]  # the clear colour
         self.col = {c: i for i, c in enumerate(COLUMNS)}
@@ -82,9 +75,9 @@ class Frames:
         self.interactive = cfg.path == INTERACTIVE
         self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
         self.done = 0
-        self.learn = None  # (planner, frame, work, times): observed at the start of the next frame
+        self.learn = None  # (frame, times): observed at the start of the next frame
         self.shared = None if cfg.exchange != "shared" else SharedPieces.make(
-            comm, self.canvas.size, self.decomposition.depth, cfg.timeout)
+            comm, self.canvas.size, depth, cfg.timeout)
         self.window = presenter.mode == "window"
         self.live = None
         if self.window:
@@ -97,40 +90,21 @@ class Frames:
                 controls = take_input(presenter, *([monitor.window] if monitor is not None else []))
                 if self.interactive:
                     start = _unshifted(path.camera(0), cfg.offset)
-            self.live = Live(cfg, comm, scene, self.balances, self.using, controls, monitor, start)
+            self.live = Live(cfg, comm, scene, self.planner.balances, self.planner.using, controls, monitor, start)
         doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
         doc["exchange"] = "shared" if self.shared is not None else "messages"
         self.config_doc = doc
         self.record = None
         if self.rank == 0:
-            self.record = RunRecord(out, self.K, self.n_frames, doc, lambda: self.decomposition.report(), cfg.video,
+            self.record = RunRecord(out, self.K, self.n_frames, doc, self.planner.report, cfg.video,
                                     cfg.progress, cfg.overlay, cfg.record)
 
-    def _planner(self, i: int):
-        """The decomposition planning with strategy ``balances[i]`` (built once, on every rank)."""
-        if i not in self.planners:
-            cfg = self.cfg
-            balance = self.balances[i] if cfg.decomposition == "screen" else cfg.balance
-            self.planners[i] = make_decomposition(cfg.decomposition, cfg.grid, cfg.size, cfg.strips, self.scene,
-                                                  balance, cfg.bin_size, cfg.bin_pattern, cfg.db_ranges,
-                                                  rank=self.rank)
-        return self.planners[i]
+    def _relay(self, partition):
+        """``--partition broadcast``: rank 0 computes the partition, every rank receives it."""
+        part = partition() if self.rank == 0 else None
+        return broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
 
     # -- phases of one frame
-    def plan(self, f: int, camera):
-        """This frame's work (every rank plans the same, or rank 0 plans and broadcasts),
-        planned over the visible pixels and moved onto the canvas."""
-        view, proj, light = frame_matrices(camera, self.canvas.size)
-        tris, d, canvas = self.scene.tris, self.decomposition, self.canvas
-        cov = self.coverage if d.needs_coverage else None
-        rects = canvas.to_visible(self.project(view, proj, cov) if cov is not None else self.project(view, proj))
-        if self.broadcast:
-            part = d.strategy.plan(rects, tris, cov) if self.rank == 0 else None
-            part = broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
-            work = d.plan_from(part, tris)
-        else:
-            work = d.plan(f, rects, tris, cov) if cov is not None else d.plan(f, rects, tris)
-        return canvas.to_canvas(work, rects, tris), (view, proj, light)
 
     def render(self, work: Work, view, proj, light) -> list:
         """Every piece this rank renders: (rgb, depth or None)."""
@@ -188,7 +162,7 @@ class Frames:
                   "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
                   "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
                   "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
-                  "input_ms": t.ms("input"), "balance": self.balance_ids[self.using]}
+                  "input_ms": t.ms("input"), "balance": self.balance_ids[self.planner.using]}
         for c, v in values.items():
             self.row[self.col[c]] = v
         # a signal or a window event seen here stops every rank after this frame
@@ -213,10 +187,8 @@ class Frames:
         if self.live is not None:
             with t.phase("input"):
                 control = self.live.control()
-            if control.balance != self.using:  # every rank switches at this frame
-                self.using = control.balance
-                self.decomposition = self._planner(self.using)
-                self.learn = None  # a strategy learns only from the work it planned
+            if control.balance != self.planner.using:  # every rank switches at this frame
+                self.planner.use(control.balance)
         camera = control.camera if control is not None and control.camera is not None else self.path.camera(f)
         return camera, control
 
@@ -225,11 +197,10 @@ class Frames:
         camera, control = self._camera(f, t)
         with t.phase("balance"):
             fault(self.rank, f)
-            if self.learn is not None:  # the strategy learns from the last frame's times: balancing CPU too
-                planner, *seen = self.learn
-                planner.observe(*seen)
+            if self.learn is not None:  # the last frame's times, to what planned it: balancing CPU too
+                self.planner.observe(*self.learn)
                 self.learn = None
-            work, (view, proj, light) = self.plan(f, camera)
+            work, (view, proj, light) = self.planner.plan(f, camera, self.relay)
         with t.phase("render"):
             rendered = self.render(work, view, proj, light)
         if self.shared is not None:
@@ -241,7 +212,7 @@ class Frames:
             sent = self.compose(f, work, rendered)
         swapped, stop = self.present(t, work, control)
         self.gather_row(f, work, t, sent, swapped, stop)
-        self.learn = (self.decomposition, f, work, self.allrows[:, self.col["rendering_cpu_ms"]].copy())
+        self.learn = (f, self.allrows[:, self.col["rendering_cpu_ms"]].copy())
         if self.rank == 0:  # rows first: the summary always matches the CSV
             rows = self.allrows[:, :len(COLUMNS)].copy()
             if self.window:  # swap moments after the frame's first swap; the skew on every row

@@ -35,8 +35,6 @@ class Adaptive(CostModel):
     def __post_init__(self):
         super().__post_init__()
         self.corr: np.ndarray | None = None
-        self._pred: np.ndarray | None = None
-        self._visible: np.ndarray | None = None
 
     def plan(self, rects, tris, coverage: np.ndarray | None = None):
         tris = np.asarray(tris)
@@ -51,25 +49,24 @@ class Adaptive(CostModel):
         p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill)
         vis = p.visible
         loads = vis @ tris.astype(np.int64)
-        p = Partition(p.regions, loads, vis, p.splits, p.split_pixels, p.spans)
         px, px_corr = rank_pixels(np.asarray(rects, np.float64), vis, p.regions, self.size,
                                   np.stack([cov, cov * self.corr]), p.spans).T
-        self._features = (loads.astype(np.float64), px)  # the fit sees raw features
-        self._pred = a * (vis @ (tris * self.corr)) + b * px_corr + c
-        self._visible = vis
-        return p
+        # the fit sees raw features; the correction step, this partition's prediction
+        features = {"triangles": loads.astype(np.float64), "pixels": px,
+                    "predicted": a * (vis @ (tris * self.corr)) + b * px_corr + c}
+        return Partition(p.regions, loads, vis, p.splits, p.split_pixels, p.spans, features=features)
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         super().observe(frame, partition, times)
-        if self._pred is None or len(self._samples) < self.warmup:
+        if partition.features is None or self.corr is None or len(self._samples) < self.warmup:
             return
         t = np.asarray(times, dtype=np.float64)
-        pred = np.maximum(self._pred, 1e-9)
+        pred = np.maximum(partition.features["predicted"], 1e-9)
         if not (np.isfinite(t).all() and (t > 0).all()):
             return
         log_s = np.log(t / pred)
         log_s -= log_s.mean()  # relative error only
-        vis = self._visible
+        vis = partition.visible
         count = vis.sum(axis=0)
         seen = count > 0
         step = (log_s @ vis)[seen] / count[seen]  # mean log error over the ranks that drew it

@@ -45,6 +45,7 @@ class Configured:
     grid: tuple[int, int]
     size: tuple[int, int]
     strips: int = 2048
+    compiled: bool | None = None  # the compiled kernel (None: where numba is installed; False: numpy reference)
 
     name: ClassVar[str] = "base"
     needs_coverage: ClassVar[bool] = False

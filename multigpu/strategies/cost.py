@@ -4,7 +4,7 @@ measured per-rank render times; the pixel term is kept only where the scene need
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,7 +37,6 @@ class CostModel(Configured):
 
     def __post_init__(self):
         self._samples: deque = deque(maxlen=self.window)
-        self._features: tuple[np.ndarray, np.ndarray] | None = None
         self.coef = np.array([1.0, 0.0, 0.0])  # a (per triangle), b (per pixel), c
         self.kept = ["triangles"]
         self.why = "warming up: balancing on triangles until enough frames are measured"
@@ -54,14 +53,14 @@ class CostModel(Configured):
                 p = Partition(p.regions, p.visible @ np.asarray(tris, np.int64), p.visible, p.splits, p.split_pixels)
         else:
             p = partition(rects, tris, self.grid, self.size, self.strips)
-        self._features = (p.loads.astype(np.float64), rank_pixels(np.asarray(rects, np.float64), p.visible,
-                                                                   p.regions, self.size, cov, p.spans))
-        return p
+        px = rank_pixels(np.asarray(rects, np.float64), p.visible, p.regions, self.size, cov, p.spans)
+        return replace(p, features={"triangles": p.loads.astype(np.float64), "pixels": px})
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
-        if self._features is None:
+        """One sample per rank from the features of the partition it planned for ``frame``."""
+        if partition.features is None:  # planned elsewhere (a broadcast partition)
             return
-        tri, px = self._features
+        tri, px = partition.features["triangles"], partition.features["pixels"]
         self._samples.append(np.column_stack([tri, px, np.asarray(times, np.float64)]))
         if len(self._samples) >= self.warmup:
             self._fit(np.concatenate(self._samples))

@@ -18,9 +18,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from multigpu.core import kernel
 from multigpu.core.balance import Partition, partition
 from multigpu.core.regions import pixel_spans, tile_regions
 from multigpu.strategies.base import Configured
+
+
+def _seqsum(x: np.ndarray) -> float:
+    """Sum in index order (numpy's ``sum`` pairs terms; the compiled kernel adds in order)."""
+    return float(np.cumsum(x)[-1])
 
 
 def _overlap_area(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -50,13 +56,19 @@ class CrossSegment(Configured):
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
         if self._pieces is None:
-            return partition(rects, tris, self.grid, self.size, self.strips)
+            return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
+        tris = np.asarray(tris)
+        if kernel.use(self.compiled) and tris.dtype.kind in "iu":
+            self.shares, part = kernel.cross_partition(self._pieces, self._times, self.tiles, self.shares,
+                                                       self.damping, self.min_share, rects, tris, self.size)
+            return Partition(*part)
         k = len(self.tiles)
         profiles, loads = self._profiles()
-        new = k * loads / loads.sum() if loads.sum() > 0 else np.ones(k)
+        total = _seqsum(loads)
+        new = k * loads / total if total > 0 else np.ones(k)
         shares = (1 - self.damping) * new + self.damping * self.shares
         shares = np.maximum(shares, self.min_share)
-        self.shares = shares * (k / shares.sum())
+        self.shares = shares * (k / _seqsum(shares))
         pieces = self._split(profiles)
         return self._partition(pieces, rects, tris)
 
@@ -68,7 +80,7 @@ class CrossSegment(Configured):
         per_rank_area = np.bincount(owner, weights=area, minlength=len(self._pieces))
         density = self._times[owner] / np.maximum(per_rank_area[owner], 1.0)  # time per pixel, per piece
         inter = _overlap_area(allp, self.tiles)  # (P, T)
-        loads = (density[:, None] * inter).sum(axis=0)
+        loads = np.cumsum(density[:, None] * inter, axis=0)[-1]  # added in piece order
         profiles = []
         for t, (x0, y0, x1, y1) in enumerate(self.tiles):  # segments, then their pieces: not objects
             ax = 0 if x1 - x0 >= y1 - y0 else 1
@@ -92,7 +104,7 @@ class CrossSegment(Configured):
             helpers = [r for r in range(k) if min(r + 1, hi_r) - max(r, lo_r) > 1e-12]
             used = np.array([min(r + 1, hi_r) - max(r, lo_r) for r in helpers])
             cum = np.cumsum(prof) if prof.sum() > 0 else np.arange(1, prof.size + 1, dtype=np.float64)
-            targets = np.cumsum(used)[:-1] / used.sum() * cum[-1]
+            targets = np.cumsum(used)[:-1] / _seqsum(used) * cum[-1]
             cuts = np.concatenate([[0], np.searchsorted(cum, targets, side="left") + 1, [prof.size]])
             cuts = np.maximum.accumulate(np.minimum(cuts, prof.size))
             x0, y0, x1, y1 = self.tiles[t]

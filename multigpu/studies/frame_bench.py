@@ -1,9 +1,10 @@
 """``multigpu bench frame``: where one rank's per-frame CPU goes, phase by phase, outside GL.
 
-One process plays rank 0 of a 2x2 wall along the scene's walkthrough: learn (the strategy
-observes the last frame's per-rank times, random here), project the bounds, plan (strategy:
-tree walk, masks, loads), the frame's work, the draw list (run-merged
-commands of the rank's mask), the transfer plan and the timing row. Each phase is timed with
+One process plays rank 0 of a 2x2 wall along the scene's walkthrough, planning through the
+frame loop's own ``core.planner.Planner``: learn (the strategy observes the last frame's
+per-rank times, random here), project the bounds, plan (strategy: tree walk, masks, loads, the
+frame's work on the canvas), the draw list (run-merged commands of the rank's mask), the
+transfer plan and the timing row. learn + project + plan is the frame loop's balance phase. Each phase is timed with
 ``time.process_time`` (CPU) per frame; medians are printed, with the C-level calls (numpy
 functions and methods, builtins) one frame makes, counted with ``sys.setprofile`` on every
 tenth frame (left out of the times).
@@ -17,32 +18,28 @@ import time
 
 import numpy as np
 
-PHASES = ("learn", "project", "plan", "work", "drawlist", "transfers", "row")
+PHASES = ("learn", "project", "plan", "drawlist", "transfers", "row")
 
 
 def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), frames: int = 60) -> dict:
-    """Median CPU ms of each per-frame phase (and their total) for rank 0."""
-    from multigpu.core.bounds import make_projector
-    from multigpu.core.camera import frame_matrices
+    """Median CPU ms of each per-frame phase (and their total) for rank 0, planned by the frame
+    loop's own ``Planner``."""
+    from multigpu.config import WalkConfig
     from multigpu.core.drawlist import DrawList
-    from multigpu.core.regions import tile_regions
-    from multigpu.core.work import from_partition, transfers
+    from multigpu.core.planner import Planner
+    from multigpu.core.work import transfers
     from multigpu.parallel.report import COLUMNS
     from multigpu.scene.paths import generate
-    from multigpu.strategies import make_strategy
 
-    size = (grid[1] * tile[0], grid[0] * tile[1])
+    cfg = WalkConfig(grid=tuple(grid), tile=tuple(tile), balance=strategy)
     path = generate("walkthrough", scene, frames)
-    project = make_projector(scene, "box")
-    strat = make_strategy(strategy, grid, size, 2048)
+    planner = Planner(cfg, scene, rank=0)
     draws = DrawList(scene)
-    tiles = tile_regions(grid[0], grid[1], *tile)
-    cov = np.ones(scene.n_objects) if strat.needs_coverage else None
+    tiles = cfg.canvas.tiles()
     row = np.zeros(len(COLUMNS) + 1)
     col = {c: i for i, c in enumerate(COLUMNS)}
     times = {p: [] for p in PHASES}
     rng = np.random.default_rng(0)
-    part = None
     calls = [0]
     counted = []
 
@@ -55,16 +52,14 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
         if counting:
             calls[0] = 0
             sys.setprofile(count)
-        view, proj, _ = frame_matrices(path.camera(f), size)
+        view, proj, _ = planner.matrices(path.camera(f))
         marks = [time.process_time()]
-        if part is not None:  # the last frame's (random) times, observed where the frame loop does
-            strat.observe(f - 1, part, 1.0 + rng.random(len(tiles)))
+        if f:  # the last frame's (random) times, observed where the frame loop does
+            planner.observe(f - 1, 1.0 + rng.random(len(tiles)))
         marks.append(time.process_time())
-        rects = project(view, proj, cov) if cov is not None else project(view, proj)
+        rects = planner.rects(view, proj)
         marks.append(time.process_time())
-        part = strat.plan(rects, scene.tris, cov)
-        marks.append(time.process_time())
-        work = from_partition(part, scene.tris)
+        work = planner.work(f, rects)
         marks.append(time.process_time())
         for m in work.masks[0]:
             draws.commands(m)
@@ -85,6 +80,7 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
     med = {p: float(np.median(v)) for p, v in times.items()}
     med["calls"] = int(np.median(counted)) if counted else 0
     med["total"] = float(np.median(np.sum([times[p] for p in PHASES], axis=0)))
+    med["balancing"] = float(np.median(np.sum([times[p] for p in ("learn", "project", "plan")], axis=0)))
     return med
 
 
@@ -97,13 +93,13 @@ def bench_frame(quick: bool) -> list[dict]:
     rows = []
     print("per-frame CPU ms of rank 0 on a 2x2 wall of 512x512 (process CPU time, median over frames)")
     print(f"{'scene':>6} {'objects':>8} {'strategy':>9} " + " ".join(f"{p:>9}" for p in (*PHASES, "total"))
-          + f" {'calls':>6}")
+          + f" {'balancing':>9} {'calls':>6}")
     for name, spec in scenes:
         scene, _ = load_scene(spec)
         for strategy in ("strips", "time", "cross", "cost", "adaptive", "none"):
             med = frame_phases(scene, strategy, frames=frames)
             rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med})
-            figures = " ".join(f"{med[p]:9.3f}" for p in (*PHASES, "total"))
+            figures = " ".join(f"{med[p]:9.3f}" for p in (*PHASES, "total", "balancing"))
             print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures} {med['calls']:6d}")
     return rows
 

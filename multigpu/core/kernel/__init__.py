@@ -4,7 +4,8 @@ make hundreds of C-level calls.
 
 * ``project.py``: box projection with frustum culling, near-plane clipping and coverage;
 * ``walk.py``: the paper's balancer: pixel spans, GPU-tree walk with the strip chooser (Start/End
-  arrays, prefix/postfix sums, the split nearest balRatio), T' masks and loads.
+  arrays, prefix/postfix sums, the split nearest balRatio), T' masks and loads;
+* ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks.
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
@@ -25,6 +26,34 @@ from multigpu.core.kernel.walk import strip_partition, tree_arrays
 def available() -> bool:
     """Whether numba is installed (the kernels run compiled)."""
     return numba is not None
+
+
+def use(compiled: bool | None) -> bool:
+    """Whether to run a kernel: ``compiled`` None means where numba is installed; True insists."""
+    if compiled and not available():
+        raise ValueError("compiled=True needs numba (pip install numba)")
+    return available() if compiled is None else bool(compiled)
+
+
+def cross_partition(pieces, times, tiles, shares, damping: float, min_share: float, rects, tris, size):
+    """``strategies.cross``: the new segment shares, and the partition's fields (regions, loads,
+    T' masks, splits, split pixels, spans, pieces and their masks per rank) from the last
+    frame's ``pieces`` (per rank) and measured ``times``."""
+    from multigpu.core.kernel.pieces import _cut, _masks
+
+    k = len(pieces)
+    allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
+    owner = np.repeat(np.arange(k), [len(p) for p in pieces])
+    shares, prects, powner = _cut(allp, owner, np.asarray(times, dtype=np.float64), tiles, shares,
+                                  float(damping), float(min_share))
+    rt = np.ascontiguousarray(np.asarray(rects, dtype=np.float64).T)
+    spans, masks, visible, loads, regions = _masks(rt, np.asarray(tris, dtype=np.int64), int(size[0]), int(size[1]),
+                                                   prects, powner, k)
+    at = np.searchsorted(powner, np.arange(k + 1)).tolist()
+    per_rank = tuple(prects[at[r]:at[r + 1]] for r in range(k))
+    per_mask = tuple(masks[at[r]:at[r + 1]] for r in range(k))
+    none = np.zeros(max(k - 1, 0))
+    return shares, (regions, loads, visible, none, none.astype(np.int64), spans, per_rank, per_mask)
 
 
 def project_boxes(center, half, half64, M, reach, widen, far_tol, signs, edges, faces, nxt, out,
@@ -53,7 +82,13 @@ def warm() -> float:
     box = BoxProjector(np.array([[-1.0, -1, -1], [0, -6, 0]]), np.array([[1.0, 1, 1], [1, -4, 2]]), compiled=True)
     box(view, proj)
     box(view, proj, np.empty(2))
+    from multigpu.strategies.cross import CrossSegment
+
+    cross = CrossSegment((2, 2), (64, 64), 16, compiled=True)
+    tris = np.array([3, 5, 7], dtype=np.int64)
+    cross.observe(0, cross.plan(rects, tris), np.array([1.0, 2.0, 3.0, 4.0]))
+    cross.plan(rects, tris)
     return time.perf_counter() - t0
 
 
-__all__ = ["available", "warm", "strip_partition", "tree_arrays", "project_boxes"]
+__all__ = ["available", "use", "cross_partition", "warm", "strip_partition", "tree_arrays", "project_boxes"]

@@ -1,0 +1,163 @@
+"""Cross-segment balancing compiled (``strategies/cross.py``): the segments' time profiles from
+the last frame's pieces and times, the view equalizer's damped shares, the cuts that give each
+helper its share of a segment, and then every piece's object mask, the ranks' T' masks, loads
+and bounding regions: two compiled calls where the reference makes some 600 numpy calls.
+
+Same operations in the same order as the reference (sequential sums), so pieces, masks and
+loads are identical (tests/test_kernel.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multigpu.core.kernel.jit import compile_all
+from multigpu.core.kernel.walk import _spans
+
+
+def _profiles(allp, owner, k, times, tiles):
+    """Per segment: axis (0: x), start, length, time profile along its longer axis (rows of
+    ``prof``), and its total time (``loads``)."""
+    P, T = allp.shape[0], tiles.shape[0]
+    rank_area = np.zeros(k)
+    for p in range(P):
+        rank_area[owner[p]] += np.float64((allp[p, 2] - allp[p, 0]) * (allp[p, 3] - allp[p, 1]))
+    density = np.empty(P)
+    for p in range(P):
+        density[p] = times[owner[p]] / max(rank_area[owner[p]], 1.0)
+    inter = np.zeros((P, T), dtype=np.int64)
+    for p in range(P):
+        for t in range(T):
+            w = min(allp[p, 2], tiles[t, 2]) - max(allp[p, 0], tiles[t, 0])
+            h = min(allp[p, 3], tiles[t, 3]) - max(allp[p, 1], tiles[t, 1])
+            inter[p, t] = max(w, 0) * max(h, 0)
+    loads = np.zeros(T)
+    longest = 0
+    for t in range(T):
+        loads[t] = density[0] * inter[0, t] if P else 0.0
+        for p in range(1, P):
+            loads[t] += density[p] * inter[p, t]
+        longest = max(longest, tiles[t, 2] - tiles[t, 0], tiles[t, 3] - tiles[t, 1])
+    axes, a0s, lens = np.zeros(T, np.int64), np.zeros(T, np.int64), np.zeros(T, np.int64)
+    prof = np.zeros((T, longest))
+    for t in range(T):
+        x0, y0, x1, y1 = tiles[t, 0], tiles[t, 1], tiles[t, 2], tiles[t, 3]
+        ax = 0 if x1 - x0 >= y1 - y0 else 1
+        a0, a1 = (x0, x1) if ax == 0 else (y0, y1)
+        axes[t], a0s[t], lens[t] = ax, a0, a1 - a0
+        for j in range(P):
+            if inter[j, t] == 0:
+                continue
+            px0, py0, px1, py1 = allp[j, 0], allp[j, 1], allp[j, 2], allp[j, 3]
+            if ax == 0:
+                lo, hi, across = max(px0, x0), min(px1, x1), min(py1, y1) - max(py0, y0)
+            else:
+                lo, hi, across = max(py0, y0), min(py1, y1), min(px1, x1) - max(px0, x0)
+            v = density[j] * across
+            for i in range(lo - a0, hi - a0):
+                prof[t, i] += v
+    return axes, a0s, lens, prof, loads
+
+
+def _seqsum(x):
+    s = x[0]
+    for i in range(1, x.shape[0]):
+        s += x[i]
+    return s
+
+
+def _cut(allp, owner, times, tiles, shares, damping, min_share):
+    """The view equalizer's new shares and every rank's pieces: (shares, rects (Q, 4), owner (Q,)),
+    rank-major, each rank's pieces in segment order."""
+    k = tiles.shape[0]
+    axes, a0s, lens, prof, loads = _profiles(allp, owner, k, times, tiles)
+    total = _seqsum(loads)
+    new = np.empty(k)
+    for t in range(k):
+        new[t] = k * loads[t] / total if total > 0 else 1.0
+    out = np.empty(k)
+    for t in range(k):
+        out[t] = max((1 - damping) * new[t] + damping * shares[t], min_share)
+    scale = k / _seqsum(out)
+    for t in range(k):
+        out[t] = out[t] * scale
+    start = np.zeros(k)
+    for t in range(1, k):
+        start[t] = start[t - 1] + out[t - 1]
+    rects = np.zeros((2 * k * k, 4), dtype=np.int64)
+    who = np.zeros(2 * k * k, dtype=np.int64)
+    seg = np.zeros(2 * k * k, dtype=np.int64)
+    q = 0
+    used = np.empty(k)
+    helpers = np.empty(k, dtype=np.int64)
+    for t in range(k):  # segments
+        lo_r, hi_r = start[t], start[t] + out[t]
+        m = 0
+        for r in range(k):
+            u = min(r + 1.0, hi_r) - max(r * 1.0, lo_r)
+            if u > 1e-12:
+                helpers[m], used[m] = r, u
+                m += 1
+        n = lens[t]
+        cum = np.empty(n)
+        positive = False
+        for i in range(n):
+            positive |= prof[t, i] > 0
+        for i in range(n):
+            cum[i] = (cum[i - 1] if i else 0.0) + prof[t, i] if positive else i + 1.0
+        usum = _seqsum(used[:m])
+        cuts = np.empty(m + 1, dtype=np.int64)
+        cuts[0], cuts[m] = 0, n
+        acc = 0.0
+        for j in range(m - 1):
+            acc += used[j]
+            target = acc / usum * cum[n - 1]
+            cuts[j + 1] = np.searchsorted(cum, target) + 1
+        for j in range(1, m + 1):
+            cuts[j] = max(cuts[j - 1], min(cuts[j], n))
+        x0, y0, x1, y1 = tiles[t, 0], tiles[t, 1], tiles[t, 2], tiles[t, 3]
+        for j in range(m):
+            c0, c1 = cuts[j], cuts[j + 1]
+            if c1 <= c0:
+                continue
+            if axes[t] == 0:
+                rects[q, 0], rects[q, 1], rects[q, 2], rects[q, 3] = a0s[t] + c0, y0, a0s[t] + c1, y1
+            else:
+                rects[q, 0], rects[q, 1], rects[q, 2], rects[q, 3] = x0, a0s[t] + c0, x1, a0s[t] + c1
+            who[q], seg[q] = helpers[j], t
+            q += 1
+    order = np.argsort(who[:q] * k + seg[:q], kind="mergesort")  # rank-major, segments in order
+    return out, rects[:q][order].copy(), who[:q][order].copy()
+
+
+def _masks(rt, tris, W, H, prects, powner, k):
+    """Pixel spans, every piece's object mask (its rect overlaps the object's span), the ranks'
+    T' masks, loads (an object drawn in two pieces counts twice) and bounding regions."""
+    n = rt.shape[1]
+    spans, on = _spans(rt, W, H)
+    P = prects.shape[0]
+    masks = np.zeros((P, n), dtype=np.bool_)
+    visible = np.zeros((k, n), dtype=np.bool_)
+    loads = np.zeros(k, dtype=tris.dtype)
+    regions = np.zeros((k, 4), dtype=np.int64)
+    seen = np.zeros(k, dtype=np.bool_)
+    for p in range(P):
+        r = powner[p]
+        x0, y0, x1, y1 = prects[p, 0], prects[p, 1], prects[p, 2], prects[p, 3]
+        if seen[r]:
+            regions[r, 0], regions[r, 1] = min(regions[r, 0], x0), min(regions[r, 1], y0)
+            regions[r, 2], regions[r, 3] = max(regions[r, 2], x1), max(regions[r, 3], y1)
+        else:
+            regions[r, 0], regions[r, 1], regions[r, 2], regions[r, 3] = x0, y0, x1, y1
+            seen[r] = True
+        total = loads[r]
+        for o in range(n):
+            if on[o] and spans[0, o] < x1 and spans[2, o] >= x0 and spans[1, o] < y1 and spans[3, o] >= y0:
+                masks[p, o] = True
+                visible[r, o] = True
+                total += tris[o]
+        loads[r] = total
+    return spans, masks, visible, loads, regions
+
+
+compile_all(globals(), ("_profiles", "_seqsum", "_cut", "_masks"))

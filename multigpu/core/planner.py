@@ -1,0 +1,101 @@
+"""The frame planner: one frame's ``Work`` from its camera, with no MPI and no GL.
+
+It owns what planning needs across frames: the scene's bounds prepared for projection, the
+wall's canvas (bezels), and one decomposition per balancing strategy (built from the
+configuration through the decompositions' registry the first time it is used, so every rank
+builds the same ones). ``plan(frame, camera)`` projects the bounds, balances, and moves the
+work onto the canvas; ``observe(frame, times)`` hands the measured per-rank times of an earlier
+frame to the decomposition that planned it, together with the work it planned then (keyed by
+frame, as Equalizer's load equalizer keys its history), so no strategy learns from state a
+later ``plan`` left behind. The frame loop, ``bench frame`` and the floor benchmark all plan
+through this one class.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from multigpu.core.bounds import make_projector
+from multigpu.core.camera import frame_matrices
+from multigpu.core.work import Work
+from multigpu.decompositions import make_decomposition
+from multigpu.strategies import REGISTRY as STRATEGIES
+
+#: planned frames kept for ``observe`` (a frame's times arrive one frame later)
+KEEP = 8
+
+
+class Planner:
+    """Plans frames for one rank of a ``WalkConfig`` wall (``rank`` None: every rank's masks)."""
+
+    def __init__(self, cfg, scene, rank: int | None = None):
+        self.cfg, self.scene, self.rank = cfg, scene, rank
+        self.canvas = cfg.canvas
+        screen = cfg.decomposition == "screen"
+        # what an operator cycles through: every strategy of the screen decomposition, else just that one
+        self.balances = list(STRATEGIES) if screen else [cfg.decomposition]
+        self.using = self.balances.index(cfg.balance) if screen else 0
+        self._built: dict[int, object] = {}
+        self._planned: dict[int, tuple[object, Work]] = {}
+        self.project = make_projector(scene, cfg.bounds)
+        self.coverage = np.ones(scene.n_objects)  # per-object silhouette coverage, for strategies that use it
+
+    @property
+    def decomposition(self):
+        """The decomposition planning with the strategy in use (built at its first use)."""
+        if self.using not in self._built:
+            cfg = self.cfg
+            balance = self.balances[self.using] if cfg.decomposition == "screen" else cfg.balance
+            self._built[self.using] = make_decomposition(cfg, self.scene, balance, self.rank)
+        return self._built[self.using]
+
+    def use(self, i: int) -> None:
+        """Plan with strategy ``balances[i]`` from the next frame on."""
+        self.using = int(i)
+
+    def matrices(self, camera):
+        """(view, proj, light) of ``camera`` on the canvas."""
+        return frame_matrices(camera, self.canvas.size)
+
+    def rects(self, view: np.ndarray, proj: np.ndarray) -> np.ndarray:
+        """(N, 4) normalized object rects in the visible space (NaN: not seen); the coverage
+        too where the decomposition in use wants it."""
+        if self.decomposition.needs_coverage:
+            return self.canvas.to_visible(self.project(view, proj, self.coverage))
+        return self.canvas.to_visible(self.project(view, proj))
+
+    def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None) -> Work:
+        """Frame ``frame``'s work on the canvas from its visible ``rects``. ``relay`` (screen
+        only): called with a thunk that computes the partition, it returns the partition to use
+        (``--partition broadcast``: rank 0 computes it, every rank receives it)."""
+        d, tris = self.decomposition, self.scene.tris
+        cov = self.coverage if d.needs_coverage else None
+        if relay is not None:
+            work = d.from_partition(relay(lambda: d.partition(rects, tris, cov)), tris)
+        else:
+            work = d.plan(frame, rects, tris, cov) if cov is not None else d.plan(frame, rects, tris)
+        work = self.canvas.to_canvas(work, rects, tris)
+        self._planned[frame] = (d, work)
+        if len(self._planned) > KEEP:
+            del self._planned[min(self._planned)]
+        return work
+
+    def plan(self, frame: int, camera, relay: Callable | None = None) -> tuple[Work, tuple]:
+        """Frame ``frame``'s work and its (view, proj, light)."""
+        view, proj, light = self.matrices(camera)
+        return self.work(frame, self.rects(view, proj), relay), (view, proj, light)
+
+    def observe(self, frame: int, times: np.ndarray) -> None:
+        """The measured (K,) per-rank render times of ``frame``, to the decomposition that
+        planned it, with the work it planned (a frame not planned here is ignored)."""
+        got = self._planned.pop(frame, None)
+        for f in [f for f in self._planned if f < frame]:  # older frames will not be observed
+            del self._planned[f]
+        if got is not None:
+            d, work = got
+            d.observe(frame, work, times)
+
+    def report(self) -> dict:
+        return self.decomposition.report()
