@@ -104,15 +104,67 @@ def validate_inputs(rects, tris, grid, size, strips) -> tuple[np.ndarray, np.nda
     return rects, tris, gpu_tree(rows, cols), (W, H)
 
 
-def tree_partition(rects, tris, grid, size, strips: int, choose) -> Partition:
+def _task(n: int, node, reg: np.ndarray, strips: int, W: int, H: int, idx, spans, tris) -> tuple[SplitTask, int, int]:
+    """What the chooser sees at internal node ``n`` over region ``reg``, and the pixels each
+    child needs along the axis (every descendant tile keeps at least one pixel)."""
+    axis = 0 if node.method == VERTICAL else 1
+    a, b = int(reg[axis]), int(reg[axis + 2])
+    length = b - a
+    q = min(strips, length)
+    if axis == 0:
+        need_lo, need_hi = node.low.ncols, node.high.ncols
+    else:
+        need_lo, need_hi = node.low.nrows, node.high.nrows
+    nl, nr = node.low.count, node.high.count
+    cuts = a + (np.arange(1, q, dtype=np.int64) * length) // q
+    valid = (cuts - a >= need_lo) & (b - cuts >= need_hi)
+    target = a + (length * nl) // (nl + nr)
+    lo_px = spans[axis].take(idx)
+    hi_px = spans[axis + 2].take(idx)
+    task = SplitTask(n, node, reg, axis, a, b, q, nl, nr, idx, lo_px, hi_px, cuts, valid, target,
+                     W if axis == 0 else H, tris)
+    return task, need_lo, need_hi
+
+
+def _children(reg: np.ndarray, axis: int, cut: int) -> tuple[np.ndarray, np.ndarray]:
+    low, high = reg.copy(), reg.copy()
+    low[axis + 2] = cut
+    high[axis] = cut
+    return low, high
+
+
+def node_cuts(tree: GpuTree, size, strips: int, choose) -> np.ndarray:
+    """(K-1,) the clamped cut of every internal node, breadth first, for a chooser that needs
+    no objects (``choose.object_free``: time feedback): the compiled walk then takes them."""
+    W, H = size
+    none = np.zeros(0, dtype=np.int64)
+    spans = np.zeros((4, 0), dtype=np.int32)
+    out = np.zeros(len(tree.internal), dtype=np.int64)
+    node_region = {tree.root.id: np.array([0, 0, W, H], dtype=np.int64)}
+    for n, node in enumerate(tree.internal):  # K - 1 nodes, no objects
+        reg = node_region.pop(node.id)
+        task, need_lo, need_hi = _task(n, node, reg, int(strips), W, H, none, spans, none)
+        out[n] = min(max(int(choose(task, spans)), task.a + need_lo), task.b - need_hi)
+        node_region[node.low.id], node_region[node.high.id] = _children(reg, task.axis, int(out[n]))
+    return out
+
+
+def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool | None = None) -> Partition:
     """Walk the GPU tree, asking ``choose(task, spans) -> cut pixel`` at every internal node.
 
     The walk (regions, T' masks, loads, split bookkeeping) is shared by every screen-space
     strategy; only the choice of the cut differs. ``spans`` is the (4, N) int32 pixel-span
-    array. The returned cut is clamped to the valid range.
+    array. The returned cut is clamped to the valid range. A chooser that needs no objects
+    (``object_free``) has its cuts found first and the compiled walk take them (``compiled``
+    as in ``partition``).
     """
     rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, strips)
     strips = int(strips)
+    from multigpu.core import kernel
+
+    if getattr(choose, "object_free", False) and kernel.use(compiled):
+        cuts = node_cuts(tree, (W, H), strips, choose)
+        return Partition(*kernel.strip_partition(rects, tris, tree, (W, H), strips, cuts))
     spans, onscreen = pixel_spans(rects, (W, H))
     spans = np.ascontiguousarray(spans.T)  # (4, N), a no-op: pixel_spans is coordinate-major
     K = tree.size
@@ -125,33 +177,14 @@ def tree_partition(rects, tris, grid, size, strips: int, choose) -> Partition:
     for n, node in enumerate(tree.internal):
         reg = node_region.pop(node.id)
         idx = node_idx.pop(node.id)
-        axis = 0 if node.method == VERTICAL else 1
-        a, b = int(reg[axis]), int(reg[axis + 2])
-        length = b - a
-        q = min(strips, length)
-        # child extents along the axis must leave every descendant tile at least one pixel
-        if axis == 0:
-            need_lo, need_hi = node.low.ncols, node.high.ncols
-        else:
-            need_lo, need_hi = node.low.nrows, node.high.nrows
-        nl, nr = node.low.count, node.high.count
-        cuts = a + (np.arange(1, q, dtype=np.int64) * length) // q
-        valid = (cuts - a >= need_lo) & (b - cuts >= need_hi)
-        target = a + (length * nl) // (nl + nr)
-        lo_px = spans[axis].take(idx)
-        hi_px = spans[axis + 2].take(idx)
-        task = SplitTask(n, node, reg, axis, a, b, q, nl, nr, idx, lo_px, hi_px, cuts, valid, target,
-                         W if axis == 0 else H, tris)
+        task, need_lo, need_hi = _task(n, node, reg, strips, W, H, idx, spans, tris)
+        a, b, axis = task.a, task.b, task.axis
         cut = min(max(int(choose(task, spans)), a + need_lo), b - need_hi)
-        splits[n] = (cut - a) / length
+        splits[n] = (cut - a) / (b - a)
         split_pixels[n] = cut
-
-        low_reg, high_reg = reg.copy(), reg.copy()
-        low_reg[axis + 2] = cut
-        high_reg[axis] = cut
-        node_region[node.low.id], node_region[node.high.id] = low_reg, high_reg
-        node_idx[node.low.id] = idx[lo_px < cut]
-        node_idx[node.high.id] = idx[hi_px >= cut]
+        node_region[node.low.id], node_region[node.high.id] = _children(reg, axis, cut)
+        node_idx[node.low.id] = idx[task.lo_px < cut]
+        node_idx[node.high.id] = idx[task.hi_px >= cut]
 
     visible = np.zeros((K, rects.shape[0]), dtype=bool)
     loads = np.zeros(K, dtype=tris.dtype)
@@ -197,16 +230,21 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
     return tree_partition(rects, tris, grid, size, strips, strip_chooser(density))
 
 
-def partition_tiles(rects, tris, grid, size) -> Partition:
+def partition_tiles(rects, tris, grid, size, compiled: bool | None = None) -> Partition:
     """The ``--balance none`` baseline: every rank renders exactly its own display tile.
 
     Same outputs as ``partition`` (loads, T' masks) so the two compare one to one; ``splits``
-    are the tile boundaries in p-pos form.
+    are the tile boundaries in p-pos form. Compiled (``compiled`` as in ``partition``): the
+    tree walk with the tile boundaries as its cuts, the same partition.
     """
     rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, 2)
     rows, cols = tree.rows, tree.cols
     if W % cols or H % rows:
         raise ValueError(f"display {W}x{H} does not divide into {rows}x{cols} equal tiles")
+    from multigpu.core import kernel
+
+    if kernel.use(compiled):
+        return Partition(*kernel.strip_partition(rects, tris, tree, (W, H), 2, _tile_splits(tree, W, H)[1]))
     regions = tile_regions(rows, cols, W // cols, H // rows)
     spans, onscreen = pixel_spans(rects, (W, H))
     K = tree.size

@@ -188,4 +188,5 @@ def time_chooser(regions: np.ndarray, times: np.ndarray, prev_cuts: np.ndarray |
             cut = int(round(old + damping * (cut - old)))
         return cut
 
+    choose.object_free = True  # the cuts follow times and regions alone: the compiled walk takes them
     return choose

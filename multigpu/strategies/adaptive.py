@@ -46,7 +46,7 @@ class Adaptive(CostModel):
         use_px = "pixels" in self.kept and b > 0
         weights = tris * self.corr * (1.0 if a > 0 or not use_px else 0.0)
         fill = cov * self.corr * (b / a if a > 0 else 1.0) if use_px else None
-        p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill)
+        p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill, compiled=self.compiled)
         vis = p.visible
         loads = vis @ tris.astype(np.int64)
         px, px_corr = rank_pixels(np.asarray(rects, np.float64), vis, p.regions, self.size,

@@ -48,11 +48,11 @@ class CostModel(Configured):
         if "pixels" in self.kept and b > 0:
             # only the ratio matters: a triangle weighs 1 and a covered pixel b / a triangles
             weights, fill = (tris, cov * (b / a)) if a > 0 else (np.zeros(len(tris)), cov)
-            p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill)
+            p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill, compiled=self.compiled)
             if a <= 0:  # loads stay triangle counts
                 p = Partition(p.regions, p.visible @ np.asarray(tris, np.int64), p.visible, p.splits, p.split_pixels)
         else:
-            p = partition(rects, tris, self.grid, self.size, self.strips)
+            p = partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         px = rank_pixels(np.asarray(rects, np.float64), p.visible, p.regions, self.size, cov, p.spans)
         return replace(p, features={"triangles": p.loads.astype(np.float64), "pixels": px})
 

@@ -14,4 +14,4 @@ class NoBalance(Configured):
     name = "none"
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
-        return partition_tiles(rects, tris, self.grid, self.size)
+        return partition_tiles(rects, tris, self.grid, self.size, self.compiled)

@@ -14,4 +14,4 @@ class Strips(Configured):
     name = "strips"
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
-        return partition(rects, tris, self.grid, self.size, self.strips)
+        return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)

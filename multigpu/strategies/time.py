@@ -28,9 +28,9 @@ class TimeFeedback(Configured):
 
     def plan(self, rects, tris, coverage=None):
         if self._last is None:
-            return partition(rects, tris, self.grid, self.size, self.strips)
+            return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         choose = time_chooser(self._last.regions, self._times, self._last.split_pixels, self.damping)
-        return tree_partition(rects, tris, self.grid, self.size, self.strips, choose)
+        return tree_partition(rects, tris, self.grid, self.size, self.strips, choose, self.compiled)
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         self._last, self._times = partition, np.asarray(times, dtype=np.float64).copy()

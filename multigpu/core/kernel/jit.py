@@ -7,7 +7,7 @@ from __future__ import annotations
 try:
     import numba
 
-    jit = numba.njit(cache=True, nogil=True)
+    jit = numba.njit(cache=True, nogil=True, error_model="numpy")  # IEEE division: no per-division checks
 except ImportError:  # the numpy references run instead
     numba = None
     jit = None

@@ -14,23 +14,6 @@ import numpy as np
 from multigpu.core.kernel.jit import compile_all
 
 
-def _corner(b, hx, hy, hz, m, k):
-    """One clip row at corner ``k`` (bit 2: x, bit 1: y, bit 0: z), in the corner dtype:
-    ((b +- hx*m0) +- hy*m1) +- hz*m2, as ``bounds._corners`` adds them."""
-    ax, ay, az = hx * m[0], hy * m[1], hz * m[2]
-    t = b + ax if k & 4 else b - ax
-    t = t + ay if k & 2 else t - ay
-    return t + az if k & 1 else t - az
-
-
-def _corner_xy(base, hx, hy, hz, Mc, cx, cy):
-    """NDC x and y of a box's 8 corners into ``cx``/``cy`` (corner dtype)."""
-    for k in range(8):
-        w = _corner(base[2], hx, hy, hz, Mc[2], k)
-        cx[k] = _corner(base[0], hx, hy, hz, Mc[0], k) / w
-        cy[k] = _corner(base[1], hx, hy, hz, Mc[1], k) / w
-
-
 def _face(cx, cy, faces, nxt, f):
     """Twice the signed area of face ``f`` (shoelace, its 4 terms added in order)."""
     s = cx[faces[f, 0]] * cy[nxt[f, 0]] - cx[nxt[f, 0]] * cy[faces[f, 0]]
@@ -95,6 +78,50 @@ def _clipped(M, cc, h, signs, edges, out, i):
     _write(out, i, lo_x, lo_y, hi_x, hi_y, 0.5, 0.5)
 
 
+#: boxes per block: the corner passes run over a block's arrays (in cache), so they vectorize
+BLOCK = 512
+
+
+def _cull(M, reach_rows, far_tol, x, y, z, w, h0, h1, h2):
+    """0: wholly in front of the near plane and inside every plane; 1: crossing the near
+    plane; 2: wholly outside a frustum plane (``bounds._boxes_block``'s tests, the same values;
+    ``x, y, z, w`` the centre's clip coordinates)."""
+    w_r = abs(M[3, 0]) * h0 + abs(M[3, 1]) * h1 + abs(M[3, 2]) * h2
+    outside = front = False
+    for p in range(6):  # left, right, bottom, top, near, far: inside means >= 0
+        c = x if p < 2 else (y if p < 4 else z)
+        d = c + w if p % 2 == 0 else -c + w  # one rounding, as the reference's
+        reach = reach_rows[p, 0] * h0 + reach_rows[p, 1] * h1 + reach_rows[p, 2] * h2
+        if p == 4:
+            front = d >= reach
+        d += reach
+        if p == 5:
+            outside |= d < -far_tol * (abs(w) + w_r)
+        else:
+            outside |= d < 0
+    return 2 if outside else (0 if front else 1)
+
+
+def _corners(base, off, sg, cx, cy, ext, m):
+    """NDC x, y (8, m) of the corners of a block's boxes, in the corner dtype: per clip row
+    ((b + sx*hx*m0) + sy*hy*m1) + sz*hz*m2 (a sign times a value is exact, and b + -a is
+    b - a: the reference's values), then divided by w; and their extents ``ext`` (4, m).
+    Branch-free inner loops."""
+    for k in range(8):  # corner k: bit 2 = x, bit 1 = y, bit 0 = z
+        sx, sy, sz = sg[(k >> 2) & 1], sg[(k >> 1) & 1], sg[k & 1]
+        for j in range(m):
+            vx = base[0, j] + sx * off[0, 0, j] + sy * off[0, 1, j] + sz * off[0, 2, j]
+            vy = base[1, j] + sx * off[1, 0, j] + sy * off[1, 1, j] + sz * off[1, 2, j]
+            vw = base[2, j] + sx * off[2, 0, j] + sy * off[2, 1, j] + sz * off[2, 2, j]
+            x, y = vx / vw, vy / vw
+            cx[k, j], cy[k, j] = x, y
+            if k == 0:
+                ext[0, j], ext[1, j], ext[2, j], ext[3, j] = x, y, x, y
+            else:
+                ext[0, j], ext[1, j] = min(ext[0, j], x), min(ext[1, j], y)
+                ext[2, j], ext[3, j] = max(ext[2, j], x), max(ext[3, j], y)
+
+
 def _project(center, half, half64, M, Mc, reach_rows, widen, far_tol, signs, edges, faces, nxt, out, cov, with_cov):
     """Rects (4, N) into ``out`` (NaN: culled or off screen) and, ``with_cov``, silhouette
     coverage into ``cov``. ``Mc``: clip rows x, y, w of M[:, :3] in the corner dtype;
@@ -102,45 +129,47 @@ def _project(center, half, half64, M, Mc, reach_rows, widen, far_tol, signs, edg
     n = center.shape[1]
     c_lo, c_hi = 0.5 + widen * -0.5, 0.5 + widen * 0.5
     cc = np.empty(4)
-    base = np.empty(3, dtype=half.dtype)  # the centre's clip x, y, w cast to the corner dtype
-    cx = np.empty(8, dtype=half.dtype)
-    cy = np.empty(8, dtype=half.dtype)
-    aw0, aw1, aw2 = abs(M[3, 0]), abs(M[3, 1]), abs(M[3, 2])
-    for i in range(n):
-        c0, c1, c2 = center[0, i], center[1, i], center[2, i]
-        h0, h1, h2 = half64[0, i], half64[1, i], half64[2, i]
-        for r in range(4):
-            cc[r] = M[r, 0] * c0 + M[r, 1] * c1 + M[r, 2] * c2 + M[r, 3]
-        w_r = aw0 * h0 + aw1 * h1 + aw2 * h2
-        outside = front = False
-        for p in range(6):  # left, right, bottom, top, near, far: inside means >= 0
-            axis, sign = p // 2, 1.0 if p % 2 == 0 else -1.0
-            d = cc[axis] + cc[3] if sign > 0 else -cc[axis] + cc[3]
-            reach = reach_rows[p, 0] * h0 + reach_rows[p, 1] * h1 + reach_rows[p, 2] * h2
-            if p == 4:
-                front = d >= reach
-            d += reach
-            if p == 5:
-                outside |= d < -far_tol * (abs(cc[3]) + w_r)
+    base = np.empty((3, BLOCK), dtype=half.dtype)  # the centres' clip x, y, w cast to the corner dtype
+    off = np.empty((3, 3, BLOCK), dtype=half.dtype)  # [row, axis]: half extent times the row's entry
+    cx = np.empty((8, BLOCK), dtype=half.dtype)
+    cy = np.empty((8, BLOCK), dtype=half.dtype)
+    ext = np.empty((4, BLOCK), dtype=half.dtype)
+    sg = np.empty(2, dtype=half.dtype)
+    sg[0], sg[1] = -1.0, 1.0
+    state = np.empty(BLOCK, dtype=np.int8)
+    for s0 in range(0, n, BLOCK):
+        m = min(BLOCK, n - s0)
+        for j in range(m):
+            i = s0 + j
+            c0, c1, c2 = center[0, i], center[1, i], center[2, i]
+            x = M[0, 0] * c0 + M[0, 1] * c1 + M[0, 2] * c2 + M[0, 3]
+            y = M[1, 0] * c0 + M[1, 1] * c1 + M[1, 2] * c2 + M[1, 3]
+            z = M[2, 0] * c0 + M[2, 1] * c1 + M[2, 2] * c2 + M[2, 3]
+            w = M[3, 0] * c0 + M[3, 1] * c1 + M[3, 2] * c2 + M[3, 3]
+            state[j] = _cull(M, reach_rows, far_tol, x, y, z, w, half64[0, i], half64[1, i], half64[2, i])
+            base[0, j], base[1, j], base[2, j] = x, y, w
+        for r in range(3):
+            for a in range(3):
+                for j in range(m):
+                    off[r, a, j] = half[a, s0 + j] * Mc[r, a]
+        _corners(base, off, sg, cx, cy, ext, m)
+        for j in range(m):
+            i = s0 + j
+            if with_cov:
+                cov[i] = 1.0
+            if state[j] == 2:
+                out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
+            elif state[j] == 1:
+                c0, c1, c2 = center[0, i], center[1, i], center[2, i]
+                for r in range(4):
+                    cc[r] = M[r, 0] * c0 + M[r, 1] * c1 + M[r, 2] * c2 + M[r, 3]
+                _clipped(M, cc, half64[:, i], signs, edges, out, i)
             else:
-                outside |= d < 0
-        if with_cov:
-            cov[i] = 1.0
-        if outside:
-            out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
-            continue
-        if not front:
-            _clipped(M, cc, half64[:, i], signs, edges, out, i)
-            continue
-        base[0], base[1], base[2] = cc[0], cc[1], cc[3]
-        _corner_xy(base, half[0, i], half[1, i], half[2, i], Mc, cx, cy)
-        x0, y0, x1, y1 = cx[0], cy[0], cx[0], cy[0]
-        for k in range(1, 8):
-            x0, y0, x1, y1 = min(x0, cx[k]), min(y0, cy[k]), max(x1, cx[k]), max(y1, cy[k])
-        e0, e1, e2, e3 = np.float64(x0), np.float64(y0), np.float64(x1), np.float64(y1)
-        if with_cov:
-            cov[i] = _coverage(cx, cy, faces, nxt, e0, e1, e2, e3)
-        _write(out, i, e0, e1, e2, e3, c_lo, c_hi)
+                e0, e1, e2, e3 = np.float64(ext[0, j]), np.float64(ext[1, j]), np.float64(ext[2, j]), \
+                    np.float64(ext[3, j])
+                if with_cov:
+                    cov[i] = _coverage(cx[:, j], cy[:, j], faces, nxt, e0, e1, e2, e3)
+                _write(out, i, e0, e1, e2, e3, c_lo, c_hi)
 
 
-compile_all(globals(), ("_corner", "_corner_xy", "_face", "_coverage", "_write", "_clipped", "_project"))
+compile_all(globals(), ("_cull", "_corners", "_face", "_coverage", "_write", "_clipped", "_project"))

@@ -15,6 +15,9 @@ import numpy as np
 
 from multigpu.core.kernel.jit import compile_all
 
+#: displays up to this many pixels along an axis look strips up in a table (as splits.py does)
+TABLE_MAX = 1 << 16
+
 
 def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray]:
     """The GPU tree as arrays. One row per internal node in breadth-first order: split axis,
@@ -77,23 +80,25 @@ def _choose(s, e, ratio, a, length, q, need_lo, need_hi, target):
 
 
 def _split(idx, spans, axis, cut):
-    """The objects of ``idx`` that touch the low side of ``cut``, and those touching the high side."""
+    """The objects of ``idx`` that touch the low side of ``cut``, and those touching the high
+    side, in order (branch-free: every object is written to both and kept where it belongs)."""
     lo = np.empty(idx.shape[0], dtype=np.int64)
     hi = np.empty(idx.shape[0], dtype=np.int64)
+    first, last = spans[axis], spans[axis + 2]
     p = r = 0
     for t in range(idx.shape[0]):
         o = idx[t]
-        if spans[axis, o] < cut:
-            lo[p] = o
-            p += 1
-        if spans[axis + 2, o] >= cut:
-            hi[r] = o
-            r += 1
-    return lo[:p].copy(), hi[:r].copy()
+        lo[p] = o
+        hi[r] = o
+        p += first[o] < cut
+        r += last[o] >= cut
+    return lo[:p], hi[:r]
 
 
-def _walk(rt, tris, W, H, strips, nodes, leaves):
-    """``balance.tree_partition`` with the strip chooser, in one call (``rt``: (4, N) rects)."""
+def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
+    """``balance.tree_partition`` with the strip chooser, in one call (``rt``: (4, N) rects);
+    a node whose ``fixed`` cut is >= 0 takes that cut instead (choosers that need no objects:
+    time feedback, the static tiles)."""
     n = rt.shape[1]
     K = leaves.shape[0]
     spans, on = _spans(rt, W, H)
@@ -110,17 +115,30 @@ def _walk(rt, tris, W, H, strips, nodes, leaves):
         idx = members[me]
         a, b = regs[me, axis], regs[me, axis + 2]
         length = b - a
-        q = min(strips, length)
-        s = np.zeros(q, dtype=tris.dtype)
-        e = np.zeros(q, dtype=tris.dtype)
-        for t in range(idx.shape[0]):  # Start/End arrays: each object at its first and last strip
-            o = idx[t]
-            f = ((spans[axis, o] - a + 1) * q - 1) // length
-            g = ((spans[axis + 2, o] - a + 1) * q - 1) // length
-            s[min(max(f, 0), q - 1)] += tris[o]
-            e[min(max(g, 0), q - 1)] += tris[o]
-        target = a + (length * nl) // (nl + nr)
-        cut = _choose(s, e, nl / nr, a, length, q, need_lo, need_hi, target)
+        if fixed[m] >= 0:
+            cut = fixed[m]
+        else:
+            q = min(strips, length)
+            s = np.zeros(q, dtype=tris.dtype)
+            e = np.zeros(q, dtype=tris.dtype)
+            extent = W if axis == 0 else H
+            if extent <= TABLE_MAX:  # the strip of every display pixel, once: no division per object
+                table = np.empty(extent, dtype=np.int64)
+                for px in range(extent):
+                    table[px] = min(max(((px - a + 1) * q - 1) // length, 0), q - 1)
+                for t in range(idx.shape[0]):  # Start/End arrays: each object at its first and last strip
+                    o = idx[t]
+                    s[table[spans[axis, o]]] += tris[o]
+                    e[table[spans[axis + 2, o]]] += tris[o]
+            else:
+                for t in range(idx.shape[0]):
+                    o = idx[t]
+                    f = ((spans[axis, o] - a + 1) * q - 1) // length
+                    g = ((spans[axis + 2, o] - a + 1) * q - 1) // length
+                    s[min(max(f, 0), q - 1)] += tris[o]
+                    e[min(max(g, 0), q - 1)] += tris[o]
+            target = a + (length * nl) // (nl + nr)
+            cut = _choose(s, e, nl / nr, a, length, q, need_lo, need_hi, target)
         cut = min(max(cut, a + need_lo), b - need_hi)
         splits[m] = (cut - a) / length
         split_pixels[m] = cut
@@ -146,17 +164,20 @@ def _walk(rt, tris, W, H, strips, nodes, leaves):
 compile_all(globals(), ("_spans", "_choose", "_split", "_walk"))
 
 
-def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int):
+def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int, cuts: np.ndarray | None = None):
     """The compiled walk on validated inputs (``balance.validate_inputs``): regions, loads,
-    T' masks, splits in p-pos and pixels, spans (4, N). Integer loads are exact sums; float
-    loads are summed again by numpy as the reference sums them (pairwise)."""
+    T' masks, splits in p-pos and pixels, spans (4, N). ``cuts`` (K-1,) fixes every node's cut
+    (-1: the strip chooser's). Integer loads are exact sums; float loads are summed again by
+    numpy as the reference sums them (pairwise)."""
     shape = (tree.rows, tree.cols)
     if shape not in _TREES:
         _TREES[shape] = tree_arrays(tree)
     nodes, leaves = _TREES[shape]
+    if cuts is None:
+        cuts = np.full(len(nodes), -1, dtype=np.int64)
     rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
     regions, loads, visible, splits, split_pixels, spans = _walk(rt, tris, int(size[0]), int(size[1]),
-                                                                 int(strips), nodes, leaves)
+                                                                 int(strips), nodes, leaves, cuts)
     if tris.dtype.kind == "f":
         loads = np.array([tris[v].sum() for v in visible], dtype=tris.dtype)  # K ranks, not objects
     return regions, loads, visible, splits, split_pixels, spans
