@@ -147,3 +147,26 @@ def test_every_strategy_compiled_equals_the_reference(name, data, rows, cols, n,
                                             max_size=k)))
         ref.observe(f, a, times)
         got.observe(f, b, times)
+
+
+@settings(max_examples=100, deadline=None)
+@given(data=st.data(), n=st.integers(1, 60))
+def test_compiled_draw_commands_equal_the_reference(data, n):
+    """The draw list: the same run-merged commands from any mask, zero-triangle objects included."""
+    from types import SimpleNamespace
+
+    from multigpu.core.drawlist import DrawList
+
+    counts = np.array(data.draw(st.lists(st.sampled_from([0, 3, 6, 30]), min_size=n, max_size=n)), dtype=np.int64)
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    verts = max(int(counts.sum()), 1)
+    scene = SimpleNamespace(n_objects=n, index_count=counts, centers=rng.random((n, 3)),
+                            indices=rng.integers(0, verts, int(counts.sum())).astype(np.uint32),
+                            base_vertex=np.zeros(n, dtype=np.int64),
+                            first_index=np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64),
+                            vertices=np.zeros((verts, 3), dtype=np.float32))
+    draws = DrawList(scene)
+    mask = np.array(data.draw(st.lists(st.booleans(), min_size=n, max_size=n)))
+    for m in (mask, None, np.zeros(n, dtype=bool)):
+        ref, got = draws.commands(m, compiled=False), draws.commands(m, compiled=True)
+        assert ref.dtype == got.dtype and np.array_equal(ref, got)

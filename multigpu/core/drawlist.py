@@ -65,11 +65,19 @@ class DrawList:
         self.vertex_object = np.zeros(scene.vertices.shape[0], dtype=np.uint32)
         self.vertex_object[absolute] = np.repeat(np.arange(n, dtype=np.uint32), count)
 
-    def commands(self, mask: np.ndarray | None) -> np.ndarray:
+    def commands(self, mask: np.ndarray | None, compiled: bool | None = None) -> np.ndarray:
         """(R, 5) uint32 ``(count, 1, first, 0, 0)`` draw commands, one per run of visible
-        objects in buffer order; ``mask`` (N,) bool in scene object order (None: all)."""
+        objects in buffer order; ``mask`` (N,) bool in scene object order (None: all).
+        ``compiled``: the one-pass kernel (``core/kernel/draws.py``, the same commands) where
+        numba is installed (None), or this numpy reference (False)."""
         if mask is None:
             mask = np.ones(self.order.size, dtype=bool)
+        from multigpu.core import kernel
+
+        if kernel.use(compiled):
+            from multigpu.core.kernel.draws import _commands
+
+            return _commands(np.asarray(mask, dtype=np.bool_), self.order, self.offsets)
         m = np.asarray(mask, dtype=bool)[self.order].view(np.int8)
         edges = np.diff(m, prepend=np.int8(0), append=np.int8(0))
         starts = np.flatnonzero(edges == 1)

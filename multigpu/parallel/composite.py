@@ -1,4 +1,5 @@
-"""Frame exchange and compositing for any decomposition: direct send, one message per pair.
+"""Frame exchange and compositing for any decomposition: direct send, one message per pair
+(the ``messages`` backend; ``shared.py`` is the other, both merging through ``core.merge``).
 
 Every rank knows every rank's pieces (``core.work``), so both ends of a (sender, receiver)
 pair compute the same list of piece parts (``core.work.transfers``) and pack or unpack one
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
 from multigpu.parallel.exchange import wait_all
 
@@ -37,7 +39,6 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
     depth bytes)."""
     from mpi4py import MPI
 
-    tx0, ty0 = int(tile[0]), int(tile[1])
     with_depth = depth is not None
     per_px = 7 if with_depth else 3
     outgoing: dict[int, list[Piece]] = {}
@@ -73,15 +74,28 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
         else:
             views = _unpack(inbox[s], parts, with_depth)
         for p, rgb, z in views:
-            x0, y0, x1, y1 = p.rect
-            dst = np.s_[y0 - ty0:y1 - ty0, x0 - tx0:x1 - tx0]
-            if with_depth:
-                nearer = z < depth[dst]
-                color[dst][nearer] = rgb[nearer]
-                depth[dst][nearer] = z[nearer]
-            else:
-                color[dst] = rgb
+            merge_part(color, depth, tile[:2], p.rect, rgb, z)
     return sent, zbytes
+
+
+class Messages:
+    """The exchange backend of direct sends: nothing to publish before the barrier; after it,
+    one message per (sender, receiver) pair (``composite``)."""
+
+    name = "messages"
+
+    def __init__(self, comm, timeout: float):
+        self.comm, self.timeout = comm, timeout
+
+    def publish(self, frame: int, me: int, rendered: list) -> None:
+        """Messages leave in ``compose``."""
+
+    def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
+                depth: np.ndarray | None = None) -> tuple[int, int]:
+        return composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth)
+
+    def close(self, collective: bool = True) -> None:
+        """Nothing held."""
 
 
 def _local(p: Piece, my_rects, rendered):

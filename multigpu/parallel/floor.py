@@ -1,7 +1,8 @@
 """The MPI side of ``multigpu bench floor``: every rank renders exactly the same work.
 
-Same region, same objects, same camera along the scene's walkthrough, synchronized per frame
-as the frame loop is; the per-rank render CPU times are compared exactly as
+Same region, same objects, same camera along the scene's walkthrough (matrices and projected
+bounds from the frame loop's ``core.planner.Planner``), synchronized per frame as the frame
+loop is; the per-rank render CPU times are compared exactly as
 ``report.summarize`` compares them (per frame max/mean, averaged over frames). Whatever
 imbalance shows is this machine's measurement noise: the floor under every strategy's
 ``imbalance_render_cpu``. ``studies/floor.py`` starts it and prints the table.
@@ -24,8 +25,9 @@ def measure(scene_name: str, frames: int, tile: int = 256) -> dict | None:
     os.environ.setdefault("LP_NUM_THREADS", "1")
     from mpi4py import MPI
 
-    from multigpu.core.bounds import make_projector
-    from multigpu.core.camera import frame_matrices
+    from multigpu.config import WalkConfig
+    from multigpu.core.planner import Planner
+    from multigpu.core.regions import overlaps, pixel_spans
     from multigpu.gpu.render import RegionRenderer, create_context
     from multigpu.scene.models import SceneSpec, load_scene
     from multigpu.scene.paths import generate
@@ -40,15 +42,13 @@ def measure(scene_name: str, frames: int, tile: int = 256) -> dict | None:
     ctx, _ = create_context(local_rank=rank)
     renderer = RegionRenderer(ctx, scene, size)
     path = generate("walkthrough", scene, frames)
-    project = make_projector(scene)
+    planner = Planner(WalkConfig(grid=(2, 2), tile=(tile, tile)), scene, rank)  # the frame loop's projection
     region = (tile // 2, tile // 2, tile // 2 + tile, tile // 2 + tile)  # a tile-sized centre region
-    lo, hi = 0.25, 0.75
     times = np.zeros(frames)
     for f in range(frames):  # frames, not objects
-        view, proj, light = frame_matrices(path.camera(f), size)
-        r = project(view, proj)
-        with np.errstate(invalid="ignore"):
-            mask = (r[:, 0] < hi) & (r[:, 2] >= lo) & (r[:, 1] < hi) & (r[:, 3] >= lo)
+        view, proj, light = planner.matrices(path.camera(f))
+        spans, onscreen = pixel_spans(planner.rects(view, proj), size)
+        mask = onscreen & overlaps(spans, region)  # the objects a rank rendering the region draws
         comm.Barrier()
         t0 = time.process_time()
         renderer.render(view, proj, light, region, mask)

@@ -17,13 +17,13 @@ from multigpu.core import kernel
 from multigpu.core.camera import Camera
 from multigpu.core.planner import Planner
 from multigpu.core.work import Work, transfers
-from multigpu.parallel.composite import composite
+from multigpu.parallel.composite import Messages
 from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
 from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.record import RunRecord
 from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
-from multigpu.parallel.shared import SharedPieces, composite_shared
+from multigpu.parallel.shared import SharedPieces
 from multigpu.parallel.timer import Timer
 from multigpu.scene.models import axis_name
 
@@ -76,8 +76,9 @@ class Frames:
         self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
         self.done = 0
         self.learn = None  # (frame, times): observed at the start of the next frame
-        self.shared = None if cfg.exchange != "shared" else SharedPieces.make(
-            comm, self.canvas.size, depth, cfg.timeout)
+        # the exchange backend: a node-shared window where asked for and possible, else messages
+        shared = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout) if cfg.exchange == "shared" else None
+        self.exchange = shared or Messages(comm, cfg.timeout)
         self.window = presenter.mode == "window"
         self.live = None
         if self.window:
@@ -92,7 +93,7 @@ class Frames:
                     start = _unshifted(path.camera(0), cfg.offset)
             self.live = Live(cfg, comm, scene, self.planner.balances, self.planner.using, controls, monitor, start)
         doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
-        doc["exchange"] = "shared" if self.shared is not None else "messages"
+        doc["exchange"] = self.exchange.name
         self.config_doc = doc
         self.record = None
         if self.rank == 0:
@@ -116,18 +117,14 @@ class Frames:
 
     def compose(self, f: int, work: Work, rendered: list) -> tuple[int, int]:
         """Frame exchange: the pieces travel to their tile owners, who copy or depth-merge them
-        (through the node-shared window when there is one, else as messages)."""
+        (the exchange backend: messages, or the node-shared window). Returns (bytes sent, of
+        which depth)."""
         if work.depth:
             self.back[:] = self.background
             self.zback[:] = 1.0
         plan = transfers(work, self.tiles)
-        zback = self.zback if work.depth else None
-        if self.shared is None:
-            return composite(self.comm, self.rank, work.rects, rendered, plan, self.tiles[self.rank],
-                             self.cfg.timeout, self.back, zback)
-        composite_shared(self.shared, f, self.rank, work.rects, plan, self.tiles[self.rank], self.back, zback)
-        px = sum(p.pixels for p in plan if p.sender == self.rank and p.receiver != self.rank)  # read by peers
-        return px * (7 if work.depth else 3), px * 4 if work.depth else 0
+        return self.exchange.compose(f, self.rank, work.rects, rendered, plan, self.tiles[self.rank], self.back,
+                                     self.zback if work.depth else None)
 
     def present(self, t: Timer, work: Work, control) -> tuple[float, int]:
         """Display: the composed tile (and the overlays that are on) into the back buffer, the
@@ -203,9 +200,8 @@ class Frames:
             work, (view, proj, light) = self.planner.plan(f, camera, self.relay)
         with t.phase("render"):
             rendered = self.render(work, view, proj, light)
-        if self.shared is not None:
-            with t.phase("exchange"):  # pieces into the shared window before the barrier
-                self.shared.publish(f, self.rank, rendered)
+        with t.phase("exchange"):  # pieces into the shared window before the barrier (messages: nothing)
+            self.exchange.publish(f, self.rank, rendered)
         with t.phase("sync"):
             barrier(self.comm, self.cfg.timeout)
         with t.phase("exchange"):
@@ -230,9 +226,9 @@ class Frames:
         """Give the shared window back: freed with the peers after a run every rank finished,
         only unlocked on a failure (the job ends anyway; a collective free would wait on ranks
         that are gone or still in the frame loop)."""
-        if self.shared is not None:
-            self.shared.close(collective)
-            self.shared = None
+        if self.exchange is not None:
+            self.exchange.close(collective)
+            self.exchange = None
         if self.live is not None:
             self.live.close(collective)
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
 from multigpu.parallel.exchange import wait_all
 
@@ -29,11 +30,13 @@ MAX_SHARED_BYTES = 1 << 30
 
 
 class SharedPieces:
-    """Every rank's segment of one shared window, as numpy views; ``None`` from ``make`` when
+    """The ``shared`` exchange backend: every rank's segment of one shared window, as numpy views; ``None`` from ``make`` when
     the ranks do not share one node or the window would be too big."""
 
     def __init__(self, win, segments: list[np.ndarray], half: int):
         self.win, self.segments, self.half = win, segments, half
+
+    name = "shared"
 
     @classmethod
     def make(cls, comm, size: tuple[int, int], with_depth: bool, timeout: float) -> "SharedPieces | None":
@@ -96,25 +99,18 @@ class SharedPieces:
         if collective:
             self.win.Free()
 
-
-def composite_shared(shared: SharedPieces, frame: int, me: int, rects, plan: list[Piece], tile,
-                     color: np.ndarray, depth: np.ndarray | None = None) -> None:
-    """Compose rank ``me``'s tile from the senders' published pieces (after the barrier).
-
-    The same result as ``composite.composite``: parts in ascending sender order, copied, or
-    with depth kept where strictly nearer (the tie rule)."""
-    shared.win.Sync()  # the peers' stores, after the barrier
-    tx0, ty0 = int(tile[0]), int(tile[1])
-    with_depth = depth is not None
-    for p in sorted((p for p in plan if p.receiver == me), key=lambda p: (p.sender, p.index)):  # parts, not pixels
-        rgb, z = shared.piece(frame, p.sender, rects[p.sender], p.index, with_depth)
-        ox, oy = (int(v) for v in np.asarray(rects[p.sender], dtype=np.int64).reshape(-1, 4)[p.index, :2])
-        x0, y0, x1, y1 = p.rect
-        src = np.s_[y0 - oy:y1 - oy, x0 - ox:x1 - ox]
-        dst = np.s_[y0 - ty0:y1 - ty0, x0 - tx0:x1 - tx0]
-        if with_depth:
-            nearer = z[src] < depth[dst]
-            color[dst][nearer] = rgb[src][nearer]
-            depth[dst][nearer] = z[src][nearer]
-        else:
-            color[dst] = rgb[src]
+    def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
+                depth: np.ndarray | None = None) -> tuple[int, int]:
+        """Compose rank ``me``'s tile from the senders' published pieces (after the barrier):
+        the same result as ``composite.composite``, parts in ascending sender order. Returns
+        the bytes peers read from this rank (colour and depth, of which depth)."""
+        self.win.Sync()  # the peers' stores, after the barrier
+        with_depth = depth is not None
+        for p in sorted((p for p in plan if p.receiver == me), key=lambda p: (p.sender, p.index)):  # parts
+            rgb, z = self.piece(frame, p.sender, rects[p.sender], p.index, with_depth)
+            ox, oy = (int(v) for v in np.asarray(rects[p.sender], dtype=np.int64).reshape(-1, 4)[p.index, :2])
+            x0, y0, x1, y1 = p.rect
+            src = np.s_[y0 - oy:y1 - oy, x0 - ox:x1 - ox]
+            merge_part(color, depth, tile[:2], p.rect, rgb[src], None if z is None else z[src])
+        px = sum(p.pixels for p in plan if p.sender == me and p.receiver != me)  # read by peers
+        return px * (7 if with_depth else 3), px * 4 if with_depth else 0

@@ -5,7 +5,12 @@ make hundreds of C-level calls.
 * ``project.py``: box projection with frustum culling, near-plane clipping and coverage;
 * ``walk.py``: the paper's balancer: pixel spans, GPU-tree walk with the strip chooser (Start/End
   arrays, prefix/postfix sums, the split nearest balRatio), T' masks and loads;
-* ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks.
+* ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks;
+* ``draws.py``: a rank's mask to run-merged draw commands.
+
+Time feedback and the static tiles run the walk with cuts found without objects. Not compiled
+(numpy): the cost model's fill chooser (``cost``, ``adaptive``), sphere bounds, and the ``db``
+and ``bins`` decompositions.
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
@@ -88,6 +93,9 @@ def warm() -> float:
     tris = np.array([3, 5, 7], dtype=np.int64)
     cross.observe(0, cross.plan(rects, tris), np.array([1.0, 2.0, 3.0, 4.0]))
     cross.plan(rects, tris)
+    from multigpu.core.kernel.draws import _commands
+
+    _commands(np.ones(2, dtype=np.bool_), np.arange(2, dtype=np.int64), np.array([0, 3, 6], dtype=np.int64))
     return time.perf_counter() - t0
 
 

@@ -1,0 +1,27 @@
+"""The one merge of rendered parts into a display tile, shared by every exchange backend.
+
+A colour-only part (screen, bins) is copied: such parts tile the display exactly. A depth part
+(sort-last) replaces the tile's fragments only where it is strictly nearer; parts arrive in
+ascending sender order and ranks own ascending ranges of the draw order, so a depth tie keeps
+the lower rank's fragment, as a one-rank GL_LESS render keeps the first drawn. Pure numpy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def merge_part(color: np.ndarray, depth: np.ndarray | None, tile_origin, rect, rgb: np.ndarray,
+               z: np.ndarray | None) -> None:
+    """Put part ``rect`` (canvas pixels ``[x0, y0, x1, y1)``) with pixels ``rgb`` (h, w, 3) and,
+    sort-last, ``z`` (h, w) into the tile ``color`` (th, tw, 3) / ``depth`` (th, tw) whose
+    lower-left canvas pixel is ``tile_origin``."""
+    x0, y0, x1, y1 = rect
+    tx0, ty0 = int(tile_origin[0]), int(tile_origin[1])
+    dst = np.s_[y0 - ty0:y1 - ty0, x0 - tx0:x1 - tx0]
+    if depth is None:
+        color[dst] = rgb
+        return
+    nearer = z < depth[dst]
+    color[dst][nearer] = rgb[nearer]
+    depth[dst][nearer] = z[nearer]
