@@ -5,3 +5,11 @@ import tempfile
 
 os.environ.setdefault("MULTIGPU_CACHE", tempfile.mkdtemp(prefix="multigpu-cache-"))
 os.environ.setdefault("LP_NUM_THREADS", "1")
+
+
+def pytest_sessionstart(session):
+    """Compile the frame kernel once, here (numba caches it beside the module), so the MPI
+    ranks of the tests load it instead of compiling it side by side inside their timeouts."""
+    from multigpu.core import kernel
+
+    kernel.warm()

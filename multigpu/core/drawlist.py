@@ -77,7 +77,7 @@ class DrawList:
         if kernel.use(compiled):
             from multigpu.core.kernel.draws import _commands
 
-            return _commands(np.asarray(mask, dtype=np.bool_), self.order, self.offsets)
+            return _commands(np.ascontiguousarray(mask, dtype=np.bool_), self.order, self.offsets)
         m = np.asarray(mask, dtype=bool)[self.order].view(np.int8)
         edges = np.diff(m, prepend=np.int8(0), append=np.int8(0))
         starts = np.flatnonzero(edges == 1)

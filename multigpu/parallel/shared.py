@@ -30,8 +30,9 @@ MAX_SHARED_BYTES = 1 << 30
 
 
 class SharedPieces:
-    """The ``shared`` exchange backend: every rank's segment of one shared window, as numpy views; ``None`` from ``make`` when
-    the ranks do not share one node or the window would be too big."""
+    """The ``shared`` exchange backend: every rank's segment of one shared window, as numpy
+    views; ``None`` from ``make`` when the ranks do not share one node or the window would be
+    too big."""
 
     def __init__(self, win, segments: list[np.ndarray], half: int):
         self.win, self.segments, self.half = win, segments, half
