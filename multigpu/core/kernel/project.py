@@ -82,24 +82,41 @@ def _clipped(M, cc, h, signs, edges, out, i):
 BLOCK = 512
 
 
-def _cull(M, reach_rows, far_tol, x, y, z, w, h0, h1, h2):
-    """0: wholly in front of the near plane and inside every plane; 1: crossing the near
-    plane; 2: wholly outside a frustum plane (``bounds._boxes_block``'s tests, the same values;
-    ``x, y, z, w`` the centre's clip coordinates)."""
-    w_r = abs(M[3, 0]) * h0 + abs(M[3, 1]) * h1 + abs(M[3, 2]) * h2
-    outside = front = False
-    for p in range(6):  # left, right, bottom, top, near, far: inside means >= 0
-        c = x if p < 2 else (y if p < 4 else z)
-        d = c + w if p % 2 == 0 else -c + w  # one rounding, as the reference's
-        reach = reach_rows[p, 0] * h0 + reach_rows[p, 1] * h1 + reach_rows[p, 2] * h2
-        if p == 4:
-            front = d >= reach
-        d += reach
-        if p == 5:
-            outside |= d < -far_tol * (abs(w) + w_r)
-        else:
-            outside |= d < 0
-    return 2 if outside else (0 if front else 1)
+def _clip_block(center, half64, M, rr, far_tol, s0, m, base, state):
+    """Clip coordinates of the block's box centres (x, y, w into ``base``, cast to the corner
+    dtype) and each box's state: 0 wholly in front of the near plane and inside every plane,
+    1 crossing the near plane, 2 wholly outside a frustum plane. ``bounds._boxes_block``'s
+    values and tests in its order (a plane's distance is x + w or -x + w, one rounding; the
+    reach of the half extents along its normal, |plane @ M| . h, added left to right). The
+    matrix entries are read once into locals so the loop keeps them in registers."""
+    m00, m01, m02, m03 = M[0, 0], M[0, 1], M[0, 2], M[0, 3]
+    m10, m11, m12, m13 = M[1, 0], M[1, 1], M[1, 2], M[1, 3]
+    m20, m21, m22, m23 = M[2, 0], M[2, 1], M[2, 2], M[2, 3]
+    m30, m31, m32, m33 = M[3, 0], M[3, 1], M[3, 2], M[3, 3]
+    a0, a1, a2 = abs(m30), abs(m31), abs(m32)
+    l0, l1, l2 = rr[0, 0], rr[0, 1], rr[0, 2]
+    g0, g1, g2 = rr[1, 0], rr[1, 1], rr[1, 2]
+    b0, b1, b2 = rr[2, 0], rr[2, 1], rr[2, 2]
+    t0, t1, t2 = rr[3, 0], rr[3, 1], rr[3, 2]
+    n0, n1, n2 = rr[4, 0], rr[4, 1], rr[4, 2]
+    f0, f1, f2 = rr[5, 0], rr[5, 1], rr[5, 2]
+    for j in range(m):
+        i = s0 + j
+        c0, c1, c2 = center[0, i], center[1, i], center[2, i]
+        h0, h1, h2 = half64[0, i], half64[1, i], half64[2, i]
+        x = m00 * c0 + m01 * c1 + m02 * c2 + m03
+        y = m10 * c0 + m11 * c1 + m12 * c2 + m13
+        z = m20 * c0 + m21 * c1 + m22 * c2 + m23
+        w = m30 * c0 + m31 * c1 + m32 * c2 + m33
+        out = (x + w) + (l0 * h0 + l1 * h1 + l2 * h2) < 0
+        out |= (-x + w) + (g0 * h0 + g1 * h1 + g2 * h2) < 0
+        out |= (y + w) + (b0 * h0 + b1 * h1 + b2 * h2) < 0
+        out |= (-y + w) + (t0 * h0 + t1 * h1 + t2 * h2) < 0
+        dn, rn = z + w, n0 * h0 + n1 * h1 + n2 * h2
+        out |= dn + rn < 0
+        out |= (-z + w) + (f0 * h0 + f1 * h1 + f2 * h2) < -far_tol * (abs(w) + (a0 * h0 + a1 * h1 + a2 * h2))
+        state[j] = 2 if out else (0 if dn >= rn else 1)
+        base[0, j], base[1, j], base[2, j] = x, y, w
 
 
 def _corners(base, off, sg, cx, cy, ext, m):
@@ -139,19 +156,13 @@ def _project(center, half, half64, M, Mc, reach_rows, widen, far_tol, signs, edg
     state = np.empty(BLOCK, dtype=np.int8)
     for s0 in range(0, n, BLOCK):
         m = min(BLOCK, n - s0)
-        for j in range(m):
-            i = s0 + j
-            c0, c1, c2 = center[0, i], center[1, i], center[2, i]
-            x = M[0, 0] * c0 + M[0, 1] * c1 + M[0, 2] * c2 + M[0, 3]
-            y = M[1, 0] * c0 + M[1, 1] * c1 + M[1, 2] * c2 + M[1, 3]
-            z = M[2, 0] * c0 + M[2, 1] * c1 + M[2, 2] * c2 + M[2, 3]
-            w = M[3, 0] * c0 + M[3, 1] * c1 + M[3, 2] * c2 + M[3, 3]
-            state[j] = _cull(M, reach_rows, far_tol, x, y, z, w, half64[0, i], half64[1, i], half64[2, i])
-            base[0, j], base[1, j], base[2, j] = x, y, w
+        _clip_block(center, half64, M, reach_rows, far_tol, s0, m, base, state)
         for r in range(3):
             for a in range(3):
+                for j in range(m):  # half64 cast to the corner dtype is ``half``: one array less to read
+                    off[r, a, j] = half64[a, s0 + j]
                 for j in range(m):
-                    off[r, a, j] = half[a, s0 + j] * Mc[r, a]
+                    off[r, a, j] = off[r, a, j] * Mc[r, a]
         _corners(base, off, sg, cx, cy, ext, m)
         for j in range(m):
             i = s0 + j
@@ -172,4 +183,4 @@ def _project(center, half, half64, M, Mc, reach_rows, widen, far_tol, signs, edg
                 _write(out, i, e0, e1, e2, e3, c_lo, c_hi)
 
 
-compile_all(globals(), ("_cull", "_corners", "_face", "_coverage", "_write", "_clipped", "_project"))
+compile_all(globals(), ("_clip_block", "_corners", "_face", "_coverage", "_write", "_clipped", "_project"))
