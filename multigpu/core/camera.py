@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,22 +27,27 @@ class Camera:
 
 
 def look_at(eye, target, up) -> np.ndarray:
-    """World-to-view matrix; the camera looks down -z with +y up."""
-    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
-    f = target - eye
-    norm = np.linalg.norm(f)
-    if not np.isfinite(norm) or norm == 0:
+    """World-to-view matrix; the camera looks down -z with +y up. Scalar float arithmetic: it
+    runs once per frame, where numpy's per-call overhead (cross, norm) would cost tens of
+    microseconds for nine products."""
+    ex, ey, ez = (float(v) for v in eye)
+    fx, fy, fz = float(target[0]) - ex, float(target[1]) - ey, float(target[2]) - ez
+    norm = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if not math.isfinite(norm) or norm == 0:
         raise ValueError("camera position and target coincide")
-    f /= norm
-    s = np.cross(f, up)
-    if np.linalg.norm(s) < 1e-12:  # looking along up: pick any perpendicular
-        s = np.cross(f, [1.0, 0.0, 0.0] if abs(f[0]) < 0.9 else [0.0, 1.0, 0.0])
-    s /= np.linalg.norm(s)
-    u = np.cross(s, f)
-    m = np.eye(4)
-    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
-    m[:3, 3] = -m[:3, :3] @ eye
-    return m
+    fx, fy, fz = fx / norm, fy / norm, fz / norm
+    ux, uy, uz = (float(v) for v in up)
+    sx, sy, sz = fy * uz - fz * uy, fz * ux - fx * uz, fx * uy - fy * ux
+    if math.sqrt(sx * sx + sy * sy + sz * sz) < 1e-12:  # looking along up: pick any perpendicular
+        ux, uy, uz = (1.0, 0.0, 0.0) if abs(fx) < 0.9 else (0.0, 1.0, 0.0)
+        sx, sy, sz = fy * uz - fz * uy, fz * ux - fx * uz, fx * uy - fy * ux
+    n = math.sqrt(sx * sx + sy * sy + sz * sz)
+    sx, sy, sz = sx / n, sy / n, sz / n
+    ux, uy, uz = sy * fz - sz * fy, sz * fx - sx * fz, sx * fy - sy * fx
+    return np.array([[sx, sy, sz, -(sx * ex + sy * ey + sz * ez)],
+                     [ux, uy, uz, -(ux * ex + uy * ey + uz * ez)],
+                     [-fx, -fy, -fz, fx * ex + fy * ey + fz * ez],
+                     [0.0, 0.0, 0.0, 1.0]])
 
 
 def perspective(fov_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
@@ -90,5 +96,7 @@ def frame_matrices(camera, size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     W, H = size
     view = camera.view()
     proj = camera.projection(W / H)
-    light = view[:3, :3].T @ np.array([0.3, 0.5, 0.8])
-    return view, proj, light / np.linalg.norm(light)
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = view[0, :3].tolist(), view[1, :3].tolist(), view[2, :3].tolist()
+    lx, ly, lz = 0.3 * a0 + 0.5 * b0 + 0.8 * c0, 0.3 * a1 + 0.5 * b1 + 0.8 * c1, 0.3 * a2 + 0.5 * b2 + 0.8 * c2
+    n = math.sqrt(lx * lx + ly * ly + lz * lz)  # view^T (0.3, 0.5, 0.8), normalized
+    return view, proj, np.array([lx / n, ly / n, lz / n])
