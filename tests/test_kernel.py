@@ -109,6 +109,33 @@ def test_compiled_projection_on_a_walkthrough():
         same_rects(scene.bmin, scene.bmax, view, proj, np.float32)
 
 
+def test_compiled_projection_culls_groups_exactly_at_the_planes():
+    """Clusters of boxes sitting on the frustum planes (inside, outside and straddling them by
+    a few ulps to a tenth of their size), at every scale: the kernel culls whole groups of
+    neighbours first, which must never change a rect."""
+    from multigpu.core.bounds import _check
+    from multigpu.core.camera import look_at, perspective
+
+    rng = np.random.default_rng(11)
+    for s in (1e-3, 1.0, 1e4, 1e8):
+        for shift in (0.0, 1e7):
+            eye = np.array([shift, -shift, 0.5 * shift])
+            view = look_at(eye, eye + [1.0, 0.3, -0.2], [0, 0, 1])
+            proj = perspective(60.0, 1.5, 0.1 * s, 100.0 * s)
+            M = _check(view, proj)
+            centres = []
+            for plane in (M[3] + M[0], M[3] - M[0], M[3] + M[1], M[3] - M[1], M[3] + M[2]):
+                normal = plane[:3] / np.linalg.norm(plane[:3])
+                p0 = eye + rng.normal(size=(40, 3)) * 20 * s
+                on = p0 - ((p0 @ plane[:3] + plane[3]) / (plane[:3] @ plane[:3]))[:, None] * plane[:3]
+                for jitter in (0.0, 1e-12, 1e-6, 1e-1):  # clusters of 16 around points on the plane
+                    side = rng.choice([-1.0, 1.0], (40, 1)) * jitter * s
+                    centres.append(np.repeat(on + side * normal, 16, axis=0) + rng.normal(size=(640, 3)) * jitter * s)
+            c = np.concatenate(centres)
+            h = np.abs(rng.normal(size=c.shape)) * s * rng.choice([0.0, 1e-9, 1e-3, 0.05], (len(c), 1))
+            same_rects(c - h, c + h, view, proj, np.float32)
+
+
 # -- every strategy (cross-segment: core/kernel/pieces.py; time, none: fixed cuts) compiled and not
 
 def same_partition(a, b):

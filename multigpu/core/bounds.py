@@ -77,6 +77,10 @@ class BoxProjector:
         # the compiled projection (core/kernel/project.py: the same rects, bit for bit) where
         # numba is installed, unless compiled=False asks for this module's numpy reference
         self.compiled = kernel.available() if compiled is None else bool(compiled)
+        if self.compiled:  # the kernel culls neighbours a group at a time: boxes in a spatial order
+            from multigpu.core.kernel.project import spatial_groups
+
+            self.grouped = spatial_groups(self.center, self.half64)
 
     def __len__(self) -> int:
         return self.center.shape[1]
@@ -94,7 +98,7 @@ class BoxProjector:
         if self.compiled:
             from multigpu.core.kernel import project_boxes
 
-            project_boxes(self.center, self.half, self.half64, M, reach_rows(M), float(np.finfo(self.dtype).eps) * 16,
+            project_boxes(self.grouped, self.half, M, reach_rows(M), float(np.finfo(self.dtype).eps) * 16,
                           FAR_TOL, _SIGNS, _EDGES, _FACES, _NEXT, out, coverage)
             return out.T
         for s in range(0, n, self.chunk):  # blocks of objects, not objects

@@ -61,14 +61,15 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
     return shares, (regions, loads, visible, none, none.astype(np.int64), spans, per_rank, per_mask)
 
 
-def project_boxes(center, half, half64, M, reach, widen, far_tol, signs, edges, faces, nxt, out,
-                  coverage=None) -> None:
-    """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage."""
+def project_boxes(grouped, half, M, reach, widen, far_tol, signs, edges, faces, nxt, out, coverage=None) -> None:
+    """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage;
+    ``grouped``: ``project.spatial_groups`` of the boxes (culled a group at a time)."""
     from multigpu.core.kernel.project import _project
 
+    order, center, half64, starts, gbox = grouped
     cov = np.empty(0) if coverage is None else coverage
-    _project(center, half, half64, M, np.ascontiguousarray(M[[0, 1, 3], :3], dtype=half.dtype), reach, widen,
-             far_tol, signs, edges, faces, nxt, out, cov, coverage is not None)
+    _project(center, half, half64, order, starts, gbox, M, np.ascontiguousarray(M[[0, 1, 3], :3], dtype=half.dtype),
+             reach, widen, far_tol, signs, edges, faces, nxt, out, cov, coverage is not None)
 
 
 def warm() -> float:
