@@ -47,6 +47,11 @@ def build_parser() -> argparse.ArgumentParser:
     scene_args(si)
     si.add_argument("--grid", default="2x2", help="the wall the scene is prepared for (automatic clustering)")
     si.add_argument("--no-cache", action="store_true")
+    sc = ssub.add_parser("scan", help="write a scanned-style model: one closed surface of even triangles (binary "
+                                      "PLY); load it cut into parts with --model OUT --split grid:8")
+    sc.add_argument("out", help="PLY file to write")
+    sc.add_argument("--triangles", type=int, default=1_000_000, help="about this many (default %(default)s)")
+    sc.add_argument("--seed", type=int, default=0)
 
     p = sub.add_parser("path", help="camera path tools")
     psub = p.add_subparsers(dest="pcmd", required=True)
@@ -86,8 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("what", help="balance | scene | render | frame | growth | floor | present")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
-    b.add_argument("--scene", default="plant", help=argparse.SUPPRESS)
     b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)
+    b.add_argument("--path-kind", default="walkthrough", help=argparse.SUPPRESS)
+    scene_args(b)  # bench floor's worker: the scene it renders
     return ap
 
 
@@ -105,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "walkthrough":
             return _walkthrough(args)
         if args.cmd == "scene":
-            return _scene_info(args)
+            return _scene_scan(args) if args.scmd == "scan" else _scene_info(args)
         if args.cmd == "path":
             return _path_make(args)
         if args.cmd == "wall":
@@ -126,9 +132,10 @@ def main(argv: list[str] | None = None) -> int:
             from multigpu.studies import bench
 
             if args.what == "floor" and args.worker:  # the MPI side, started by bench floor
+                from multigpu.flags import spec
                 from multigpu.parallel import floor
 
-                floor.main(args.scene, args.frames or 120)
+                floor.main(spec(args), args.path_kind, args.frames or 120)
                 return 0
             if args.what == "floor":
                 from multigpu.studies.floor import bench_floor
@@ -232,6 +239,24 @@ def _end_failed_job(comm, job, exc: BaseException) -> None:
         print(text, file=sys.stderr, flush=True)
     time.sleep(ABORT_PAUSE)  # the launcher forwards what we printed before MPI_Abort tears it down
     comm.Abort(code)
+
+
+def _scene_scan(a) -> int:
+    from pathlib import Path
+
+    from multigpu.scene.scan import MIN_TRIANGLES, write_scan
+
+    out = Path(a.out)
+    if a.triangles < MIN_TRIANGLES:
+        raise InputError.of("triangles", f"a scan needs at least {MIN_TRIANGLES}, got {a.triangles}")
+    if out.suffix.lower() != ".ply":
+        raise InputError(f"scene scan writes PLY: name the file *.ply, got '{out}'")
+    if not out.parent.is_dir():
+        raise InputError(f"scene scan: directory '{out.parent}' does not exist")
+    write_scan(out, a.triangles, a.seed)
+    print(f"wrote {out} ({out.stat().st_size / 2**20:.1f} MiB); walk it: launch/walkthrough --model {out} "
+          f"--split grid:8 --path-kind orbit")
+    return 0
 
 
 def _scene_info(a) -> int:

@@ -218,3 +218,32 @@ def test_big_walls_cut_big_objects_small_walls_keep_them():
     assert auto_cluster(tris, 4)[0] == 0
     size, why = auto_cluster(tris, 16)
     assert size == max(64, -(-int(tris.sum()) // (64 * 16))) and "16-rank wall" in why
+
+
+def test_scan_is_one_closed_surface_cut_into_about_a_hundred_parts(tmp_path, capsys):
+    """`multigpu scene scan`: the scanned-style model of the payoff study (issue 24): one
+    watertight, outward-wound mesh of even triangles (+Y up, as PLY scans are), which
+    `--split grid:8` cuts into ~100 parts that a 2x2 wall keeps as modelled."""
+    from multigpu.scene.scan import scan_mesh
+
+    verts, faces = scan_mesh(30_000, seed=3)
+    mesh = trimesh.Trimesh(verts, faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0  # closed, wound outward
+    assert abs(len(faces) - 30_000) / 30_000 < 0.05
+    assert mesh.area_faces.max() / mesh.area_faces.min() < 8  # even triangles, as a scanner's
+    path = tmp_path / "scan.ply"
+    assert cli(["scene", "scan", str(path), "--triangles", "30000", "--seed", "3"]) == 0
+    scene, _ = load_scene(SceneSpec(model=str(path), split="grid:8"), use_cache=False)
+    assert scene.n_triangles == len(faces) and axis_name(scene.meta["up"]) == "+y"
+    assert 60 <= scene.n_objects <= 200
+    assert scene.tris.max() / scene.n_triangles < 0.05  # few large objects, none dominant
+
+
+@pytest.mark.parametrize("argv, needle", [(["x.obj"], "*.ply"), (["missing/x.ply"], "does not exist"),
+                                          (["x.ply", "--triangles", "3"], "--triangles")])
+def test_scan_flags_are_refused_in_one_line(tmp_path, capsys, argv, needle):
+    argv = [str(tmp_path / argv[0]), *argv[1:]]
+    assert cli(["scene", "scan", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+    assert not list(tmp_path.iterdir())  # nothing written

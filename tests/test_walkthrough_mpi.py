@@ -197,10 +197,12 @@ def test_launch_script_runs_the_job(tmp_path):
 
 
 def test_noise_floor_bench_measures_identical_work_on_every_rank():
-    """bench floor's MPI side: every rank renders the same work; the figures are sane."""
+    """bench floor's MPI side: every rank renders the same work (any scene flags and generated
+    path); the figures are sane."""
     from multigpu.studies.floor import run
 
-    got = run(scenes=("plant",), ranks=2, frames=8, timeout=240)[0]
-    assert got["ranks"] == 2 and got["frames"] == 3
+    got = run(scenes={"two plants": ["--triangles", "20000", "--copies", "2", "--path-kind", "orbit"]}, ranks=2,
+              frames=8, timeout=240)[0]
+    assert got["scene"] == "two plants" and got["ranks"] == 2 and got["frames"] == 3
     assert got["render_ms_mean"] > 0
     assert 1.0 <= got["imbalance_floor"] < 2.0 and got["noise_cv"] >= 0.0

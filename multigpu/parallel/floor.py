@@ -18,8 +18,9 @@ import numpy as np
 MARK = "floor-json: "
 
 
-def measure(scene_name: str, frames: int, tile: int = 256) -> dict | None:
-    """The worker, on every rank of an MPI job: returns the figures on rank 0."""
+def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
+    """The worker, on every rank of an MPI job, for the scene of ``spec`` (a ``SceneSpec``)
+    along its generated ``path_kind`` path: returns the figures on rank 0."""
     import os
 
     os.environ.setdefault("LP_NUM_THREADS", "1")
@@ -29,19 +30,19 @@ def measure(scene_name: str, frames: int, tile: int = 256) -> dict | None:
     from multigpu.core.planner import Planner
     from multigpu.core.regions import overlaps, pixel_spans
     from multigpu.gpu.render import RegionRenderer, create_context
-    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.models import load_scene
     from multigpu.scene.paths import generate
 
     comm = MPI.COMM_WORLD
     rank = comm.Get_rank()
     if rank == 0:
-        load_scene(SceneSpec(scene=scene_name))  # build the cache once
+        load_scene(spec)  # build the cache once
     comm.Barrier()
-    scene, _ = load_scene(SceneSpec(scene=scene_name))
+    scene, _ = load_scene(spec)
     size = (2 * tile, 2 * tile)
     ctx, _ = create_context(local_rank=rank)
     renderer = RegionRenderer(ctx, scene, size)
-    path = generate("walkthrough", scene, frames)
+    path = generate(path_kind, scene, frames)
     planner = Planner(WalkConfig(grid=(2, 2), tile=(tile, tile)), scene, rank)  # the frame loop's projection
     region = (tile // 2, tile // 2, tile // 2 + tile, tile // 2 + tile)  # a tile-sized centre region
     times = np.zeros(frames)
@@ -59,14 +60,14 @@ def measure(scene_name: str, frames: int, tile: int = 256) -> dict | None:
     if rank != 0:
         return None
     t = allt.T[min(5, frames - 1):]  # (F, K), first frames warm up
-    return {"scene": scene_name, "ranks": int(comm.Get_size()), "frames": int(t.shape[0]),
+    return {"scene": scene.name, "ranks": int(comm.Get_size()), "frames": int(t.shape[0]),
             "render_ms_mean": float(t.mean()),
             "imbalance_floor": float(np.mean(t.max(axis=1) / t.mean(axis=1))),
             "noise_cv": float(np.mean(t.std(axis=1) / t.mean(axis=1)))}
 
 
-def main(scene_name: str, frames: int) -> None:
+def main(spec, path_kind: str, frames: int) -> None:
     """Measure and print rank 0's figures as one JSON line after ``MARK``."""
-    got = measure(scene_name, frames)
+    got = measure(spec, path_kind, frames)
     if got is not None:
         print(MARK + json.dumps(got), flush=True)

@@ -13,21 +13,25 @@ import sys
 
 from multigpu.parallel.floor import MARK
 
+#: the scenes ``bench floor`` measures by default: name -> scene flags (as ``walkthrough`` takes them)
+SCENES = {"plant": ["--scene", "plant"], "city": ["--scene", "city"]}
 
-def run(scenes: tuple[str, ...] = ("plant", "city"), ranks: int = 4, frames: int = 120,
+
+def run(scenes: dict[str, list[str]] | None = None, ranks: int = 4, frames: int = 120,
         timeout: float = 600) -> list[dict]:
-    """Start the worker under mpiexec for each scene; the figures it printed."""
+    """Start the worker under mpiexec for each scene (name -> scene flags, and ``--path-kind``
+    where not the walkthrough); the figures it printed, each with its ``scene`` name."""
     from multigpu.parallel.mpirun import run_multigpu
 
     rows = []
-    for name in scenes:
-        job = run_multigpu(ranks, ["bench", "floor", "--worker", "--scene", name, "--frames", str(frames)], timeout,
+    for name, flags in (scenes or SCENES).items():
+        job = run_multigpu(ranks, ["bench", "floor", "--worker", *flags, "--frames", str(frames)], timeout,
                            merge_stderr=True)
         lines = [ln for ln in job.stdout.splitlines() if ln.startswith(MARK)]
         if job.returncode != 0 or not lines:
             tail = "\n".join(job.stdout.strip().splitlines()[-5:])
             raise RuntimeError(f"bench floor: the MPI job failed (exit {job.returncode})\n{tail}")
-        rows.append(json.loads(lines[-1][len(MARK):]))
+        rows.append({**json.loads(lines[-1][len(MARK):]), "scene": name})
     return rows
 
 

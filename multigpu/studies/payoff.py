@@ -1,5 +1,6 @@
-"""Does balancing pay? Frame time of every strategy against ``none`` on the plant and the
-city, alternated in rounds (``payoff``); overlap and render efficiency as walls grow, with
+"""Does balancing pay? Frame time of every strategy against ``none`` on the plant, the city,
+the paper's plants on an orbit and a scanned-style model cut into ~100 parts, alternated in
+rounds with the noise floor and the ceiling it implies (``payoff``); overlap and render efficiency as walls grow, with
 objects kept whole or cut by the automatic cluster rule (``walls``)."""
 
 from __future__ import annotations
@@ -12,20 +13,31 @@ from multigpu.studies.floor import run as floor_run
 from multigpu.studies.runs import Settings, _plt, walk
 from multigpu.studies.tables import md_table, write_csv
 
-FLOOR_SCENES = ("plant", "city")  # built-in scenes at their defaults: bench floor measures them
-
 
 def orbit_copies(s: Settings) -> int:
     """Plants in the orbit scene (the paper's Section 7 setup)."""
     return 2 if s.quick else 4
 
 
-def scenes(s: Settings) -> dict[str, list[str]]:
-    """The plant walkthrough, the city drive, and the paper's Section 7 setup (plants, orbit)."""
+def scan_triangles(s: Settings) -> int:
+    """Size of the scanned-style model: ~1 M triangles (the issue's 871k-triangle scan)."""
+    return 10 * s.triangles
+
+
+def scenes(s: Settings, out: Path) -> dict[str, list[str]]:
+    """Scene flags of each scene: the plant walkthrough, the city drive, the paper's Section 7
+    setup (plants, orbit), and a scanned-style model (``scene scan``, written into ``out``) cut
+    into ~100 parts by ``--split grid:8``, on an orbit: few large objects."""
+    from multigpu.scene.scan import write_scan
+
     copies = orbit_copies(s)
+    scan = out / "scan.ply"
+    if not scan.exists():
+        write_scan(scan, scan_triangles(s))
     return {"plant": ["--scene", "plant", "--triangles", str(s.triangles)],
             "city": ["--scene", "city", "--triangles", str(s.triangles)],
-            "orbit": ["--triangles", str(s.triangles * copies), "--copies", str(copies), "--path-kind", "orbit"]}
+            "orbit": ["--triangles", str(s.triangles * copies), "--copies", str(copies), "--path-kind", "orbit"],
+            "scan": ["--model", str(scan), "--split", "grid:8", "--path-kind", "orbit"]}
 
 
 def exp_payoff(s: Settings, out: Path) -> str:
@@ -34,9 +46,10 @@ def exp_payoff(s: Settings, out: Path) -> str:
     strategies = ("strips", "cost", "time", "adaptive", "cross", "none")
     runs: dict = {}
     floors: dict = {}
-    SCENES = scenes(s)
+    out.mkdir(parents=True, exist_ok=True)
+    SCENES = scenes(s, out)
     for r in range(rounds):  # rounds alternate the strategies, so drift hits all alike
-        for got in floor_run(FLOOR_SCENES, 4, min(s.frames, 120), s.timeout):
+        for got in floor_run(SCENES, 4, min(s.frames, 120), s.timeout):
             floors.setdefault(got["scene"], []).append(got["imbalance_floor"])
         for scene, flags in SCENES.items():
             for name in strategies:
@@ -50,24 +63,31 @@ def exp_payoff(s: Settings, out: Path) -> str:
             rs = runs[(scene, name)]
             em = [r.summary["emulated_frame_ms"] for r in rs]
             lb = [r.summary["cpu"]["load_balancing_cpu_ms"] for r in rs]
-            rows.append({"scene": scene, "objects": rs[0].summary["config"]["scene"]["objects"], "balance": name,
+            rows.append({"scene": scene, "objects": rs[0].summary["config"]["scene"]["objects"],
+                     "triangles": rs[0].summary["config"]["scene"]["triangles"], "balance": name,
                          "emulated_ms": float(np.median(em)), "speedup_vs_none": float(none / np.median(em)),
                          "speedup_min": float(none / max(em)), "speedup_max": float(none / min(em)),
                          "imb_render": float(np.median([r.summary["imbalance_render_cpu"] for r in rs])),
                          "imb_tris": float(np.median([r.summary["imbalance_triangles"] for r in rs])),
                          "lb_cpu_ms": float(np.median(lb)), "lb_share": float(np.median(lb) / np.median(em)),
-                         "render_max_ms": float(np.median([r.summary["render_cpu_max_ms"] for r in rs]))})
+                         "render_max_ms": float(np.median([r.summary["render_cpu_max_ms"] for r in rs])),
+                         "tris_drawn": float(np.median([r.summary["triangles_per_frame"] for r in rs]))})
     write_csv(out / "payoff.csv", rows)
     bounds = [ceiling(scene, runs[(scene, "none")], float(np.median(floors[scene])),
                       max(x["speedup_vs_none"] for x in rows if x["scene"] == scene and x["balance"] != "none"))
-              for scene in FLOOR_SCENES]
+              for scene in SCENES]
     write_csv(out / "payoff_ceiling.csv", bounds)
     ranking, verdict = rank_strategies(rows, tuple(SCENES))
     write_csv(out / "payoff_ranking.csv", ranking)
+    checks = default_checks(rows, bounds)
+    write_csv(out / "payoff_default.csv", checks)
     return "\n".join([
         f"2x2 wall of 256x256 tiles, {s.frames} frames per run: the plant walkthrough, the city drive along its "
-        f"streets, and {orbit_copies(s)} plants on an orbit keeping them all in view (the paper's Section 7 "
-        f"setup); {rounds} alternating rounds; medians over rounds (min..max of the speedup beside). Emulated "
+        f"streets, {orbit_copies(s)} plants on an orbit keeping them all in view (the paper's Section 7 "
+        f"setup), and a scanned-style model (`multigpu scene scan`: one closed surface of "
+        f"{rows_of(rows, 'scan')['triangles']:,} even triangles, cut by `--split grid:8` into "
+        f"{rows_of(rows, 'scan')['objects']} parts: few large objects) on an orbit; {rounds} alternating rounds; "
+        "medians over rounds (min..max of the speedup beside). Emulated "
         "parallel frame = "
         "slowest rank's CPU time per frame; `LB share` = load-balancing CPU per rank (projection, plan, learning "
         "from the last frame's times) / emulated frame.", "",
@@ -75,8 +95,8 @@ def exp_payoff(s: Settings, out: Path) -> str:
                         ("emulated_ms", "Frame (emulated) ms", ".2f"), ("speedup_vs_none", "vs none", ".2f"),
                         ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f"),
                         ("render_max_ms", "Slowest render ms", ".2f"), ("imb_render", "Imb. render", ".3f"),
-                        ("imb_tris", "Imb. tris", ".3f"), ("lb_cpu_ms", "LB CPU ms", ".2f"),
-                        ("lb_share", "LB share", ".1%")]), "",
+                        ("imb_tris", "Imb. tris", ".3f"), ("tris_drawn", "Tris drawn / frame", ",.0f"),
+                        ("lb_cpu_ms", "LB CPU ms", ".2f"), ("lb_share", "LB share", ".1%")]), "",
         "How far balancing can go here. `Floor` = the render imbalance of identical work on every rank "
         "(`multigpu bench floor`, measured in every round beside the runs: this machine's noise, which a perfect "
         "balancer would still show). `Ideal frame` = `none`'s frame with its balancing, exchange and display CPU "
@@ -88,11 +108,41 @@ def exp_payoff(s: Settings, out: Path) -> str:
                           ("render_mean_ms", "Mean render ms", ".2f"), ("render_max_ms", "Slowest render ms", ".2f"),
                           ("ideal_ms", "Ideal frame ms", ".2f"), ("ceiling", "Ceiling vs none", ".2f"),
                           ("best", "Best measured vs none", ".2f")]), "",
-        "Which strategy pays best over all three scenes (speedup over `none`, emulated frame), ranked by the worst "
+        "Which strategy pays best over every scene (speedup over `none`, emulated frame), ranked by the worst "
         "case, then the geometric mean:", "",
         md_table(ranking, [("balance", "Balance", ""), *[(sc, sc, ".2f") for sc in SCENES],
                            ("geomean", "Geometric mean", ".3f"), ("worst", "Worst", ".2f")]), "",
-        verdict])
+        verdict, "",
+        "The default against the best strategy and the ceiling, scene by scene (targets: within 3 % of the best "
+        "measured strategy everywhere, and at least 0.9 of the ceiling where the ceiling is above 1.05x):", "",
+        md_table(checks, [("scene", "Scene", ""), ("ceiling", "Ceiling", ".2f"), ("best", "Best", ""),
+                          ("best_speedup", "Best vs none", ".2f"), ("default", "Default", ""),
+                          ("default_speedup", "Default vs none", ".2f"), ("of_best", "Default / best", ".3f"),
+                          ("of_ceiling", "Default / ceiling", ".3f"), ("meets", "Meets both", "")])])
+
+
+def default_checks(rows: list[dict], bounds: list[dict]) -> list[dict]:
+    """Per scene: the configured default's speedup against the best strategy's and the ceiling."""
+    from multigpu.config import WalkConfig
+
+    default = WalkConfig().balance
+    out = []
+    for b in bounds:
+        mine = [r for r in rows if r["scene"] == b["scene"]]
+        best = max((r for r in mine if r["balance"] != "none"), key=lambda r: r["speedup_vs_none"])
+        d = next(r for r in mine if r["balance"] == default)
+        of_best, of_ceiling = d["speedup_vs_none"] / best["speedup_vs_none"], d["speedup_vs_none"] / b["ceiling"]
+        meets = of_best >= 0.97 and (b["ceiling"] <= 1.05 or of_ceiling >= 0.9)
+        out.append({"scene": b["scene"], "ceiling": b["ceiling"], "best": best["balance"],
+                    "best_speedup": best["speedup_vs_none"], "default": default,
+                    "default_speedup": d["speedup_vs_none"], "of_best": of_best, "of_ceiling": of_ceiling,
+                    "meets": "yes" if meets else "no"})
+    return out
+
+
+def rows_of(rows: list[dict], scene: str) -> dict:
+    """The first row of ``scene``."""
+    return next(r for r in rows if r["scene"] == scene)
 
 
 def rank_strategies(rows: list[dict], names: tuple[str, ...]) -> tuple[list[dict], str]:
