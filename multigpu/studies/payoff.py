@@ -32,7 +32,7 @@ def scenes(s: Settings, out: Path) -> dict[str, list[str]]:
     from multigpu.scene.scan import write_scan
 
     copies = orbit_copies(s)
-    scan = out / "scan.ply"
+    scan = out / f"scan_{scan_triangles(s)}.ply"  # named by size: a quick run never reuses a full run's
     if not scan.exists():
         write_scan(scan, scan_triangles(s))
     return {"plant": ["--scene", "plant", "--triangles", str(s.triangles)],

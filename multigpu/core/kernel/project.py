@@ -101,25 +101,22 @@ def spatial_groups(center: np.ndarray, half64: np.ndarray, size: int = GROUP):
     groups of ``size`` neighbours: (order, sorted centres, sorted half extents, group starts,
     group boxes (6, G): centre and half extents of each group's members' union). Once per scene."""
     n = center.shape[1]
-    finite = np.isfinite(center).all(axis=0)
-    lo = center[:, finite].min(axis=1, initial=np.inf) if finite.any() else np.zeros(3)
-    hi = center[:, finite].max(axis=1, initial=-np.inf) if finite.any() else np.ones(3)
+    finite = center[:, np.isfinite(center).all(axis=0)]
+    lo, hi = (finite.min(axis=1), finite.max(axis=1)) if finite.size else (np.zeros(3), np.ones(3))
     span = np.where(hi > lo, hi - lo, 1.0)
     q = np.clip(np.nan_to_num((center - lo[:, None]) / span[:, None] * (2 ** 21 - 1)), 0, 2 ** 21 - 1)
     q = q.astype(np.uint64)
     code = _spread(q[0]) | (_spread(q[1]) << np.uint64(1)) | (_spread(q[2]) << np.uint64(2))
     order = np.argsort(code, kind="stable").astype(np.int64)
     c, h = np.ascontiguousarray(center[:, order]), np.ascontiguousarray(half64[:, order])
-    starts = np.arange(0, n + size, size).clip(max=n)
-    starts = np.unique(starts) if n else np.zeros(1, dtype=np.int64)
-    if n and starts[-1] != n:
-        starts = np.append(starts, n)
-    first = starts[:-1]
-    with np.errstate(invalid="ignore"):
-        lo_g = np.minimum.reduceat(c - h, first, axis=1) if n else np.zeros((3, 0))
-        hi_g = np.maximum.reduceat(c + h, first, axis=1) if n else np.zeros((3, 0))
+    starts = np.unique(np.minimum(np.arange(0, n + size, size, dtype=np.int64), n))  # ends with n
+    lo_g, hi_g = np.zeros((3, 0)), np.zeros((3, 0))
+    if n:
+        with np.errstate(invalid="ignore"):
+            lo_g = np.minimum.reduceat(c - h, starts[:-1], axis=1)
+            hi_g = np.maximum.reduceat(c + h, starts[:-1], axis=1)
     gbox = np.ascontiguousarray(np.concatenate([(lo_g + hi_g) * 0.5, (hi_g - lo_g) * 0.5]))
-    return order, c, h, starts.astype(np.int64), gbox
+    return order, c, h, starts, gbox
 
 
 def _clip_block(center, half64, M, rr, far_tol, s0, m, base, state):
