@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 from mpirun import ROOT, SMALL, read_png, run_mpi, start_mpi
-from xserver import Xvfb, key, need_tools, screenshot, wait_for, windows, wm_close
+from xserver import Xvfb, escape, need_tools, screenshot, wait_for, windows, wm_close
 
 pytestmark = pytest.mark.mpi
 GRID, TILE, MULLION = (2, 2), (60, 48), (7, 5)
@@ -56,7 +56,7 @@ def test_screen_shows_the_composite_and_escape_ends_the_run(tmp_path, still_path
         try:
             wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4)
             shot = screenshot(x.name)
-            key(x.name, windows(x.name)[0], "Escape")
+            escape(x.name, windows(x.name)[0])
             _, err = finish(proc, kill)
         finally:
             kill() if proc.poll() is None else None

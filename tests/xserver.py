@@ -65,11 +65,12 @@ def windows(display: str, name: str = "multigpu tile") -> list[str]:
     return got.stdout.split()
 
 
-def key(display: str, window: str, keysym: str) -> None:
-    """Press a key in ``window``: the pointer over it gives it the keyboard (no window manager)."""
+def escape(display: str, window: str) -> None:
+    """Press Escape in ``window`` to end the run: the press alone, since the run acts on it and
+    may have destroyed the window before a release could be sent (X error BadWindow)."""
     env = {**os.environ, "DISPLAY": display}
     subprocess.run(["xdotool", "mousemove", "--window", window, "5", "5"], env=env, timeout=10, check=True)
-    subprocess.run(["xdotool", "key", "--window", window, keysym], env=env, timeout=10, check=True)
+    subprocess.run(["xdotool", "keydown", "--window", window, "Escape"], env=env, timeout=10, check=True)
 
 
 class _ClientMessage(ctypes.Structure):
