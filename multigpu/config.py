@@ -62,7 +62,7 @@ class WalkConfig:
     grid: tuple[int, int] = (2, 2)
     tile: tuple[int, int] = (256, 256)
     strips: int = 2048
-    balance: str = "cross"  # measured best over none on average (docs/RESULTS.md, payoff)
+    balance: str = "auto"  # cross or strips, whichever the scene's frames favour (docs/RESULTS.md, payoff)
     bounds: str = "box"
     out: str = "out"
     mosaic_every: int = 100

@@ -177,7 +177,7 @@ def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
     (["--tile", "0x5"], "--tile must be positive"),
     (["--grid", "two"], "--grid must look like"),
     (["--frames", "0"], "--frames must be >= 1"),
-    (["--balance", "magic"], "--balance must be one of strips, cost, time, adaptive, cross, none"),
+    (["--balance", "magic"], "--balance must be one of strips, cost, time, adaptive, cross, auto, none"),
     (["--subfrustum", "tiles"], "--subfrustum must be one of"),
     (["--partition", "gossip"], "--partition must be 'redundant' or 'broadcast'"),
     (["--exchange", "pigeon"], "--exchange must be 'messages' or 'shared'"),

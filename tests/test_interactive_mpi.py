@@ -14,6 +14,7 @@ import pytest
 from mpirun import SMALL, read_png, run_mpi, start_mpi
 from xserver import Xvfb, escape, need_tools, screenshot, wait_for, windows
 
+from multigpu.config import WalkConfig
 from multigpu.strategies import REGISTRY
 
 pytestmark = pytest.mark.mpi
@@ -51,8 +52,8 @@ def unit(v):
 
 
 def test_keys_fly_switch_the_strategy_and_the_recording_replays_bit_for_bit(tmp_path):
-    cycle = list(REGISTRY)
-    after = cycle[(cycle.index("cross") + 1) % len(cycle)]  # what B switches the default to
+    cycle, default = list(REGISTRY), WalkConfig.balance
+    after = cycle[(cycle.index(default) + 1) % len(cycle)]  # what B switches the default to
     with Xvfb(CANVAS) as x:
         out = tmp_path / "live"
         proc, kill = start_mpi(4, live_args(out), env={"DISPLAY": x.name})
@@ -85,8 +86,8 @@ def test_keys_fly_switch_the_strategy_and_the_recording_replays_bit_for_bit(tmp_
     assert all(len(k) == 1 for k in names), "every rank plans each frame with the same strategy"
     names = [k.pop() for k in names]
     switch = names.index(after)
-    assert set(names[:switch]) == {"cross"} and set(names[switch:]) == {after}  # from one frame on
-    assert s["balance_frames"] == {"cross": switch, after: n - switch}
+    assert set(names[:switch]) == {default} and set(names[switch:]) == {after}  # from one frame on
+    assert s["balance_frames"] == {default: switch, after: n - switch}
 
     cams = json.loads((tmp_path / "live.json").read_text())["cameras"]
     assert len(cams) == n  # the camera of every frame written

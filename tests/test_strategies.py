@@ -144,7 +144,7 @@ def test_time_feedback_converges_and_tiles():
 
 
 def test_registry_and_unknown_name():
-    assert set(REGISTRY) == {"strips", "cost", "time", "adaptive", "cross", "none"}
+    assert set(REGISTRY) == {"strips", "cost", "time", "adaptive", "cross", "auto", "none"}
     assert all(name in describe() for name in REGISTRY)
     with pytest.raises(ValueError, match="unknown balancing strategy"):
         make_strategy("magic", (2, 2), (64, 64), 16)
@@ -199,6 +199,48 @@ def test_every_registered_strategy_keeps_the_contract(name):
         for a, b in zip(*runs):
             np.testing.assert_array_equal(a.regions, b.regions)
             np.testing.assert_array_equal(a.visible, b.visible)
+
+
+@pytest.mark.parametrize("cross_cost", [0.5, 2.0])
+def test_auto_keeps_the_candidate_whose_frames_were_faster_and_checks_again(cross_cost):
+    """Frames planned by cross (pieces) cost ``cross_cost`` times strips' frames: the trial picks
+    the faster, the winner plans every frame of the hold, the next trial decides again; two
+    copies fed the same times decide alike."""
+    from multigpu.strategies.auto import Auto
+
+    rects, tris = workload(300, seed=11)
+    time_of = lambda p: np.full(4, cross_cost if p.pieces is not None else 1.0)
+    runs = []
+    for _ in range(2):
+        auto = Auto((2, 2), (128, 128), 64, window=4, settle=1, rounds=2, hold=10)
+        runs.append(simulate(auto, rects, tris, time_of, frames=2 * (auto.trial_frames + auto.hold)))
+    want = "cross" if cross_cost < 1 else "strips"
+    doc = auto.report()
+    assert doc["using"] == want and [t["chose"] for t in doc["trials"]] == [want, want]
+    assert doc["trials"][0]["scores_ms"] == {"cross": cross_cost, "strips": 1.0}  # settled frames only
+    held = runs[0][auto.trial_frames:auto.trial_frames + auto.hold]
+    assert all((p.pieces is not None) == (want == "cross") for p in held)
+    assert doc["frames"]["cross"] + doc["frames"]["strips"] == len(runs[0])
+    for a, b in zip(*runs):
+        np.testing.assert_array_equal(a.regions, b.regions)
+
+
+def test_auto_picks_cross_where_a_cost_hides_from_triangle_counts():
+    """Objects in one corner cost 5x per triangle: strips, balancing triangles, leaves that
+    rank slow; cross follows the measured times, and auto settles on it."""
+    from multigpu.strategies.auto import Auto
+
+    rects, tris = workload(600, seed=6)
+    heavy = np.where((rects[:, 0] > 0.5) & (rects[:, 1] > 0.5), 5.0, 1.0)
+
+    def time_of(p):
+        masks = p.piece_visible or p.visible[:, None, :]
+        return np.array([(m.astype(float) @ (tris * heavy)).sum() for m in masks]) * 1e-3
+
+    auto = Auto((2, 2), (256, 256), 256)
+    simulate(auto, rects, tris, time_of, frames=auto.trial_frames + 5)
+    t = auto.report()["trials"][0]
+    assert t["chose"] == "cross" and t["scores_ms"]["cross"] < t["scores_ms"]["strips"]
 
 
 def test_rank_pixels_uses_the_partition_spans():

@@ -84,7 +84,7 @@ def test_shared_window_and_messages_compose_the_same(tmp_path, reference, extra)
 
 
 def test_broadcast_partition_carries_pieces(tmp_path, reference):
-    """cross (the default) under --partition broadcast: rank 0's pieces reach every rank, and the
+    """cross under --partition broadcast: rank 0's pieces reach every rank, and the
     wall still equals the one-rank render."""
     out = walk(tmp_path, "bcast_cross", (2, 2), ["--partition", "broadcast", "--balance", "cross"])
     for got, ref in zip(frames_of(out), reference):

@@ -7,6 +7,7 @@ and the tests that loop over every strategy read (as IceT's ``select.c`` and its
 from __future__ import annotations
 
 from multigpu.strategies.adaptive import Adaptive
+from multigpu.strategies.auto import Auto
 from multigpu.strategies.base import Configured, Strategy, rank_pixels
 from multigpu.strategies.cost import CostModel
 from multigpu.strategies.cross import CrossSegment
@@ -15,7 +16,7 @@ from multigpu.strategies.strips import Strips
 from multigpu.strategies.time import TimeFeedback
 
 REGISTRY: dict[str, type] = {cls.name: cls for cls in (Strips, CostModel, TimeFeedback, Adaptive, CrossSegment,
-                                                      NoBalance)}
+                                                      Auto, NoBalance)}
 
 
 def describe() -> str:
@@ -30,4 +31,4 @@ def make_strategy(name: str, grid, size, strips: int) -> Strategy:
 
 
 __all__ = ["REGISTRY", "Strategy", "Configured", "make_strategy", "describe", "rank_pixels",
-           "Strips", "CostModel", "TimeFeedback", "Adaptive", "CrossSegment", "NoBalance"]
+           "Strips", "CostModel", "TimeFeedback", "Adaptive", "CrossSegment", "Auto", "NoBalance"]

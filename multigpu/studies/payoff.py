@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.strategies import REGISTRY
 from multigpu.studies.floor import run as floor_run
 from multigpu.studies.runs import Settings, _plt, walk
 from multigpu.studies.tables import md_table, write_csv
@@ -44,7 +45,7 @@ def scenes(s: Settings, out: Path) -> dict[str, list[str]]:
 def exp_payoff(s: Settings, out: Path) -> str:
     """Emulated frame of each strategy over ``none``, same scene and path, alternated rounds."""
     rounds = 1 if s.quick else 3
-    strategies = ("strips", "cost", "time", "adaptive", "cross", "none")
+    strategies = tuple(REGISTRY)  # every registered strategy, `none` last
     runs: dict = {}
     floors: dict = {}
     out.mkdir(parents=True, exist_ok=True)
