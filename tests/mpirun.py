@@ -12,24 +12,25 @@ ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--triangles", "20000", "--no-progress"]
 
 
-def start_mpi(n: int, args: list[str], env: dict | None = None):
+def start_mpi(n: int, args: list[str], env: dict | None = None, launcher=None, hosts=None):
     """A job in its own process group (for signal tests); returns (proc, kill)."""
     import os
     import signal
     import subprocess
 
-    launcher = find_launcher()
-    proc = subprocess.Popen(launcher.command(n, args), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True,
-                            env=launcher.environ({"LP_NUM_THREADS": "1", **(env or {})}))
+    launcher = launcher or find_launcher()
+    job_env = launcher.environ({"LP_NUM_THREADS": "1", **(env or {})})
+    proc = subprocess.Popen(launcher.command(n, args, hosts=hosts, env=job_env), cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, env=job_env)
     return proc, lambda: os.killpg(proc.pid, signal.SIGKILL)
 
 
-def run_mpi(n: int, args: list[str], timeout: float = 120, env: dict | None = None, launcher=None):
-    """``mpiexec -n n python -m mpi4py -m multigpu ARGS``; the whole process group is killed on timeout."""
+def run_mpi(n: int, args: list[str], timeout: float = 120, env: dict | None = None, launcher=None, hosts=None):
+    """``mpiexec -n n python -m mpi4py -m multigpu ARGS`` (on ``hosts`` [(host, slots)] when
+    given); the whole process group is killed on timeout."""
     try:
         return run_multigpu(n, args, timeout, env={"LP_NUM_THREADS": "1", **(env or {})}, cwd=ROOT,
-                            launcher=launcher)
+                            launcher=launcher, hosts=hosts)
     except JobTimeout as exc:
         raise AssertionError(f"{exc}\n{exc.stderr[-2000:]}") from None
 

@@ -92,19 +92,22 @@ def broadcast_partition(comm, part, k: int, n: int, timeout: float):
 ERROR_BYTES = 1024  # an agreed setup error travels as a fixed-size buffer
 
 
-def agree(comm, error: str | None, timeout: float) -> str | None:
-    """Every rank's setup outcome; the first error (with its rank) or None, on all ranks.
+def allgather_text(comm, text: str, timeout: float, what: str, nbytes: int = ERROR_BYTES) -> list[str]:
+    """Every rank's ``text`` (UTF-8, cut to ``nbytes - 1`` bytes), on all ranks.
 
     Non-blocking and bounded: a fixed-size buffer per rank in one ``Iallgather``, so a rank
     that never arrives ends the wait (timeout, or sooner through the job's liveness check)."""
-    K = comm.Get_size()
-    mine = np.zeros(ERROR_BYTES, dtype=np.uint8)
-    msg = (error or "").encode("utf-8")[:ERROR_BYTES - 1]
+    mine = np.zeros(nbytes, dtype=np.uint8)
+    msg = text.encode("utf-8")[:nbytes - 1]
     mine[:len(msg)] = np.frombuffer(msg, dtype=np.uint8)
-    allbuf = np.zeros((K, ERROR_BYTES), dtype=np.uint8)
-    wait_all([comm.Iallgather(mine, allbuf)], timeout, "setup")
-    errors = [bytes(b).rstrip(b"\0").decode("utf-8", "replace") for b in allbuf]
-    bad = [(r, e) for r, e in enumerate(errors) if e]
+    allbuf = np.zeros((comm.Get_size(), nbytes), dtype=np.uint8)
+    wait_all([comm.Iallgather(mine, allbuf)], timeout, what)
+    return [bytes(b).rstrip(b"\0").decode("utf-8", "replace") for b in allbuf]
+
+
+def agree(comm, error: str | None, timeout: float) -> str | None:
+    """Every rank's setup outcome; the first error (with its rank) or None, on all ranks."""
+    bad = [(r, e) for r, e in enumerate(allgather_text(comm, error or "", timeout, "setup")) if e]
     if not bad:
         return None
     r, e = bad[0]

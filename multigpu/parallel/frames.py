@@ -53,7 +53,7 @@ class Frames:
     """The frame loop in named phases: balance, render, sync, exchange, display, record."""
 
     def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, presenter, out: OutputDir | None,
-                 load_info, device, monitor=None):
+                 load_info, placement: list[dict], monitor=None):
         self.cfg, self.comm, self.job = cfg, comm, job
         self.scene, self.path, self.renderer, self.presenter = scene, path, renderer, presenter
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
@@ -92,7 +92,7 @@ class Frames:
                 if self.interactive:
                     start = _unshifted(path.camera(0), cfg.offset)
             self.live = Live(cfg, comm, scene, self.planner.balances, self.planner.using, controls, monitor, start)
-        doc = _config_doc(cfg, scene, load_info, self.n_frames, device, renderer.method)
+        doc = _config_doc(cfg, scene, load_info, self.n_frames, placement, renderer.method)
         doc["exchange"] = self.exchange.name
         self.config_doc = doc
         self.record = None
@@ -284,7 +284,9 @@ class Frames:
         return summary
 
 
-def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dict:
+def _config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> dict:
+    """The run's configuration for summary.json; ``placement``: every rank's host, index on
+    its host (``node_rank``) and EGL device."""
     return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
             "decomposition": cfg.decomposition, "balance": cfg.balance if cfg.decomposition == "screen" else None,
             "bin_size": cfg.bin_size if cfg.decomposition == "bins" else None,
@@ -296,7 +298,8 @@ def _config_doc(cfg, scene, load_info, n_frames, device, renderer_method) -> dic
                       "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
                       "warnings": scene.meta.get("warnings", []), "objects_from": scene.meta.get("objects"),
                       "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source")},
-            "path": cfg.path or cfg.path_kind, "egl_device": device, "present": cfg.present,
+            "path": cfg.path or cfg.path_kind, "egl_device": placement[0]["egl_device"], "present": cfg.present,
+            "ranks": placement, "hosts": len({p["host"] for p in placement}),
             "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,
             "monitor": cfg.monitor is not None,
             "lp_num_threads": os.environ.get("LP_NUM_THREADS"),

@@ -61,9 +61,31 @@ class Launcher:
     args: tuple[str, ...] = ()
     env: dict = field(default_factory=dict)
 
-    def command(self, n: int, argv: list[str], python: str | None = None) -> list[str]:
-        return [self.path, *self.args, "-n", str(n), python or sys.executable, "-m", "mpi4py", "-m", "multigpu",
-                *argv]
+    def command(self, n: int, argv: list[str], python: str | None = None,
+                hosts: list[tuple[str, int]] | None = None, env: dict | None = None) -> list[str]:
+        """The ``mpiexec`` command line for ``n`` ranks of ``multigpu ARGV``, on ``hosts``
+        [(host, slots)] when given (``hosts.py``), else on this machine; ``env`` is the job's
+        environment (default: ``environ()``)."""
+        placing = self.placing(hosts, self.environ() if env is None else env) if hosts else ()
+        return [self.path, *self.args, *placing, "-n", str(n),
+                python or sys.executable, "-m", "mpi4py", "-m", "multigpu", *argv]
+
+    def placing(self, hosts: list[tuple[str, int]], env: dict) -> list[str]:
+        """Flags that place the ranks on ``hosts`` in order, started through the remote shell
+        ``$MULTIGPU_RSH`` (default: the MPI's own, ssh). Open MPI is told to pass on the
+        environment the ranks need (Hydra passes all of it by default)."""
+        from multigpu.parallel.hosts import spec
+
+        rsh = env.get("MULTIGPU_RSH")
+        if rsh:
+            rsh = shutil.which(rsh) or ""
+            if not rsh:
+                raise InputError(f"MULTIGPU_RSH={env['MULTIGPU_RSH']}: not an executable")
+        if self.flavor == "openmpi":
+            names = {"LP_NUM_THREADS", *self.env, *(k for k in env if k.startswith("MULTIGPU_"))}
+            forward = [a for k in sorted(names) for a in ("-x", k)]
+            return ["--host", spec(hosts), *(("--mca", "plm_rsh_agent", rsh) if rsh else ()), *forward]
+        return ["-hosts", spec(hosts), *(("-launcher", "ssh", "-launcher-exec", rsh) if rsh else ())]
 
     def environ(self, extra: dict | None = None) -> dict:
         """The environment for the job: ours, the launcher's needs, one rasterizer thread per
@@ -116,11 +138,14 @@ def openmpi_on_path() -> str | None:
 
 
 def run_multigpu(n: int, args: list[str], timeout: float, env: dict | None = None, cwd=None,
-                 merge_stderr: bool = False, launcher: Launcher | None = None) -> subprocess.CompletedProcess:
-    """``mpiexec -n n python -m mpi4py -m multigpu ARGS``, killed whole after ``timeout`` s."""
+                 merge_stderr: bool = False, launcher: Launcher | None = None,
+                 hosts: list[tuple[str, int]] | None = None) -> subprocess.CompletedProcess:
+    """``mpiexec -n n python -m mpi4py -m multigpu ARGS`` (on ``hosts`` when given), killed
+    whole after ``timeout`` s."""
     launcher = launcher or find_launcher()
-    cmd = launcher.command(n, args)
-    proc = subprocess.Popen(cmd, cwd=cwd, env=launcher.environ(env), stdout=subprocess.PIPE,
+    job_env = launcher.environ(env)
+    cmd = launcher.command(n, args, hosts=hosts, env=job_env)
+    proc = subprocess.Popen(cmd, cwd=cwd, env=job_env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT if merge_stderr else subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
@@ -135,18 +160,34 @@ def run_multigpu(n: int, args: list[str], timeout: float, env: dict | None = Non
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err or "")
 
 
+def hosts_from(flag: str, value: str, ranks: int) -> list[tuple[str, int]]:
+    """The hosts of ``--hosts LIST`` or ``--hostfile FILE``, checked to hold ``ranks`` ranks."""
+    from multigpu.parallel.hosts import parse_hosts, placement, read_hostfile
+
+    hosts = parse_hosts(value) if flag == "--hosts" else read_hostfile(value)
+    placement(hosts, ranks, f"{flag} {value}")
+    return hosts
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m multigpu.parallel.mpirun -n K ARGS...``: exec the right mpiexec for K ranks."""
+    """``python -m multigpu.parallel.mpirun -n K [--hosts a:2,b:2 | --hostfile FILE] ARGS...``:
+    exec the right mpiexec for K ranks, on those hosts when given."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    usage = "usage: python -m multigpu.parallel.mpirun -n RANKS [--hosts H:N,... | --hostfile FILE] MULTIGPU_ARGS..."
     if len(argv) < 2 or argv[0] != "-n" or not argv[1].isdigit() or int(argv[1]) < 1:
-        print("usage: python -m multigpu.parallel.mpirun -n RANKS MULTIGPU_ARGS...", file=sys.stderr)
+        print(usage, file=sys.stderr)
         return 2
+    ranks, rest, hosts = int(argv[1]), argv[2:], None
     try:
+        if rest and rest[0] in ("--hosts", "--hostfile"):
+            if len(rest) < 2:
+                raise InputError(f"{rest[0]} needs a value")
+            hosts, rest = hosts_from(rest[0], rest[1], ranks), rest[2:]
         launcher = find_launcher()
+        cmd = launcher.command(ranks, rest, hosts=hosts)
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2
-    cmd = launcher.command(int(argv[1]), argv[2:])
     os.execvpe(cmd[0], cmd, launcher.environ())
     return 127  # not reached
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
+from multigpu.errors import InputError
 from multigpu.parallel.exchange import wait_all
 
 #: the most bytes a job may put in shared windows (all ranks, both halves) before it uses messages
@@ -31,8 +32,8 @@ MAX_SHARED_BYTES = 1 << 30
 
 class SharedPieces:
     """The ``shared`` exchange backend: every rank's segment of one shared window, as numpy
-    views; ``None`` from ``make`` when the ranks do not share one node or the window would be
-    too big."""
+    views; ``None`` from ``make`` when the window would be too big; refused (one line) when
+    the ranks do not share one host."""
 
     def __init__(self, win, segments: list[np.ndarray], half: int):
         self.win, self.segments, self.half = win, segments, half
@@ -46,7 +47,10 @@ class SharedPieces:
         per_half = size[0] * size[1] * (7 if with_depth else 3)  # a rank's pieces never exceed the display
         node = comm.Split_type(MPI.COMM_TYPE_SHARED)
         try:
-            if node.Get_size() != comm.Get_size() or 2 * per_half * comm.Get_size() > MAX_SHARED_BYTES:
+            if node.Get_size() != comm.Get_size():  # every rank sees it: all refuse alike
+                raise InputError.of("exchange", "shared needs every rank on one host, but the job spans several "
+                                    "(use --exchange messages)")
+            if 2 * per_half * comm.Get_size() > MAX_SHARED_BYTES:
                 return None
             ok = np.ones(1, dtype=np.int32)
             try:

@@ -12,13 +12,16 @@ after the current frame.
 
 from __future__ import annotations
 
+import json
+import socket
+
 import numpy as np
 
 from multigpu.config import INTERACTIVE, MONITOR_BESIDE, WalkConfig, setup_timeout
 from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
 from multigpu.core.camera import frame_matrices
 from multigpu.errors import InputError, as_flags
-from multigpu.parallel.exchange import agree
+from multigpu.parallel.exchange import agree, allgather_text
 from multigpu.parallel.frames import Frames, fault
 from multigpu.parallel.outdir import OutputDir
 from multigpu.scene.models import load_scene
@@ -135,10 +138,11 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 monitor = _monitor(cfg, presenter)
             from multigpu.gpu.render import RegionRenderer, create_context
 
+            local = node_rank(comm)
             if presenter.context is not None:  # render in the window's context
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:
-                ctx, device = create_context(cfg.device, local_rank=node_rank(comm))
+                ctx, device = create_context(cfg.device, local_rank=local)
             renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum)
             from multigpu.core import kernel
 
@@ -148,6 +152,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         error = agree(comm, error, wait)
         if error:
             raise InputError(error)
+        placement = [json.loads(t) for t in allgather_text(comm, json.dumps(
+            {"host": socket.gethostname(), "node_rank": local, "egl_device": device}), wait, "setup")]
     except BaseException:
         _close(renderer, presenter, monitor)
         if out is not None:
@@ -155,7 +161,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         raise
     frames = None
     try:
-        frames = Frames(cfg, comm, job, scene, path, renderer, presenter, out, load_info, device, monitor)
+        frames = Frames(cfg, comm, job, scene, path, renderer, presenter, out, load_info, placement, monitor)
         summary = frames.run()
         frames.release(collective=True)  # every rank left the frame loop after the same frame
         return summary

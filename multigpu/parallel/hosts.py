@@ -1,0 +1,77 @@
+"""Where the ranks run: ``--hosts a:2,b:2`` or ``--hostfile FILE``, one form for every MPI.
+
+Pure parsing (no MPI): a list of (host, slots), ranks filling the hosts in order (the first
+``slots`` ranks on the first host, and so on), as both MPICH's Hydra and Open MPI place them.
+A hostfile holds one host per line as ``host``, ``host:N`` (MPICH's form) or ``host slots=N``
+(Open MPI's), ``#`` starts a comment; so a user's existing hostfile of either MPI works with
+either. The launcher (``mpirun.Launcher``) writes the list in its MPI's own syntax.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from multigpu.errors import InputError
+
+#: a host name or address as both launchers accept it (no spaces, commas or colons)
+_NAME = re.compile(r"^[A-Za-z0-9_.\-\[\]]+$")
+
+
+def _entry(text: str, where: str) -> tuple[str, int]:
+    m = re.fullmatch(r"\s*(\S+?)(?::(\S+)|\s+slots\s*=\s*(\S+))?\s*", text)
+    if not m or not _NAME.match(m.group(1)):
+        raise InputError(f"{where}: '{text.strip()}' is not a host (want HOST, HOST:N or HOST slots=N)")
+    raw = m.group(2) or m.group(3)
+    if raw is None:
+        return m.group(1), 1
+    if not raw.isdigit() or int(raw) < 1:
+        raise InputError(f"{where}: '{text.strip()}': the rank count must be a whole number >= 1")
+    return m.group(1), int(raw)
+
+
+def _merged(entries: list[tuple[str, int]]) -> list[tuple[str, int]]:
+    """Repeated hosts add their slots (first appearance keeps its place)."""
+    out: dict[str, int] = {}
+    for h, n in entries:
+        out[h] = out.get(h, 0) + n
+    return list(out.items())
+
+
+def parse_hosts(text: str) -> list[tuple[str, int]]:
+    """``a:2,b:2`` (or ``a,b``: one rank each) as [(host, slots)]."""
+    parts = [p for p in text.split(",")]
+    if not text.strip() or any(not p.strip() for p in parts):
+        raise InputError(f"--hosts: '{text}' is not a host list (want e.g. a:2,b:2)")
+    return _merged([_entry(p, "--hosts") for p in parts])
+
+
+def read_hostfile(path: str) -> list[tuple[str, int]]:
+    """The hosts of ``path`` (see the module doc)."""
+    p = Path(path).expanduser()
+    try:
+        lines = p.read_text().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"--hostfile {path}: cannot read it ({exc.__class__.__name__}: "
+                         f"{getattr(exc, 'strerror', None) or exc})") from None
+    entries = []
+    for i, line in enumerate(lines, 1):
+        line = line.split("#", 1)[0]
+        if line.strip():
+            entries.append(_entry(line, f"--hostfile {path}, line {i}"))
+    if not entries:
+        raise InputError(f"--hostfile {path}: no hosts in it")
+    return _merged(entries)
+
+
+def placement(hosts: list[tuple[str, int]], ranks: int, where: str = "--hosts") -> list[str]:
+    """The host of each of ``ranks`` ranks; refused when the hosts have fewer slots."""
+    slots = sum(n for _, n in hosts)
+    if slots < ranks:
+        raise InputError(f"{where}: {slots} rank slots on {len(hosts)} host(s), but the job needs {ranks} ranks")
+    return [h for h, n in hosts for _ in range(n)][:ranks]
+
+
+def spec(hosts: list[tuple[str, int]]) -> str:
+    """``a:2,b:2``: the form both MPIs take on their command line."""
+    return ",".join(f"{h}:{n}" for h, n in hosts)

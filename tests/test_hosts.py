@@ -1,0 +1,72 @@
+"""Host placement without MPI: the host list and hostfile forms, their refusals, and the flags
+each MPI's launcher gets for them."""
+
+import subprocess
+import sys
+
+import pytest
+from mpirun import ROOT
+
+from multigpu.errors import InputError
+from multigpu.parallel.hosts import parse_hosts, placement, read_hostfile, spec
+from multigpu.parallel.mpirun import Launcher
+
+
+def test_host_lists_and_files_of_either_mpi_give_one_placement(tmp_path):
+    assert parse_hosts("a:2,b:2") == [("a", 2), ("b", 2)]
+    assert parse_hosts("node1,node2,node1") == [("node1", 2), ("node2", 1)]  # repeats add up, first place kept
+    f = tmp_path / "hosts"
+    f.write_text("# the wall's machines\nwall-a slots=2\n\nwall-b:1   # MPICH's form\nwall-c\n")
+    hosts = read_hostfile(str(f))
+    assert hosts == [("wall-a", 2), ("wall-b", 1), ("wall-c", 1)] and spec(hosts) == "wall-a:2,wall-b:1,wall-c:1"
+    assert placement(hosts, 3) == ["wall-a", "wall-a", "wall-b"]
+    assert placement(hosts, 4) == ["wall-a", "wall-a", "wall-b", "wall-c"]
+
+
+@pytest.mark.parametrize("text, want", [("", "not a host list"), ("a:2,,b", "not a host list"),
+                                        ("a:0", "whole number >= 1"), ("a:x", "whole number >= 1"),
+                                        ("a b", "not a host"), ("a:2:3", "whole number")])
+def test_bad_host_lists_are_refused_in_one_line(text, want):
+    with pytest.raises(InputError, match=want) as exc:
+        parse_hosts(text)
+    assert "\n" not in str(exc.value) and "--hosts" in str(exc.value)
+
+
+def test_bad_hostfiles_and_too_few_slots_name_the_file_and_line(tmp_path):
+    with pytest.raises(InputError, match=r"--hostfile .*missing: cannot read it"):
+        read_hostfile(str(tmp_path / "missing"))
+    f = tmp_path / "hosts"
+    f.write_text("# nothing\n")
+    with pytest.raises(InputError, match="no hosts in it"):
+        read_hostfile(str(f))
+    f.write_text("a slots=2\nb slots=two\n")
+    with pytest.raises(InputError, match="line 2"):
+        read_hostfile(str(f))
+    with pytest.raises(InputError, match="3 rank slots on 2 host.*needs 4 ranks"):
+        placement([("a", 2), ("b", 1)], 4)
+
+
+def test_each_mpi_gets_its_own_placement_flags(tmp_path):
+    rsh = tmp_path / "rsh"
+    rsh.write_text("#!/bin/sh\n")
+    rsh.chmod(0o755)
+    hosts = [("a", 2), ("b", 2)]
+    mpich = Launcher("/x/mpiexec", "mpich").command(4, ["walkthrough"], hosts=hosts, env={"MULTIGPU_RSH": str(rsh)})
+    assert mpich[1:7] == ["-hosts", "a:2,b:2", "-launcher", "ssh", "-launcher-exec", str(rsh)]
+    assert Launcher("/x/mpiexec", "mpich").command(4, [], hosts=hosts, env={})[1:4] == ["-hosts", "a:2,b:2", "-n"]
+    ompi = Launcher("/x/mpiexec", "openmpi", ("--oversubscribe",), {"MPI4PY_LIBMPI": "libmpi.so.40"})
+    cmd = ompi.command(4, [], hosts=hosts, env={"MULTIGPU_RSH": str(rsh), "MULTIGPU_CACHE": "/c"})
+    assert cmd[1:6] == ["--oversubscribe", "--host", "a:2,b:2", "--mca", "plm_rsh_agent"]
+    for name in ("LP_NUM_THREADS", "MPI4PY_LIBMPI", "MULTIGPU_CACHE", "MULTIGPU_RSH"):
+        assert cmd[cmd.index(name) - 1] == "-x"  # Open MPI passes on only what it is told to
+    with pytest.raises(InputError, match="MULTIGPU_RSH=no-such-shell: not an executable"):
+        Launcher("/x/mpiexec", "mpich").command(4, [], hosts=hosts, env={"MULTIGPU_RSH": "no-such-shell"})
+
+
+@pytest.mark.parametrize("argv, want", [(["--hosts", "a:1", "walkthrough"], "1 rank slots on 1 host(s), but the job"),
+                                        (["--hostfile", "/no/such/file", "walkthrough"], "cannot read it"),
+                                        (["--hosts"], "--hosts needs a value")])
+def test_the_launcher_refuses_bad_placement_before_starting_anything(argv, want):
+    res = subprocess.run([sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", *argv],
+                         capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and want in res.stderr, res.stderr
