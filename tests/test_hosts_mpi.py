@@ -1,16 +1,14 @@
 """Across hosts: two simulated hosts (namespaces with their own hostname and /dev/shm, see
 simhosts.py) of two ranks each, started through each MPI's own host placement and a remote
-shell. The wall equals the one-rank render bit for bit; the summary says where each rank ran;
-a scene cache every host shares is built once; ``--exchange shared`` is refused across hosts;
-a host that dies mid-run ends the job within ``--liveness`` with every whole frame kept. Every
-job runs under a hard timeout and every namespace process is killed by id."""
+shell. The wall equals the one-rank render bit for bit and the run ends with no MPI/UCX
+warnings; the summary says where each rank ran; a scene cache every host shares is built
+once; ``--exchange shared`` is refused across hosts. Every job runs under a hard timeout and
+every namespace process is killed by id."""
 
 import json
-import time
 
-import numpy as np
 import pytest
-from mpirun import SMALL, read_png, run_mpi, start_mpi
+from mpirun import SMALL, read_png, run_mpi
 from simhosts import SimHosts
 
 from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
@@ -43,7 +41,7 @@ def hosts(tmp_path):
 
 def args(out, frames=FRAMES, extra=()):
     return ["walkthrough", *SMALL, "--frames", str(frames), "--grid", "2x2", "--tile", f"{W // 2}x{H // 2}",
-            "--mosaic-every", "1", "--no-overlay", "--out", str(out), *extra]
+            "--mosaic-every", "1", "--no-overlay", "--cluster", "0", "--out", str(out), *extra]  # one cache key
 
 
 def frames_of(out, n=FRAMES):
@@ -60,7 +58,7 @@ def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_pat
     s = json.loads((tmp_path / "wall" / "summary.json").read_text())
     assert [r["host"] for r in s["config"]["ranks"]] == ["a", "a", "b", "b"] and s["config"]["hosts"] == 2
     assert [r["node_rank"] for r in s["config"]["ranks"]] == [0, 1, 0, 1]
-    assert all(r["egl_device"] for r in s["config"]["ranks"])
+    assert all(isinstance(r["egl_device"], int) for r in s["config"]["ranks"])  # one device here: 0
     assert s["config"]["scene"]["cached"] is False  # built here, once, by rank 0
     built = sorted(p.name for p in cache.rglob("*") if p.is_file())
     assert built and not [n for n in built if ".part" in n or n.startswith(".")], built  # whole files only
@@ -79,31 +77,3 @@ def test_shared_exchange_across_hosts_is_refused_in_one_line(tmp_path, hosts, la
     assert res.returncode == 2, res.stderr[-3000:]
     errors = [line for line in res.stderr.splitlines() if line.startswith("multigpu: error:")]
     assert len(errors) == 1 and "--exchange shared needs every rank on one host" in errors[0], res.stderr[-2000:]
-
-
-def test_a_host_that_dies_mid_run_ends_the_job_within_liveness_keeping_whole_frames(tmp_path, hosts, launcher):
-    out = tmp_path / "dies"
-    env = {"MULTIGPU_RSH": str(hosts.rsh), "MULTIGPU_CACHE": str(tmp_path / "cache")}
-    liveness = 4.0
-    proc, kill = start_mpi(4, args(out, frames=100000, extra=["--mosaic-every", "0", "--liveness", str(liveness)]),
-                           env=env, launcher=launcher, hosts=HOSTS)
-    try:
-        csv = out / "timings.csv"
-        deadline = time.monotonic() + 120
-        while not (csv.exists() and len(csv.read_text().splitlines()) > 1 + 4 * 10):
-            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate(timeout=10)[1][-3000:]
-            time.sleep(0.1)
-        hosts.kill("b")
-        killed = time.monotonic()
-        _, err = proc.communicate(timeout=liveness + 60)
-        ended = time.monotonic() - killed
-    finally:
-        kill() if proc.poll() is None else None
-    assert proc.returncode not in (0, None), err[-3000:]
-    assert ended < liveness + 20, f"the job took {ended:.1f} s to end after its host died"
-    rows = csv.read_text().splitlines()[1:]
-    frames = [int(r.split(",")[0]) for r in rows]
-    assert len(rows) % 4 == 0 and frames == sorted(frames), "a frame was written in part"
-    s = json.loads((out / "summary.json").read_text())
-    assert s["frames_written"] == len(rows) // 4 and not s["complete"]
-    assert np.bincount(frames).tolist() == [4] * (len(rows) // 4)

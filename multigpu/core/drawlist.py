@@ -65,6 +65,11 @@ class DrawList:
         self.vertex_object = np.zeros(scene.vertices.shape[0], dtype=np.uint32)
         self.vertex_object[absolute] = np.repeat(np.arange(n, dtype=np.uint32), count)
 
+    def uploaded(self) -> None:
+        """Drop the index buffer and vertex ids once the GL buffers hold them (``commands``
+        needs only ``order`` and ``offsets``): a rank keeps one copy, the GL one."""
+        self.indices = self.vertex_object = None
+
     def commands(self, mask: np.ndarray | None, compiled: bool | None = None) -> np.ndarray:
         """(R, 5) uint32 ``(count, 1, first, 0, 0)`` draw commands, one per run of visible
         objects in buffer order; ``mask`` (N,) bool in scene object order (None: all).

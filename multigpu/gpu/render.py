@@ -155,6 +155,7 @@ class RegionRenderer:
         self.vbo = ctx.buffer(np.ascontiguousarray(scene.vertices, dtype=np.float32))
         self.obo = ctx.buffer(self.draws.vertex_object)
         self.ibo = ctx.buffer(self.draws.indices)
+        self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
         self.cbo = ctx.buffer(np.ascontiguousarray(scene.colors, dtype=np.float32).ravel())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 3f", "in_pos", "in_nrm"),
                                                 (self.obo, "1u", "in_obj")],

@@ -27,7 +27,10 @@ import numpy as np
 
 from multigpu.parallel import exchange
 
-HEARTBEAT, FAILED = 1, 2
+HEARTBEAT, FAILED, BYE = 1, 2, 3
+#: how long a closing rank waits for its peers' last heartbeats (their BYE), so none is left
+#: unreceived at MPI_Finalize (UCX warns of each such message between hosts)
+DRAIN = 2.0
 #: seconds between heartbeats
 INTERVAL = 0.5
 #: a wait blocked this long after SIGINT/SIGTERM gives up (the others did not stop with us)
@@ -99,20 +102,46 @@ class Job:
 
         peers = [p for p in range(self.size) if p != self.rank]
         token = np.zeros(1, dtype=np.uint8)
-        pending: list = []
-        status = MPI.Status()
+        self._pending = []
         while not self._stop.is_set():
-            pending = [r for r in pending if not r.Test()]
-            if len(pending) < 64 * len(peers):  # a stopped peer does not pile up sends without end
-                pending += [self.comm.Isend([token, MPI.BYTE], dest=p, tag=HEARTBEAT) for p in peers]
-            while self.comm.Iprobe(MPI.ANY_SOURCE, MPI.ANY_TAG, status):
-                src, tag, n = status.Get_source(), status.Get_tag(), status.Get_count(MPI.BYTE)
-                buf = np.empty(max(n, 1), dtype=np.uint8)
-                self.comm.Recv([buf, n, MPI.BYTE], source=src, tag=tag)
-                self.last_seen[src] = time.monotonic()
-                if tag == FAILED and self.failed is None:
-                    self.failed = (src, bytes(buf[:n]).decode("utf-8", "replace"))
+            self._pending = [r for r in self._pending if not r.Test()]
+            if len(self._pending) < 64 * len(peers):  # a stopped peer does not pile up sends without end
+                self._pending += [self.comm.Isend([token, MPI.BYTE], dest=p, tag=HEARTBEAT) for p in peers]
+            self._receive()
             self._stop.wait(self.interval)
+
+    def _receive(self) -> set[int]:
+        """Take every message waiting (heartbeats, failures, goodbyes); the peers that said BYE."""
+        from mpi4py import MPI
+
+        status, byes = MPI.Status(), set()
+        while self.comm.Iprobe(MPI.ANY_SOURCE, MPI.ANY_TAG, status):
+            src, tag, n = status.Get_source(), status.Get_tag(), status.Get_count(MPI.BYTE)
+            buf = np.empty(max(n, 1), dtype=np.uint8)
+            self.comm.Recv([buf, n, MPI.BYTE], source=src, tag=tag)
+            self.last_seen[src] = time.monotonic()
+            if tag == FAILED and self.failed is None:
+                self.failed = (src, bytes(buf[:n]).decode("utf-8", "replace"))
+            elif tag == BYE:
+                byes.add(src)
+        return byes
+
+    def _drain(self) -> None:
+        """After the last heartbeat: say BYE to every peer and take what each sent until its
+        BYE (messages from one sender arrive in order), for at most ``DRAIN`` s; so no
+        heartbeat is left unreceived when MPI finalizes."""
+        from mpi4py import MPI
+
+        peers = {p for p in range(self.size) if p != self.rank}
+        token = np.zeros(1, dtype=np.uint8)
+        sends = [self.comm.Isend([token, MPI.BYTE], dest=p, tag=BYE) for p in peers]
+        deadline, gone = time.monotonic() + DRAIN, set()
+        while True:
+            gone |= self._receive()
+            done = MPI.Request.Testall(sends + self._pending)
+            if (gone >= peers and done) or time.monotonic() > deadline:
+                break
+            time.sleep(1e-3)
 
     # -- what waits ask
     def stalled(self) -> list[int]:
@@ -166,11 +195,12 @@ class Job:
         exchange.WATCH.append(self.check)
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, kind, *exc) -> None:
+        self.close(drain=kind is None)
 
-    def close(self) -> None:
-        """Stop the heartbeat, unhook from waits, restore the signal handlers."""
+    def close(self, drain: bool = False) -> None:
+        """Stop the heartbeat, unhook from waits, restore the signal handlers. ``drain`` (a run
+        every rank ended alike): take the peers' last heartbeats first (``_drain``)."""
         if self.check in exchange.WATCH:
             exchange.WATCH.remove(self.check)
         for s, h in self._old_handlers.items():
@@ -179,6 +209,8 @@ class Job:
         if self._thread is not None:
             self._stop.set()
             self._thread.join(timeout=5.0)
+            if drain and not self._thread.is_alive():
+                self._drain()
             self._thread = None
 
 

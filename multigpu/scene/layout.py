@@ -101,19 +101,57 @@ class Scene:
         tmp.replace(path)
 
     @classmethod
-    def load(cls, path: Path) -> "Scene":
+    def load(cls, path: Path, mapped: bool = True) -> "Scene":
+        """The scene saved at ``path``. ``mapped``: the vertex and index buffers are read-only
+        maps of the file, not copies, so every rank of a host shares one copy of them (the
+        page cache's) and a scene larger than memory still loads."""
         path = Path(path)
         try:
             with np.load(path, allow_pickle=False) as z:
                 head = json.loads(str(z["meta"]))
                 if head.get("version") != FORMAT_VERSION:
                     raise InputError(f"{path}: scene cache version {head.get('version')} is not {FORMAT_VERSION}")
-                arrays = {k: z[k] for k in z.files if k != "meta"}
+                maps = _map_members(path, MAPPED) if mapped else {}
+                arrays = {k: maps[k] if k in maps else z[k] for k in z.files if k != "meta"}
         except InputError:
             raise
         except Exception as exc:  # a truncated or foreign file
             raise InputError(f"{path}: not a readable multigpu scene file ({exc.__class__.__name__}: {exc})") from None
         return cls(name=head["name"], meta=head["meta"], **arrays)
+
+
+#: the buffers ``Scene.load`` maps from the file (the bulk of a scene; read only after loading)
+MAPPED = ("vertices", "indices")
+
+
+def _map_members(path: Path, names) -> dict[str, np.ndarray]:
+    """Read-only ``np.memmap`` views of the named arrays stored (uncompressed) in the .npz at
+    ``path``: each member's local zip header and .npy header give where its data starts."""
+    import struct
+    import zipfile
+
+    from numpy.lib import format as npy
+
+    out = {}
+    with zipfile.ZipFile(path) as zf, open(path, "rb") as fh:
+        for info in zf.infolist():
+            name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+            if name not in names or info.compress_type != zipfile.ZIP_STORED:
+                continue
+            fh.seek(info.header_offset)
+            local = fh.read(30)
+            if local[:4] != b"PK\x03\x04":
+                raise ValueError(f"member {info.filename}: bad local header")
+            name_len, extra_len = struct.unpack("<HH", local[26:30])
+            fh.seek(info.header_offset + 30 + name_len + extra_len)
+            version = npy.read_magic(fh)
+            shape, fortran, dtype = (npy.read_array_header_1_0(fh) if version == (1, 0)
+                                     else npy.read_array_header_2_0(fh))
+            if dtype.hasobject or 0 in shape:
+                continue
+            out[name] = np.memmap(path, dtype=dtype, mode="r", offset=fh.tell(), shape=shape,
+                                  order="F" if fortran else "C")
+    return out
 
 
 def assemble(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]], name: str, meta: dict,

@@ -132,6 +132,7 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
         if use_cache:
             try:
                 scene.save(path)
+                scene = Scene.load(path)  # the built arrays go; the file's mapped pages are shared per host
             except OSError:
                 pass  # a read-only cache only costs time
     if spec.up is not None:
