@@ -64,6 +64,13 @@ def test_cache_hit_returns_identical_arrays(tmp_path, monkeypatch):
     assert not ia["cached"] and ib["cached"]
     for k, v in a._arrays().items():
         assert np.array_equal(v, getattr(b, k))
+    from multigpu.scene.layout import MAPPED, Scene
+
+    copy = Scene.load(ib["cache"], mapped=False)
+    for s in (a, b):  # the builder's scene too: reloaded mapped from the file it saved
+        for k in MAPPED:  # the bulk is a read-only map of the cache file, equal to a copy of it
+            v = getattr(s, k)
+            assert isinstance(v, np.memmap) and not v.flags.writeable and np.array_equal(v, getattr(copy, k))
 
 
 @pytest.mark.parametrize("content,needle", [

@@ -33,21 +33,31 @@ def _pss(pid: int) -> int:
     return 0
 
 
-def _ranks(session: int) -> list[int]:
-    """Pids of the rank processes (``-m multigpu walkthrough``) in process session ``session``."""
-    out = []
+def _ranks(root: int) -> list[int]:
+    """Pids of the rank processes (``-m multigpu walkthrough``) descended from ``root`` (the
+    launcher: its proxies may start sessions of their own)."""
+    parent = {}
     for d in os.listdir("/proc"):
-        if not d.isdigit():
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as fh:
+                    parent[int(d)] = int(fh.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+    out = []
+    for pid in parent:
+        p, seen = pid, 0
+        while p in parent and p != root and seen < 64:
+            p, seen = parent[p], seen + 1
+        if p != root or pid == root:
             continue
         try:
-            if os.getsid(int(d)) != session:
-                continue
-            with open(f"/proc/{d}/cmdline", "rb") as fh:
+            with open(f"/proc/{pid}/cmdline", "rb") as fh:
                 argv = fh.read().split(b"\0")
         except OSError:
             continue
         if b"multigpu" in argv and b"walkthrough" in argv:
-            out.append(int(d))
+            out.append(pid)
     return out
 
 
