@@ -40,7 +40,7 @@ def _merged(entries: list[tuple[str, int]]) -> list[tuple[str, int]]:
 
 def parse_hosts(text: str) -> list[tuple[str, int]]:
     """``a:2,b:2`` (or ``a,b``: one rank each) as [(host, slots)]."""
-    parts = [p for p in text.split(",")]
+    parts = text.split(",")
     if not text.strip() or any(not p.strip() for p in parts):
         raise InputError(f"--hosts: '{text}' is not a host list (want e.g. a:2,b:2)")
     return _merged([_entry(p, "--hosts") for p in parts])
