@@ -2,10 +2,11 @@
 
 Each host is a UTS + mount namespace (``unshare --uts --mount``) with its own hostname and a
 fresh ``/dev/shm``; the network namespace stays this machine's, so every connection stays on
-its loopback and local addresses. A remote-shell script (``rsh``) enters a host with
-``nsenter`` and runs the command there, as ssh would; the launchers take it through
-``MULTIGPU_RSH``. On exit every process inside the namespaces is killed by id, then the
-namespaces' own holders. Tests skip with a reason where namespaces are not permitted.
+its loopback and local addresses (``SimHosts.env`` keeps MPI's traffic on the loopback
+interface). A remote-shell script (``rsh``) enters a host with ``nsenter`` and runs the
+command there, as ssh would; the launchers take it through ``MULTIGPU_RSH``. On exit every
+process inside the namespaces is killed by id, then the namespaces' own holders. Tests skip
+with a reason where namespaces are not permitted.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ class SimHosts:
         try:
             for name in self.names:
                 pidfile = self.dir / f"{name}.pid"
+                pidfile.unlink(missing_ok=True)  # a directory used before: never a stale host's id
                 script = (f"hostname {name} && mount -t tmpfs -o size=2g tmpfs /dev/shm && "
                           f"echo $$ > {pidfile}.part && mv {pidfile}.part {pidfile} && exec sleep 3600")
                 self.holders[name] = subprocess.Popen(
@@ -66,6 +68,10 @@ class SimHosts:
         except BaseException:
             self.__exit__(None, None, None)
             raise
+        #: MPI's traffic between the hosts on the loopback addresses only (Open MPI's TCP would
+        #: also use this machine's other interfaces; UCX is told the same)
+        self.env = {"MULTIGPU_RSH": str(self.dir / "rsh"), "UCX_NET_DEVICES": "lo",
+                    "OMPI_MCA_btl_tcp_if_include": "lo", "OMPI_MCA_oob_tcp_if_include": "lo"}
         self.rsh = self.dir / "rsh"
         self.rsh.write_text(RSH % self.dir)
         self.rsh.chmod(0o755)
@@ -77,11 +83,12 @@ class SimHosts:
                               capture_output=True, text=True, timeout=timeout)
 
     def processes(self, name: str) -> list[int]:
-        """Every process on host ``name`` but the namespace's holder."""
+        """Every process on host ``name`` but the namespace's holder (and ``unshare`` above it)."""
         ns = _uts(self.pids[name])
+        holders = {self.pids[name], self.holders[name].pid}
         mine = []
         for d in os.listdir("/proc"):
-            if d.isdigit() and int(d) != self.pids[name] and _uts(int(d)) == ns:
+            if d.isdigit() and int(d) not in holders and _uts(int(d)) == ns:
                 mine.append(int(d))
         return mine
 

@@ -7,6 +7,7 @@ every namespace process is killed by id."""
 
 import json
 
+import numpy as np
 import pytest
 from mpirun import SMALL, read_png, run_mpi
 from simhosts import SimHosts
@@ -50,7 +51,7 @@ def frames_of(out, n=FRAMES):
 
 def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_path, hosts, launcher):
     cache = tmp_path / "cache"  # a directory every host sees, as a home on a network file system
-    env = {"MULTIGPU_RSH": str(hosts.rsh), "MULTIGPU_CACHE": str(cache)}
+    env = {**hosts.env, "MULTIGPU_CACHE": str(cache)}
     res = run_mpi(4, args(tmp_path / "wall"), env=env, launcher=launcher, hosts=HOSTS, timeout=180)
     assert res.returncode == 0, res.stderr[-3000:]
     noise = [line for line in (res.stdout + res.stderr).splitlines() if any(w in line for w in QUIET)]
@@ -73,7 +74,58 @@ def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_pat
 
 def test_shared_exchange_across_hosts_is_refused_in_one_line(tmp_path, hosts, launcher):
     res = run_mpi(4, args(tmp_path / "shared", extra=["--exchange", "shared"]), launcher=launcher, hosts=HOSTS,
-                  env={"MULTIGPU_RSH": str(hosts.rsh), "MULTIGPU_CACHE": str(tmp_path / "cache")}, timeout=180)
+                  env={**hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache")}, timeout=180)
     assert res.returncode == 2, res.stderr[-3000:]
     errors = [line for line in res.stderr.splitlines() if line.startswith("multigpu: error:")]
     assert len(errors) == 1 and "--exchange shared needs every rank on one host" in errors[0], res.stderr[-2000:]
+
+
+def test_a_host_dying_mid_run_ends_the_job_with_every_whole_frame_kept(tmp_path, hosts, launcher):
+    """Host b's namespace killed mid-run: the MPI runtime tears the job down (MPICH at once,
+    Open MPI within seconds) long before ``--liveness``; no rank is left, the exit code is 1
+    through ``python -m multigpu.parallel.mpirun``, timings.csv holds whole frames only and
+    summary.json is rewritten from them, saying what happened."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    from mpirun import ROOT
+
+    from multigpu.parallel.report import COLUMNS, read_timings
+
+    out, liveness = tmp_path / "o", 20
+    env = {**os.environ, **hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache"), "MULTIGPU_MPIEXEC": launcher.path,
+           "LP_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "4", "--hosts", "a:2,b:2",
+           *args(out, frames=100000, extra=["--mosaic-every", "0", "--liveness", str(liveness)])]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        csv, t = out / "timings.csv", time.monotonic()
+        while not (csv.exists() and csv.read_text().count("\n") > 1 + 4 * 60):
+            assert proc.poll() is None and time.monotonic() - t < 120, proc.communicate()[1][-3000:]
+            time.sleep(0.2)
+        assert hosts.processes("b"), "no rank on host b"
+        hosts.kill("b")
+        t = time.monotonic()
+        _, err = proc.communicate(timeout=liveness + 30)
+        took = time.monotonic() - t
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 1 and took < liveness, (proc.returncode, took, err[-3000:])
+    assert "summary.json rewritten from the" in err, err[-3000:]
+    left, t = hosts.processes("a") + hosts.processes("b"), time.monotonic()
+    while left and time.monotonic() - t < 10:  # the runtime's last processes finish leaving
+        time.sleep(0.2)
+        left = hosts.processes("a") + hosts.processes("b")
+    assert not left, [Path(f"/proc/{p}/cmdline").read_bytes()[:200] for p in left]  # no rank left behind
+    rows = read_timings(csv)
+    frame = rows[:, COLUMNS.index("frame")]
+    assert len(rows) % 4 == 0 and (frame == np.repeat(np.arange(len(rows) // 4), 4)).all()  # whole frames
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is False and s["frames"] == s["frames_written"] == len(rows) // 4 > 60
+    assert "ended abnormally" in s["stopped_by"]

@@ -33,6 +33,10 @@ HEARTBEAT, FAILED, BYE = 1, 2, 3
 DRAIN = 2.0
 #: seconds between heartbeats
 INTERVAL = 0.5
+#: seconds between the heartbeat thread's polls for arrivals: each poll drives MPI's progress,
+#: which messages between hosts need on both ends (over TCP, a heartbeat polled for only once
+#: per interval took seconds to arrive and the liveness check took a busy peer for a dead one)
+POLL = 0.02
 #: a wait blocked this long after SIGINT/SIGTERM gives up (the others did not stop with us)
 INTERRUPT_GRACE = 3.0
 #: after a failure elsewhere, a rank other than 0 gives rank 0 this long to save and end the job
@@ -103,12 +107,15 @@ class Job:
         peers = [p for p in range(self.size) if p != self.rank]
         token = np.zeros(1, dtype=np.uint8)
         self._pending = []
+        next_beat = 0.0
         while not self._stop.is_set():
-            self._pending = [r for r in self._pending if not r.Test()]
-            if len(self._pending) < 64 * len(peers):  # a stopped peer does not pile up sends without end
-                self._pending += [self.comm.Isend([token, MPI.BYTE], dest=p, tag=HEARTBEAT) for p in peers]
-            self._receive()
-            self._stop.wait(self.interval)
+            if time.monotonic() >= next_beat:
+                next_beat = time.monotonic() + self.interval
+                self._pending = [r for r in self._pending if not r.Test()]
+                if len(self._pending) < 64 * len(peers):  # a stopped peer does not pile up sends without end
+                    self._pending += [self.comm.Isend([token, MPI.BYTE], dest=p, tag=HEARTBEAT) for p in peers]
+            self._receive()  # between beats too: every poll drives MPI's progress
+            self._stop.wait(POLL)
 
     def _receive(self) -> set[int]:
         """Take every message waiting (heartbeats, failures, goodbyes); the peers that said BYE."""

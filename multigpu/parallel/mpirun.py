@@ -169,9 +169,82 @@ def hosts_from(flag: str, value: str, ranks: int) -> list[tuple[str, int]]:
     return hosts
 
 
+def out_dir(argv: list[str]) -> Path | None:
+    """The ``--out`` directory of a ``walkthrough`` command line (its default ``out``), else None."""
+    if not argv or argv[0] != "walkthrough":
+        return None
+    out = "out"
+    for i, a in enumerate(argv):
+        if a == "--out" and i + 1 < len(argv):
+            out = argv[i + 1]
+        elif a.startswith("--out="):
+            out = a.split("=", 1)[1]
+    return Path(out)
+
+
+def _die_with_parent() -> None:
+    """In the launcher's child: be sent SIGKILL if this wrapper dies (Linux), so a wrapper
+    killed whole by its caller never leaves a job behind in the launcher's own session."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec") -> int:
+    """Run the launcher, pass it SIGINT/SIGTERM/SIGHUP exactly once each, and return the
+    documented exit code whichever MPI runs the job: 0 done, 2 bad input, 128 + signal when a
+    signal stopped it (Open MPI's mpiexec itself returns 1 there), 1 any failure (MPICH's
+    mpiexec returns 255 when a host dies, Open MPI's 9 or 1). If the runtime
+    killed rank 0 before it closed its record (a host died), summary.json is rewritten from
+    the whole frames in timings.csv and one line says so."""
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=_die_with_parent)
+    got: list[int] = []
+
+    def forward(signum, _frame):
+        got.append(signum)
+        try:
+            os.killpg(proc.pid, signum)  # the launcher and every local rank, as a terminal's Ctrl-C
+        except ProcessLookupError:
+            pass
+
+    old = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    try:
+        code = proc.wait()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    code = 128 - code if code < 0 else code
+    if code in (0, 2):
+        return code
+    summary = _read_summary(out)
+    if got and summary is not None and str(summary.get("stopped_by", "")).startswith("signal "):
+        return 128 + got[0]
+    if out is not None:
+        from multigpu.parallel.record import salvage
+
+        frames = salvage(out, f"the job ended abnormally ({name} exited {code}: a rank or its host died)")
+        if frames is not None:
+            print(f"multigpu: the job ended without rank 0 closing its record ({name} exited {code}: a rank or "
+                  f"its host died); {out}/summary.json rewritten from the {frames} whole frames in timings.csv",
+                  file=sys.stderr, flush=True)
+    return 128 + got[0] if got else 1
+
+
+def _read_summary(out: Path | None) -> dict | None:
+    import json
+
+    try:
+        return json.loads((out / "summary.json").read_text()) if out is not None else None
+    except (OSError, ValueError):
+        return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m multigpu.parallel.mpirun -n K [--hosts a:2,b:2 | --hostfile FILE] ARGS...``:
-    exec the right mpiexec for K ranks, on those hosts when given."""
+    run the right mpiexec for K ranks, on those hosts when given (``supervise``)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     usage = "usage: python -m multigpu.parallel.mpirun -n RANKS [--hosts H:N,... | --hostfile FILE] MULTIGPU_ARGS..."
     if len(argv) < 2 or argv[0] != "-n" or not argv[1].isdigit() or int(argv[1]) < 1:
@@ -188,8 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2
-    os.execvpe(cmd[0], cmd, launcher.environ())
-    return 127  # not reached
+    return supervise(cmd, launcher.environ(), out_dir(rest), Path(launcher.path).name)
 
 
 if __name__ == "__main__":

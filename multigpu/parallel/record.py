@@ -16,7 +16,7 @@ from multigpu.config import SUMMARY_EVERY
 from multigpu.display.hud import overlay
 from multigpu.parallel.mosaic import save_png
 from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.report import COLUMNS, TimingWriter, summarize, table, write_json
+from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, summarize, table, write_json
 
 
 class RunRecord:
@@ -110,3 +110,25 @@ class RunRecord:
         print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
         if self.record_to is not None:
             print(f"camera path of the {self.recorded} frames written in {self.record_to} (replay: --path)", flush=True)
+
+
+def salvage(out: Path, reason: str) -> int | None:
+    """Finish the record of a job whose rank 0 was killed before closing it (its host died, the
+    MPI runtime tore the job down): summary.json, last rewritten at a checkpoint, is rewritten
+    from every whole frame in timings.csv, with ``stopped_by = reason``. Returns the frames it
+    now describes, or None where there is nothing to finish (no record here, or rank 0 closed it)."""
+    import json
+
+    path = Path(out) / "summary.json"
+    try:
+        doc = json.loads(path.read_text())
+        rows = read_timings(Path(out) / "timings.csv")
+        ranks = len(doc["config"]["ranks"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if doc.get("complete") or doc.get("stopped_by"):
+        return None
+    summary = summarize(rows, ranks)
+    write_json(path, {"complete": False, "frames_written": summary["frames"], "config": doc["config"],
+                      "decomposition": doc.get("decomposition"), **summary, "stopped_by": reason})
+    return summary["frames"]

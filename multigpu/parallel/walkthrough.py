@@ -81,15 +81,14 @@ def _check_path(cfg, scene, path) -> None:
     raise InputError(f"the camera path never sees the scene ({scene.name}): no visible triangles")
 
 
-def node_rank(comm) -> int:
-    """This rank's index among the ranks on its node (MPI's shared-memory split: any launcher)."""
-    from mpi4py import MPI
+def node_rank(comm, timeout: float) -> int:
+    """This rank's index among the ranks on its host (ranks of one hostname, in rank order).
 
-    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
-    try:
-        return node.Get_rank()
-    finally:
-        node.Free()
+    One bounded non-blocking exchange of host names, not MPI's blocking shared-memory split:
+    a rank blocked in a collective stalls its heartbeats' delivery across hosts (MPICH over
+    TCP), so the liveness check took a slow peer for a dead one."""
+    hosts = allgather_text(comm, socket.gethostname(), timeout, "setup")
+    return hosts[: comm.Get_rank()].count(hosts[comm.Get_rank()])
 
 
 def _check_video() -> None:
@@ -138,7 +137,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 monitor = _monitor(cfg, presenter)
             from multigpu.gpu.render import RegionRenderer, create_context
 
-            local = node_rank(comm)
+            local = node_rank(comm, wait)
             if presenter.context is not None:  # render in the window's context
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:

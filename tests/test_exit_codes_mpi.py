@@ -1,0 +1,85 @@
+"""Exit codes through every launcher: ``launch/walkthrough``, ``python -m
+multigpu.parallel.mpirun`` and raw ``mpiexec``, for MPICH and Open MPI. A bad flag gives 2, a
+failing rank 1, SIGINT (Ctrl-C) 130 and SIGTERM 143, and summary.json says what happened.
+Raw Open MPI ``mpiexec`` cannot carry a signal's code (it forwards Ctrl-C as SIGTERM and
+returns 1 itself; docs/USAGE.md says so): our two launchers return the documented codes with
+either MPI. Every job runs in its own process group under a hard timeout, killed by id."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from mpirun import ROOT, SMALL
+
+from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
+
+pytestmark = pytest.mark.mpi
+ENTRIES = ["script", "module", "raw"]
+EVENTS = {"bad flag": 2, "failing rank": 1, "SIGINT": 130, "SIGTERM": 143}
+
+
+@pytest.fixture(params=["default", "openmpi"], scope="module")
+def launcher(request):
+    if request.param == "default":
+        return find_launcher()
+    path = openmpi_on_path()
+    if path is None:
+        pytest.skip("no Open MPI mpiexec here (Debian: apt install openmpi-bin)")
+    got = launcher_for(path)
+    if got.path == find_launcher().path:
+        pytest.skip("the default mpiexec is Open MPI already")
+    return got
+
+
+def command(entry: str, launcher, args: list[str]) -> list[str]:
+    if entry == "script":
+        return [str(ROOT / "launch" / "walkthrough"), *args]
+    if entry == "module":
+        return [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", "walkthrough", *args]
+    return launcher.command(2, ["walkthrough", *args])
+
+
+def expected(entry: str, launcher, event: str) -> int:
+    if entry == "raw" and launcher.flavor == "openmpi" and event.startswith("SIG"):
+        return 1  # Open MPI's mpiexec returns 1 after forwarding the signal
+    return EVENTS[event]
+
+
+@pytest.mark.parametrize("event", list(EVENTS))
+@pytest.mark.parametrize("entry", ENTRIES)
+def test_exit_code(tmp_path, launcher, entry, event):
+    out = tmp_path / "o"
+    args = [*SMALL, "--grid", "1x2", "--tile", "64x48", "--mosaic-every", "0", "--out", str(out)]
+    args += {"bad flag": ["--balance", "nope", "--frames", "5"], "failing rank": ["--frames", "100000"]}.get(
+        event, ["--frames", "100000"])
+    env = launcher.environ({"LP_NUM_THREADS": "1", "MULTIGPU_MPIEXEC": launcher.path,
+                            **({"MULTIGPU_FAULT": "1:8"} if event == "failing rank" else {})})
+    proc = subprocess.Popen(command(entry, launcher, args), cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        if event.startswith("SIG"):
+            csv, t = out / "timings.csv", time.monotonic()
+            while not (csv.exists() and csv.read_text().count("\n") > 1 + 2 * 10):
+                assert proc.poll() is None and time.monotonic() - t < 120, proc.communicate()[1][-3000:]
+                time.sleep(0.2)
+            os.killpg(proc.pid, getattr(signal, event))  # as a terminal does: the whole foreground group
+        _, err = proc.communicate(timeout=90)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == expected(entry, launcher, event), (proc.returncode, err[-3000:])
+    if event == "bad flag":
+        assert err.count("--balance must be one of") == 1 and not out.exists(), err[-2000:]
+        return
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is False and s["frames"] == s["frames_written"] > 0
+    if event == "failing rank":
+        assert s["frames"] == 8 and "injected fault at frame 8" in s["stopped_by"], s["stopped_by"]
+        assert err.count("injected fault at frame 8") == 1, err[-2000:]
+    else:
+        seen = "SIGTERM" if launcher.flavor == "openmpi" else event  # Open MPI forwards Ctrl-C as SIGTERM
+        assert s["stopped_by"] == f"signal {seen}", s["stopped_by"]
