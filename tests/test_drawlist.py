@@ -60,3 +60,26 @@ def test_morton_order_keeps_neighbours_together():
     cells = g[order].reshape(-1, 8, 3) // 2
     assert (cells == cells[:, :1]).all()
     assert morton_order(np.zeros((0, 3))).size == 0
+
+
+def test_built_in_blocks_equals_the_whole_buffer_at_once(monkeypatch):
+    """The buffer is built a block of indices at a time (small temporaries at any scale): with
+    blocks that cut objects anywhere and vertices shared between objects, it equals the direct
+    whole-array construction (last object's id on a shared vertex)."""
+    import multigpu.core.drawlist as drawlist
+    from multigpu.scene.cluster import split_objects
+
+    scene = split_objects(generate_plant(triangles=6000, seed=3), 16)  # parts share their parent's vertices
+    count = scene.index_count.astype(np.int64)
+    absolute = scene.indices.astype(np.int64) + np.repeat(scene.base_vertex.astype(np.int64), count)
+    owner = np.zeros(scene.vertices.shape[0], np.uint32)
+    owner[absolute] = np.repeat(np.arange(scene.n_objects, dtype=np.uint32), count)
+    for chunk in (1, 7, 997, 1 << 20):
+        monkeypatch.setattr(drawlist, "CHUNK", chunk)
+        dl = DrawList(scene)
+        want = np.concatenate([absolute[scene.first_index[i]:scene.first_index[i] + count[i]] for i in dl.order])
+        np.testing.assert_array_equal(dl.indices, want)
+        np.testing.assert_array_equal(dl.vertex_object, owner)
+    objects = np.repeat(np.arange(scene.n_objects), count)
+    pairs = np.unique(np.stack([absolute, objects]), axis=1)
+    assert len(np.unique(pairs[0])) < pairs.shape[1]  # vertices shared between objects were there to test

@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 MORTON_BITS = 10  # per axis: 2**30 cells
+#: indices per block when the buffer is built
+CHUNK = 1 << 20
 
 
 def morton_codes(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
@@ -39,6 +41,15 @@ def morton_order(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
     return np.argsort(morton_codes(points, bits), kind="stable")
 
 
+def _owners(starts: np.ndarray, s: int, e: int) -> np.ndarray:
+    """The object of every position in ``[s, e)``, objects laid out back to back from
+    ``starts`` ((N+1,) cumulative, from 0)."""
+    k0 = int(np.searchsorted(starts, s, side="right")) - 1
+    k1 = int(np.searchsorted(starts, e, side="left"))
+    span = np.minimum(starts[k0 + 1:k1 + 1], e) - np.maximum(starts[k0:k1], s)
+    return np.repeat(np.arange(k0, k1, dtype=np.int64), span)
+
+
 class DrawList:
     """A scene's index buffer in Morton order, and per-frame run-merged draw commands.
 
@@ -50,20 +61,32 @@ class DrawList:
     """
 
     def __init__(self, scene):
-        n = scene.n_objects
+        n, nv = scene.n_objects, scene.vertices.shape[0]
         count = scene.index_count.astype(np.int64)
         self.order = morton_order(scene.centers)
-        absolute = scene.indices.astype(np.int64) + np.repeat(scene.base_vertex.astype(np.int64), count)
-        if absolute.size and (absolute.min() < 0 or absolute.max() >= scene.vertices.shape[0]):
-            raise ValueError(f"{scene.name}: an index points outside the vertex buffer")
         lengths = count[self.order]
         self.offsets = np.zeros(n + 1, dtype=np.int64)  # buffer offset of each object in order
         np.cumsum(lengths, out=self.offsets[1:])
-        gather = np.repeat(scene.first_index.astype(np.int64)[self.order] - self.offsets[:-1], lengths)
-        gather += np.arange(gather.size, dtype=np.int64)
-        self.indices = absolute[gather].astype(np.uint32)
-        self.vertex_object = np.zeros(scene.vertices.shape[0], dtype=np.uint32)
-        self.vertex_object[absolute] = np.repeat(np.arange(n, dtype=np.uint32), count)
+        # blocks of CHUNK indices: the temporaries stay small at any scale (the buffers
+        # themselves, 4 bytes per index and per vertex, are the build's only full-size arrays)
+        base = scene.base_vertex.astype(np.int64)
+        self.vertex_object = np.zeros(nv, dtype=np.uint32)
+        starts = np.zeros(n + 1, dtype=np.int64)  # the scene's own layout: object i's indices follow i-1's
+        np.cumsum(count, out=starts[1:])
+        for s in range(0, int(starts[-1]), CHUNK):
+            e = min(s + CHUNK, int(starts[-1]))
+            obj = _owners(starts, s, e)
+            absolute = scene.indices[s:e].astype(np.int64) + base[obj]
+            if absolute.min() < 0 or absolute.max() >= nv:
+                raise ValueError(f"{scene.name}: an index points outside the vertex buffer")
+            self.vertex_object[absolute] = obj  # a vertex shared by objects: the last one's id
+        first, base = scene.first_index.astype(np.int64)[self.order], base[self.order]
+        self.indices = np.empty(int(self.offsets[-1]), dtype=np.uint32)
+        for s in range(0, self.indices.size, CHUNK):
+            e = min(s + CHUNK, self.indices.size)
+            k = _owners(self.offsets, s, e)  # which object in buffer order
+            src = first[k] + np.arange(s, e, dtype=np.int64) - self.offsets[k]
+            self.indices[s:e] = scene.indices[src].astype(np.int64) + base[k]
 
     def uploaded(self) -> None:
         """Drop the index buffer and vertex ids once the GL buffers hold them (``commands``

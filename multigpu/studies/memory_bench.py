@@ -124,9 +124,9 @@ def bench_memory(quick: bool) -> list[dict]:
     rows = []
     print(f"{'ranks':>5} {'triangles':>10} {'run':>6} {'peak PSS/rank MiB':>18} {'peak PSS/host MiB':>18} "
           f"{'host B/tri':>10} {'seconds':>8}", flush=True)
-    with tempfile.TemporaryDirectory() as cache:
-        for n in sizes:
-            for k in ranks:
+    for n in sizes:
+        for k in ranks:
+            with tempfile.TemporaryDirectory() as cache:  # each case's first run builds its own cache
                 for run in ("first", "cached"):
                     d = {**measure(k, n, cache), "run": run}
                     rows.append(d)
