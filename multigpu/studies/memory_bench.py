@@ -135,3 +135,73 @@ def bench_memory(quick: bool) -> list[dict]:
                           f"{d['seconds']:8.1f}",
                           flush=True)
     return rows
+
+
+def _anonymous_mib() -> float:
+    with open("/proc/self/smaps_rollup") as fh:
+        for line in fh:
+            if line.startswith("Anonymous:"):
+                return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
+    """One rank's anonymous memory after each step of its setup and first frames, in this
+    process: the cached plant (``--triangles 5000000 --copies 4``, 4.28 M triangles; 10^6 with
+    ``--quick``) loaded mapped, an EGL context, the GL upload, the compiled kernel, then two
+    frames drawn by the renderer (indirect commands) or as one plain draw of everything."""
+    import sys
+
+    from multigpu.scene.models import SceneSpec, load_scene
+
+    if not os.path.exists("/proc/self/smaps_rollup"):
+        raise InputError("bench memory-steps needs Linux's /proc/PID/smaps_rollup")
+    spec = SceneSpec(triangles=1_000_000) if quick else SceneSpec(triangles=5_000_000, copies=4)
+    load_scene(spec)  # the cache exists before the measured load
+    steps = []
+    for draw in ("indirect", "plain"):
+        code = f"from multigpu.studies.memory_bench import _steps; _steps({spec.triangles}, {spec.copies}, '{draw}')"
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800)
+        if out.returncode != 0:
+            raise RuntimeError(f"bench memory-steps: {out.stderr.strip().splitlines()[-1:]}")
+        for line in out.stdout.splitlines():
+            name, mib = line.rsplit(" ", 1)
+            if draw == "plain" and not name.startswith("frame"):
+                continue
+            steps.append((name if draw == "indirect" or not name.startswith("frame") else f"{name} (plain draw)",
+                          float(mib)))
+    print(f"{'step':<44} {'anonymous MiB':>14}")
+    for name, mib in steps:
+        print(f"{name:<44} {mib:14.0f}")
+    return steps
+
+
+def _steps(triangles: int, copies: int, draw: str) -> None:
+    """The measured process of ``bench_memory_steps`` (a fresh one per way of drawing)."""
+    import numpy as np
+
+    from multigpu.core import kernel
+    from multigpu.core.camera import frame_matrices
+    from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import generate
+
+    scene, _ = load_scene(SceneSpec(triangles=triangles, copies=copies))
+    ctx, _ = create_context(None, local_rank=0)
+    print(f"scene loaded (mapped) + EGL context {_anonymous_mib():.1f}")
+    r = RegionRenderer(ctx, scene, (512, 512), "auto")
+    print(f"GL upload {_anonymous_mib():.1f}")
+    kernel.warm()
+    print(f"compiled kernel loaded {_anonymous_mib():.1f}")
+    path = generate("walkthrough", scene, 10)
+    for f in range(2):
+        view, proj, _ = frame_matrices(path.camera(f), (512, 512))
+        if draw == "indirect":
+            r.render(view, proj, np.array([0.0, 0.0, 1.0]), (0, 0, 512, 512), None)
+        else:
+            r.prog["mvp"].write(np.eye(4, dtype=np.float32))
+            r.cbo.bind_to_storage_buffer(0)
+            r.fbo.use()
+            r.vao.render()
+            ctx.finish()
+        print(f"frame {f} {_anonymous_mib():.1f}")
