@@ -19,5 +19,5 @@ if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
     echo "$WANT" > "$STAMP"
 fi
 export PATH="$VENV/bin:$PATH"
-# llvmpipe: one rasterizer thread per rank, so a rank's rendering is its own CPU time.
-export LP_NUM_THREADS="${LP_NUM_THREADS:-1}"
+# llvmpipe's rasterizer threads: each rank chooses (gpu/render.py raster_threads) unless
+# LP_NUM_THREADS is set here.

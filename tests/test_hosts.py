@@ -1,6 +1,7 @@
 """Host placement without MPI: the host list and hostfile forms, their refusals, and the flags
 each MPI's launcher gets for them."""
 
+import os
 import subprocess
 import sys
 
@@ -55,10 +56,13 @@ def test_each_mpi_gets_its_own_placement_flags(tmp_path):
     assert mpich[1:7] == ["-hosts", "a:2,b:2", "-launcher", "ssh", "-launcher-exec", str(rsh)]
     assert Launcher("/x/mpiexec", "mpich").command(4, [], hosts=hosts, env={})[1:4] == ["-hosts", "a:2,b:2", "-n"]
     ompi = Launcher("/x/mpiexec", "openmpi", ("--oversubscribe",), {"MPI4PY_LIBMPI": "libmpi.so.40"})
-    cmd = ompi.command(4, [], hosts=hosts, env={"MULTIGPU_RSH": str(rsh), "MULTIGPU_CACHE": "/c"})
+    cmd = ompi.command(4, [], hosts=hosts, env={"MULTIGPU_RSH": str(rsh), "MULTIGPU_CACHE": "/c",
+                                                "LP_NUM_THREADS": "2"})
     assert cmd[1:6] == ["--oversubscribe", "--host", "a:2,b:2", "--mca", "plm_rsh_agent"]
     for name in ("LP_NUM_THREADS", "MPI4PY_LIBMPI", "MULTIGPU_CACHE", "MULTIGPU_RSH"):
         assert cmd[cmd.index(name) - 1] == "-x"  # Open MPI passes on only what it is told to
+    unset = ompi.command(4, [], hosts=hosts, env={"MULTIGPU_CACHE": "/c"})
+    assert "LP_NUM_THREADS" not in unset  # unset: each rank chooses (gpu.render.raster_threads)
     with pytest.raises(InputError, match="MULTIGPU_RSH=no-such-shell: not an executable"):
         Launcher("/x/mpiexec", "mpich").command(4, [], hosts=hosts, env={"MULTIGPU_RSH": "no-such-shell"})
 
@@ -70,3 +74,14 @@ def test_the_launcher_refuses_bad_placement_before_starting_anything(argv, want)
     res = subprocess.run([sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", *argv],
                          capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and want in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize("host_ranks, cores, want", [(1, 2, "1"), (2, 2, "0"), (4, 2, "0"), (3, 16, "1"), (1, 1, "0")])
+def test_llvmpipe_gets_a_raster_thread_only_where_a_core_is_spare(monkeypatch, host_ranks, cores, want):
+    from multigpu.gpu.render import raster_threads
+
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(cores)), raising=False)
+    assert raster_threads(host_ranks) == want == os.environ["LP_NUM_THREADS"]
+    monkeypatch.setenv("LP_NUM_THREADS", "3")  # the user's setting wins
+    assert raster_threads(host_ranks) == "3"

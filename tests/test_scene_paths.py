@@ -7,6 +7,7 @@ import pytest
 import trimesh
 
 from multigpu.errors import InputError
+from multigpu.scene.layout import Scene
 from multigpu.scene.models import SceneSpec, load_model, load_scene
 from multigpu.scene.paths import catmull_rom, load_path, orbit, walkthrough
 from multigpu.scene.plant import generate_plant
@@ -71,6 +72,31 @@ def test_cache_hit_returns_identical_arrays(tmp_path, monkeypatch):
         for k in MAPPED:  # the bulk is a read-only map of the cache file, equal to a copy of it
             v = getattr(s, k)
             assert isinstance(v, np.memmap) and not v.flags.writeable and np.array_equal(v, getattr(copy, k))
+
+
+def test_a_scene_without_geometry_unmaps_the_cache_file(tmp_path, monkeypatch):
+    """What the frame loop keeps after the GL upload: bounds, ranges and colours, and no map of
+    the cache file's vertex and index buffers (their pages leave the rank)."""
+    import gc
+
+    monkeypatch.setenv("MULTIGPU_CACHE", str(tmp_path))
+    load_scene(SceneSpec(triangles=20_000, seed=2))
+    scene, info = load_scene(SceneSpec(triangles=20_000, seed=2))
+
+    def maps_cache() -> bool:
+        with open("/proc/self/maps") as fh:
+            return any(str(info["cache"]) in line for line in fh)
+
+    assert maps_cache()
+    bare = scene.without_geometry()
+    del scene
+    gc.collect()
+    assert not maps_cache()
+    whole = Scene.load(info["cache"], mapped=False)
+    assert bare.vertices.shape == (0, 6) and bare.indices.size == 0 and bare.n_triangles == whole.n_triangles
+    for k in ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors", "origin"):
+        assert np.array_equal(getattr(bare, k), getattr(whole, k))
+    assert bare.meta == whole.meta and bare.name == whole.name
 
 
 @pytest.mark.parametrize("content,needle", [

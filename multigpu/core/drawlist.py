@@ -8,7 +8,7 @@ frame's visibility mask into one command per RUN of consecutive visible objects.
 are near each other in space are near each other in the buffer, so a rank's screen region
 selects a few long runs. Per-object colour reaches the shader through a per-vertex object id.
 
-Pure numpy, no GL: ``render.py`` uploads ``indices`` and ``vertex_object`` once and sends
+Pure numpy, no GL: ``render.py`` uploads ``index_blocks()`` and ``vertex_object`` once and sends
 ``commands(mask)`` every frame.
 """
 
@@ -56,7 +56,8 @@ class DrawList:
     Attributes
     ----------
     order : (N,) int64  object ids in buffer order.
-    indices : (3T,) uint32  absolute vertex indices (base vertex folded in), objects in ``order``.
+    indices : (3T,) uint32  absolute vertex indices (base vertex folded in), objects in ``order``
+        (made on demand from the scene; ``index_blocks`` streams it).
     vertex_object : (V,) uint32  object id of every vertex (for per-object colour).
     """
 
@@ -67,8 +68,8 @@ class DrawList:
         lengths = count[self.order]
         self.offsets = np.zeros(n + 1, dtype=np.int64)  # buffer offset of each object in order
         np.cumsum(lengths, out=self.offsets[1:])
-        # blocks of CHUNK indices: the temporaries stay small at any scale (the buffers
-        # themselves, 4 bytes per index and per vertex, are the build's only full-size arrays)
+        # blocks of CHUNK indices: the temporaries stay small at any scale (the vertex ids, 4
+        # bytes per vertex, are the build's only full-size array; the indices are streamed)
         base = scene.base_vertex.astype(np.int64)
         self.vertex_object = np.zeros(nv, dtype=np.uint32)
         starts = np.zeros(n + 1, dtype=np.int64)  # the scene's own layout: object i's indices follow i-1's
@@ -80,18 +81,33 @@ class DrawList:
             if absolute.min() < 0 or absolute.max() >= nv:
                 raise ValueError(f"{scene.name}: an index points outside the vertex buffer")
             self.vertex_object[absolute] = obj  # a vertex shared by objects: the last one's id
-        first, base = scene.first_index.astype(np.int64)[self.order], base[self.order]
-        self.indices = np.empty(int(self.offsets[-1]), dtype=np.uint32)
-        for s in range(0, self.indices.size, CHUNK):
-            e = min(s + CHUNK, self.indices.size)
+        self._scene = scene  # until uploaded: the index buffer is made from it a block at a time
+
+    def index_blocks(self):
+        """The index buffer a block of ``CHUNK`` indices at a time: ``(offset, (n,) uint32
+        absolute vertex indices)``, objects in ``order``. The renderer writes each block into
+        its GL buffer, so no full-size copy of the buffer is ever made on the host."""
+        scene = self._scene
+        first = scene.first_index.astype(np.int64)[self.order]
+        base = scene.base_vertex.astype(np.int64)[self.order]
+        for s in range(0, int(self.offsets[-1]), CHUNK):
+            e = min(s + CHUNK, int(self.offsets[-1]))
             k = _owners(self.offsets, s, e)  # which object in buffer order
             src = first[k] + np.arange(s, e, dtype=np.int64) - self.offsets[k]
-            self.indices[s:e] = scene.indices[src].astype(np.int64) + base[k]
+            yield s, (scene.indices[src].astype(np.int64) + base[k]).astype(np.uint32)
+
+    @property
+    def indices(self) -> np.ndarray:
+        """(3T,) uint32 the whole index buffer (tests and tools; the renderer streams it)."""
+        out = np.empty(int(self.offsets[-1]), dtype=np.uint32)
+        for s, block in self.index_blocks():
+            out[s:s + block.size] = block
+        return out
 
     def uploaded(self) -> None:
-        """Drop the index buffer and vertex ids once the GL buffers hold them (``commands``
-        needs only ``order`` and ``offsets``): a rank keeps one copy, the GL one."""
-        self.indices = self.vertex_object = None
+        """Drop the vertex ids and the scene once the GL buffers hold them (``commands`` needs
+        only ``order`` and ``offsets``): a rank keeps one copy, the GL one."""
+        self.vertex_object = self._scene = None
 
     def commands(self, mask: np.ndarray | None, compiled: bool | None = None) -> np.ndarray:
         """(R, 5) uint32 ``(count, 1, first, 0, 0)`` draw commands, one per run of visible

@@ -31,13 +31,17 @@ VERTEX = """
 uniform mat4 mvp;
 layout(std430, binding = 0) readonly buffer Colors { float colors[]; };  // 3 per object
 in vec3 in_pos;
-in vec3 in_nrm;
+in uint in_nrm;  // octahedral, 16 + 16 bits (pack_normals)
 in uint in_obj;
 out vec3 v_nrm;
 out vec3 v_col;
 void main() {
     gl_Position = mvp * vec4(in_pos, 1.0);
-    v_nrm = in_nrm;
+    vec2 f = vec2(float(in_nrm & 0xFFFFu), float(in_nrm >> 16)) / 65535.0 * 2.0 - 1.0;
+    vec3 n = vec3(f, 1.0 - abs(f.x) - abs(f.y));
+    float t = max(-n.z, 0.0);
+    n.xy += vec2(n.x >= 0.0 ? -t : t, n.y >= 0.0 ? -t : t);
+    v_nrm = n;
     uint c = 3u * in_obj;
     v_col = vec3(colors[c], colors[c + 1u], colors[c + 2u]);
 }
@@ -62,15 +66,31 @@ class EglUnavailable(RuntimeError):
     """No headless EGL context could be made on this machine."""
 
 
-def create_context(device: int | None = None, local_rank: int = 0):
+def raster_threads(host_ranks: int) -> str:
+    """Choose llvmpipe's rasterizer threads for a rank (``LP_NUM_THREADS``, unless the user set
+    it; call before the first GL context) and return the value in effect.
+
+    One thread when this host has a core to spare for it beside its ranks: the raster work
+    overlaps the rank's own. None (0: the rank rasterizes on its own thread) when the ranks
+    already fill the cores: a thread per rank then only competes for them, and its queued
+    scenes cost memory. Measured at 4.28 M triangles on 4 ranks of 2 cores (docs/BENCHMARKS.md):
+    0 threads, 4 % less CPU and wall time, ~100 MiB less per rank. The value never changes a
+    pixel. A real GPU ignores it."""
+    if "LP_NUM_THREADS" not in os.environ:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        os.environ["LP_NUM_THREADS"] = "1" if host_ranks < cores else "0"
+    return os.environ["LP_NUM_THREADS"]
+
+
+def create_context(device: int | None = None, local_rank: int = 0, host_ranks: int = 1):
     """A standalone EGL context, and the device index it is on.
 
     ``device`` picks an EGL device explicitly (``--device``); by default a rank takes
     ``local_rank`` modulo the machine's device count, so the ranks of one node spread over its
     GPUs. glcontext selects the device (``device_index``; its ``GLCONTEXT_DEVICE_INDEX``
     variable overrides both) and reports the device count when an index is out of range,
-    which is all the counting needed."""
-    os.environ.setdefault("LP_NUM_THREADS", "1")  # llvmpipe: a rank's raster work is its own CPU time
+    which is all the counting needed. ``host_ranks``: the ranks on this host (``raster_threads``)."""
+    raster_threads(host_ranks)
     import moderngl
 
     index = local_rank if device is None else device
@@ -93,6 +113,68 @@ def create_context(device: int | None = None, local_rank: int = 0):
                 exc = again
         why = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         raise EglUnavailable(f"{EGL_HELP} ({exc.__class__.__name__}: {why})") from None
+
+
+#: bytes per block when a buffer is uploaded
+UPLOAD_BLOCK = 16 << 20
+_MADV_DONTNEED = 4
+
+
+def pack_normals(normals: np.ndarray) -> np.ndarray:
+    """(V,) uint32 octahedral encodings of (V, 3) normals, 16 bits per coordinate (the vertex
+    shader decodes them): a third of the bytes of three floats, within 1e-4 of the normal's
+    direction, which the lighting cannot show in 8-bit colour. A zero normal reads as +z."""
+    n = np.asarray(normals, dtype=np.float64)
+    s = np.abs(n).sum(axis=1, keepdims=True)
+    n = n / np.where(s > 0, s, 1.0)
+    n[s[:, 0] == 0, 2] = 1.0
+    x, y, z = n[:, 0], n[:, 1], n[:, 2]
+    sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
+    fold = z < 0
+    x, y = np.where(fold, (1 - np.abs(y)) * sx, x), np.where(fold, (1 - np.abs(x)) * sy, y)
+    u = np.rint((x * 0.5 + 0.5) * 65535).astype(np.uint32)
+    v = np.rint((y * 0.5 + 0.5) * 65535).astype(np.uint32)
+    return u | (v << np.uint32(16))
+
+
+def pack_vertices(vertices: np.ndarray) -> np.ndarray:
+    """(V, 4) uint32 GL vertices of the scene's (V, 6) float32 ones: the position's three
+    float32 as they are, the normal packed (``pack_normals``): 16 bytes a vertex, not 24."""
+    out = np.empty((vertices.shape[0], 4), dtype=np.uint32)
+    out[:, :3] = np.ascontiguousarray(vertices[:, :3], dtype=np.float32).view(np.uint32)
+    out[:, 3] = pack_normals(vertices[:, 3:6])
+    return out
+
+
+def upload(ctx, array: np.ndarray, row_bytes: int, convert):
+    """A GL buffer holding ``convert(block)`` (``row_bytes`` per row of ``array``) for the
+    blocks of ``array``, written one block at a time. Where ``array`` is a read-only map of a
+    file (a cached scene), each block's pages are unmapped from this process once written (the
+    page cache keeps them for the other ranks): a rank never holds the file's pages and the
+    driver's copy whole at once, and the last rank to upload does not carry the whole file."""
+    rows = max(1, UPLOAD_BLOCK // max(1, row_bytes))
+    buf = ctx.buffer(reserve=max(4, array.shape[0] * row_bytes))
+    mapped = isinstance(array, np.memmap) and array.mode == "r"
+    for s in range(0, array.shape[0], rows):
+        part = array[s:s + rows]
+        buf.write(np.ascontiguousarray(convert(part)), offset=s * row_bytes)
+        if mapped:
+            _unmap_pages(part)
+    return buf
+
+
+def _unmap_pages(part: np.ndarray) -> None:
+    """Drop this process's mapping of the whole pages under ``part`` (a read-only file map:
+    touching them again reads them back from the file)."""
+    import ctypes
+    import mmap
+
+    page = mmap.PAGESIZE
+    start = -(-part.ctypes.data // page) * page
+    end = (part.ctypes.data + part.nbytes) // page * page
+    if end > start:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.madvise(ctypes.c_void_p(start), ctypes.c_size_t(end - start), _MADV_DONTNEED)
 
 
 METHODS = ("auto", "viewport", "scissor", "offaxis")
@@ -152,12 +234,14 @@ class RegionRenderer:
         self.origin = np.asarray(scene.origin, dtype=np.float64)
         self.prog = ctx.program(vertex_shader=VERTEX, fragment_shader=FRAGMENT)
         self.draws = DrawList(scene)
-        self.vbo = ctx.buffer(np.ascontiguousarray(scene.vertices, dtype=np.float32))
+        self.vbo = upload(ctx, scene.vertices, 16, pack_vertices)
         self.obo = ctx.buffer(self.draws.vertex_object)
-        self.ibo = ctx.buffer(self.draws.indices)
+        self.ibo = ctx.buffer(reserve=max(4, 4 * int(self.draws.offsets[-1])))
+        for at, block in self.draws.index_blocks():
+            self.ibo.write(block, offset=4 * at)
         self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
         self.cbo = ctx.buffer(np.ascontiguousarray(scene.colors, dtype=np.float32).ravel())
-        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 3f", "in_pos", "in_nrm"),
+        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 1u", "in_pos", "in_nrm"),
                                                 (self.obo, "1u", "in_obj")],
                                     index_buffer=self.ibo, index_element_size=4)
         self.indirect = ctx.buffer(reserve=20 * 1024)  # grows when a frame needs more commands

@@ -21,9 +21,6 @@ MARK = "floor-json: "
 def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
     """The worker, on every rank of an MPI job, for the scene of ``spec`` (a ``SceneSpec``)
     along its generated ``path_kind`` path: returns the figures on rank 0."""
-    import os
-
-    os.environ.setdefault("LP_NUM_THREADS", "1")
     from mpi4py import MPI
 
     from multigpu.config import WalkConfig
@@ -40,7 +37,7 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
     comm.Barrier()
     scene, _ = load_scene(spec)
     size = (2 * tile, 2 * tile)
-    ctx, _ = create_context(local_rank=rank)
+    ctx, _ = create_context(local_rank=rank, host_ranks=comm.Get_size())  # one host
     renderer = RegionRenderer(ctx, scene, size)
     path = generate(path_kind, scene, frames)
     planner = Planner(WalkConfig(grid=(2, 2), tile=(tile, tile)), scene, rank)  # the frame loop's projection

@@ -82,15 +82,15 @@ class Launcher:
             if not rsh:
                 raise InputError(f"MULTIGPU_RSH={env['MULTIGPU_RSH']}: not an executable")
         if self.flavor == "openmpi":
-            names = {"LP_NUM_THREADS", *self.env, *(k for k in env if k.startswith("MULTIGPU_"))}
+            names = {*self.env, *(k for k in env if k.startswith(("MULTIGPU_", "LP_NUM_THREADS")))}
             forward = [a for k in sorted(names) for a in ("-x", k)]
             return ["--host", spec(hosts), *(("--mca", "plm_rsh_agent", rsh) if rsh else ()), *forward]
         return ["-hosts", spec(hosts), *(("-launcher", "ssh", "-launcher-exec", rsh) if rsh else ())]
 
     def environ(self, extra: dict | None = None) -> dict:
-        """The environment for the job: ours, the launcher's needs, one rasterizer thread per
-        rank unless set, then ``extra``."""
-        base = {**os.environ, "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", "1")}
+        """The environment for the job: ours, the launcher's needs, then ``extra`` (llvmpipe's
+        threads per rank are each rank's choice, ``gpu.render.raster_threads``, unless set)."""
+        base = dict(os.environ)
         for k, v in self.env.items():
             base.setdefault(k, v)
         return {**base, **(extra or {})}

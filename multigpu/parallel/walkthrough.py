@@ -81,14 +81,16 @@ def _check_path(cfg, scene, path) -> None:
     raise InputError(f"the camera path never sees the scene ({scene.name}): no visible triangles")
 
 
-def node_rank(comm, timeout: float) -> int:
-    """This rank's index among the ranks on its host (ranks of one hostname, in rank order).
+def node_rank(comm, timeout: float) -> tuple[int, int]:
+    """This rank's index among the ranks on its host (ranks of one hostname, in rank order),
+    and how many ranks that host runs.
 
     One bounded non-blocking exchange of host names, not MPI's blocking shared-memory split:
     a rank blocked in a collective stalls its heartbeats' delivery across hosts (MPICH over
     TCP), so the liveness check took a slow peer for a dead one."""
     hosts = allgather_text(comm, socket.gethostname(), timeout, "setup")
-    return hosts[: comm.Get_rank()].count(hosts[comm.Get_rank()])
+    mine = hosts[comm.Get_rank()]
+    return hosts[: comm.Get_rank()].count(mine), hosts.count(mine)
 
 
 def _check_video() -> None:
@@ -132,17 +134,19 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         try:
             if rank != 0:
                 scene, path, load_info = load_world(cfg)
+            from multigpu.gpu.render import RegionRenderer, create_context, raster_threads
+
+            local, host_ranks = node_rank(comm, wait)
+            raster_threads(host_ranks)  # before any GL context, the window's included
             presenter = _presenter(cfg, rank)
             if rank == 0 and cfg.monitor is not None:
                 monitor = _monitor(cfg, presenter)
-            from multigpu.gpu.render import RegionRenderer, create_context
-
-            local = node_rank(comm, wait)
             if presenter.context is not None:  # render in the window's context
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:
-                ctx, device = create_context(cfg.device, local_rank=local)
+                ctx, device = create_context(cfg.device, local_rank=local, host_ranks=host_ranks)
             renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum)
+            scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
             from multigpu.core import kernel
 
             load_info = {**load_info, "kernel_seconds": kernel.warm()}  # compiled here, never in a frame

@@ -87,6 +87,13 @@ class Scene:
         return Scene(**{**self._arrays(), **moved}, name=self.name,
                      meta={**self.meta, "offset": (np.asarray(self.meta.get("offset", 0.0)) + off).tolist()})
 
+    def without_geometry(self) -> "Scene":
+        """The same objects without their vertex and index buffers (empty arrays), for the
+        frame loop once the GL buffers hold them: bounds, draw ranges, colours and meta stay.
+        Dropping the last reference to a mapped buffer unmaps it, so its pages leave the rank."""
+        empty = {"vertices": np.empty((0, 6), dtype=np.float32), "indices": np.empty(0, dtype=np.uint32)}
+        return Scene(**{**self._arrays(), **empty}, name=self.name, meta=self.meta)
+
     def world_positions(self) -> np.ndarray:
         """(V, 3) float64 vertex positions in world space."""
         return self.vertices[:, :3].astype(np.float64) + self.origin

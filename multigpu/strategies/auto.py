@@ -86,10 +86,12 @@ class Auto(Configured):
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         for c in self.candidates:  # every candidate learns from every frame
             c.observe(frame, partition, times)
-        for part, i, scored in self._made:
+        for n, (part, i, scored) in enumerate(self._made):
             if part is partition:
                 if scored:
                     self._scores[i].append(float(np.max(times)))
+                for _ in range(n + 1):  # it and older plans (never observed now): their masks go
+                    self._made.popleft()
                 break
 
     def report(self) -> dict:
