@@ -166,3 +166,41 @@ def test_bad_path_files(tmp_path, doc, needle):
     p.write_text("{not json")
     with pytest.raises(InputError, match="not valid JSON"):
         load_path(p)
+
+
+def test_models_and_clusters_built_a_block_of_faces_at_a_time_are_the_same(tmp_path, monkeypatch):
+    """Loading a model (components merged, degenerate faces dropped, grid split, scene-graph
+    nodes) and cutting objects into clusters go a block of faces at a time: blocks that cut
+    objects anywhere give the very arrays of one whole-array pass."""
+    import multigpu.scene.blocks as blocks
+    from multigpu.scene.cluster import split_objects
+
+    rng = np.random.default_rng(0)
+    parts = [trimesh.creation.icosphere(subdivisions=4)]
+    for _ in range(12):
+        b = trimesh.creation.box(extents=rng.uniform(0.1, 1, 3))
+        b.apply_translation(rng.uniform(-5, 5, 3))
+        parts.append(b)
+    for _ in range(40):  # parts under merge_below: merged by grid cell
+        t = trimesh.creation.icosphere(subdivisions=0, radius=0.05)
+        t.apply_translation(rng.uniform(3, 3.5, 3))
+        parts.append(t)
+    m = trimesh.util.concatenate(parts)
+    trimesh.Trimesh(m.vertices, np.vstack([m.faces, [[0, 0, 1]]]), process=False).export(tmp_path / "m.ply")
+    graph = trimesh.Scene()
+    for i, p in enumerate(parts[:10]):
+        graph.add_geometry(p, transform=trimesh.transformations.translation_matrix([i * 0.1, 0, 0]))
+    graph.export(tmp_path / "m.glb")
+    cases = [("m.ply", "auto"), ("m.ply", "grid:8"), ("m.glb", "auto"), ("m.glb", "grid:4")]
+
+    def build():
+        scenes = [load_model(tmp_path / f, split=split) for f, split in cases]
+        return scenes + [split_objects(scenes[0], 37), split_objects(generate_plant(triangles=20_000, seed=1), 16)]
+
+    whole = build()
+    monkeypatch.setattr(blocks, "FACE_BLOCK", 997)
+    for a, b in zip(whole, build()):
+        assert a.meta == b.meta
+        for k, v in a._arrays().items():
+            np.testing.assert_array_equal(v, getattr(b, k), err_msg=k)
+    assert whole[0].meta["warnings"] == ["dropped 1 degenerate faces"] and whole[0].n_objects < len(parts)

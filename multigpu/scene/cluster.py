@@ -16,6 +16,7 @@ import numpy as np
 from multigpu.core.drawlist import morton_codes
 from multigpu.core.triangles import triangle_objects
 from multigpu.errors import InputError
+from multigpu.scene.blocks import blocks, per_object
 from multigpu.scene.layout import Scene
 
 #: automatic clusters are never smaller than this (tiny pieces only add per-object cost)
@@ -64,11 +65,15 @@ def split_objects(scene: Scene, max_tris: int) -> Scene:
     if tris.size == 0 or tris.max() <= max_tris:
         return scene
     tri, obj = triangle_objects(scene)  # (T, 3) absolute vertices, object of each triangle
-    pos = scene.vertices[:, :3].astype(np.float64)
-    centroid = pos[tri].mean(axis=1)
+    pos = scene.vertices[:, :3]
+    centroid = np.empty((len(obj), 3))
+    for s, e in blocks(len(obj)):
+        centroid[s:e] = pos[tri[s:e]].astype(np.float64).mean(axis=1)
     big = tris[obj] > max_tris
     key = np.where(big, morton_codes(centroid), np.uint64(0))  # small objects keep their order
+    del centroid, big
     order = np.lexsort((np.arange(len(obj)), key, obj))
+    del key
     tri, obj = tri[order], obj[order]
     # rank of each triangle within its object, and the object's cluster count and size
     counts = np.bincount(obj, minlength=scene.n_objects)
@@ -77,23 +82,33 @@ def split_objects(scene: Scene, max_tris: int) -> Scene:
     n_clusters = -(-counts // max_tris)
     per = -(-counts // np.maximum(n_clusters, 1))  # near-equal cluster sizes
     cluster = within // np.maximum(per[obj], 1)
+    del within
     first_of_obj = np.concatenate([[0], np.cumsum(n_clusters)[:-1]])
     cid = first_of_obj[obj] + cluster  # new object id, in (object, cluster) order
+    del cluster, obj
     # inside a cluster keep the modelled triangle order (vertex reuse as the modeller left it)
     keep = np.lexsort((order, cid))
-    tri, obj, cid = tri[keep], obj[keep], cid[keep]
+    del order
+    tri, cid = tri[keep], cid[keep]
+    del keep
     n_new = int(n_clusters.sum())
     new_counts = np.bincount(cid, minlength=n_new)
     parent = np.repeat(np.arange(scene.n_objects), n_clusters)
     starts = np.concatenate([[0], np.cumsum(new_counts)[:-1]])
-    world = pos[tri] + scene.origin  # (T, 3, 3) float64
-    bmin = np.minimum.reduceat(world.min(axis=1), starts)
-    bmax = np.maximum.reduceat(world.max(axis=1), starts)
-    centers = (bmin + bmax) / 2
-    radii = np.maximum.reduceat(np.linalg.norm(world - centers[cid][:, None, :], axis=2).max(axis=1), starts)
     base = scene.base_vertex[parent]
-    local = (tri - base[cid][:, None]).astype(np.uint32)
-    return Scene(vertices=scene.vertices, indices=local.ravel(), first_index=starts * 3,
+    bmin, bmax, radii = np.full((n_new, 3), np.inf), np.full((n_new, 3), -np.inf), np.zeros(n_new)
+    local = np.empty(tri.size, dtype=np.uint32)
+    for s, e in blocks(len(cid)):  # blocks of triangles: the (T, 3, 3) corners never whole
+        world = pos[tri[s:e]].astype(np.float64) + scene.origin
+        per_object(np.minimum, world.min(axis=1), cid[s:e], bmin)
+        per_object(np.maximum, world.max(axis=1), cid[s:e], bmax)
+        local[3 * s:3 * e] = (tri[s:e] - base[cid[s:e]][:, None]).astype(np.uint32).ravel()
+    centers = (bmin + bmax) / 2
+    for s, e in blocks(len(cid)):
+        world = pos[tri[s:e]].astype(np.float64) + scene.origin
+        per_object(np.maximum, np.linalg.norm(world - centers[cid[s:e]][:, None, :], axis=2).max(axis=1),
+                    cid[s:e], radii)
+    return Scene(vertices=scene.vertices, indices=local, first_index=starts * 3,
                  index_count=new_counts.astype(np.int64) * 3, base_vertex=base, bmin=bmin, bmax=bmax,
                  centers=centers, radii=radii, colors=scene.colors[parent], origin=scene.origin, name=scene.name,
                  meta={**scene.meta, "cluster": int(max_tris), "modelled_objects": scene.n_objects})

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError, check_file
+from multigpu.scene.blocks import blocks, per_object
 from multigpu.scene.layout import FORMAT_VERSION, Scene
 
 FORMATS = {".obj", ".ply", ".stl", ".off", ".gltf", ".glb"}
@@ -283,32 +284,43 @@ def _check_indices_and_range(verts, faces, path) -> None:
                          f"{len(verts)} vertices (corrupt or truncated file)")
     finite = np.isfinite(verts).all(axis=1)
     if finite.any():
-        reach = float(np.abs(verts[finite]).max())
+        reach = max(float(np.abs(verts[s:e][finite[s:e]]).max(initial=0.0)) for s, e in blocks(len(verts)))
         if reach > MAX_COORD:
             raise InputError.of("model", f"{path}: coordinates reach {reach:.3g}, beyond +-{MAX_COORD:g} "
                              "(rescale the model; --offset moves a scene far from the origin)")
 
 
 def _clean_faces(verts, faces, path, warnings) -> np.ndarray:
+    """``faces`` without those using a non-finite vertex or of zero area (the same array
+    when none is dropped: no copy)."""
     bad_v = ~np.isfinite(verts).all(axis=1)
-    bad = bad_v[faces].any(axis=1)
+    bad = np.zeros(len(faces), dtype=bool)
+    for s, e in blocks(len(faces)):
+        bad[s:e] = bad_v[faces[s:e]].any(axis=1)
     if bad.any():
         warnings.append(f"dropped {int(bad.sum())} faces with non-finite vertices")
-    f = faces[~bad]
-    degenerate = _degenerate(verts, f)
+    degenerate = _degenerate(verts, faces) & ~bad
     if degenerate.any():
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
-    f = f[~degenerate]
-    if len(f) == 0:
+    bad |= degenerate
+    if bad.all():
         raise InputError.of("model", f"{path}: no valid triangles (all faces degenerate or non-finite)")
-    return f
+    return faces[~bad] if bad.any() else faces
 
 
 def _degenerate(verts, faces) -> np.ndarray:
     """(F,) True for faces of zero (or non-finite) area."""
-    tri = verts[faces]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    return ~(area2 > 0)
+    out = np.empty(len(faces), dtype=bool)
+    for s, e in blocks(len(faces)):
+        tri = verts[faces[s:e]]
+        area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        out[s:e] = ~(area2 > 0)
+    return out
+
+
+def _face_centres(verts, faces, s: int, e: int) -> np.ndarray:
+    """(e-s, 3) float64 centres of faces ``s:e``."""
+    return verts[faces[s:e]].mean(axis=1)
 
 
 def _component_labels(faces: np.ndarray, verts: np.ndarray) -> np.ndarray:
@@ -318,21 +330,28 @@ def _component_labels(faces: np.ndarray, verts: np.ndarray) -> np.ndarray:
 
     # vertices at the same position are one vertex (STL and split-normal OBJ duplicate them)
     _, canon = np.unique(verts, axis=0, return_inverse=True)
-    faces = canon.ravel()[faces]
-    rows = np.concatenate([faces[:, 0], faces[:, 1]])
-    cols = np.concatenate([faces[:, 1], faces[:, 2]])
-    n_verts = int(faces.max()) + 1
-    g = coo_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n_verts, n_verts))
+    canon = canon.ravel().astype(np.int32 if len(verts) < 2**31 else np.int64)
+    rows = np.concatenate([canon[faces[:, 0]], canon[faces[:, 1]]])
+    cols = np.concatenate([canon[faces[:, 1]], canon[faces[:, 2]]])
+    n_verts = int(canon.max()) + 1
+    g = coo_matrix((np.ones(rows.size, dtype=np.float32), (rows, cols)), shape=(n_verts, n_verts))
+    del rows, cols
     _, vlabel = connected_components(g, directed=False)
-    return vlabel[faces[:, 0]]
+    return vlabel[canon[faces[:, 0]]]
 
 
 def _grid_labels(verts, faces, n: int) -> np.ndarray:
-    cen = verts[faces].mean(axis=1)
-    lo, hi = cen.min(0), cen.max(0)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for s, e in blocks(len(faces)):
+        cen = _face_centres(verts, faces, s, e)
+        lo, hi = np.minimum(lo, cen.min(0)), np.maximum(hi, cen.max(0))
     size = max(float((hi - lo).max()), 1e-12) / n
-    cell = np.minimum(((cen - lo) / size).astype(np.int64), n - 1)  # the far edge is in the last cell
-    return np.unique(cell, axis=0, return_inverse=True)[1].ravel()
+    code = np.empty(len(faces), dtype=np.int64)
+    for s, e in blocks(len(faces)):
+        cell = ((_face_centres(verts, faces, s, e) - lo) / size).astype(np.int64)
+        cell = np.minimum(cell, n - 1)  # the far edge is in the last cell
+        code[s:e] = (cell[:, 0] * n + cell[:, 1]) * n + cell[:, 2]
+    return np.unique(code, return_inverse=True)[1].ravel()
 
 
 def _merge_small(labels, verts, faces, merge_below: int) -> np.ndarray:
@@ -342,8 +361,11 @@ def _merge_small(labels, verts, faces, merge_below: int) -> np.ndarray:
     small_comp = counts < merge_below
     if not small_comp.any():
         return inv
-    face_cen = verts[faces].mean(axis=1)
-    comp_cen = np.stack([np.bincount(inv, weights=face_cen[:, a], minlength=uniq.size) for a in range(3)], 1)
+    comp_cen = np.zeros((uniq.size, 3))
+    for s, e in blocks(len(faces)):
+        face_cen = _face_centres(verts, faces, s, e)
+        for a in range(3):  # axes
+            comp_cen[:, a] += np.bincount(inv[s:e], weights=face_cen[:, a], minlength=uniq.size)
     comp_cen /= counts[:, None]
     cen = comp_cen[small_comp]
     lo, hi = cen.min(0), cen.max(0)
@@ -356,14 +378,18 @@ def _merge_small(labels, verts, faces, merge_below: int) -> np.ndarray:
 
 
 def _normals(verts, faces) -> np.ndarray:
-    """Area-weighted vertex normals (vectorized)."""
-    tri = verts[faces]
-    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    """Area-weighted vertex normals (vectorized, a block of faces at a time)."""
     vn = np.zeros_like(verts)
-    for k in range(3):
-        np.add.at(vn, faces[:, k], fn)
+    for s, e in blocks(len(faces)):
+        f = faces[s:e]
+        tri = verts[f]
+        fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        for k in range(3):  # corners
+            np.add.at(vn, f[:, k], fn)
     norm = np.linalg.norm(vn, axis=1, keepdims=True)
-    return np.where(norm > 0, vn / np.where(norm > 0, norm, 1), [0, 0, 1])
+    vn /= np.where(norm > 0, norm, 1)
+    vn[norm[:, 0] == 0] = [0, 0, 1]
+    return vn
 
 
 def _colors(n: int, seed: int = 7) -> np.ndarray:
@@ -372,29 +398,40 @@ def _colors(n: int, seed: int = 7) -> np.ndarray:
 
 
 def _from_labels(verts, faces, labels, path, warnings, meta) -> Scene:
-    """One object per label: faces sorted by label, one shared vertex buffer (base vertex 0)."""
+    """One object per label: faces sorted by label, one shared vertex buffer (base vertex 0).
+    Every pass over the faces goes a block at a time: besides the model's own arrays, what is
+    held is the sorted faces and the scene being built."""
     order = np.argsort(labels, kind="stable")
     faces, labels = faces[order], labels[order]
-    n = int(labels.max()) + 1
+    del order
+    n = int(labels[-1]) + 1
     counts = np.bincount(labels, minlength=n)
     first = np.concatenate([[0], np.cumsum(counts)[:-1]]) * 3
     normals = _normals(verts, faces)
-    used = np.unique(faces)
-    # compact the vertex buffer to the vertices faces use
+    used = np.zeros(len(verts), dtype=bool)  # compact the vertex buffer to the vertices faces use
+    used[faces.ravel()] = True
+    used = np.flatnonzero(used)
     remap = np.full(len(verts), -1, dtype=np.int64)
     remap[used] = np.arange(used.size)
-    v = verts[used]
-    f = remap[faces]
-    tri = v[f]  # (T, 3, 3)
-    starts = first // 3
-    bmin = np.minimum.reduceat(tri.min(axis=1), starts)
-    bmax = np.maximum.reduceat(tri.max(axis=1), starts)
+    bmin, bmax, radii = np.full((n, 3), np.inf), np.full((n, 3), -np.inf), np.zeros(n)
+    for s, e in blocks(len(faces)):
+        tri = verts[faces[s:e]]  # (b, 3, 3)
+        per_object(np.minimum, tri.min(axis=1), labels[s:e], bmin)
+        per_object(np.maximum, tri.max(axis=1), labels[s:e], bmax)
     centers = (bmin + bmax) / 2
-    d = np.linalg.norm(tri - centers[labels][:, None, :], axis=2).max(axis=1)
-    radii = np.maximum.reduceat(d, starts)
+    for s, e in blocks(len(faces)):
+        d = np.linalg.norm(verts[faces[s:e]] - centers[labels[s:e]][:, None, :], axis=2).max(axis=1)
+        per_object(np.maximum, d, labels[s:e], radii)
     origin = (bmin.min(axis=0) + bmax.max(axis=0)) / 2  # float32 vertices relative to it
-    return Scene(vertices=np.concatenate([v - origin, normals[used]], axis=1).astype(np.float32),
-                 indices=f.ravel().astype(np.uint32), first_index=first.astype(np.int64),
+    vertices = np.empty((used.size, 6), dtype=np.float32)
+    vertices[:, :3] = verts[used] - origin
+    vertices[:, 3:] = normals[used]
+    del normals
+    indices = np.empty(faces.size, dtype=np.uint32)
+    for s, e in blocks(len(faces)):
+        indices[3 * s:3 * e] = remap[faces[s:e]].ravel()
+    return Scene(vertices=vertices,
+                 indices=indices, first_index=first.astype(np.int64),
                  index_count=(counts * 3).astype(np.int64), base_vertex=np.zeros(n, dtype=np.int64),
                  bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=_colors(n), origin=origin,
                  name=Path(path).stem, meta={**meta, "source": str(path), "warnings": warnings,

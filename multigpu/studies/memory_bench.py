@@ -148,8 +148,10 @@ def _anonymous_mib() -> float:
 def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
     """One rank's anonymous memory after each step of its setup and first frames, in this
     process: the cached plant (``--triangles 5000000 --copies 4``, 4.28 M triangles; 10^6 with
-    ``--quick``) loaded mapped, an EGL context, the GL upload, the compiled kernel, then two
-    frames drawn by the renderer (indirect commands) or as one plain draw of everything."""
+    ``--quick``) loaded mapped, an EGL context, the GL upload, the compiled kernel, then three
+    frames of the whole scene into a 512x512 region, with llvmpipe's raster thread
+    (``LP_NUM_THREADS=1``) and without it (``0``: what ranks filling a host's cores use), each
+    in a fresh process."""
     import sys
 
     from multigpu.scene.models import SceneSpec, load_scene
@@ -159,24 +161,26 @@ def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
     spec = SceneSpec(triangles=1_000_000) if quick else SceneSpec(triangles=5_000_000, copies=4)
     load_scene(spec)  # the cache exists before the measured load
     steps = []
-    for draw in ("indirect", "plain"):
-        code = f"from multigpu.studies.memory_bench import _steps; _steps({spec.triangles}, {spec.copies}, '{draw}')"
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800)
+    for threads in ("1", "0"):
+        code = f"from multigpu.studies.memory_bench import _steps; _steps({spec.triangles}, {spec.copies})"
+        env = {**os.environ, "LP_NUM_THREADS": threads}
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800, env=env)
         if out.returncode != 0:
             raise RuntimeError(f"bench memory-steps: {out.stderr.strip().splitlines()[-1:]}")
         for line in out.stdout.splitlines():
             name, mib = line.rsplit(" ", 1)
-            if draw == "plain" and not name.startswith("frame"):
+            if threads == "0" and not name.startswith("frame"):
                 continue
-            steps.append((name if draw == "indirect" else f"{name} (plain draw)", float(mib)))
+            steps.append((f"{name} ({threads} raster thread{'s' if threads != '1' else ''})"
+                          if name.startswith("frame") else name, float(mib)))
     print(f"{'step':<44} {'anonymous MiB':>14}")
     for name, mib in steps:
         print(f"{name:<44} {mib:14.0f}")
     return steps
 
 
-def _steps(triangles: int, copies: int, draw: str) -> None:
-    """The measured process of ``bench_memory_steps`` (a fresh one per way of drawing)."""
+def _steps(triangles: int, copies: int) -> None:
+    """The measured process of ``bench_memory_steps`` (a fresh one per raster-thread setting)."""
     import numpy as np
 
     from multigpu.core import kernel
@@ -189,19 +193,12 @@ def _steps(triangles: int, copies: int, draw: str) -> None:
     ctx, _ = create_context(None, local_rank=0)
     print(f"scene loaded (mapped) + EGL context {_anonymous_mib():.1f}")
     r = RegionRenderer(ctx, scene, (512, 512), "auto")
+    scene = scene.without_geometry()  # as the walkthrough does
     print(f"GL upload {_anonymous_mib():.1f}")
     kernel.warm()
     print(f"compiled kernel loaded {_anonymous_mib():.1f}")
     path = generate("walkthrough", scene, 10)
-    for f in range(2):
+    for f in range(3):
         view, proj, _ = frame_matrices(path.camera(f), (512, 512))
-        if draw == "indirect":
-            r.render(view, proj, np.array([0.0, 0.0, 1.0]), (0, 0, 512, 512), None)
-        else:
-            r.prog["mvp"].write(np.eye(4, dtype=np.float32))
-            r.cbo.bind_to_storage_buffer(0)
-            if r.fbo is not None:  # scissor: one framebuffer of the display's size; else the default one
-                r.fbo.use()
-            r.vao.render()
-            ctx.finish()
+        r.render(view, proj, np.array([0.0, 0.0, 1.0]), (0, 0, 512, 512), None)
         print(f"frame {f} {_anonymous_mib():.1f}")
