@@ -88,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--out", default="out/accuracy", help="directory for the CSV tables")
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
-    b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | memory | memory-steps")
+    b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | memory | "
+                                "memory-steps | model-load")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
     b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)

@@ -18,3 +18,13 @@ def test_memory_steps_report_every_step(tmp_path, monkeypatch):
     assert list(steps) == ["scene loaded (mapped) + EGL context", "GL upload", "compiled kernel loaded", *frames]
     assert steps["GL upload"] > steps["scene loaded (mapped) + EGL context"] > 0  # the driver's copy of the buffers
     assert all(v > 0 for v in steps.values())
+
+
+def test_model_load_bench_reports_each_load(tmp_path, monkeypatch):
+    from multigpu.studies.memory_bench import bench_model_load
+
+    monkeypatch.setenv("MULTIGPU_CACHE", str(tmp_path))
+    rows = bench_model_load(quick=True)
+    assert [r["load"] for r in rows] == ["trimesh", "into the cache", "cached"]
+    assert len({r["triangles"] for r in rows}) == 1 and rows[0]["triangles"] > 0
+    assert all(r["peak_rss"] > 0 for r in rows)

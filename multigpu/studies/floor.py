@@ -22,11 +22,12 @@ def run(scenes: dict[str, list[str]] | None = None, ranks: int = 4, frames: int 
     """Start the worker under mpiexec for each scene (name -> scene flags, and ``--path-kind``
     where not the walkthrough); the figures it printed, each with its ``scene`` name."""
     from multigpu.parallel.mpirun import run_multigpu
+    from multigpu.studies.runs import study_env
 
     rows = []
     for name, flags in (scenes or SCENES).items():
         job = run_multigpu(ranks, ["bench", "floor", "--worker", *flags, "--frames", str(frames)], timeout,
-                           merge_stderr=True)
+                           env=study_env(), merge_stderr=True)
         lines = [ln for ln in job.stdout.splitlines() if ln.startswith(MARK)]
         if job.returncode != 0 or not lines:
             tail = "\n".join(job.stdout.strip().splitlines()[-5:])

@@ -202,3 +202,51 @@ def _steps(triangles: int, copies: int) -> None:
         view, proj, _ = frame_matrices(path.camera(f), (512, 512))
         r.render(view, proj, np.array([0.0, 0.0, 1.0]), (0, 0, 512, 512), None)
         print(f"frame {f} {_anonymous_mib():.1f}")
+
+
+#: this process's peak resident set (VmHWM: unlike ru_maxrss, not inherited through fork + exec)
+_HWM = "int([l for l in open('/proc/self/status') if l.startswith('VmHWM')][0].split()[1]) * 1024"
+
+_MODEL_CHILD = """
+import json, sys, time
+import trimesh
+from multigpu.scene.models import SceneSpec, load_scene
+what, path = sys.argv[1], sys.argv[2]
+t = time.perf_counter()
+if what == "trimesh":
+    n = len(trimesh.load(path, process=False).faces)
+else:
+    n = load_scene(SceneSpec(model=path, ranks=4))[0].n_triangles
+print(json.dumps({"triangles": n, "seconds": time.perf_counter() - t,
+                  "peak_rss": HWM}))
+""".replace("HWM", _HWM)
+
+
+def bench_model_load(quick: bool) -> list[dict]:
+    """Peak memory of loading a big model file into the scene cache: a PLY of one icosphere
+    (5.24 M triangles; 0.33 M with ``--quick``) read by trimesh alone, then by ``load_scene``
+    for a 4-rank wall (components, normals, bounds, clusters, the cache written), each in a
+    fresh process (peak RSS), against the interpreter with the imports alone."""
+    import json
+    import sys
+
+    import trimesh
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "sphere.ply")
+        trimesh.creation.icosphere(subdivisions=7 if quick else 9).export(path)
+        size = os.path.getsize(path)
+        env = {**os.environ, "MULTIGPU_CACHE": os.path.join(tmp, "cache")}
+        base = int(subprocess.run([sys.executable, "-c", f"import trimesh, multigpu.scene.models; print({_HWM})"],
+                                  capture_output=True, text=True, check=True, env=env).stdout)
+        print(f"PLY of {size / 2**20:.0f} MiB; interpreter + imports peak RSS {base / 2**20:.0f} MiB")
+        print(f"{'load':<28} {'triangles':>10} {'seconds':>8} {'peak RSS MiB':>13} {'above imports B/tri':>20}")
+        for what in ("trimesh", "into the cache", "cached"):
+            out = subprocess.run([sys.executable, "-c", _MODEL_CHILD, what, path], capture_output=True, text=True,
+                                 check=True, env=env, timeout=1800).stdout
+            d = {"load": what, **json.loads(out)}
+            rows.append(d)
+            print(f"{what:<28} {d['triangles']:10d} {d['seconds']:8.1f} {d['peak_rss'] / 2**20:13.0f} "
+                  f"{(d['peak_rss'] - base) / d['triangles']:20.0f}")
+    return rows

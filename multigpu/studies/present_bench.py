@@ -29,6 +29,7 @@ MODES = ("headless", "window", "monitor")
 
 def bench_present(quick: bool) -> list[dict]:
     from multigpu.parallel.mpirun import run_multigpu
+    from multigpu.studies.runs import study_env
 
     if shutil.which("Xvfb") is None:
         raise InputError("bench present: needs Xvfb (Debian: apt install xvfb)")
@@ -55,7 +56,7 @@ def bench_present(quick: bool) -> list[dict]:
                                 "--frames", str(frames), "--mosaic-every", "0", "--no-progress", "--present",
                                 "headless" if mode == "headless" else "window", "--out", str(out)]
                         args += ["--monitor"] if mode == "monitor" else []
-                        job = run_multigpu(grid[0] * grid[1], args, 1800, env={"DISPLAY": display},
+                        job = run_multigpu(grid[0] * grid[1], args, 1800, env={"DISPLAY": display, **study_env()},
                                            merge_stderr=True)
                         if job.returncode != 0:
                             raise RuntimeError(f"bench present: {mode} run failed (exit {job.returncode}):\n"

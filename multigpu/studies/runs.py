@@ -10,6 +10,7 @@ speedups and efficiencies are computed from emulated figures only.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,6 +18,14 @@ import numpy as np
 
 from multigpu.parallel.mpirun import JobTimeout, run_multigpu
 from multigpu.parallel.report import COLUMNS, read_timings
+
+
+def study_env() -> dict:
+    """The environment every study job runs with: one llvmpipe raster thread per rank at any
+    rank count (unless ``LP_NUM_THREADS`` is set), so 1-rank and K-rank CPU times compare like
+    with like. A plain walkthrough lets each rank choose (``gpu.render.raster_threads``)."""
+    return {"LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS", "1")}
+
 
 # Dong & Peng 2019, Section 7 (quoted for comparison, not measured here)
 PAPER = {
@@ -79,7 +88,7 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str
     args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
             "--no-progress", *args]
     try:
-        job = run_multigpu(k, args, timeout, merge_stderr=True)
+        job = run_multigpu(k, args, timeout, env=study_env(), merge_stderr=True)
     except JobTimeout:
         raise RuntimeError(f"experiment job timed out after {timeout} s: multigpu {' '.join(args)}") from None
     log = job.stdout
