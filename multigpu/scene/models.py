@@ -34,6 +34,7 @@ import numpy as np
 
 from multigpu.errors import InputError, check_file
 from multigpu.scene.blocks import blocks, per_object
+from multigpu.scene.labels import face_labels
 from multigpu.scene.layout import FORMAT_VERSION, Scene
 
 FORMATS = {".obj", ".ply", ".stl", ".off", ".gltf", ".glb"}
@@ -219,14 +220,7 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     _check_indices_and_range(verts, faces, path)
     faces = _clean_faces(verts, faces, path, warnings)
     split = "components" if split == "auto" else split
-    return _from_labels(verts, faces, _labels(verts, faces, split, merge_below), path, warnings, {"split": split})
-
-
-def _labels(verts, faces, split: str, merge_below: int) -> np.ndarray:
-    """Object of every face for ``components`` or ``grid:N``."""
-    if split == "components":
-        return _merge_small(_component_labels(faces, verts), verts, faces, merge_below)
-    return _grid_labels(verts, faces, int(split.split(":")[1]))
+    return _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings, {"split": split})
 
 
 def declared_counts(path: Path) -> tuple[int, int] | None:
@@ -316,65 +310,6 @@ def _degenerate(verts, faces) -> np.ndarray:
         area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
         out[s:e] = ~(area2 > 0)
     return out
-
-
-def _face_centres(verts, faces, s: int, e: int) -> np.ndarray:
-    """(e-s, 3) float64 centres of faces ``s:e``."""
-    return verts[faces[s:e]].mean(axis=1)
-
-
-def _component_labels(faces: np.ndarray, verts: np.ndarray) -> np.ndarray:
-    """Connected components over shared vertices (scipy's sparse graph, vectorized)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    # vertices at the same position are one vertex (STL and split-normal OBJ duplicate them)
-    _, canon = np.unique(verts, axis=0, return_inverse=True)
-    canon = canon.ravel().astype(np.int32 if len(verts) < 2**31 else np.int64)
-    rows = np.concatenate([canon[faces[:, 0]], canon[faces[:, 1]]])
-    cols = np.concatenate([canon[faces[:, 1]], canon[faces[:, 2]]])
-    n_verts = int(canon.max()) + 1
-    g = coo_matrix((np.ones(rows.size, dtype=np.float32), (rows, cols)), shape=(n_verts, n_verts))
-    del rows, cols
-    _, vlabel = connected_components(g, directed=False)
-    return vlabel[canon[faces[:, 0]]]
-
-
-def _grid_labels(verts, faces, n: int) -> np.ndarray:
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for s, e in blocks(len(faces)):
-        cen = _face_centres(verts, faces, s, e)
-        lo, hi = np.minimum(lo, cen.min(0)), np.maximum(hi, cen.max(0))
-    size = max(float((hi - lo).max()), 1e-12) / n
-    code = np.empty(len(faces), dtype=np.int64)
-    for s, e in blocks(len(faces)):
-        cell = ((_face_centres(verts, faces, s, e) - lo) / size).astype(np.int64)
-        cell = np.minimum(cell, n - 1)  # the far edge is in the last cell
-        code[s:e] = (cell[:, 0] * n + cell[:, 1]) * n + cell[:, 2]
-    return np.unique(code, return_inverse=True)[1].ravel()
-
-
-def _merge_small(labels, verts, faces, merge_below: int) -> np.ndarray:
-    """Merge components with fewer than ``merge_below`` faces by the grid cell (1/16 of the
-    extent) of their centre: a small part stays whole, neighbouring small parts share an object."""
-    uniq, inv, counts = np.unique(labels, return_inverse=True, return_counts=True)
-    small_comp = counts < merge_below
-    if not small_comp.any():
-        return inv
-    comp_cen = np.zeros((uniq.size, 3))
-    for s, e in blocks(len(faces)):
-        face_cen = _face_centres(verts, faces, s, e)
-        for a in range(3):  # axes
-            comp_cen[:, a] += np.bincount(inv[s:e], weights=face_cen[:, a], minlength=uniq.size)
-    comp_cen /= counts[:, None]
-    cen = comp_cen[small_comp]
-    lo, hi = cen.min(0), cen.max(0)
-    cell = np.minimum(((cen - lo) / (max(float((hi - lo).max()), 1e-12) / 16)).astype(np.int64), 15)
-    cell_id = np.full(uniq.size, -1, dtype=np.int64)
-    cell_id[small_comp] = uniq.size + np.unique(cell[:, 0] * 256 + cell[:, 1] * 16 + cell[:, 2],
-                                                return_inverse=True)[1].ravel()
-    comp_new = np.where(small_comp, cell_id, np.arange(uniq.size))
-    return np.unique(comp_new[inv], return_inverse=True)[1].ravel()
 
 
 def _normals(verts, faces) -> np.ndarray:
@@ -477,6 +412,7 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
         faces, labels = faces[~degenerate], labels[~degenerate]
     if split != "auto":
-        return _from_labels(verts, faces, _labels(verts, faces, split, merge_below), path, warnings, {"split": split})
+        objects = face_labels(verts, faces, split, merge_below)
+        return _from_labels(verts, faces, objects, path, warnings, {"split": split})
     labels = np.unique(labels, return_inverse=True)[1].ravel()
     return _from_labels(verts, faces, labels, path, warnings, {"split": "nodes"})
