@@ -4,7 +4,7 @@ lighting they give equal to that of the scene's float normals."""
 import numpy as np
 import pytest
 
-from multigpu.gpu.render import pack_normals
+from multigpu.gpu.buffers import pack_normals
 from multigpu.scene.layout import Scene
 
 

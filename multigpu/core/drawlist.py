@@ -58,20 +58,29 @@ class DrawList:
     order : (N,) int64  object ids in buffer order.
     indices : (3T,) uint32  absolute vertex indices (base vertex folded in), objects in ``order``
         (made on demand from the scene; ``index_blocks`` streams it).
-    vertex_object : (V,) uint32  object id of every vertex (for per-object colour).
+    vertex_object : (V,) uint32  object id of every vertex (for per-object colour; on demand).
     """
 
     def __init__(self, scene):
-        n, nv = scene.n_objects, scene.vertices.shape[0]
         count = scene.index_count.astype(np.int64)
         self.order = morton_order(scene.centers)
         lengths = count[self.order]
-        self.offsets = np.zeros(n + 1, dtype=np.int64)  # buffer offset of each object in order
+        self.offsets = np.zeros(scene.n_objects + 1, dtype=np.int64)  # buffer offset of each object in order
         np.cumsum(lengths, out=self.offsets[1:])
-        # blocks of CHUNK indices: the temporaries stay small at any scale (the vertex ids, 4
-        # bytes per vertex, are the build's only full-size array; the indices are streamed)
+        self._scene = scene  # until uploaded: the GL buffers are made from it a block at a time
+
+    @property
+    def vertex_object(self) -> np.ndarray:
+        """(V,) uint32 the object id of every vertex, made from the scene on demand (4 bytes a
+        vertex; the indices pass a block of ``CHUNK`` at a time, so the temporaries stay small
+        at any scale). A vertex shared by objects gets the last one's id."""
+        scene = self._scene
+        if scene is None:
+            raise RuntimeError("the draw list was uploaded: its scene's buffers are gone")
+        n, nv = scene.n_objects, scene.vertices.shape[0]
+        count = scene.index_count.astype(np.int64)
         base = scene.base_vertex.astype(np.int64)
-        self.vertex_object = np.zeros(nv, dtype=np.uint32)
+        out = np.zeros(nv, dtype=np.uint32)
         starts = np.zeros(n + 1, dtype=np.int64)  # the scene's own layout: object i's indices follow i-1's
         np.cumsum(count, out=starts[1:])
         for s in range(0, int(starts[-1]), CHUNK):
@@ -80,8 +89,8 @@ class DrawList:
             absolute = scene.indices[s:e].astype(np.int64) + base[obj]
             if absolute.min() < 0 or absolute.max() >= nv:
                 raise ValueError(f"{scene.name}: an index points outside the vertex buffer")
-            self.vertex_object[absolute] = obj  # a vertex shared by objects: the last one's id
-        self._scene = scene  # until uploaded: the index buffer is made from it a block at a time
+            out[absolute] = obj
+        return out
 
     def index_blocks(self):
         """The index buffer a block of ``CHUNK`` indices at a time: ``(offset, (n,) uint32
@@ -105,9 +114,9 @@ class DrawList:
         return out
 
     def uploaded(self) -> None:
-        """Drop the vertex ids and the scene once the GL buffers hold them (``commands`` needs
-        only ``order`` and ``offsets``): a rank keeps one copy, the GL one."""
-        self.vertex_object = self._scene = None
+        """Drop the scene once the GL buffers hold it (``commands`` needs only ``order`` and
+        ``offsets``): a rank keeps one copy, the GL one."""
+        self._scene = None
 
     def commands(self, mask: np.ndarray | None, compiled: bool | None = None) -> np.ndarray:
         """(R, 5) uint32 ``(count, 1, first, 0, 0)`` draw commands, one per run of visible

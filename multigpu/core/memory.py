@@ -4,7 +4,9 @@ Each frame allocates the same few MB-sized numpy temporaries (rects, spans, inde
 glibc serves blocks above its mmap threshold with fresh ``mmap`` calls and returns them on
 free, so every frame pays the page faults of touching new memory again: at 10^5 objects that
 doubled the balancer's time here (``multigpu bench balance`` prints both). Raising the mmap
-and trim thresholds keeps such blocks in the heap, where they are reused warm.
+and trim thresholds keeps such blocks in the heap, where they are reused warm. The price is
+that a big setup (scene build, GL upload) leaves its freed temporaries in the heap too:
+``release_heap`` hands them back once, after setup, before the first frame.
 """
 
 from __future__ import annotations
@@ -41,3 +43,16 @@ def keep_heap() -> bool:
             _applied = bool(mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD)) and bool(
                 mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
     return _applied
+
+
+def release_heap() -> bool:
+    """Return the heap's free memory to the system (glibc ``malloc_trim``; elsewhere a no-op).
+    Called once after setup: the scene build's and the GL upload's freed temporaries would
+    otherwise stay resident under the raised trim threshold. Returns whether anything went."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        trim = libc.malloc_trim
+    except (OSError, AttributeError):
+        return False
+    trim.argtypes = [ctypes.c_size_t]
+    return bool(trim(0))

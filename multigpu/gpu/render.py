@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import os
 import re
+from pathlib import Path
 
 import numpy as np
 
 from multigpu.core.camera import model_view, region_clip
 from multigpu.core.drawlist import DrawList
 from multigpu.errors import InputError
+from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
 
 EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL drivers "
             "(Debian/Ubuntu: sudo apt install libegl1 libgl1-mesa-dri) or an NVIDIA driver with EGL")
@@ -115,68 +117,6 @@ def create_context(device: int | None = None, local_rank: int = 0, host_ranks: i
         raise EglUnavailable(f"{EGL_HELP} ({exc.__class__.__name__}: {why})") from None
 
 
-#: bytes per block when a buffer is uploaded
-UPLOAD_BLOCK = 16 << 20
-_MADV_DONTNEED = 4
-
-
-def pack_normals(normals: np.ndarray) -> np.ndarray:
-    """(V,) uint32 octahedral encodings of (V, 3) normals, 16 bits per coordinate (the vertex
-    shader decodes them): a third of the bytes of three floats, within 1e-4 of the normal's
-    direction, which the lighting cannot show in 8-bit colour. A zero normal reads as +z."""
-    n = np.asarray(normals, dtype=np.float64)
-    s = np.abs(n).sum(axis=1, keepdims=True)
-    n = n / np.where(s > 0, s, 1.0)
-    n[s[:, 0] == 0, 2] = 1.0
-    x, y, z = n[:, 0], n[:, 1], n[:, 2]
-    sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
-    fold = z < 0
-    x, y = np.where(fold, (1 - np.abs(y)) * sx, x), np.where(fold, (1 - np.abs(x)) * sy, y)
-    u = np.rint((x * 0.5 + 0.5) * 65535).astype(np.uint32)
-    v = np.rint((y * 0.5 + 0.5) * 65535).astype(np.uint32)
-    return u | (v << np.uint32(16))
-
-
-def pack_vertices(vertices: np.ndarray) -> np.ndarray:
-    """(V, 4) uint32 GL vertices of the scene's (V, 6) float32 ones: the position's three
-    float32 as they are, the normal packed (``pack_normals``): 16 bytes a vertex, not 24."""
-    out = np.empty((vertices.shape[0], 4), dtype=np.uint32)
-    out[:, :3] = np.ascontiguousarray(vertices[:, :3], dtype=np.float32).view(np.uint32)
-    out[:, 3] = pack_normals(vertices[:, 3:6])
-    return out
-
-
-def upload(ctx, array: np.ndarray, row_bytes: int, convert):
-    """A GL buffer holding ``convert(block)`` (``row_bytes`` per row of ``array``) for the
-    blocks of ``array``, written one block at a time. Where ``array`` is a read-only map of a
-    file (a cached scene), each block's pages are unmapped from this process once written (the
-    page cache keeps them for the other ranks): a rank never holds the file's pages and the
-    driver's copy whole at once, and the last rank to upload does not carry the whole file."""
-    rows = max(1, UPLOAD_BLOCK // max(1, row_bytes))
-    buf = ctx.buffer(reserve=max(4, array.shape[0] * row_bytes))
-    mapped = isinstance(array, np.memmap) and array.mode == "r"
-    for s in range(0, array.shape[0], rows):
-        part = array[s:s + rows]
-        buf.write(np.ascontiguousarray(convert(part)), offset=s * row_bytes)
-        if mapped:
-            _unmap_pages(part)
-    return buf
-
-
-def _unmap_pages(part: np.ndarray) -> None:
-    """Drop this process's mapping of the whole pages under ``part`` (a read-only file map:
-    touching them again reads them back from the file)."""
-    import ctypes
-    import mmap
-
-    page = mmap.PAGESIZE
-    start = -(-part.ctypes.data // page) * page
-    end = (part.ctypes.data + part.nbytes) // page * page
-    if end > start:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.madvise(ctypes.c_void_p(start), ctypes.c_size_t(end - start), _MADV_DONTNEED)
-
-
 METHODS = ("auto", "viewport", "scissor", "offaxis")
 
 
@@ -224,7 +164,7 @@ class RegionRenderer:
     they are bit-identical to a one-rank render of the whole display.
     """
 
-    def __init__(self, ctx, scene, size: tuple[int, int], method: str = "auto"):
+    def __init__(self, ctx, scene, size: tuple[int, int], method: str = "auto", shared: Path | None = None):
         import moderngl
 
         self.ctx = ctx
@@ -234,11 +174,7 @@ class RegionRenderer:
         self.origin = np.asarray(scene.origin, dtype=np.float64)
         self.prog = ctx.program(vertex_shader=VERTEX, fragment_shader=FRAGMENT)
         self.draws = DrawList(scene)
-        self.vbo = upload(ctx, scene.vertices, 16, pack_vertices)
-        self.obo = ctx.buffer(self.draws.vertex_object)
-        self.ibo = ctx.buffer(reserve=max(4, 4 * int(self.draws.offsets[-1])))
-        for at, block in self.draws.index_blocks():
-            self.ibo.write(block, offset=4 * at)
+        self.vbo, self.ibo, self.obo = self._buffers(scene, shared)
         self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
         self.cbo = ctx.buffer(np.ascontiguousarray(scene.colors, dtype=np.float32).ravel())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 1u", "in_pos", "in_nrm"),
@@ -253,6 +189,36 @@ class RegionRenderer:
         if self.method == "scissor":
             self._framebuffer((W, H))
         self.depth_test = moderngl.DEPTH_TEST
+
+    def _buffers(self, scene, shared: Path | None):
+        """The vertex, index and vertex-id GL buffers: the host's shared buffers file itself
+        where the driver draws from host memory (``buffers.pinned``), else uploaded a block at
+        a time (from that file where there is one: already packed). ``self.storage`` says which."""
+        ctx, draws = self.ctx, self.draws
+        maps = map_buffers(shared, scene, draws) if shared is not None else None
+        self._maps = None
+        if maps is None:
+            self.storage = "uploaded" if shared is None else f"uploaded ({shared.name} does not fit this scene)"
+        else:
+            why = can_pin(ctx)
+            if why is None:
+                bufs = [pinned(ctx, maps[k]) for k in ("vertices", "indices", "objects")]
+                if all(b is not None for b in bufs):
+                    self._maps, self.storage = maps, f"shared: {shared}"
+                    return bufs
+                for b in bufs:
+                    if b is not None:
+                        b.release()
+                why = "the driver refused host memory"
+            self.storage = f"uploaded from {shared.name} ({why})"
+            vbo = upload(ctx, maps["vertices"], 16)
+            ibo = upload(ctx, maps["indices"], 4)
+            return vbo, ibo, upload(ctx, maps["objects"], 4)
+        vbo = upload(ctx, scene.vertices, 16, pack_vertices)
+        ibo = ctx.buffer(reserve=max(4, 4 * int(draws.offsets[-1])))
+        for at, block in draws.index_blocks():
+            ibo.write(block, offset=4 * at)
+        return vbo, ibo, ctx.buffer(draws.vertex_object)
 
     def _framebuffer(self, need: tuple[int, int]) -> None:
         """Make the framebuffer at least ``need`` (grown by 1/4 to avoid re-allocating often)."""
@@ -340,3 +306,4 @@ class RegionRenderer:
             self.fbo.release()
         for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.vbo, self.prog):
             obj.release()
+        self._maps = None  # the file's maps outlive the GL buffers drawing from them

@@ -20,7 +20,9 @@ import numpy as np
 from multigpu.config import INTERACTIVE, MONITOR_BESIDE, WalkConfig, setup_timeout
 from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
 from multigpu.core.camera import frame_matrices
+from multigpu.core.memory import release_heap
 from multigpu.errors import InputError, as_flags
+from multigpu.gpu.buffers import ensure_buffers
 from multigpu.parallel.exchange import agree, allgather_text
 from multigpu.parallel.frames import Frames, fault
 from multigpu.parallel.outdir import OutputDir
@@ -113,7 +115,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
     wait = setup_timeout(cfg)
     # -- setup: rank 0 takes the output directory and builds the scene cache first
     error = None
-    scene = path = out = None
+    scene = path = out = shared = None
     if rank == 0:
         try:
             out = OutputDir(cfg.out)
@@ -123,6 +125,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 check_record(cfg.record)
             scene, path, load_info = load_world(cfg)
             _check_path(cfg, scene, path)
+            shared = ensure_buffers(load_info.get("cache"), scene)  # once, before the others map it
         except InputError as exc:
             error = as_flags(exc)
     presenter = renderer = monitor = None
@@ -132,9 +135,11 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         if error:
             raise InputError(error)
         try:
+            from multigpu.gpu.render import RegionRenderer, create_context, raster_threads
+
             if rank != 0:
                 scene, path, load_info = load_world(cfg)
-            from multigpu.gpu.render import RegionRenderer, create_context, raster_threads
+                shared = ensure_buffers(load_info.get("cache"), scene)
 
             local, host_ranks = node_rank(comm, wait)
             raster_threads(host_ranks)  # before any GL context, the window's included
@@ -145,18 +150,20 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:
                 ctx, device = create_context(cfg.device, local_rank=local, host_ranks=host_ranks)
-            renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum)
+            renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum, shared)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
             from multigpu.core import kernel
 
             load_info = {**load_info, "kernel_seconds": kernel.warm()}  # compiled here, never in a frame
+            release_heap()  # setup's freed temporaries leave the heap before the first frame
         except (InputError, RuntimeError) as exc:
             error = as_flags(exc)
         error = agree(comm, error, wait)
         if error:
             raise InputError(error)
         placement = [json.loads(t) for t in allgather_text(comm, json.dumps(
-            {"host": socket.gethostname(), "node_rank": local, "egl_device": device}), wait, "setup")]
+            {"host": socket.gethostname(), "node_rank": local, "egl_device": device,
+             "gl_buffers": renderer.storage}), wait, "setup")]
     except BaseException:
         _close(renderer, presenter, monitor)
         if out is not None:
