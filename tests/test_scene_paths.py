@@ -204,3 +204,24 @@ def test_models_and_clusters_built_a_block_of_faces_at_a_time_are_the_same(tmp_p
         for k, v in a._arrays().items():
             np.testing.assert_array_equal(v, getattr(b, k), err_msg=k)
     assert whole[0].meta["warnings"] == ["dropped 1 degenerate faces"] and whole[0].n_objects < len(parts)
+
+
+def test_compiled_components_equal_scipys():
+    """Union-find (compiled) and scipy's sparse graph give the same face labels: the same
+    partition, numbered in the same order of lowest vertex (so scenes are identical)."""
+    from multigpu.core import kernel
+    from multigpu.scene.labels import component_labels
+
+    if not kernel.available():
+        pytest.skip("numba is not installed: only scipy's reference runs")
+    rng = np.random.default_rng(5)
+    for n_verts, n_faces in ((3, 1), (50, 10), (400, 300), (5000, 2000), (2000, 6000)):
+        verts = rng.normal(size=(n_verts, 3))
+        verts[rng.integers(0, n_verts, n_verts // 5)] = verts[0]  # duplicated positions are one vertex
+        faces = rng.integers(0, n_verts, size=(n_faces, 3))
+        want = component_labels(faces, verts, compiled=False)
+        got = component_labels(faces, verts, compiled=True)
+        assert np.array_equal(np.unique(want, return_inverse=True)[1], np.unique(got, return_inverse=True)[1])
+    m = trimesh.util.concatenate([trimesh.creation.icosphere(1).apply_translation([3 * i, 0, 0]) for i in range(4)])
+    got = component_labels(np.asarray(m.faces), np.asarray(m.vertices), compiled=True)
+    assert len(np.unique(got)) == 4 and (np.diff(got) >= 0).all()  # four spheres, in file order

@@ -21,12 +21,13 @@ MORTON_BITS = 10  # per axis: 2**30 cells
 CHUNK = 1 << 20
 
 
-def morton_codes(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
-    """(N,) uint64 3-D Z-order codes of ``points`` (N, 3) over their bounding box."""
+def morton_codes(points: np.ndarray, bits: int = MORTON_BITS, box=None) -> np.ndarray:
+    """(N,) uint64 3-D Z-order codes of ``points`` (N, 3) over their bounding box, or over
+    ``box`` = (lo, hi) (to code a big set a block at a time: the same codes)."""
     p = np.asarray(points, dtype=np.float64)
     if p.shape[0] == 0:
         return np.zeros(0, dtype=np.uint64)
-    lo, hi = p.min(axis=0), p.max(axis=0)
+    lo, hi = (p.min(axis=0), p.max(axis=0)) if box is None else box
     span = np.where(hi > lo, hi - lo, 1.0)
     cells = ((p - lo) / span * ((1 << bits) - 1)).astype(np.uint64)
     code = np.zeros(p.shape[0], dtype=np.uint64)

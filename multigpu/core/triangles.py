@@ -15,15 +15,29 @@ import numpy as np
 _EDGES = ((0, 1), (1, 2), (2, 0))
 
 
-def triangle_objects(scene) -> tuple[np.ndarray, np.ndarray]:
-    """(T, 3) absolute vertex indices of every triangle and (T,) its object id."""
+def triangle_objects(scene, block: int = 1 << 18) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 3) absolute vertex indices of every triangle (int32 where the vertex count allows)
+    and (T,) int64 its object id, objects in buffer order. Made ``block`` triangles at a time:
+    the temporaries stay small at any scale."""
+    from multigpu.core.drawlist import _owners
+
     order = np.argsort(scene.first_index, kind="stable")
-    counts = scene.index_count[order]
-    base = np.repeat(scene.base_vertex[order], counts)
-    starts = np.repeat(scene.first_index[order], counts)
-    within = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    absolute = scene.indices[starts + within].astype(np.int64) + base
-    return absolute.reshape(-1, 3), np.repeat(order, counts // 3)
+    counts = scene.index_count[order].astype(np.int64)
+    first = scene.first_index[order].astype(np.int64)
+    base = scene.base_vertex[order].astype(np.int64)
+    starts = np.zeros(order.size + 1, dtype=np.int64)  # where each object's indices go in the output
+    np.cumsum(counts, out=starts[1:])
+    n = int(starts[-1]) // 3
+    tri = np.empty((n, 3), dtype=np.int32 if scene.vertices.shape[0] < 2**31 else np.int64)
+    obj = np.empty(n, dtype=np.int64)
+    flat = tri.reshape(-1)
+    for s in range(0, n, block):
+        e = min(s + block, n)
+        k = _owners(starts, 3 * s, 3 * e)  # which object (in ``order``) every index is of
+        src = first[k] + np.arange(3 * s, 3 * e, dtype=np.int64) - starts[k]
+        flat[3 * s:3 * e] = scene.indices[src].astype(np.int64) + base[k]
+        obj[s:e] = order[k[::3]]
+    return tri, obj
 
 
 def triangle_rects(world: np.ndarray, tri: np.ndarray, view: np.ndarray, proj: np.ndarray,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 #: faces per block
-FACE_BLOCK = 1 << 20
+FACE_BLOCK = 1 << 18  # a (b, 3, 3) float64 temporary: 18 MiB
 
 
 def blocks(n: int):

@@ -66,12 +66,16 @@ def split_objects(scene: Scene, max_tris: int) -> Scene:
         return scene
     tri, obj = triangle_objects(scene)  # (T, 3) absolute vertices, object of each triangle
     pos = scene.vertices[:, :3]
-    centroid = np.empty((len(obj), 3))
+    centroid = lambda s, e: pos[tri[s:e]].astype(np.float64).mean(axis=1)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)  # the centroids' box, then their codes in it
     for s, e in blocks(len(obj)):
-        centroid[s:e] = pos[tri[s:e]].astype(np.float64).mean(axis=1)
-    big = tris[obj] > max_tris
-    key = np.where(big, morton_codes(centroid), np.uint64(0))  # small objects keep their order
-    del centroid, big
+        c = centroid(s, e)
+        lo, hi = np.minimum(lo, c.min(axis=0)), np.maximum(hi, c.max(axis=0))
+    key = np.zeros(len(obj), dtype=np.uint64)  # small objects keep their order
+    for s, e in blocks(len(obj)):
+        big = tris[obj[s:e]] > max_tris
+        if big.any():
+            key[s:e] = np.where(big, morton_codes(centroid(s, e), box=(lo, hi)), np.uint64(0))
     order = np.lexsort((np.arange(len(obj)), key, obj))
     del key
     tri, obj = tri[order], obj[order]

@@ -25,20 +25,29 @@ def face_centres(verts, faces, s: int, e: int) -> np.ndarray:
     return verts[faces[s:e]].mean(axis=1)
 
 
-def component_labels(faces: np.ndarray, verts: np.ndarray) -> np.ndarray:
-    """Connected components over shared vertices (scipy's sparse graph, vectorized)."""
+def component_labels(faces: np.ndarray, verts: np.ndarray, compiled: bool | None = None) -> np.ndarray:
+    """A label per face, equal for faces connected through shared vertices, ordered as the
+    components' lowest vertex (vertices at the same position are one vertex: STL and
+    split-normal OBJ duplicate them). Compiled union-find where numba is installed (``None``):
+    a parent per vertex, nothing per edge; ``compiled=False``: scipy's sparse graph (the
+    reference: its edge lists cost ~30 bytes a face)."""
+    from multigpu.core import kernel
+
+    _, canon = np.unique(verts, axis=0, return_inverse=True)
+    canon = canon.ravel().astype(np.int32 if len(verts) < 2**31 else np.int64)
+    n_verts = int(canon.max()) + 1
+    if kernel.use(compiled):
+        from multigpu.core.kernel.components import vertex_roots
+
+        return vertex_roots(canon, np.ascontiguousarray(faces), n_verts)[canon[faces[:, 0]]]
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    # vertices at the same position are one vertex (STL and split-normal OBJ duplicate them)
-    _, canon = np.unique(verts, axis=0, return_inverse=True)
-    canon = canon.ravel().astype(np.int32 if len(verts) < 2**31 else np.int64)
     rows = np.concatenate([canon[faces[:, 0]], canon[faces[:, 1]]])
     cols = np.concatenate([canon[faces[:, 1]], canon[faces[:, 2]]])
-    n_verts = int(canon.max()) + 1
     g = coo_matrix((np.ones(rows.size, dtype=np.float32), (rows, cols)), shape=(n_verts, n_verts))
     del rows, cols
-    _, vlabel = connected_components(g, directed=False)
+    _, vlabel = connected_components(g, directed=False)  # numbered in order of their lowest vertex
     return vlabel[canon[faces[:, 0]]]
 
 

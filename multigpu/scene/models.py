@@ -206,8 +206,9 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
         if not meshes:
             raise InputError.of("model", f"{path}: the file holds no triangles (empty, or not a {kind} file)")
         if len(meshes) > 1:
+            del loaded  # the meshes (transforms applied) are copies: _from_meshes lets them go
             return _from_meshes(meshes, path, warnings, split, merge_below)
-        mesh = meshes[0]
+        mesh = meshes.pop()  # the list lets it go with the rest
     elif isinstance(loaded, trimesh.Trimesh):
         mesh = loaded
     else:
@@ -218,9 +219,22 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     faces = np.asarray(mesh.faces, dtype=np.int64)
     _check_complete(path, declared, len(verts), len(faces))
     _check_indices_and_range(verts, faces, path)
+    faces = _narrow(faces, len(verts))
+    del mesh, loaded  # trimesh's int64 faces go: the model is held once, as verts and faces
     faces = _clean_faces(verts, faces, path, warnings)
     split = "components" if split == "auto" else split
     return _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings, {"split": split})
+
+
+def _narrow(faces: np.ndarray, n_verts: int) -> np.ndarray:
+    """``faces`` as int32 where the vertex count allows (half the bytes of trimesh's int64;
+    every later pass indexes with it), converted a block at a time."""
+    if n_verts >= 2**31 or faces.dtype == np.int32:
+        return faces
+    out = np.empty(faces.shape, dtype=np.int32)
+    for s, e in blocks(len(faces)):
+        out[s:e] = faces[s:e]
+    return out
 
 
 def declared_counts(path: Path) -> tuple[int, int] | None:
@@ -312,11 +326,11 @@ def _degenerate(verts, faces) -> np.ndarray:
     return out
 
 
-def _normals(verts, faces) -> np.ndarray:
-    """Area-weighted vertex normals (vectorized, a block of faces at a time)."""
+def _normals(verts, face_blocks) -> np.ndarray:
+    """Area-weighted vertex normals, summed over ``face_blocks`` ((b, 3) faces each, in
+    order: the sums' rounding follows it)."""
     vn = np.zeros_like(verts)
-    for s, e in blocks(len(faces)):
-        f = faces[s:e]
+    for f in face_blocks:
         tri = verts[f]
         fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         for k in range(3):  # corners
@@ -333,38 +347,40 @@ def _colors(n: int, seed: int = 7) -> np.ndarray:
 
 
 def _from_labels(verts, faces, labels, path, warnings, meta) -> Scene:
-    """One object per label: faces sorted by label, one shared vertex buffer (base vertex 0).
-    Every pass over the faces goes a block at a time: besides the model's own arrays, what is
-    held is the sorted faces and the scene being built."""
+    """One object per label: faces in label order, one shared vertex buffer (base vertex 0).
+    Every pass over the faces goes a block at a time, in label order through ``order`` (no
+    sorted copy of the faces): besides the model's own arrays, what is held is a label and an
+    order entry per face and the scene being built."""
     order = np.argsort(labels, kind="stable")
-    faces, labels = faces[order], labels[order]
-    del order
-    n = int(labels[-1]) + 1
+    n = int(labels.max()) + 1
     counts = np.bincount(labels, minlength=n)
     first = np.concatenate([[0], np.cumsum(counts)[:-1]]) * 3
-    normals = _normals(verts, faces)
+    sorted_blocks = lambda: ((s, e, faces[order[s:e]], labels[order[s:e]]) for s, e in blocks(len(faces)))
+    normals = _normals(verts, (f for _, _, f, _ in sorted_blocks()))
     used = np.zeros(len(verts), dtype=bool)  # compact the vertex buffer to the vertices faces use
-    used[faces.ravel()] = True
+    for s, e in blocks(len(faces)):
+        used[faces[s:e]] = True
     used = np.flatnonzero(used)
     remap = np.full(len(verts), -1, dtype=np.int64)
     remap[used] = np.arange(used.size)
     bmin, bmax, radii = np.full((n, 3), np.inf), np.full((n, 3), -np.inf), np.zeros(n)
-    for s, e in blocks(len(faces)):
-        tri = verts[faces[s:e]]  # (b, 3, 3)
-        per_object(np.minimum, tri.min(axis=1), labels[s:e], bmin)
-        per_object(np.maximum, tri.max(axis=1), labels[s:e], bmax)
+    for s, e, f, lab in sorted_blocks():
+        tri = verts[f]  # (b, 3, 3)
+        per_object(np.minimum, tri.min(axis=1), lab, bmin)
+        per_object(np.maximum, tri.max(axis=1), lab, bmax)
     centers = (bmin + bmax) / 2
-    for s, e in blocks(len(faces)):
-        d = np.linalg.norm(verts[faces[s:e]] - centers[labels[s:e]][:, None, :], axis=2).max(axis=1)
-        per_object(np.maximum, d, labels[s:e], radii)
+    for s, e, f, lab in sorted_blocks():
+        d = np.linalg.norm(verts[f] - centers[lab][:, None, :], axis=2).max(axis=1)
+        per_object(np.maximum, d, lab, radii)
     origin = (bmin.min(axis=0) + bmax.max(axis=0)) / 2  # float32 vertices relative to it
     vertices = np.empty((used.size, 6), dtype=np.float32)
-    vertices[:, :3] = verts[used] - origin
-    vertices[:, 3:] = normals[used]
+    for s, e in blocks(used.size):
+        vertices[s:e, :3] = verts[used[s:e]] - origin
+        vertices[s:e, 3:] = normals[used[s:e]]
     del normals
     indices = np.empty(faces.size, dtype=np.uint32)
-    for s, e in blocks(len(faces)):
-        indices[3 * s:3 * e] = remap[faces[s:e]].ravel()
+    for s, e, f, _ in sorted_blocks():
+        indices[3 * s:3 * e] = remap[f].ravel()
     return Scene(vertices=vertices,
                  indices=indices, first_index=first.astype(np.int64),
                  index_count=(counts * 3).astype(np.int64), base_vertex=np.zeros(n, dtype=np.int64),
@@ -389,17 +405,26 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     """One object per scene-graph node instance (transforms already applied by trimesh), or
     the whole graph's triangles cut by an explicit ``--split components|grid:N``."""
     sizes = np.array([len(m.vertices) for m in meshes])
-    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    verts = np.concatenate([np.asarray(m.vertices, dtype=np.float64) for m in meshes])
-    faces = np.concatenate([np.asarray(m.faces, dtype=np.int64) + o for m, o in zip(meshes, offsets)])
-    labels = np.repeat(np.arange(len(meshes)), [len(m.faces) for m in meshes])
-    local = faces - np.repeat(offsets, [len(m.faces) for m in meshes])[:, None]  # indices within each mesh
-    own = np.repeat(sizes, [len(m.faces) for m in meshes])[:, None]
-    if (local < 0).any() or (local >= own).any():
-        raise InputError.of("model", f"{path}: a face uses a vertex index outside its mesh (corrupt file)")
+    n_faces = np.array([len(m.faces) for m in meshes])
+    n_meshes = len(meshes)
+    big = int(sizes.sum()) >= 2**31
+    verts = np.empty((int(sizes.sum()), 3), dtype=np.float64)
+    faces = np.empty((int(n_faces.sum()), 3), dtype=np.int64 if big else np.int32)
+    v = f = 0
+    for i in range(n_meshes):  # meshes, not frames: each is let go once copied (one copy held)
+        m, meshes[i] = meshes[i], None
+        mf = np.asarray(m.faces, dtype=np.int64)
+        if mf.size and (mf.min() < 0 or mf.max() >= len(m.vertices)):
+            raise InputError.of("model", f"{path}: a face uses a vertex index outside its mesh (corrupt file)")
+        verts[v:v + len(m.vertices)] = m.vertices
+        faces[f:f + len(mf)] = mf + v
+        v, f = v + len(m.vertices), f + len(mf)
+        del m, mf
+    meshes.clear()
+    labels = np.repeat(np.arange(n_meshes), n_faces)
     _check_indices_and_range(verts, faces, path)
     bad_v = ~np.isfinite(verts).all(axis=1)
-    bad_obj = np.zeros(len(meshes), dtype=bool)
+    bad_obj = np.zeros(n_meshes, dtype=bool)
     np.logical_or.at(bad_obj, labels, bad_v[faces].any(axis=1))
     if bad_obj.any():
         warnings.append(f"dropped {int(bad_obj.sum())} objects with non-finite vertices")
