@@ -55,6 +55,7 @@ class Frames:
     def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, presenter, out: OutputDir | None,
                  load_info, placement: list[dict], monitor=None):
         self.cfg, self.comm, self.job = cfg, comm, job
+        self._beat_cpu = job.thread_cpu
         self.scene, self.path, self.renderer, self.presenter = scene, path, renderer, presenter
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         tw, th = cfg.tile
@@ -159,12 +160,19 @@ class Frames:
                   "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
                   "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
                   "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
-                  "input_ms": t.ms("input"), "balance": self.balance_ids[self.planner.using]}
+                  "input_ms": t.ms("input"), "heartbeat_cpu_ms": self._heartbeat_cpu(),
+                  "balance": self.balance_ids[self.planner.using]}
         for c, v in values.items():
             self.row[self.col[c]] = v
         # a signal or a window event seen here stops every rank after this frame
         self.row[-1] = float(self.job.signum or stop)
         wait_all([self.comm.Iallgather(self.row, self.allrows)], self.cfg.timeout, "timing gather")
+
+    def _heartbeat_cpu(self) -> float:
+        """CPU ms of this rank's heartbeat thread since the last frame's row."""
+        now = self.job.thread_cpu
+        spent, self._beat_cpu = (now - self._beat_cpu) * 1e3, now
+        return spent
 
     def show(self, f: int, work: Work) -> None:
         """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""

@@ -92,6 +92,7 @@ class Job:
         self.last_seen = np.full(self.size, start)
         self._stop = threading.Event()
         self._thread = None
+        self.thread_cpu = 0.0  # CPU seconds the heartbeat thread has used so far
         self._old_handlers: dict[int, object] = {}
         threaded = MPI.Query_thread() == MPI.THREAD_MULTIPLE
         self.enabled = self.liveness > 0 and self.size > 1 and threaded
@@ -115,6 +116,7 @@ class Job:
                 if len(self._pending) < 64 * len(peers):  # a stopped peer does not pile up sends without end
                     self._pending += [self.comm.Isend([token, MPI.BYTE], dest=p, tag=HEARTBEAT) for p in peers]
             self._receive()  # between beats too: every poll drives MPI's progress
+            self.thread_cpu = time.thread_time()
             self._stop.wait(POLL)
 
     def _receive(self) -> set[int]:

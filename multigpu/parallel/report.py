@@ -13,7 +13,10 @@ Figures and what they are:
   minus earliest swap return (the same on every row of a frame; 0 when headless);
 * ``input_ms``: the frame's input phase (rank 0 reads keys and mouse, the camera and commands
   reach every rank in one broadcast; 0 when headless); ``balance``: the strategy (screen) or
-  decomposition that planned the frame, by name (it may change at a key press).
+  decomposition that planned the frame, by name (it may change at a key press);
+* ``heartbeat_cpu_ms``: CPU time of the rank's heartbeat thread since the last frame
+  (``time.thread_time`` in the thread; already inside the phases' process CPU times where it
+  ran during them, shown apart so its cost is known).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms", "frame_ms",
            "load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
            "bytes_sent", "objects", "pieces", "depth_bytes", "load_cv",
-           "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms", "input_ms", "balance"]
+           "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms", "input_ms", "heartbeat_cpu_ms", "balance"]
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
 #: what the ``balance`` column can name: a strategy of the screen decomposition, or another decomposition
 BALANCE_NAMES = (*STRATEGIES, *(d for d in DECOMPOSITIONS if d != "screen"))
@@ -120,7 +123,7 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "frame_ms": float(frame_ms.mean()),
         "fps": float(1000.0 / frame_ms.mean()),
         "cpu": {c: float(get(c).mean()) for c in ("load_balancing_cpu_ms", "rendering_cpu_ms",
-                                                  "frame_exchange_cpu_ms", "display_cpu_ms")},
+                                                  "frame_exchange_cpu_ms", "display_cpu_ms", "heartbeat_cpu_ms")},
         "emulated_frame_ms": float(emulated.mean()),
         "emulated_fps": float(1000.0 / emulated.mean()),
         "emulated_frame_ms_median": float(np.median(emulated)),
@@ -160,7 +163,8 @@ def table(summary: dict, title: str = "") -> str:
     lines += [f"{summary['frames']} frames x {summary['ranks']} ranks. Wall-clock per-rank means (ms):", head, row,
               f"Per-rank CPU time (ms): load balancing {c['load_balancing_cpu_ms']:.2f}, rendering "
               f"{c['rendering_cpu_ms']:.2f} (slowest rank {summary['render_cpu_max_ms']:.2f}), exchange "
-              f"{c['frame_exchange_cpu_ms']:.2f}, display {c['display_cpu_ms']:.2f}",
+              f"{c['frame_exchange_cpu_ms']:.2f}, display {c['display_cpu_ms']:.2f}; heartbeat thread "
+              f"{c.get('heartbeat_cpu_ms', 0.0):.3f}",
               f"Emulated parallel frame (slowest rank's CPU time): {summary['emulated_frame_ms']:.2f} ms = "
               f"{summary['emulated_fps']:.2f} FPS (median {summary['emulated_frame_ms_median']:.2f} ms)",
               f"Imbalance max/mean: triangles {_fmt(summary['imbalance_triangles'])}, render CPU time "

@@ -150,8 +150,9 @@ def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
     process: the cached plant (``--triangles 5000000 --copies 4``, 4.28 M triangles; 10^6 with
     ``--quick``) loaded mapped, an EGL context, the GL upload, the compiled kernel, then three
     frames of the whole scene into a 512x512 region, with llvmpipe's raster thread
-    (``LP_NUM_THREADS=1``) and without it (``0``: what ranks filling a host's cores use), each
-    in a fresh process."""
+    (``LP_NUM_THREADS=1``) and without it (``0``: what ranks filling a host's cores use), and
+    without it with the GL buffers drawn from the host's shared buffers file (what a walkthrough
+    rank does), each in a fresh process."""
     import sys
 
     from multigpu.scene.models import SceneSpec, load_scene
@@ -161,40 +162,48 @@ def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
     spec = SceneSpec(triangles=1_000_000) if quick else SceneSpec(triangles=5_000_000, copies=4)
     load_scene(spec)  # the cache exists before the measured load
     steps = []
-    for threads in ("1", "0"):
-        code = f"from multigpu.studies.memory_bench import _steps; _steps({spec.triangles}, {spec.copies})"
+    for threads, shared in (("1", False), ("0", False), ("0", True)):
+        code = (f"from multigpu.studies.memory_bench import _steps; "
+                f"_steps({spec.triangles}, {spec.copies}, {shared})")
         env = {**os.environ, "LP_NUM_THREADS": threads}
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800, env=env)
         if out.returncode != 0:
             raise RuntimeError(f"bench memory-steps: {out.stderr.strip().splitlines()[-1:]}")
+        how = f"{threads} raster thread{'s' if threads != '1' else ''}" + (", shared file" if shared else "")
         for line in out.stdout.splitlines():
             name, mib = line.rsplit(" ", 1)
-            if threads == "0" and not name.startswith("frame"):
-                continue
-            steps.append((f"{name} ({threads} raster thread{'s' if threads != '1' else ''})"
-                          if name.startswith("frame") else name, float(mib)))
+            first_run = threads == "1"
+            if name.startswith("frame"):
+                steps.append((f"{name} ({how})", float(mib)))
+            elif first_run or (shared and name.startswith("GL")):
+                steps.append((name, float(mib)))
     print(f"{'step':<44} {'anonymous MiB':>14}")
     for name, mib in steps:
         print(f"{name:<44} {mib:14.0f}")
     return steps
 
 
-def _steps(triangles: int, copies: int) -> None:
-    """The measured process of ``bench_memory_steps`` (a fresh one per raster-thread setting)."""
+def _steps(triangles: int, copies: int, shared: bool = False) -> None:
+    """The measured process of ``bench_memory_steps`` (a fresh one per setting): the GL
+    buffers uploaded, or (``shared``) drawn from the host's buffers file as the walkthrough's are."""
     import numpy as np
 
     from multigpu.core import kernel
     from multigpu.core.camera import frame_matrices
+    from multigpu.gpu.buffers import ensure_buffers
     from multigpu.gpu.render import RegionRenderer, create_context
     from multigpu.scene.models import SceneSpec, load_scene
     from multigpu.scene.paths import generate
 
-    scene, _ = load_scene(SceneSpec(triangles=triangles, copies=copies))
+    scene, info = load_scene(SceneSpec(triangles=triangles, copies=copies))
+    path = ensure_buffers(info["cache"], scene) if shared else None
     ctx, _ = create_context(None, local_rank=0)
     print(f"scene loaded (mapped) + EGL context {_anonymous_mib():.1f}")
-    r = RegionRenderer(ctx, scene, (512, 512), "auto")
+    r = RegionRenderer(ctx, scene, (512, 512), "auto", path)
     scene = scene.without_geometry()  # as the walkthrough does
-    print(f"GL upload {_anonymous_mib():.1f}")
+    if shared and not r.storage.startswith("shared"):
+        raise RuntimeError(f"the GL buffers were not shared: {r.storage}")
+    print(f"{'GL buffers drawn from the shared file' if shared else 'GL upload'} {_anonymous_mib():.1f}")
     kernel.warm()
     print(f"compiled kernel loaded {_anonymous_mib():.1f}")
     path = generate("walkthrough", scene, 10)
