@@ -65,6 +65,17 @@ def test_a_whole_file_is_written_once_and_a_wrong_one_is_never_used(cached, tmp_
     assert ensure_buffers(None, scene) is None  # no cache: the renderer uploads from the scene
 
 
+def test_every_rank_uploads_its_own_copy_when_asked(cached, monkeypatch):
+    from multigpu.errors import InputError
+
+    scene, cache = cached
+    monkeypatch.setenv("MULTIGPU_GL_BUFFERS", "upload")
+    assert ensure_buffers(cache, scene) is None
+    monkeypatch.setenv("MULTIGPU_GL_BUFFERS", "pinned")
+    with pytest.raises(InputError, match="MULTIGPU_GL_BUFFERS must be 'shared' or 'upload', got 'pinned'"):
+        ensure_buffers(cache, scene)
+
+
 def test_a_cache_that_cannot_be_written_gives_no_file(cached, tmp_path):
     scene, _ = cached
     (tmp_path / "a-file").write_text("")  # the cache "directory" is a file: nothing can be written there

@@ -62,7 +62,8 @@ def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_pat
     assert all(isinstance(r["egl_device"], int) for r in s["config"]["ranks"])  # one device here: 0
     assert s["config"]["scene"]["cached"] is False  # built here, once, by rank 0
     built = sorted(p.name for p in cache.rglob("*") if p.is_file())
-    assert built and not [n for n in built if ".part" in n or ".tmp" in n or n.startswith(".")], built  # whole files only
+    partial = [n for n in built if ".part" in n or ".tmp" in n or n.startswith(".")]
+    assert built and not partial, built  # whole files only
     # the GL buffers file beside the cache, written once, is what every rank on both hosts draws from
     gl = [n for n in built if n.endswith(".gl1")]
     assert len(gl) == 1 and all(r["gl_buffers"].endswith(gl[0]) or gl[0] in r["gl_buffers"]

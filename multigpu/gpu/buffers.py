@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.errors import InputError
+
 VERSION = 1  # the file's layout and the packing it holds; a change makes a new name
 MAGIC = b"MULTIGPU-GL-BUFFERS\n"
 PAGE = mmap.PAGESIZE
@@ -177,8 +179,12 @@ def map_buffers(path: Path, scene, draws) -> dict[str, np.ndarray] | None:
 def ensure_buffers(cache: str | os.PathLike | None, scene) -> Path | None:
     """The buffers file of the scene cached at ``cache``, written now if missing or stale;
     None where there is no cache or it cannot be written (a read-only cache: the renderer
-    then uploads from the scene as before)."""
-    if not cache or scene.vertices.shape[0] == 0:
+    then uploads from the scene as before), or where ``MULTIGPU_GL_BUFFERS=upload`` asks every
+    rank to upload its own copy (a driver that misbehaves on host memory; A/B measurements)."""
+    how = os.environ.get("MULTIGPU_GL_BUFFERS", "shared")
+    if how not in ("shared", "upload"):
+        raise InputError(f"MULTIGPU_GL_BUFFERS must be 'shared' or 'upload', got '{how}'")
+    if not cache or scene.vertices.shape[0] == 0 or how == "upload":
         return None
     from multigpu.core.drawlist import DrawList
 
