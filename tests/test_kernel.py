@@ -74,6 +74,10 @@ def same_rects(bmin, bmax, view, proj, dtype):
     assert np.array_equal(ref_cov, got_cov)
     plain = BoxProjector(bmin, bmax, dtype, compiled=True)(view, proj)  # without coverage: the same rects
     assert np.array_equal(plain, got, equal_nan=True)
+    for order in (0, 1):  # the boxes always by groups (0), always in their own order (1): the same rects
+        cov = np.full(n, -3.0)
+        forced = BoxProjector(bmin, bmax, dtype, compiled=True, plain=order)(view, proj, cov)
+        assert np.array_equal(forced, ref, equal_nan=True) and np.array_equal(cov, ref_cov), order
 
 
 scale = st.sampled_from([1e-3, 1.0, 50.0, 1e4, 1e8])

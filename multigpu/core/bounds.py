@@ -60,7 +60,8 @@ class BoxProjector:
     ``BoxProjector(bmin, bmax)(view, proj)`` equals ``project_boxes(bmin, bmax, view, proj)``.
     """
 
-    def __init__(self, bmin, bmax, dtype=np.float32, chunk: int = 1 << 15, compiled: bool | None = None):
+    def __init__(self, bmin, bmax, dtype=np.float32, chunk: int = 1 << 15, compiled: bool | None = None,
+                 plain: int = -1):
         bmin = np.asarray(bmin, dtype=np.float64)
         bmax = np.asarray(bmax, dtype=np.float64)
         if bmin.ndim != 2 or bmin.shape[1] != 3 or bmax.shape != bmin.shape:
@@ -77,6 +78,7 @@ class BoxProjector:
         # the compiled projection (core/kernel/project.py: the same rects, bit for bit) where
         # numba is installed, unless compiled=False asks for this module's numpy reference
         self.compiled = kernel.available() if compiled is None else bool(compiled)
+        self.plain = int(plain)  # compiled: boxes in their own order where few are culled (-1), always (1), never (0)
         if self.compiled:  # the kernel culls neighbours a group at a time: boxes in a spatial order
             from multigpu.core.kernel.project import spatial_groups
 
@@ -98,8 +100,9 @@ class BoxProjector:
         if self.compiled:
             from multigpu.core.kernel import project_boxes
 
-            project_boxes(self.grouped, self.half, M, reach_rows(M), float(np.finfo(self.dtype).eps) * 16,
-                          FAR_TOL, _SIGNS, _EDGES, _FACES, _NEXT, out, coverage)
+            project_boxes(self.grouped, (self.center, self.half64), self.half, M, reach_rows(M),
+                          float(np.finfo(self.dtype).eps) * 16, FAR_TOL, _SIGNS, _EDGES, _FACES, _NEXT, out, coverage,
+                          self.plain)
             return out.T
         for s in range(0, n, self.chunk):  # blocks of objects, not objects
             e = min(n, s + self.chunk)

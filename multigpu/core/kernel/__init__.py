@@ -61,15 +61,19 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
     return shares, (regions, loads, visible, none, none.astype(np.int64), spans, per_rank, per_mask)
 
 
-def project_boxes(grouped, half, M, reach, widen, far_tol, signs, edges, faces, nxt, out, coverage=None) -> None:
+def project_boxes(grouped, plain_boxes, half, M, reach, widen, far_tol, signs, edges, faces, nxt, out, coverage=None,
+                  plain: int = -1) -> None:
     """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage;
-    ``grouped``: ``project.spatial_groups`` of the boxes (culled a group at a time)."""
+    ``grouped``: ``project.spatial_groups`` of the boxes (culled a group at a time);
+    ``plain_boxes``: (centres, half extents) in object order, used where the groups cull
+    fewer than half the boxes (``plain`` -1; 1: always, 0: never; the same rects)."""
     from multigpu.core.kernel.project import _project
 
     order, center, half64, starts, gbox = grouped
     cov = np.empty(0) if coverage is None else coverage
-    _project(center, half, half64, order, starts, gbox, M, np.ascontiguousarray(M[[0, 1, 3], :3], dtype=half.dtype),
-             reach, widen, far_tol, signs, edges, faces, nxt, out, cov, coverage is not None)
+    _project(center, half, half64, order, starts, gbox, plain_boxes[0], plain_boxes[1], plain, M,
+             np.ascontiguousarray(M[[0, 1, 3], :3], dtype=half.dtype), reach, widen, far_tol, signs, edges, faces,
+             nxt, out, cov, coverage is not None)
 
 
 def warm() -> float:

@@ -232,14 +232,19 @@ def _group_out(M, rr, c0, c1, c2, h0, h1, h2):
             or (z + w) + (rr[4, 0] * h0 + rr[4, 1] * h1 + rr[4, 2] * h2) < -margin)
 
 
-def _project(center, half, half64, order, groups, gbox, M, Mc, reach_rows, widen, far_tol, signs, edges, faces, nxt,
-             out, cov, with_cov):
+def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, M, Mc, reach_rows, widen, far_tol,
+             signs, edges, faces, nxt, out, cov, with_cov):
     """Rects (4, N) into ``out`` (NaN: culled or off screen) and, ``with_cov``, silhouette
     coverage into ``cov``. The boxes come in a spatial order (``order[j]``: the object at sorted
     position j; ``center``/``half64`` sorted), in groups of neighbours (``groups``: G+1 starts,
     ``gbox`` (6, G): each group's centre and half extents): a group outside a frustum plane is
-    culled whole, the boxes of the others gathered into blocks. ``Mc``: clip rows x, y, w of
-    M[:, :3] in the corner dtype; ``reach_rows``: |plane @ M[:, :3]| of the six planes."""
+    culled whole, the boxes of the others gathered into blocks. Where the groups cull fewer
+    than half of the boxes (``plain`` -1; 1 always, 0 never), the boxes go in their own order
+    instead (``pcenter``/``phalf64``: unsorted): no gathering, and the rects written in
+    sequence rather than scattered at random (at 10^6 boxes the scatter alone costs ~8 ms).
+    The rects are the same either way: a group's test only culls boxes their own tests cull.
+    ``Mc``: clip rows x, y, w of M[:, :3] in the corner dtype; ``reach_rows``: |plane @
+    M[:, :3]| of the six planes."""
     c_lo, c_hi = 0.5 + widen * -0.5, 0.5 + widen * 0.5
     cc = np.empty(4)
     bc = np.empty((3, BLOCK))  # a block of gathered boxes: centres, half extents, object ids
@@ -253,10 +258,27 @@ def _project(center, half, half64, order, groups, gbox, M, Mc, reach_rows, widen
     sg = np.empty(2, dtype=half.dtype)
     sg[0], sg[1] = -1.0, 1.0
     state = np.empty(BLOCK, dtype=np.int8)
+    n_groups = groups.size - 1
+    gout = np.zeros(n_groups, dtype=np.bool_)
+    culled = 0
+    if plain != 1:
+        for g in range(n_groups):
+            if _group_out(M, reach_rows, gbox[0, g], gbox[1, g], gbox[2, g], gbox[3, g], gbox[4, g], gbox[5, g]):
+                gout[g] = True
+                culled += groups[g + 1] - groups[g]
+    n = pcenter.shape[1]
+    if plain == 1 or (plain == -1 and 2 * culled < n):
+        for s0 in range(0, n, BLOCK):
+            m = min(BLOCK, n - s0)
+            for j in range(m):
+                idx[j] = s0 + j
+            _block(pcenter, phalf64, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov,
+                   with_cov, s0, m, idx, base, off, sg, cx, cy, ext, state, cc)
+        return
     m = 0
-    for g in range(groups.size - 1):
+    for g in range(n_groups):
         g0, g1 = groups[g], groups[g + 1]
-        if _group_out(M, reach_rows, gbox[0, g], gbox[1, g], gbox[2, g], gbox[3, g], gbox[4, g], gbox[5, g]):
+        if gout[g]:
             for j in range(g0, g1):
                 i = order[j]
                 out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
