@@ -229,3 +229,20 @@ def test_huge_wall_balances_within_int32_spans():
             assert max(r[i, 0], r[j, 0]) >= min(r[i, 2], r[j, 2]) or max(r[i, 1], r[j, 1]) >= min(r[i, 3], r[j, 3])
     _, loads = recount(rects, tris, p.regions, W, H)
     assert (p.loads == loads).all()
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+@pytest.mark.parametrize("bad", [[0.5, 0.1, 0.4, 0.2], [0.1, 0.6, 0.2, 0.5]])
+def test_an_inverted_rect_is_refused_by_either_path(compiled, bad):
+    """The compiled walk checks inverted rows in its own pass over the rects, the numpy
+    reference before it starts: the same refusal, wherever the row is, NaN rows allowed."""
+    from multigpu.core import kernel
+
+    if compiled and not kernel.available():
+        pytest.skip("numba is not installed")
+    rects = np.array([[0.1, 0.1, 0.3, 0.3], [np.nan] * 4, [0.2, 0.2, 0.9, 0.8]] * 50)
+    tris = np.arange(1, len(rects) + 1)
+    partition(rects, tris, (2, 2), (64, 64), 16, compiled=compiled)  # NaN rows are unseen, not inverted
+    rects[77] = bad
+    with pytest.raises(ValueError, match="inverted rows"):
+        partition(rects, tris, (2, 2), (64, 64), 16, compiled=compiled)

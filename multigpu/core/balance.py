@@ -63,8 +63,11 @@ class Partition:
         return float(np.max(self.loads)) / mean if mean > 0 else 1.0
 
 
-def validate_inputs(rects, tris, grid, size, strips) -> tuple[np.ndarray, np.ndarray, GpuTree, tuple[int, int]]:
-    """Check the public arguments once; return them as arrays plus the GPU tree."""
+def validate_inputs(rects, tris, grid, size, strips, rows: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray, GpuTree, tuple[int, int]]:
+    """Check the public arguments once; return them as arrays plus the GPU tree. ``rows``
+    False leaves the inverted-rows check to the compiled walk (``kernel.strip_partition``),
+    which makes it in its own pass over the rects."""
     if not (isinstance(grid, (tuple, list)) and len(grid) == 2):
         raise ValueError(f"grid must be (rows, cols), got {grid!r}")
     rows, cols = (int(g) for g in grid)
@@ -99,7 +102,7 @@ def validate_inputs(rects, tris, grid, size, strips) -> tuple[np.ndarray, np.nda
         raise ValueError("the triangle total exceeds 2**62 (sums could overflow int64)")
     rt = rects.T  # coordinate-major rows (projectors return views of (4, N) arrays)
     with np.errstate(invalid="ignore"):
-        if (rt[:2] > rt[2:]).any():
+        if rows and (rt[:2] > rt[2:]).any():
             raise ValueError("rects has inverted rows (xmin > xmax or ymin > ymax)")
     return rects, tris, gpu_tree(rows, cols), (W, H)
 
@@ -218,7 +221,7 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
     from multigpu.core import kernel
 
     if fill is None and kernel.use(compiled):
-        rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips)
+        rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips, rows=False)
         return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips)))
     rects_a = np.asarray(rects)
     density = None

@@ -15,6 +15,7 @@ import numpy as np
 
 from multigpu.core.kernel.jit import compile_all
 
+INVERTED = "rects has inverted rows (xmin > xmax or ymin > ymax)"
 #: displays up to this many pixels along an axis look strips up in a table (as splits.py does)
 TABLE_MAX = 1 << 16
 
@@ -39,18 +40,22 @@ def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray]:
 
 def _spans(rt, W, H):
     """``regions.pixel_spans`` of coordinate-major rects ``rt`` (4, N): inclusive pixel spans
-    (4, N) and which rects are on screen."""
+    (4, N), which rects are on screen, and whether any row is inverted (xmin > xmax or ymin >
+    ymax: ``balance.validate_inputs``' check, made in this pass instead of a numpy one)."""
     n = rt.shape[1]
     spans = np.zeros((4, n), dtype=np.int32)
     on = np.zeros(n, dtype=np.bool_)
+    inverted = False
     for i in range(n):
+        if rt[0, i] > rt[2, i] or rt[1, i] > rt[3, i]:  # False for NaN rows
+            inverted = True
         if rt[2, i] >= 0.0 and rt[0, i] <= 1.0 and rt[3, i] >= 0.0 and rt[1, i] <= 1.0:  # False for NaN rows
             on[i] = True
             for c in range(4):
                 size = W if c % 2 == 0 else H
                 v = min(max(rt[c, i] * size, 0.0), size - 1.0)
                 spans[c, i] = np.int32(v)  # truncation is floor: v >= 0
-    return spans, on
+    return spans, on, inverted
 
 
 def _choose(s, e, ratio, a, length, q, need_lo, need_hi, target):
@@ -101,7 +106,7 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
     time feedback, the static tiles)."""
     n = rt.shape[1]
     K = leaves.shape[0]
-    spans, on = _spans(rt, W, H)
+    spans, on, inverted = _spans(rt, W, H)
     regs = np.zeros((2 * K - 1, 4), dtype=np.int64)
     regs[0, 2], regs[0, 3] = W, H
     members = [np.flatnonzero(on).astype(np.int64)]
@@ -158,14 +163,15 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
             visible[label, idx[t]] = True
             total += tris[idx[t]]
         loads[label] = total
-    return regions, loads, visible, splits, split_pixels, spans
+    return regions, loads, visible, splits, split_pixels, spans, inverted
 
 
 compile_all(globals(), ("_spans", "_choose", "_split", "_walk"))
 
 
 def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int, cuts: np.ndarray | None = None):
-    """The compiled walk on validated inputs (``balance.validate_inputs``): regions, loads,
+    """The compiled walk on validated inputs (``balance.validate_inputs``; inverted rows are
+    refused here, in the walk's own pass over the rects): regions, loads,
     T' masks, splits in p-pos and pixels, spans (4, N). ``cuts`` (K-1,) fixes every node's cut
     (-1: the strip chooser's). Integer loads are exact sums; float loads are summed again by
     numpy as the reference sums them (pairwise)."""
@@ -176,8 +182,10 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
     if cuts is None:
         cuts = np.full(len(nodes), -1, dtype=np.int64)
     rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
-    regions, loads, visible, splits, split_pixels, spans = _walk(rt, tris, int(size[0]), int(size[1]),
-                                                                 int(strips), nodes, leaves, cuts)
+    regions, loads, visible, splits, split_pixels, spans, inverted = _walk(
+        rt, tris, int(size[0]), int(size[1]), int(strips), nodes, leaves, cuts)
+    if inverted:
+        raise ValueError(INVERTED)
     if tris.dtype.kind == "f":
         loads = np.array([tris[v].sum() for v in visible], dtype=tris.dtype)  # K ranks, not objects
     return regions, loads, visible, splits, split_pixels, spans
