@@ -134,7 +134,8 @@ def _masks(rt, tris, W, H, prects, powner, k):
     """Pixel spans, every piece's object mask (its rect overlaps the object's span), the ranks'
     T' masks, loads (an object drawn in two pieces counts twice) and bounding regions."""
     n = rt.shape[1]
-    spans, on, _ = _spans(rt, W, H)  # the strategy validated its rects
+    none = np.empty(0, dtype=np.int64)
+    spans, on, _, _ = _spans(rt, W, H, none, 0, none, none, none)  # the strategy validated its rects
     P = prects.shape[0]
     masks = np.zeros((P, n), dtype=np.bool_)
     visible = np.zeros((k, n), dtype=np.bool_)

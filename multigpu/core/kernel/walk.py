@@ -38,24 +38,45 @@ def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray]:
     return nodes, leaves
 
 
-def _spans(rt, W, H):
+def _spans(rt, W, H, tris, axis, table, s, e):
     """``regions.pixel_spans`` of coordinate-major rects ``rt`` (4, N): inclusive pixel spans
-    (4, N), which rects are on screen, and whether any row is inverted (xmin > xmax or ymin >
-    ymax: ``balance.validate_inputs``' check, made in this pass instead of a numpy one)."""
+    (4, N), which rects are on screen, whether any row is inverted (xmin > xmax or ymin > ymax:
+    ``balance.validate_inputs``' check, made in this pass instead of a numpy one), and the
+    on-screen objects in order. Where ``table`` is not empty, the same pass also adds each
+    on-screen object's ``tris`` to the Start/End arrays ``s``/``e`` at the strips ``table``
+    gives its first and last pixel along ``axis`` (the root node's, in the walk's order: the
+    same sums), so the root's objects are not read a second time."""
     n = rt.shape[1]
     spans = np.zeros((4, n), dtype=np.int32)
     on = np.zeros(n, dtype=np.bool_)
+    members = np.empty(n, dtype=np.int64)
+    count = 0
     inverted = False
+    fused = table.shape[0] > 0
     for i in range(n):
         if rt[0, i] > rt[2, i] or rt[1, i] > rt[3, i]:  # False for NaN rows
             inverted = True
         if rt[2, i] >= 0.0 and rt[0, i] <= 1.0 and rt[3, i] >= 0.0 and rt[1, i] <= 1.0:  # False for NaN rows
             on[i] = True
+            members[count] = i
+            count += 1
             for c in range(4):
                 size = W if c % 2 == 0 else H
                 v = min(max(rt[c, i] * size, 0.0), size - 1.0)
                 spans[c, i] = np.int32(v)  # truncation is floor: v >= 0
-    return spans, on, inverted
+            if fused:
+                s[table[spans[axis, i]]] += tris[i]
+                e[table[spans[axis + 2, i]]] += tris[i]
+    return spans, on, inverted, members[:count]
+
+
+def _strip_table(extent, a, length, q):
+    """The strip of every display pixel along an axis, for a node over ``[a, a + length)``
+    cut into ``q`` strips (pixels outside clamp to the end strips)."""
+    table = np.empty(extent, dtype=np.int64)
+    for px in range(extent):
+        table[px] = min(max(((px - a + 1) * q - 1) // length, 0), q - 1)
+    return table
 
 
 def _choose(s, e, ratio, a, length, q, need_lo, need_hi, target):
@@ -106,10 +127,18 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
     time feedback, the static tiles)."""
     n = rt.shape[1]
     K = leaves.shape[0]
-    spans, on, inverted = _spans(rt, W, H)
+    # the root's Start/End arrays are filled in the spans' own pass (its region is the display)
+    root_axis = nodes[0, 0] if nodes.shape[0] > 0 else 0
+    root_len = W if root_axis == 0 else H
+    root_q = min(strips, root_len)
+    fuse = nodes.shape[0] > 0 and fixed[0] < 0 and root_len <= TABLE_MAX
+    table0 = _strip_table(root_len, 0, root_len, root_q) if fuse else np.empty(0, dtype=np.int64)
+    s0 = np.zeros(root_q if fuse else 0, dtype=tris.dtype)
+    e0 = np.zeros(root_q if fuse else 0, dtype=tris.dtype)
+    spans, on, inverted, first_members = _spans(rt, W, H, tris, root_axis, table0, s0, e0)
     regs = np.zeros((2 * K - 1, 4), dtype=np.int64)
     regs[0, 2], regs[0, 3] = W, H
-    members = [np.flatnonzero(on).astype(np.int64)]
+    members = [first_members]
     for _ in range(2 * K - 2):
         members.append(members[0][:0])
     splits = np.zeros(K - 1, dtype=np.float64)
@@ -127,10 +156,10 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
             s = np.zeros(q, dtype=tris.dtype)
             e = np.zeros(q, dtype=tris.dtype)
             extent = W if axis == 0 else H
-            if extent <= TABLE_MAX:  # the strip of every display pixel, once: no division per object
-                table = np.empty(extent, dtype=np.int64)
-                for px in range(extent):
-                    table[px] = min(max(((px - a + 1) * q - 1) // length, 0), q - 1)
+            if m == 0 and fuse:  # filled with the spans
+                s, e = s0, e0
+            elif extent <= TABLE_MAX:  # the strip of every display pixel, once: no division per object
+                table = _strip_table(extent, a, length, q)
                 for t in range(idx.shape[0]):  # Start/End arrays: each object at its first and last strip
                     o = idx[t]
                     s[table[spans[axis, o]]] += tris[o]
@@ -166,7 +195,7 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
     return regions, loads, visible, splits, split_pixels, spans, inverted
 
 
-compile_all(globals(), ("_spans", "_choose", "_split", "_walk"))
+compile_all(globals(), ("_spans", "_strip_table", "_choose", "_split", "_walk"))
 
 
 def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int, cuts: np.ndarray | None = None):
