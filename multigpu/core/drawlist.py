@@ -42,7 +42,7 @@ def morton_order(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
     return np.argsort(morton_codes(points, bits), kind="stable")
 
 
-def _owners(starts: np.ndarray, s: int, e: int) -> np.ndarray:
+def owners(starts: np.ndarray, s: int, e: int) -> np.ndarray:
     """The object of every position in ``[s, e)``, objects laid out back to back from
     ``starts`` ((N+1,) cumulative, from 0)."""
     k0 = int(np.searchsorted(starts, s, side="right")) - 1
@@ -86,7 +86,7 @@ class DrawList:
         np.cumsum(count, out=starts[1:])
         for s in range(0, int(starts[-1]), CHUNK):
             e = min(s + CHUNK, int(starts[-1]))
-            obj = _owners(starts, s, e)
+            obj = owners(starts, s, e)
             absolute = scene.indices[s:e].astype(np.int64) + base[obj]
             if absolute.min() < 0 or absolute.max() >= nv:
                 raise ValueError(f"{scene.name}: an index points outside the vertex buffer")
@@ -102,7 +102,7 @@ class DrawList:
         base = scene.base_vertex.astype(np.int64)[self.order]
         for s in range(0, int(self.offsets[-1]), CHUNK):
             e = min(s + CHUNK, int(self.offsets[-1]))
-            k = _owners(self.offsets, s, e)  # which object in buffer order
+            k = owners(self.offsets, s, e)  # which object in buffer order
             src = first[k] + np.arange(s, e, dtype=np.int64) - self.offsets[k]
             yield s, (scene.indices[src].astype(np.int64) + base[k]).astype(np.uint32)
 

@@ -24,6 +24,10 @@ _TRIM_THRESHOLD = 256 << 20
 _applied: bool | None = None
 
 
+def _libc():
+    return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+
+
 def keep_heap() -> bool:
     """Keep large temporaries in the heap (glibc only; elsewhere a no-op). Returns whether the
     setting is active. Idempotent. ``MULTIGPU_MALLOC=default`` leaves glibc's defaults (for
@@ -34,8 +38,7 @@ def keep_heap() -> bool:
             _applied = False
             return _applied
         try:
-            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-            mallopt = libc.mallopt
+            mallopt = _libc().mallopt
         except (OSError, AttributeError):  # not glibc (macOS, musl without mallopt)
             _applied = False
         else:
@@ -50,9 +53,8 @@ def release_heap() -> bool:
     Called once after setup: the scene build's and the GL upload's freed temporaries would
     otherwise stay resident under the raised trim threshold. Returns whether anything went."""
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        trim = libc.malloc_trim
-    except (OSError, AttributeError):
+        trim = _libc().malloc_trim
+    except (OSError, AttributeError):  # not glibc
         return False
     trim.argtypes = [ctypes.c_size_t]
     return bool(trim(0))

@@ -19,7 +19,7 @@ def triangle_objects(scene, block: int = 1 << 18) -> tuple[np.ndarray, np.ndarra
     """(T, 3) absolute vertex indices of every triangle (int32 where the vertex count allows)
     and (T,) int64 its object id, objects in buffer order. Made ``block`` triangles at a time:
     the temporaries stay small at any scale."""
-    from multigpu.core.drawlist import _owners
+    from multigpu.core.drawlist import owners
 
     order = np.argsort(scene.first_index, kind="stable")
     counts = scene.index_count[order].astype(np.int64)
@@ -33,7 +33,7 @@ def triangle_objects(scene, block: int = 1 << 18) -> tuple[np.ndarray, np.ndarra
     flat = tri.reshape(-1)
     for s in range(0, n, block):
         e = min(s + block, n)
-        k = _owners(starts, 3 * s, 3 * e)  # which object (in ``order``) every index is of
+        k = owners(starts, 3 * s, 3 * e)  # which object (in ``order``) every index is of
         src = first[k] + np.arange(3 * s, 3 * e, dtype=np.int64) - starts[k]
         flat[3 * s:3 * e] = scene.indices[src].astype(np.int64) + base[k]
         obj[s:e] = order[k[::3]]
