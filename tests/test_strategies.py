@@ -204,8 +204,9 @@ def test_every_registered_strategy_keeps_the_contract(name):
 @pytest.mark.parametrize("cross_cost", [0.5, 2.0])
 def test_auto_keeps_the_candidate_whose_frames_were_faster_and_checks_again(cross_cost):
     """Frames planned by cross (pieces) cost ``cross_cost`` times strips' frames: the trial picks
-    the faster, the winner plans every frame of the hold, the next trial decides again; two
-    copies fed the same times decide alike."""
+    the faster (after one round: without noise the lead is clear at once), the winner plans
+    every frame of the hold, the next trial decides again; two copies fed the same times decide
+    alike."""
     from multigpu.strategies.auto import Auto
 
     rects, tris = workload(300, seed=11)
@@ -213,16 +214,38 @@ def test_auto_keeps_the_candidate_whose_frames_were_faster_and_checks_again(cros
     runs = []
     for _ in range(2):
         auto = Auto((2, 2), (128, 128), 64, window=4, settle=1, rounds=2, hold=10)
-        runs.append(simulate(auto, rects, tris, time_of, frames=2 * (auto.trial_frames + auto.hold)))
+        cycle = auto.round_frames + auto.hold
+        runs.append(simulate(auto, rects, tris, time_of, frames=2 * cycle))
     want = "cross" if cross_cost < 1 else "strips"
     doc = auto.report()
     assert doc["using"] == want and [t["chose"] for t in doc["trials"]] == [want, want]
+    assert [t["frames"] for t in doc["trials"]] == [auto.round_frames] * 2  # one round each: clear
     assert doc["trials"][0]["scores_ms"] == {"cross": cross_cost, "strips": 1.0}  # settled frames only
-    held = runs[0][auto.trial_frames:auto.trial_frames + auto.hold]
-    assert all((p.pieces is not None) == (want == "cross") for p in held)
+    assert doc["trials"][0]["scored"] == [3, 3]
+    for start in (0, cycle):  # the winner holds after each trial
+        held = runs[0][start + auto.round_frames:start + cycle]
+        assert all((p.pieces is not None) == (want == "cross") for p in held)
     assert doc["frames"]["cross"] + doc["frames"]["strips"] == len(runs[0])
     for a, b in zip(*runs):
         np.testing.assert_array_equal(a.regions, b.regions)
+
+
+@pytest.mark.parametrize("lead, rounds", [(0.5, 1), (0.01, 3)])
+def test_auto_ends_a_trial_early_only_on_a_clear_lead(lead, rounds):
+    """Noisy times (sd 0.1): strips ahead by ``lead``. A lead of five standard deviations ends
+    the trial after the first round; one far inside the noise runs every round, and the
+    scores say how many frames each candidate was scored on."""
+    from multigpu.strategies.auto import Auto
+
+    rects, tris = workload(200, seed=12)
+    rng = np.random.default_rng(3)
+    time_of = lambda p: np.full(4, (1.0 + lead if p.pieces is not None else 1.0) + 0.1 * rng.standard_normal())
+    auto = Auto((2, 2), (128, 128), 64, window=6, settle=1, rounds=3, hold=5)
+    simulate(auto, rects, tris, time_of, frames=auto.trial_frames + 1)
+    t = auto.report()["trials"][0]
+    assert t["frames"] == rounds * auto.round_frames and t["scored"] == [5 * rounds] * 2
+    if rounds == 1:
+        assert t["chose"] == "strips"
 
 
 def test_auto_picks_cross_where_a_cost_hides_from_triangle_counts():
