@@ -201,3 +201,76 @@ def test_compiled_draw_commands_equal_the_reference(data, n):
     for m in (mask, None, np.zeros(n, dtype=bool)):
         ref, got = draws.commands(m, compiled=False), draws.commands(m, compiled=True)
         assert ref.dtype == got.dtype and np.array_equal(ref, got)
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=st.data(), rows=st.integers(1, 4), cols=st.integers(1, 4), n=st.integers(0, 60),
+       integer=st.booleans(), strips=st.sampled_from([2, 3, 7, 64, 2048]), scalar=st.booleans())
+def test_compiled_fill_chooser_equals_the_reference(data, rows, cols, n, integer, strips, scalar):
+    """The cost model's fill term (``partition(..., fill=)``): the same partition compiled and
+    with ``splits.fill_prefix``, per-object or one scalar density, zeros included."""
+    W = data.draw(st.integers(cols, 700))
+    H = data.draw(st.integers(rows, 700))
+    pts = np.array(data.draw(st.lists(st.tuples(coord, coord, coord, coord), min_size=n, max_size=n)),
+                   dtype=np.float64).reshape(-1, 4)
+    with np.errstate(invalid="ignore"):
+        rects = np.concatenate([np.minimum(pts[:, :2], pts[:, 2:]), np.maximum(pts[:, :2], pts[:, 2:])], axis=1)
+    rects[np.isnan(rects).any(axis=1)] = np.nan
+    if integer:
+        tris = np.array(data.draw(st.lists(st.integers(0, 10**6), min_size=n, max_size=n)), dtype=np.int64)
+    else:
+        tris = np.array(data.draw(st.lists(st.floats(0, 1e6), min_size=n, max_size=n)), dtype=np.float64)
+    values = st.sampled_from([0.0, 1e-12, 0.25, 1.0, 3.0, 1e6])
+    fill = data.draw(values) if scalar else np.array(data.draw(st.lists(values, min_size=n, max_size=n)))
+    ref = partition(rects, tris, (rows, cols), (W, H), strips, fill=fill, compiled=False)
+    got = partition(rects, tris, (rows, cols), (W, H), strips, fill=fill, compiled=True)
+    for name in FIELDS:
+        a, b = getattr(got, name), getattr(ref, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b), f"{name} differs: {a} vs {b}"
+
+
+def test_compiled_fill_chooser_on_wide_displays_and_weights_that_differ():
+    """Displays wider than the fill line's table (cells of several pixels) and a fill that
+    moves the cut: compiled and reference agree, and the fill changes the partition."""
+    rng = np.random.default_rng(5)
+    n = 3000
+    lo = rng.uniform(-0.1, 1.0, (n, 2))
+    rects = np.concatenate([lo, lo + rng.exponential(0.04, (n, 2))], axis=1)
+    tris = rng.integers(1, 5000, n)
+    fill = np.where(rects[:, 0] < 0.3, 50.0, 0.01)
+    moved = False
+    for grid, size in (((2, 2), (1024, 512)), ((1, 4), (200_000, 64)), ((4, 4), (70_000, 90_000))):
+        for f in (0.5, fill):
+            ref = partition(rects, tris, grid, size, 2048, fill=f, compiled=False)
+            got = partition(rects, tris, grid, size, 2048, fill=f, compiled=True)
+            for name in FIELDS:
+                assert np.array_equal(getattr(got, name), getattr(ref, name)), (grid, name)
+        plain = partition(rects, tris, grid, size, 2048, compiled=True)
+        moved |= not np.array_equal(plain.regions, got.regions)  # by the per-object fill
+    assert moved
+
+
+@pytest.mark.parametrize("size", [(1024, 512), (200_000, 64), (70_000, 90_000)])
+def test_compiled_fill_line_equals_fill_prefix(size):
+    """The fill cost below every candidate cut of the root node, value for value, where the
+    line is per pixel and where it is in cells of several pixels (displays past 2**16)."""
+    from multigpu.core.balance import _task
+    from multigpu.core.kernel.walk import _fill_line
+    from multigpu.core.regions import pixel_spans
+    from multigpu.core.splits import fill_prefix
+    from multigpu.core.tree import gpu_tree
+
+    rng = np.random.default_rng(9)
+    n = 2000
+    lo = rng.uniform(-0.1, 1.0, (n, 2))
+    rects = np.concatenate([lo, lo + rng.exponential(0.03, (n, 2))], axis=1)
+    density = rng.uniform(0.0, 3.0, n)
+    tris = np.ones(n, dtype=np.int64)
+    spans, on = pixel_spans(rects, size)
+    spans = np.ascontiguousarray(spans.T)
+    tree = gpu_tree(2, 2)
+    reg = np.array([0, 0, *size], dtype=np.int64)
+    task, _, _ = _task(0, tree.internal[0], reg, 2048, *size, np.flatnonzero(on), spans, tris)
+    want, want_total = fill_prefix(task, spans, density)
+    got, got_total = _fill_line(task.idx, spans, density, reg, task.axis, task.a, task.b, task.cuts)
+    assert np.array_equal(got, want) and got_total == want_total

@@ -214,22 +214,21 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
     fill : optional (N,) non-negative float, or a scalar: cost per covered pixel of each
         object's rect (the cost model's fragment term). None balances ``tris`` alone, exactly
         the paper's Alg. 2.
-    compiled : the paper's Alg. 2 (no ``fill``) as one compiled call (``core/kernel.py``: the
+    compiled : Alg. 2 (with or without ``fill``) as one compiled call (``core/kernel``: the
         same partition, bit for bit); None uses it where numba is installed, False runs this
         module's numpy reference.
     """
     from multigpu.core import kernel
 
-    if fill is None and kernel.use(compiled):
-        rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips, rows=False)
-        return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips)))
-    rects_a = np.asarray(rects)
     density = None
     if fill is not None:
-        density = np.broadcast_to(np.asarray(fill, dtype=np.float64), rects_a.shape[:1])
+        density = np.broadcast_to(np.asarray(fill, dtype=np.float64), np.shape(rects)[:1])
         if density.size and (not np.isfinite(density).all() or density.min() < 0):
             raise ValueError("fill must be finite and non-negative")
         density = np.ascontiguousarray(density)
+    if kernel.use(compiled):
+        rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips, rows=False)
+        return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips), density=density))
     return tree_partition(rects, tris, grid, size, strips, strip_chooser(density))
 
 

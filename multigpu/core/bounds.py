@@ -79,6 +79,8 @@ class BoxProjector:
         # numba is installed, unless compiled=False asks for this module's numpy reference
         self.compiled = kernel.available() if compiled is None else bool(compiled)
         self.plain = int(plain)  # compiled: boxes in their own order where few are culled (-1), always (1), never (0)
+        self.widen = float(np.finfo(self.dtype).eps) * 16  # rects widened by this (NDC) against rounding
+        self.plain_boxes = (self.center, self.half64)
         if self.compiled:  # the kernel culls neighbours a group at a time: boxes in a spatial order
             from multigpu.core.kernel.project import spatial_groups
 
@@ -100,9 +102,8 @@ class BoxProjector:
         if self.compiled:
             from multigpu.core.kernel import project_boxes
 
-            project_boxes(self.grouped, (self.center, self.half64), self.half, M, reach_rows(M),
-                          float(np.finfo(self.dtype).eps) * 16, FAR_TOL, _SIGNS, _EDGES, _FACES, _NEXT, out, coverage,
-                          self.plain)
+            project_boxes(self.grouped, self.plain_boxes, self.half, M, self.widen, FAR_TOL, _SIGNS, _EDGES, _FACES,
+                          _NEXT, out, coverage, self.plain)
             return out.T
         for s in range(0, n, self.chunk):  # blocks of objects, not objects
             e = min(n, s + self.chunk)

@@ -4,13 +4,14 @@ make hundreds of C-level calls.
 
 * ``project.py``: box projection with frustum culling, near-plane clipping and coverage;
 * ``walk.py``: the paper's balancer: pixel spans, GPU-tree walk with the strip chooser (Start/End
-  arrays, prefix/postfix sums, the split nearest balRatio), T' masks and loads;
+  arrays, prefix/postfix sums, the split nearest balRatio; the cost model's fill term too), T'
+  masks and loads;
 * ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks;
 * ``draws.py``: a rank's mask to run-merged draw commands.
 
 Time feedback and the static tiles run the walk with cuts found without objects. Not compiled
-(numpy): the cost model's fill chooser (``cost``, ``adaptive``), sphere bounds, and the ``db``
-and ``bins`` decompositions.
+(numpy): the cost model's per-rank pixel features and least-squares fit (``cost``,
+``adaptive``), sphere bounds, and the ``db`` and ``bins`` decompositions.
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
@@ -61,7 +62,7 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
     return shares, (regions, loads, visible, none, none.astype(np.int64), spans, per_rank, per_mask)
 
 
-def project_boxes(grouped, plain_boxes, half, M, reach, widen, far_tol, signs, edges, faces, nxt, out, coverage=None,
+def project_boxes(grouped, plain_boxes, half, M, widen, far_tol, signs, edges, faces, nxt, out, coverage=None,
                   plain: int = -1) -> None:
     """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage;
     ``grouped``: ``project.spatial_groups`` of the boxes (culled a group at a time);
@@ -70,10 +71,12 @@ def project_boxes(grouped, plain_boxes, half, M, reach, widen, far_tol, signs, e
     from multigpu.core.kernel.project import _project
 
     order, center, half64, starts, gbox = grouped
-    cov = np.empty(0) if coverage is None else coverage
-    _project(center, half, half64, order, starts, gbox, plain_boxes[0], plain_boxes[1], plain, M,
-             np.ascontiguousarray(M[[0, 1, 3], :3], dtype=half.dtype), reach, widen, far_tol, signs, edges, faces,
-             nxt, out, cov, coverage is not None)
+    cov = _NO_COVERAGE if coverage is None else coverage
+    _project(center, half, half64, order, starts, gbox, plain_boxes[0], plain_boxes[1], plain, M, widen, far_tol,
+             signs, edges, faces, nxt, out, cov, coverage is not None)
+
+
+_NO_COVERAGE = np.empty(0)
 
 
 def warm() -> float:

@@ -232,7 +232,22 @@ def _group_out(M, rr, c0, c1, c2, h0, h1, h2):
             or (z + w) + (rr[4, 0] * h0 + rr[4, 1] * h1 + rr[4, 2] * h2) < -margin)
 
 
-def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, M, Mc, reach_rows, widen, far_tol,
+def _frame_rows(M, dtype_of):
+    """What every box's tests read from ``M`` (4, 4): the clip rows x, y, w of M[:, :3] in the
+    corner dtype (``dtype_of``: an array of it), and the six planes' reach |plane @ M[:, :3]|
+    (plane i: +-row i // 2 plus row 3; ``bounds.reach_rows``' values: one rounding each)."""
+    Mc = np.empty((3, 3), dtype=dtype_of.dtype)
+    for a in range(3):
+        Mc[0, a], Mc[1, a], Mc[2, a] = M[0, a], M[1, a], M[3, a]
+    rr = np.empty((6, 3))
+    for i in range(6):
+        sign = 1.0 if i % 2 == 0 else -1.0
+        for a in range(3):
+            rr[i, a] = abs(sign * M[i // 2, a] + M[3, a])
+    return Mc, rr
+
+
+def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, M, widen, far_tol,
              signs, edges, faces, nxt, out, cov, with_cov):
     """Rects (4, N) into ``out`` (NaN: culled or off screen) and, ``with_cov``, silhouette
     coverage into ``cov``. The boxes come in a spatial order (``order[j]``: the object at sorted
@@ -243,8 +258,8 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
     instead (``pcenter``/``phalf64``: unsorted): no gathering, and the rects written in
     sequence rather than scattered at random (at 10^6 boxes the scatter alone costs ~8 ms).
     The rects are the same either way: a group's test only culls boxes their own tests cull.
-    ``Mc``: clip rows x, y, w of M[:, :3] in the corner dtype; ``reach_rows``: |plane @
-    M[:, :3]| of the six planes."""
+    ``M``: projection times view."""
+    Mc, reach_rows = _frame_rows(M, half)
     c_lo, c_hi = 0.5 + widen * -0.5, 0.5 + widen * 0.5
     cc = np.empty(4)
     bc = np.empty((3, BLOCK))  # a block of gathered boxes: centres, half extents, object ids
@@ -275,15 +290,16 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
             _block(pcenter, phalf64, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov,
                    with_cov, s0, m, idx, base, off, sg, cx, cy, ext, state, cc)
         return
+    # culled boxes' rects: NaN written in sequence over every row first (a write per culled box
+    # scattered by ``order`` would touch every cache line of ``out`` at random), the others
+    # overwritten below
+    out[:] = np.nan
+    if with_cov:
+        cov[:] = 1.0
     m = 0
     for g in range(n_groups):
         g0, g1 = groups[g], groups[g + 1]
         if gout[g]:
-            for j in range(g0, g1):
-                i = order[j]
-                out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
-                if with_cov:
-                    cov[i] = 1.0
             continue
         if m + (g1 - g0) > BLOCK:
             _block(bc, bh, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov, with_cov,
@@ -302,4 +318,4 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
 
 
 compile_all(globals(), ("_clip_block", "_corners", "_face", "_coverage", "_write", "_clipped", "_block", "_group_out",
-                         "_project"))
+                         "_frame_rows", "_project"))

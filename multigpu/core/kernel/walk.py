@@ -105,6 +105,69 @@ def _choose(s, e, ratio, a, length, q, need_lo, need_hi, target):
     return pick if pick >= 0 else target
 
 
+def _fill_line(idx, spans, density, reg, axis, a, b, cuts_of):
+    """``splits.fill_prefix`` at one node: the fill cost below every candidate cut (``cuts_of``
+    gives them: cut i at ``a + ((i + 1) * (b - a)) // q``, as a (q - 1,) array) and in the whole
+    region. Each object's fill (density x its pixels across the axis) spread evenly over the
+    cells it covers along the axis; the cells' differences summed in the objects' order, then
+    two running sums: the reference's ``bincount`` and ``cumsum`` values."""
+    other = 1 - axis
+    L = b - a
+    block = max(1, -(-L // TABLE_MAX))
+    cells = -(-L // block)
+    up = np.zeros(cells + 1)
+    down = np.zeros(cells + 1)
+    for t in range(idx.shape[0]):
+        o = idx[t]
+        o0 = max(spans[other, o], reg[other])
+        o1 = min(spans[other + 2, o], reg[other + 2] - 1)
+        extent = np.float64(max(o1 - o0 + 1, 0))
+        lo = max(spans[axis, o], a) - a
+        hi = min(spans[axis + 2, o], b - 1) - a
+        lo_c, hi_c = lo // block, hi // block
+        per_cell = density[o] * extent * ((hi - lo + 1) / (hi_c - lo_c + 1))
+        up[lo_c] += per_cell
+        down[hi_c + 1] += per_cell
+    line = np.zeros(cells + 1)
+    run = 0.0
+    acc = 0.0
+    for c in range(cells):
+        run += up[c] - down[c]  # the reference's cumsum of (bincount - bincount), up to cell c
+        acc = run if c == 0 else acc + run
+        line[c + 1] = acc
+    below = np.empty(cuts_of.shape[0])
+    for i in range(cuts_of.shape[0]):
+        below[i] = line[min((cuts_of[i] - a) // block, cells)]
+    return below, line[cells]
+
+
+def _choose_fill(s, e, below, total, ratio, a, length, q, need_lo, need_hi, target):
+    """``_choose`` with the cost model's fill term: each side's cost is its strips' weights
+    plus the fill below (above) the cut (``splits.choose_split`` with ``fill``)."""
+    for i in range(1, q):
+        s[i] += s[i - 1]
+    for i in range(q - 2, -1, -1):
+        e[i] += e[i + 1]
+    best = np.inf
+    for i in range(q - 1):
+        cut = a + ((i + 1) * length) // q
+        left, right = s[i] + below[i], e[i + 1] + (total - below[i])
+        if cut - a >= need_lo and a + length - cut >= need_hi and left > 0 and right > 0:
+            best = min(best, abs(left / right - ratio))
+    pick, pick_dist = -1, 0
+    for i in range(q - 1):
+        cut = a + ((i + 1) * length) // q
+        if cut - a < need_lo or a + length - cut < need_hi:
+            continue
+        left, right = s[i] + below[i], e[i + 1] + (total - below[i])
+        if best < np.inf and not (left > 0 and right > 0 and abs(left / right - ratio) == best):
+            continue
+        dist = abs(cut - target)
+        if pick < 0 or dist < pick_dist:
+            pick, pick_dist = cut, dist
+    return pick if pick >= 0 else target
+
+
 def _split(idx, spans, axis, cut):
     """The objects of ``idx`` that touch the low side of ``cut``, and those touching the high
     side, in order (branch-free: every object is written to both and kept where it belongs)."""
@@ -121,10 +184,11 @@ def _split(idx, spans, axis, cut):
     return lo[:p], hi[:r]
 
 
-def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
+def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density):
     """``balance.tree_partition`` with the strip chooser, in one call (``rt``: (4, N) rects);
     a node whose ``fixed`` cut is >= 0 takes that cut instead (choosers that need no objects:
-    time feedback, the static tiles)."""
+    time feedback, the static tiles). A non-empty ``density`` (N,) adds the cost model's fill
+    term to every chosen cut (``splits.strip_chooser(density)``)."""
     n = rt.shape[1]
     K = leaves.shape[0]
     # the root's Start/End arrays are filled in the spans' own pass (its region is the display)
@@ -172,7 +236,12 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
                     s[min(max(f, 0), q - 1)] += tris[o]
                     e[min(max(g, 0), q - 1)] += tris[o]
             target = a + (length * nl) // (nl + nr)
-            cut = _choose(s, e, nl / nr, a, length, q, need_lo, need_hi, target)
+            if density.shape[0] > 0:
+                cuts_of = a + (np.arange(1, q) * length) // q
+                below, total = _fill_line(idx, spans, density, regs[me], axis, a, b, cuts_of)
+                cut = _choose_fill(s, e, below, total, nl / nr, a, length, q, need_lo, need_hi, target)
+            else:
+                cut = _choose(s, e, nl / nr, a, length, q, need_lo, need_hi, target)
         cut = min(max(cut, a + need_lo), b - need_hi)
         splits[m] = (cut - a) / length
         split_pixels[m] = cut
@@ -195,14 +264,16 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed):
     return regions, loads, visible, splits, split_pixels, spans, inverted
 
 
-compile_all(globals(), ("_spans", "_strip_table", "_choose", "_split", "_walk"))
+compile_all(globals(), ("_spans", "_strip_table", "_choose", "_fill_line", "_choose_fill", "_split", "_walk"))
 
 
-def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int, cuts: np.ndarray | None = None):
+def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int, cuts: np.ndarray | None = None,
+                    density: np.ndarray | None = None):
     """The compiled walk on validated inputs (``balance.validate_inputs``; inverted rows are
     refused here, in the walk's own pass over the rects): regions, loads,
     T' masks, splits in p-pos and pixels, spans (4, N). ``cuts`` (K-1,) fixes every node's cut
-    (-1: the strip chooser's). Integer loads are exact sums; float loads are summed again by
+    (-1: the strip chooser's); ``density`` (N,) float64, validated: the cost model's fill per
+    covered pixel of each object. Integer loads are exact sums; float loads are summed again by
     numpy as the reference sums them (pairwise)."""
     shape = (tree.rows, tree.cols)
     if shape not in _TREES:
@@ -212,7 +283,8 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
         cuts = np.full(len(nodes), -1, dtype=np.int64)
     rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
     regions, loads, visible, splits, split_pixels, spans, inverted = _walk(
-        rt, tris, int(size[0]), int(size[1]), int(strips), nodes, leaves, cuts)
+        rt, tris, int(size[0]), int(size[1]), int(strips), nodes, leaves, cuts,
+        _NO_FILL if density is None else density)
     if inverted:
         raise ValueError(INVERTED)
     if tris.dtype.kind == "f":
@@ -221,3 +293,4 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
 
 
 _TREES: dict = {}
+_NO_FILL = np.empty(0)
