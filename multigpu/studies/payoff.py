@@ -73,6 +73,8 @@ def exp_payoff(s: Settings, out: Path) -> str:
                          "imb_tris": float(np.median([r.summary["imbalance_triangles"] for r in rs])),
                          "lb_cpu_ms": float(np.median(lb)), "lb_share": float(np.median(lb) / np.median(em)),
                          "render_max_ms": float(np.median([r.summary["render_cpu_max_ms"] for r in rs])),
+                         "render_mean_ms": float(np.median([r.summary["cpu"]["rendering_cpu_ms"] for r in rs])),
+                         "fixed_ms": float(np.median([_fixed_cpu(r.summary) for r in rs])),
                          "tris_drawn": float(np.median([r.summary["triangles_per_frame"] for r in rs]))})
     write_csv(out / "payoff.csv", rows)
     bounds = [ceiling(scene, runs[(scene, "none")], float(np.median(floors[scene])),
@@ -120,7 +122,15 @@ def exp_payoff(s: Settings, out: Path) -> str:
         md_table(checks, [("scene", "Scene", ""), ("ceiling", "Ceiling", ".2f"), ("best", "Best", ""),
                           ("best_speedup", "Best vs none", ".2f"), ("default", "Default", ""),
                           ("default_speedup", "Default vs none", ".2f"), ("of_best", "Default / best", ".3f"),
-                          ("of_ceiling", "Default / ceiling", ".3f"), ("meets", "Meets both", "")])])
+                          ("of_ceiling", "Default / ceiling", ".3f"), ("meets", "Meets both", "")]), "",
+        "What stands between the default and the ideal frame, CPU ms per frame (medians over rounds): "
+        "`Duplicated` = its mean render above `none`'s (objects two ranks draw, cross's pieces), `Imbalance "
+        "left` = its slowest render above its mean times the floor, `Fixed extra` = its balancing + exchange + "
+        "display CPU above `none`'s. They add up to about `Frame - ideal` (the emulated frame is the "
+        "slowest rank's sum, frame by frame).", "",
+        md_table(checks, [("scene", "Scene", ""), ("default", "Default", ""), ("gap_ms", "Frame - ideal ms", ".2f"),
+                          ("overlap_ms", "Duplicated ms", ".2f"), ("imbalance_ms", "Imbalance left ms", ".2f"),
+                          ("fixed_extra_ms", "Fixed extra ms", ".2f")])])
 
 
 def default_checks(rows: list[dict], bounds: list[dict]) -> list[dict]:
@@ -138,8 +148,21 @@ def default_checks(rows: list[dict], bounds: list[dict]) -> list[dict]:
         out.append({"scene": b["scene"], "ceiling": b["ceiling"], "best": best["balance"],
                     "best_speedup": best["speedup_vs_none"], "default": default,
                     "default_speedup": d["speedup_vs_none"], "of_best": of_best, "of_ceiling": of_ceiling,
-                    "meets": "yes" if meets else "no"})
+                    "meets": "yes" if meets else "no", **gap(d, b)})
     return out
+
+
+def gap(d: dict, b: dict) -> dict:
+    """What stands between a strategy's frame (row ``d``) and the ideal frame (``b``), in CPU ms
+    per frame: the work its partition duplicates (mean render above ``none``'s: objects drawn
+    by two ranks, pieces), the imbalance it leaves (slowest render above the mean times the
+    noise floor), and its fixed CPU (balancing, exchange, display) above ``none``'s. Their sum
+    approximates frame - ideal (the emulated frame is a slowest rank's sum, per frame)."""
+    overlap = d["render_mean_ms"] - b["render_mean_ms"]
+    imbalance = d["render_max_ms"] - d["render_mean_ms"] * b["floor"]
+    fixed = d["fixed_ms"] - b["fixed_ms"]
+    return {"gap_ms": d["emulated_ms"] - b["ideal_ms"], "overlap_ms": overlap, "imbalance_ms": imbalance,
+            "fixed_extra_ms": fixed}
 
 
 def rows_of(rows: list[dict], scene: str) -> dict:
@@ -168,15 +191,22 @@ def rank_strategies(rows: list[dict], names: tuple[str, ...]) -> tuple[list[dict
     return out, verdict
 
 
+def _fixed_cpu(summary: dict) -> float:
+    """CPU ms per rank and frame outside rendering: balancing, exchange, display."""
+    cpu = summary["cpu"]
+    return cpu["load_balancing_cpu_ms"] + cpu["frame_exchange_cpu_ms"] + cpu["display_cpu_ms"]
+
+
 def ceiling(scene: str, none_runs: list, floor: float, best: float) -> dict:
     """The most any balancer could gain over ``none`` here: ``none``'s frame with its render time
     replaced by the mean rank's render time times the noise floor (medians over rounds)."""
     med = lambda f: float(np.median([f(r.summary) for r in none_runs]))
     cpu = lambda c: med(lambda x: x["cpu"][c])
-    fixed = cpu("load_balancing_cpu_ms") + cpu("frame_exchange_cpu_ms") + cpu("display_cpu_ms")
+    fixed = med(_fixed_cpu)
     ideal = fixed + cpu("rendering_cpu_ms") * floor
     none_ms = med(lambda x: x["emulated_frame_ms"])
     return {"scene": scene, "floor": floor, "none_ms": none_ms, "render_mean_ms": cpu("rendering_cpu_ms"),
+            "fixed_ms": fixed,
             "render_max_ms": med(lambda x: x["render_cpu_max_ms"]), "ideal_ms": ideal, "ceiling": none_ms / ideal,
             "best": best}
 
