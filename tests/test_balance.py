@@ -246,3 +246,30 @@ def test_an_inverted_rect_is_refused_by_either_path(compiled, bad):
     rects[77] = bad
     with pytest.raises(ValueError, match="inverted rows"):
         partition(rects, tris, (2, 2), (64, 64), 16, compiled=compiled)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_bad_weights_are_refused_by_either_path_in_the_same_order(compiled):
+    """The compiled walk checks the weights in its pass over the objects, the numpy reference
+    before it starts: the same refusal for a weight that is negative or not finite, for a
+    total past 2**62, and the weights' refusal before an inverted row's."""
+    from multigpu.core import kernel
+
+    if compiled and not kernel.available():
+        pytest.skip("numba is not installed")
+    rects = np.array([[0.1, 0.1, 0.3, 0.3], [np.nan] * 4, [0.2, 0.2, 0.9, 0.8]] * 20)
+    n = len(rects)
+    run = lambda r, t: partition(r, t, (2, 2), (64, 64), 16, compiled=compiled)
+    run(rects, np.arange(n))
+    cases = [(np.r_[np.ones(n - 1), np.nan], "must be finite"), (np.r_[np.ones(n - 1), -np.inf], "must be finite"),
+             (np.r_[np.arange(n - 1), -1], "non-negative"), (np.r_[np.ones(n - 1), -0.5], "non-negative"),
+             (np.r_[np.zeros(n - 2, dtype=np.int64), 2**61, 2**61], "exceeds 2\\*\\*62"),
+             (np.r_[np.inf, np.ones(n - 1)], "must be finite")]
+    for tris, message in cases:
+        with pytest.raises(ValueError, match=message):
+            run(rects, tris)
+        bad = rects.copy()
+        bad[5] = [0.5, 0.1, 0.4, 0.2]
+        with pytest.raises(ValueError, match=message):  # the weights first, as the reference
+            run(bad, tris)
+    run(rects, np.r_[np.zeros(n - 2, dtype=np.int64), 2**61, 2**61 - 1])  # just below: accepted

@@ -63,23 +63,31 @@ class Partition:
         return float(np.max(self.loads)) / mean if mean > 0 else 1.0
 
 
+#: the refusals of per-object inputs, made here or in the compiled walk's own pass
+NOT_FINITE = "tris (weights) must be finite"
+NEGATIVE = "tris must be non-negative (a negative triangle count was given)"
+TOO_MANY = "the triangle total exceeds 2**62 (sums could overflow int64)"
+INVERTED = "rects has inverted rows (xmin > xmax or ymin > ymax)"
+
+
 def validate_inputs(rects, tris, grid, size, strips, rows: bool = True
                     ) -> tuple[np.ndarray, np.ndarray, GpuTree, tuple[int, int]]:
     """Check the public arguments once; return them as arrays plus the GPU tree. ``rows``
-    False leaves the inverted-rows check to the compiled walk (``kernel.strip_partition``),
-    which makes it in its own pass over the rects."""
+    False leaves the per-object checks (inverted rows; weights negative or not finite; the
+    triangle total) to the compiled walk (``kernel.strip_partition``), which makes them in its
+    own pass over the objects, with the same refusals in the same order."""
     if not (isinstance(grid, (tuple, list)) and len(grid) == 2):
         raise ValueError(f"grid must be (rows, cols), got {grid!r}")
-    rows, cols = (int(g) for g in grid)
-    if rows < 1 or cols < 1:
-        raise ValueError(f"grid must have at least 1 row and 1 column, got {rows}x{cols}")
+    n_rows, cols = (int(g) for g in grid)
+    if n_rows < 1 or cols < 1:
+        raise ValueError(f"grid must have at least 1 row and 1 column, got {n_rows}x{cols}")
     if not (isinstance(size, (tuple, list)) and len(size) == 2):
         raise ValueError(f"size must be (W, H), got {size!r}")
     W, H = (int(s) for s in size)
     if W > MAX_PIXELS or H > MAX_PIXELS:
         raise ValueError(f"display {W}x{H} exceeds {MAX_PIXELS} pixels along an axis")
-    if W < cols or H < rows:
-        raise ValueError(f"display {W}x{H} is smaller than one pixel per rank for a {rows}x{cols} grid")
+    if W < cols or H < n_rows:
+        raise ValueError(f"display {W}x{H} is smaller than one pixel per rank for a {n_rows}x{cols} grid")
     if int(strips) != strips or strips < 2:
         raise ValueError(f"strips must be an integer >= 2, got {strips!r}")
     rects = np.asarray(rects, dtype=np.float64)
@@ -91,20 +99,21 @@ def validate_inputs(rects, tris, grid, size, strips, rows: bool = True
     if tris.dtype.kind in "iub":
         tris = tris.astype(np.int64, copy=False)
     elif tris.dtype.kind == "f":
-        if not np.isfinite(tris).all():
-            raise ValueError("tris (weights) must be finite")
+        if rows and not np.isfinite(tris).all():
+            raise ValueError(NOT_FINITE)
         tris = tris.astype(np.float64, copy=False)
     else:
         raise ValueError(f"tris must be integers (triangle counts) or floats, got dtype {tris.dtype}")
-    if tris.size and tris.min() < 0:
-        raise ValueError("tris must be non-negative (a negative triangle count was given)")
-    if tris.dtype.kind == "i" and tris.size and int(tris.sum(dtype=np.uint64)) >= MAX_TOTAL:
-        raise ValueError("the triangle total exceeds 2**62 (sums could overflow int64)")
-    rt = rects.T  # coordinate-major rows (projectors return views of (4, N) arrays)
-    with np.errstate(invalid="ignore"):
-        if rows and (rt[:2] > rt[2:]).any():
-            raise ValueError("rects has inverted rows (xmin > xmax or ymin > ymax)")
-    return rects, tris, gpu_tree(rows, cols), (W, H)
+    if rows:
+        if tris.size and tris.min() < 0:
+            raise ValueError(NEGATIVE)
+        if tris.dtype.kind == "i" and tris.size and int(tris.sum(dtype=np.uint64)) >= MAX_TOTAL:
+            raise ValueError(TOO_MANY)
+        rt = rects.T  # coordinate-major rows (projectors return views of (4, N) arrays)
+        with np.errstate(invalid="ignore"):
+            if (rt[:2] > rt[2:]).any():
+                raise ValueError(INVERTED)
+    return rects, tris, gpu_tree(n_rows, cols), (W, H)
 
 
 def _task(n: int, node, reg: np.ndarray, strips: int, W: int, H: int, idx, spans, tris) -> tuple[SplitTask, int, int]:

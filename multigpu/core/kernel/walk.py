@@ -15,7 +15,6 @@ import numpy as np
 
 from multigpu.core.kernel.jit import compile_all
 
-INVERTED = "rects has inverted rows (xmin > xmax or ymin > ymax)"
 #: displays up to this many pixels along an axis look strips up in a table (as splits.py does)
 TABLE_MAX = 1 << 16
 
@@ -40,20 +39,31 @@ def tree_arrays(tree) -> tuple[np.ndarray, np.ndarray]:
 
 def _spans(rt, W, H, tris, axis, table, s, e):
     """``regions.pixel_spans`` of coordinate-major rects ``rt`` (4, N): inclusive pixel spans
-    (4, N), which rects are on screen, whether any row is inverted (xmin > xmax or ymin > ymax:
-    ``balance.validate_inputs``' check, made in this pass instead of a numpy one), and the
-    on-screen objects in order. Where ``table`` is not empty, the same pass also adds each
-    on-screen object's ``tris`` to the Start/End arrays ``s``/``e`` at the strips ``table``
-    gives its first and last pixel along ``axis`` (the root node's, in the walk's order: the
-    same sums), so the root's objects are not read a second time."""
+    (4, N), which rects are on screen, the on-screen objects in order, and what
+    ``balance.validate_inputs`` checks per object, made in this pass instead of numpy ones:
+    whether any row is inverted (xmin > xmax or ymin > ymax), any weight is not finite or
+    negative, and the weights' total (uint64, wrapping as numpy's sum does). Where ``table`` is
+    not empty, the same pass also adds each on-screen object's ``tris`` to the Start/End
+    arrays ``s``/``e`` at the strips ``table`` gives its first and last pixel along ``axis``
+    (the root node's, in the walk's order: the same sums), so the root's objects are not read
+    a second time."""
     n = rt.shape[1]
     spans = np.zeros((4, n), dtype=np.int32)
     on = np.zeros(n, dtype=np.bool_)
     members = np.empty(n, dtype=np.int64)
     count = 0
     inverted = False
+    not_finite = negative = False
+    total = np.uint64(0)
     fused = table.shape[0] > 0
     for i in range(n):
+        w = tris[i]
+        if w != w or w == np.inf or w == -np.inf:  # float weights only
+            not_finite = True
+        elif w < 0:
+            negative = True
+        if w >= 0 and w < 1.8e19:  # every int64 weight; the total is read for integer weights only
+            total += np.uint64(w)
         if rt[0, i] > rt[2, i] or rt[1, i] > rt[3, i]:  # False for NaN rows
             inverted = True
         if rt[2, i] >= 0.0 and rt[0, i] <= 1.0 and rt[3, i] >= 0.0 and rt[1, i] <= 1.0:  # False for NaN rows
@@ -67,7 +77,7 @@ def _spans(rt, W, H, tris, axis, table, s, e):
             if fused:
                 s[table[spans[axis, i]]] += tris[i]
                 e[table[spans[axis + 2, i]]] += tris[i]
-    return spans, on, inverted, members[:count]
+    return spans, on, (inverted, not_finite, negative, total), members[:count]
 
 
 def _strip_table(extent, a, length, q):
@@ -77,32 +87,6 @@ def _strip_table(extent, a, length, q):
     for px in range(extent):
         table[px] = min(max(((px - a + 1) * q - 1) // length, 0), q - 1)
     return table
-
-
-def _choose(s, e, ratio, a, length, q, need_lo, need_hi, target):
-    """``splits.choose_split`` on Start/End arrays ``s``/``e`` (turned into prefix/postfix sums
-    in place): the valid cut with the least Diff, ties and the all-infinite case nearest
-    ``target`` (then the lower cut); ``target`` itself when no cut is valid."""
-    for i in range(1, q):
-        s[i] += s[i - 1]
-    for i in range(q - 2, -1, -1):
-        e[i] += e[i + 1]
-    best = np.inf
-    for i in range(q - 1):
-        cut = a + ((i + 1) * length) // q
-        if cut - a >= need_lo and a + length - cut >= need_hi and s[i] > 0 and e[i + 1] > 0:
-            best = min(best, abs(s[i] / e[i + 1] - ratio))
-    pick, pick_dist = -1, 0
-    for i in range(q - 1):
-        cut = a + ((i + 1) * length) // q
-        if cut - a < need_lo or a + length - cut < need_hi:
-            continue
-        if best < np.inf and not (s[i] > 0 and e[i + 1] > 0 and abs(s[i] / e[i + 1] - ratio) == best):
-            continue
-        dist = abs(cut - target)
-        if pick < 0 or dist < pick_dist:
-            pick, pick_dist = cut, dist
-    return pick if pick >= 0 else target
 
 
 def _fill_line(idx, spans, density, reg, axis, a, b, cuts_of):
@@ -141,9 +125,13 @@ def _fill_line(idx, spans, density, reg, axis, a, b, cuts_of):
     return below, line[cells]
 
 
-def _choose_fill(s, e, below, total, ratio, a, length, q, need_lo, need_hi, target):
-    """``_choose`` with the cost model's fill term: each side's cost is its strips' weights
-    plus the fill below (above) the cut (``splits.choose_split`` with ``fill``)."""
+def _choose(s, e, below, total, ratio, a, length, q, need_lo, need_hi, target):
+    """``splits.choose_split`` on Start/End arrays ``s``/``e`` (turned into prefix/postfix sums
+    in place): the valid cut with the least Diff, ties and the all-infinite case nearest
+    ``target`` (then the lower cut); ``target`` itself when no cut is valid. A non-empty
+    ``below`` (``_fill_line``, with the region's ``total``) adds the cost model's fill to each
+    side. Each side's cost is a float either way, as the reference's ratio of two int64 sums."""
+    fill = below.shape[0] > 0
     for i in range(1, q):
         s[i] += s[i - 1]
     for i in range(q - 2, -1, -1):
@@ -151,7 +139,8 @@ def _choose_fill(s, e, below, total, ratio, a, length, q, need_lo, need_hi, targ
     best = np.inf
     for i in range(q - 1):
         cut = a + ((i + 1) * length) // q
-        left, right = s[i] + below[i], e[i + 1] + (total - below[i])
+        left = s[i] + below[i] if fill else s[i] + 0.0
+        right = e[i + 1] + (total - below[i]) if fill else e[i + 1] + 0.0
         if cut - a >= need_lo and a + length - cut >= need_hi and left > 0 and right > 0:
             best = min(best, abs(left / right - ratio))
     pick, pick_dist = -1, 0
@@ -159,7 +148,8 @@ def _choose_fill(s, e, below, total, ratio, a, length, q, need_lo, need_hi, targ
         cut = a + ((i + 1) * length) // q
         if cut - a < need_lo or a + length - cut < need_hi:
             continue
-        left, right = s[i] + below[i], e[i + 1] + (total - below[i])
+        left = s[i] + below[i] if fill else s[i] + 0.0
+        right = e[i + 1] + (total - below[i]) if fill else e[i + 1] + 0.0
         if best < np.inf and not (left > 0 and right > 0 and abs(left / right - ratio) == best):
             continue
         dist = abs(cut - target)
@@ -199,7 +189,7 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density):
     table0 = _strip_table(root_len, 0, root_len, root_q) if fuse else np.empty(0, dtype=np.int64)
     s0 = np.zeros(root_q if fuse else 0, dtype=tris.dtype)
     e0 = np.zeros(root_q if fuse else 0, dtype=tris.dtype)
-    spans, on, inverted, first_members = _spans(rt, W, H, tris, root_axis, table0, s0, e0)
+    spans, on, checks, first_members = _spans(rt, W, H, tris, root_axis, table0, s0, e0)
     regs = np.zeros((2 * K - 1, 4), dtype=np.int64)
     regs[0, 2], regs[0, 3] = W, H
     members = [first_members]
@@ -236,12 +226,11 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density):
                     s[min(max(f, 0), q - 1)] += tris[o]
                     e[min(max(g, 0), q - 1)] += tris[o]
             target = a + (length * nl) // (nl + nr)
+            below, total = density[:0], 0.0  # no fill term
             if density.shape[0] > 0:
-                cuts_of = a + (np.arange(1, q) * length) // q
-                below, total = _fill_line(idx, spans, density, regs[me], axis, a, b, cuts_of)
-                cut = _choose_fill(s, e, below, total, nl / nr, a, length, q, need_lo, need_hi, target)
-            else:
-                cut = _choose(s, e, nl / nr, a, length, q, need_lo, need_hi, target)
+                below, total = _fill_line(idx, spans, density, regs[me], axis, a, b,
+                                          a + (np.arange(1, q) * length) // q)
+            cut = _choose(s, e, below, total, nl / nr, a, length, q, need_lo, need_hi, target)
         cut = min(max(cut, a + need_lo), b - need_hi)
         splits[m] = (cut - a) / length
         split_pixels[m] = cut
@@ -261,16 +250,16 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density):
             visible[label, idx[t]] = True
             total += tris[idx[t]]
         loads[label] = total
-    return regions, loads, visible, splits, split_pixels, spans, inverted
+    return regions, loads, visible, splits, split_pixels, spans, checks
 
 
-compile_all(globals(), ("_spans", "_strip_table", "_choose", "_fill_line", "_choose_fill", "_split", "_walk"))
+compile_all(globals(), ("_spans", "_strip_table", "_fill_line", "_choose", "_split", "_walk"))
 
 
 def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int, cuts: np.ndarray | None = None,
                     density: np.ndarray | None = None):
-    """The compiled walk on validated inputs (``balance.validate_inputs``; inverted rows are
-    refused here, in the walk's own pass over the rects): regions, loads,
+    """The compiled walk on validated inputs (``balance.validate_inputs``; the per-object
+    checks are made here, in the walk's own pass over the objects): regions, loads,
     T' masks, splits in p-pos and pixels, spans (4, N). ``cuts`` (K-1,) fixes every node's cut
     (-1: the strip chooser's); ``density`` (N,) float64, validated: the cost model's fill per
     covered pixel of each object. Integer loads are exact sums; float loads are summed again by
@@ -282,11 +271,19 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
     if cuts is None:
         cuts = np.full(len(nodes), -1, dtype=np.int64)
     rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
-    regions, loads, visible, splits, split_pixels, spans, inverted = _walk(
+    regions, loads, visible, splits, split_pixels, spans, (inverted, not_finite, negative, total) = _walk(
         rt, tris, int(size[0]), int(size[1]), int(strips), nodes, leaves, cuts,
         _NO_FILL if density is None else density)
+    from multigpu.core import balance
+
+    if not_finite:  # the reference's order: weights, their total, then the rects
+        raise ValueError(balance.NOT_FINITE)
+    if negative:
+        raise ValueError(balance.NEGATIVE)
+    if tris.dtype.kind == "i" and int(total) >= balance.MAX_TOTAL:
+        raise ValueError(balance.TOO_MANY)
     if inverted:
-        raise ValueError(INVERTED)
+        raise ValueError(balance.INVERTED)
     if tris.dtype.kind == "f":
         loads = np.array([tris[v].sum() for v in visible], dtype=tris.dtype)  # K ranks, not objects
     return regions, loads, visible, splits, split_pixels, spans
