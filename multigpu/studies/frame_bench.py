@@ -21,9 +21,16 @@ import numpy as np
 PHASES = ("learn", "project", "plan", "drawlist", "transfers", "row")
 
 
-def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), frames: int = 60) -> dict:
+#: bytes written between frames by ``frame_phases(cold=True)``: past this machine's caches, as a
+#: rank's rendering and its neighbours on the same cores are between two balance phases
+EVICT = 64 << 20
+
+
+def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), frames: int = 60,
+                 cold: bool = False) -> dict:
     """Median CPU ms of each per-frame phase (and their total) for rank 0, planned by the frame
-    loop's own ``Planner``."""
+    loop's own ``Planner``; ``cold``: the caches are flushed before every frame (``EVICT``
+    bytes written, not timed), as in a run, where the renderer runs between two plans."""
     from multigpu.config import WalkConfig
     from multigpu.core.drawlist import DrawList
     from multigpu.core.planner import Planner
@@ -47,8 +54,11 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
         if event == "c_call":
             calls[0] += 1
 
+    sweep = np.zeros(EVICT, dtype=np.uint8) if cold else None
     for f in range(len(path)):  # frames, not objects
         counting = f % 10 == 9  # every 10th frame counts its calls and is left out of the times
+        if sweep is not None:
+            sweep += 1
         if counting:
             calls[0] = 0
             sys.setprofile(count)
@@ -94,16 +104,19 @@ def bench_frame(quick: bool) -> list[dict]:
     frames = 20 if quick else 120
     rows = []
     print("per-frame CPU ms of rank 0 on a 2x2 wall of 512x512 (process CPU time, median over frames)")
+    print("'cold': the balancing with the caches flushed before every frame (64 MiB written, as the renderer and "
+          "the ranks sharing the cores do between two plans in a run)")
     print(f"{'scene':>6} {'objects':>8} {'strategy':>9} " + " ".join(f"{p:>9}" for p in (*PHASES, "total"))
-          + f" {'balancing':>9} {'calls':>6}")
+          + f" {'balancing':>9} {'cold':>6} {'calls':>6}")
     for name, spec in scenes:
         scene, _ = load_scene(spec)
         for strategy in ("strips", "time", "cross", "cost", "adaptive", "none") if name != "plant4" else \
                 ("strips", "cross", "none"):
             med = frame_phases(scene, strategy, frames=frames)
-            rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med})
+            cold = frame_phases(scene, strategy, frames=frames, cold=True)["balancing"]
+            rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med, "cold": cold})
             figures = " ".join(f"{med[p]:9.3f}" for p in (*PHASES, "total", "balancing"))
-            print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures} {med['calls']:6d}")
+            print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures} {cold:6.3f} {med['calls']:6d}")
     return rows
 
 
