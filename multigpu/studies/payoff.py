@@ -86,6 +86,12 @@ def exp_payoff(s: Settings, out: Path) -> str:
     per_round = {key: [r.summary["emulated_frame_ms"] for r in rs] for key, rs in runs.items()}
     checks = default_checks(rows, bounds, per_round)
     write_csv(out / "payoff_default.csv", checks)
+    return _page(s, rows, bounds, ranking, verdict, checks, rounds)
+
+
+def _page(s: Settings, rows, bounds, ranking, verdict: str, checks, rounds: int) -> str:
+    """The payoff section of the results page from its tables."""
+    SCENES = tuple(dict.fromkeys(r["scene"] for r in rows))
     return "\n".join([
         f"2x2 wall of 256x256 tiles, {s.frames} frames per run: the plant walkthrough, the city drive along its "
         f"streets, {orbit_copies(s)} plants on an orbit keeping them all in view (the paper's Section 7 "
