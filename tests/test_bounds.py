@@ -172,3 +172,22 @@ def test_silhouette_coverage_fraction():
     cov = np.full(200, -1.0)
     BoxProjector(bmin, bmax)(V, P, cov)
     assert ((cov > 0) & (cov <= 1)).all()
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+@pytest.mark.parametrize("which", ["view", "proj"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_matrices_that_are_not_finite_are_refused_by_both_paths(compiled, which, bad):
+    from multigpu.core import kernel
+
+    if compiled and not kernel.available():
+        pytest.skip("numba is not installed")
+    bmin, bmax = random_boxes(20)
+    box = BoxProjector(bmin, bmax, compiled=compiled)
+    view, proj = V.copy(), P.copy()
+    (view if which == "view" else proj)[3, 1] = bad  # an entry the other matrix meets with a zero
+    with pytest.raises(ValueError, match="must be finite"):
+        box(view, proj)
+    with pytest.raises(ValueError, match="4x4"):
+        box(V[:3], P)
+    assert np.array_equal(box(V, P), BoxProjector(bmin, bmax, compiled=not compiled)(V, P), equal_nan=True)

@@ -17,6 +17,8 @@ small per-corner offsets may be float32 (``dtype``) for speed.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 # corner sign patterns of a box, (8, 3)
@@ -27,13 +29,28 @@ _EDGES = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)
 
 
 def _check(view, proj) -> np.ndarray:
+    """proj @ view, refused unless both are finite 4x4 matrices. Runs every frame, so one
+    scalar test: a sum is finite only if every term is (and sixteen entries near 1e308 that
+    overflow it are refused too: their product would)."""
     view = np.asarray(view, dtype=np.float64)
     proj = np.asarray(proj, dtype=np.float64)
     if view.shape != (4, 4) or proj.shape != (4, 4):
         raise ValueError("view and projection must be 4x4 matrices")
-    if not (np.isfinite(view).all() and np.isfinite(proj).all()):
+    if not math.isfinite(view.sum() + proj.sum()):
         raise ValueError("view and projection matrices must be finite")
     return proj @ view
+
+
+def _product(view, proj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """view and proj as float64 arrays (refused unless 4x4) and proj @ view, with as few numpy
+    calls as can be: every frame pays each one's cold-cache cost. Entries are not tested."""
+    if view.__class__ is not np.ndarray or view.dtype != np.float64:
+        view = np.asarray(view, dtype=np.float64)
+    if proj.__class__ is not np.ndarray or proj.dtype != np.float64:
+        proj = np.asarray(proj, dtype=np.float64)
+    if view.shape != (4, 4) or proj.shape != (4, 4):
+        raise ValueError("view and projection must be 4x4 matrices")
+    return view, proj, proj @ view
 
 
 _SHIFT = np.array([[0.5], [0.5], [0.5], [0.5]])
@@ -85,6 +102,7 @@ class BoxProjector:
             from multigpu.core.kernel.project import spatial_groups
 
             self.grouped = spatial_groups(self.center, self.half64)
+            self._kernel = kernel.project_boxes
 
     def __len__(self) -> int:
         return self.center.shape[1]
@@ -96,15 +114,16 @@ class BoxProjector:
         area as a fraction of its rect's area (1 for boxes crossing the near plane, 0 unseen):
         the cost model's estimate of the fragments an object generates per rect pixel.
         """
-        M = _check(view, proj)
         n = len(self)
-        out = np.empty((4, n))
-        if self.compiled:
-            from multigpu.core.kernel import project_boxes
-
-            project_boxes(self.grouped, self.plain_boxes, self.half, M, self.widen, FAR_TOL, _SIGNS, _EDGES, _FACES,
-                          _NEXT, out, coverage, self.plain)
+        if self.compiled:  # the kernel tests the matrices' entries: here just their shapes
+            view, proj, M = _product(view, proj)
+            out = np.empty((4, n))
+            if not self._kernel(self.grouped, self.plain_boxes, self.half, view, proj, M, self.widen, FAR_TOL, _SIGNS,
+                                _EDGES, _FACES, _NEXT, out, coverage, self.plain):
+                raise ValueError("view and projection matrices must be finite")
             return out.T
+        M = _check(view, proj)
+        out = np.empty((4, n))
         for s in range(0, n, self.chunk):  # blocks of objects, not objects
             e = min(n, s + self.chunk)
             _boxes_block(self.center[:, s:e], self.half[:, s:e], self.half64[:, s:e], M, self.dtype, out[:, s:e],

@@ -27,9 +27,14 @@ class Camera:
 
 
 def look_at(eye, target, up) -> np.ndarray:
-    """World-to-view matrix; the camera looks down -z with +y up. Scalar float arithmetic: it
-    runs once per frame, where numpy's per-call overhead (cross, norm) would cost tens of
-    microseconds for nine products."""
+    """World-to-view matrix; the camera looks down -z with +y up."""
+    return np.array(_look_at_rows(eye, target, up))
+
+
+def _look_at_rows(eye, target, up) -> list[list[float]]:
+    """``look_at`` as rows of Python floats. Scalar float arithmetic: it runs once per frame,
+    where numpy's per-call overhead (cross, norm) would cost tens of microseconds for nine
+    products."""
     ex, ey, ez = (float(v) for v in eye)
     fx, fy, fz = float(target[0]) - ex, float(target[1]) - ey, float(target[2]) - ez
     norm = math.sqrt(fx * fx + fy * fy + fz * fz)
@@ -44,30 +49,33 @@ def look_at(eye, target, up) -> np.ndarray:
     n = math.sqrt(sx * sx + sy * sy + sz * sz)
     sx, sy, sz = sx / n, sy / n, sz / n
     ux, uy, uz = sy * fz - sz * fy, sz * fx - sx * fz, sx * fy - sy * fx
-    return np.array([[sx, sy, sz, -(sx * ex + sy * ey + sz * ez)],
-                     [ux, uy, uz, -(ux * ex + uy * ey + uz * ez)],
-                     [-fx, -fy, -fz, fx * ex + fy * ey + fz * ez],
-                     [0.0, 0.0, 0.0, 1.0]])
+    return [[sx, sy, sz, -(sx * ex + sy * ey + sz * ez)],
+            [ux, uy, uz, -(ux * ex + uy * ey + uz * ez)],
+            [-fx, -fy, -fz, fx * ex + fy * ey + fz * ez],
+            [0.0, 0.0, 0.0, 1.0]]
 
 
 def perspective(fov_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
     """Symmetric GL perspective projection (vertical fov in degrees)."""
-    t = near * np.tan(np.radians(fov_deg) / 2.0)
+    return np.array(_perspective_rows(fov_deg, aspect, near, far))
+
+
+def _perspective_rows(fov_deg: float, aspect: float, near: float, far: float) -> list[list[float]]:
+    t = near * math.tan(math.radians(fov_deg) / 2.0)
     r = t * aspect
-    return frustum(-r, r, -t, t, near, far)
+    return _frustum_rows(-r, r, -t, t, near, far)
 
 
 def frustum(left: float, right: float, bottom: float, top: float, near: float, far: float) -> np.ndarray:
     """GL off-axis perspective projection (glFrustum)."""
-    m = np.zeros((4, 4))
-    m[0, 0] = 2 * near / (right - left)
-    m[1, 1] = 2 * near / (top - bottom)
-    m[0, 2] = (right + left) / (right - left)
-    m[1, 2] = (top + bottom) / (top - bottom)
-    m[2, 2] = -(far + near) / (far - near)
-    m[2, 3] = -2 * far * near / (far - near)
-    m[3, 2] = -1.0
-    return m
+    return np.array(_frustum_rows(left, right, bottom, top, near, far), dtype=np.float64)
+
+
+def _frustum_rows(left: float, right: float, bottom: float, top: float, near: float, far: float) -> list:
+    return [[2 * near / (right - left), 0.0, (right + left) / (right - left), 0.0],
+            [0.0, 2 * near / (top - bottom), (top + bottom) / (top - bottom), 0.0],
+            [0.0, 0.0, -(far + near) / (far - near), -2 * far * near / (far - near)],
+            [0.0, 0.0, -1.0, 0.0]]
 
 
 def region_clip(region, size) -> np.ndarray:
@@ -91,12 +99,13 @@ def model_view(view: np.ndarray, origin) -> np.ndarray:
     return np.asarray(view, dtype=np.float64) @ t
 
 
-def frame_matrices(camera, size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """view, projection (float64) and the light direction (towards the viewer, slightly above)."""
+def frame_matrices(camera, size) -> tuple[np.ndarray, np.ndarray, tuple[float, float, float]]:
+    """view, projection (float64; views of one array: one numpy call per frame, not several)
+    and the light direction (towards the viewer, slightly above)."""
     W, H = size
-    view = camera.view()
-    proj = camera.projection(W / H)
-    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = view[0, :3].tolist(), view[1, :3].tolist(), view[2, :3].tolist()
+    v = _look_at_rows(camera.position, camera.target, camera.up)
+    both = np.array((v, _perspective_rows(camera.fov, W / H, camera.near, camera.far)), dtype=np.float64)
+    (a0, a1, a2, _), (b0, b1, b2, _), (c0, c1, c2, _), _ = v
     lx, ly, lz = 0.3 * a0 + 0.5 * b0 + 0.8 * c0, 0.3 * a1 + 0.5 * b1 + 0.8 * c1, 0.3 * a2 + 0.5 * b2 + 0.8 * c2
     n = math.sqrt(lx * lx + ly * ly + lz * lz)  # view^T (0.3, 0.5, 0.8), normalized
-    return view, proj, np.array([lx / n, ly / n, lz / n])
+    return both[0], both[1], (lx / n, ly / n, lz / n)

@@ -19,6 +19,7 @@ and are skipped. Pure numpy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -49,8 +50,9 @@ class Canvas:
         (rows, cols), (tw, th), (mx, my) = self.grid, self.tile, self.mullion
         return cols * tw + (cols - 1) * mx, rows * th + (rows - 1) * my
 
-    @property
+    @cached_property
     def bezels(self) -> bool:
+        """Whether any pixels hide behind bezels (asked every frame: computed once)."""
         return any(self.mullion)
 
     def tiles(self) -> np.ndarray:

@@ -51,6 +51,7 @@ class CrossSegment(Configured):
         W, H = self.size
         self.tiles = tile_regions(rows, cols, W // cols, H // rows)
         self._pieces: tuple | None = None
+        self._flat: dict | None = None  # the same pieces flat, where the kernel planned them
         self._times: np.ndarray | None = None
         self.shares = np.ones(len(self.tiles))
 
@@ -59,7 +60,8 @@ class CrossSegment(Configured):
             return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         tris = np.asarray(tris)
         if kernel.use(self.compiled) and tris.dtype.kind in "iu":
-            self.shares, part = kernel.cross_partition(self._pieces, self._times, self.tiles, self.shares,
+            last = self._flat if self._flat is not None else self._pieces
+            self.shares, part = kernel.cross_partition(last, self._times, self.tiles, self.shares,
                                                        self.damping, self.min_share, rects, tris, self.size)
             return Partition(*part)
         k = len(self.tiles)
@@ -140,6 +142,8 @@ class CrossSegment(Configured):
                          np.ascontiguousarray(sp), tuple(prects), tuple(pvis))
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
+        features = partition.features
+        self._flat = features if features is not None and "owner" in features else None
         if partition.pieces is not None:
             self._pieces = partition.pieces
         else:

@@ -2,9 +2,10 @@
 
 One process plays rank 0 of a 2x2 wall along the scene's walkthrough, planning through the
 frame loop's own ``core.planner.Planner``: learn (the strategy observes the last frame's
-per-rank times, random here), project the bounds, plan (strategy: tree walk, masks, loads, the
-frame's work on the canvas), the draw list (run-merged commands of the rank's mask), the
-transfer plan and the timing row. learn + project + plan is the frame loop's balance phase. Each phase is timed with
+per-rank times, random here), project the bounds (the camera's matrices included), plan
+(strategy: tree walk, masks, loads, the frame's work on the canvas), the draw list (run-merged
+commands of the rank's mask), the transfer plan and the timing row. learn + project + plan is
+the frame loop's balance phase. Each phase is timed with
 ``time.process_time`` (CPU) per frame; medians are printed, with the C-level calls (numpy
 functions and methods, builtins) one frame makes, counted with ``sys.setprofile`` on every
 tenth frame (left out of the times).
@@ -62,11 +63,12 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
         if counting:
             calls[0] = 0
             sys.setprofile(count)
-        view, proj, _ = planner.matrices(path.camera(f))
+        camera = path.camera(f)
         marks = [time.process_time()]
         if f:  # the last frame's (random) times, observed where the frame loop does
             planner.observe(f - 1, 1.0 + rng.random(len(tiles)))
         marks.append(time.process_time())
+        view, proj, _ = planner.matrices(camera)  # in the frame loop's balance phase too
         rects = planner.rects(view, proj)
         marks.append(time.process_time())
         work = planner.work(f, rects)

@@ -26,6 +26,8 @@ import time
 import numpy as np
 
 from multigpu.core.kernel.jit import numba
+from multigpu.core.kernel.pieces import _cross
+from multigpu.core.kernel.project import _project
 from multigpu.core.kernel.walk import strip_partition, tree_arrays
 
 
@@ -43,37 +45,52 @@ def use(compiled: bool | None) -> bool:
 
 def cross_partition(pieces, times, tiles, shares, damping: float, min_share: float, rects, tris, size):
     """``strategies.cross``: the new segment shares, and the partition's fields (regions, loads,
-    T' masks, splits, split pixels, spans, pieces and their masks per rank) from the last
-    frame's ``pieces`` (per rank) and measured ``times``."""
-    from multigpu.core.kernel.pieces import _cut, _masks
-
-    k = len(pieces)
-    allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
-    owner = np.repeat(np.arange(k), [len(p) for p in pieces])
-    shares, prects, powner = _cut(allp, owner, np.asarray(times, dtype=np.float64), tiles, shares,
-                                  float(damping), float(min_share))
+    T' masks, splits, split pixels, spans, pieces and their masks per rank, and the pieces flat
+    for the next frame: ``{"pieces": (Q, 4), "owner": (Q,)}``) from the last frame's pieces
+    (that flat form, or per rank) and measured ``times``. One compiled call."""
+    k = len(tiles)
+    if isinstance(pieces, dict):  # the last frame's flat pieces, as this function returned them
+        allp, owner = pieces["pieces"], pieces["owner"]
+    else:
+        allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
+        owner = np.repeat(np.arange(k), [len(p) for p in pieces])
     rt = np.ascontiguousarray(np.asarray(rects, dtype=np.float64).T)
-    spans, masks, visible, loads, regions = _masks(rt, np.asarray(tris, dtype=np.int64), int(size[0]), int(size[1]),
-                                                   prects, powner, k)
-    at = np.searchsorted(powner, np.arange(k + 1)).tolist()
+    shares, prects, powner, at, spans, masks, visible, loads, regions = _cross(
+        allp, owner, np.asarray(times, dtype=np.float64), tiles, shares, float(damping), float(min_share), rt,
+        np.asarray(tris, dtype=np.int64), int(size[0]), int(size[1]))
+    at = at.tolist()
     per_rank = tuple(prects[at[r]:at[r + 1]] for r in range(k))
     per_mask = tuple(masks[at[r]:at[r + 1]] for r in range(k))
-    none = np.zeros(max(k - 1, 0))
-    return shares, (regions, loads, visible, none, none.astype(np.int64), spans, per_rank, per_mask)
+    none, none_px = _no_splits(k)
+    return shares, (regions, loads, visible, none, none_px, spans, per_rank, per_mask,
+                    {"pieces": prects, "owner": powner})
 
 
-def project_boxes(grouped, plain_boxes, half, M, widen, far_tol, signs, edges, faces, nxt, out, coverage=None,
-                  plain: int = -1) -> None:
+_NO_SPLITS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _no_splits(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Read-only (K-1,) zero splits and split pixels of a partition with no tree (one pair per K)."""
+    if k not in _NO_SPLITS:
+        pair = np.zeros(max(k - 1, 0)), np.zeros(max(k - 1, 0), dtype=np.int64)
+        for a in pair:
+            a.setflags(write=False)
+        _NO_SPLITS[k] = pair
+    return _NO_SPLITS[k]
+
+
+def project_boxes(grouped, plain_boxes, half, view, proj, M, widen, far_tol, signs, edges, faces, nxt, out,
+                  coverage=None, plain: int = -1) -> bool:
     """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage;
     ``grouped``: ``project.spatial_groups`` of the boxes (culled a group at a time);
     ``plain_boxes``: (centres, half extents) in object order, used where the groups cull
-    fewer than half the boxes (``plain`` -1; 1: always, 0: never; the same rects)."""
-    from multigpu.core.kernel.project import _project
-
+    fewer than half the boxes (``plain`` -1; 1: always, 0: never; the same rects). ``M`` is
+    ``proj @ view``; False (nothing written) when ``view`` or ``proj`` has an entry that is
+    not finite."""
     order, center, half64, starts, gbox = grouped
     cov = _NO_COVERAGE if coverage is None else coverage
-    _project(center, half, half64, order, starts, gbox, plain_boxes[0], plain_boxes[1], plain, M, widen, far_tol,
-             signs, edges, faces, nxt, out, cov, coverage is not None)
+    return _project(center, half, half64, order, starts, gbox, plain_boxes[0], plain_boxes[1], plain, view, proj, M,
+                    widen, far_tol, signs, edges, faces, nxt, out, cov, coverage is not None)
 
 
 _NO_COVERAGE = np.empty(0)

@@ -161,4 +161,18 @@ def _masks(rt, tris, W, H, prects, powner, k):
     return spans, masks, visible, loads, regions
 
 
-compile_all(globals(), ("_profiles", "_seqsum", "_cut", "_masks"))
+def _cross(allp, owner, times, tiles, shares, damping, min_share, rt, tris, W, H):
+    """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan), and where each
+    rank's pieces start in the rank-major rects (``at``, K+1)."""
+    k = tiles.shape[0]
+    out, prects, powner = _cut(allp, owner, times, tiles, shares, damping, min_share)
+    spans, masks, visible, loads, regions = _masks(rt, tris, W, H, prects, powner, k)
+    at = np.zeros(k + 1, dtype=np.int64)
+    for p in range(powner.shape[0]):
+        at[powner[p] + 1] += 1
+    for r in range(k):
+        at[r + 1] += at[r]
+    return out, prects, powner, at, spans, masks, visible, loads, regions
+
+
+compile_all(globals(), ("_profiles", "_seqsum", "_cut", "_masks", "_cross"))

@@ -247,7 +247,16 @@ def _frame_rows(M, dtype_of):
     return Mc, rr
 
 
-def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, M, widen, far_tol,
+def _finite(a):
+    """Whether every entry of the 2-D ``a`` is finite."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            if not np.isfinite(a[i, j]):
+                return False
+    return True
+
+
+def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, view, proj, M, widen, far_tol,
              signs, edges, faces, nxt, out, cov, with_cov):
     """Rects (4, N) into ``out`` (NaN: culled or off screen) and, ``with_cov``, silhouette
     coverage into ``cov``. The boxes come in a spatial order (``order[j]``: the object at sorted
@@ -258,7 +267,10 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
     instead (``pcenter``/``phalf64``: unsorted): no gathering, and the rects written in
     sequence rather than scattered at random (at 10^6 boxes the scatter alone costs ~8 ms).
     The rects are the same either way: a group's test only culls boxes their own tests cull.
-    ``M``: projection times view."""
+    ``M``: ``proj @ view``. False, with nothing written, when ``view`` or ``proj`` is not
+    finite (the caller refuses them), else True."""
+    if not (_finite(view) and _finite(proj)):
+        return False
     Mc, reach_rows = _frame_rows(M, half)
     c_lo, c_hi = 0.5 + widen * -0.5, 0.5 + widen * 0.5
     cc = np.empty(4)
@@ -289,7 +301,7 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
                 idx[j] = s0 + j
             _block(pcenter, phalf64, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov,
                    with_cov, s0, m, idx, base, off, sg, cx, cy, ext, state, cc)
-        return
+        return True
     # culled boxes' rects: NaN written in sequence over every row first (a write per culled box
     # scattered by ``order`` would touch every cache line of ``out`` at random), the others
     # overwritten below
@@ -315,7 +327,8 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
     if m:
         _block(bc, bh, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov, with_cov,
                0, m, idx, base, off, sg, cx, cy, ext, state, cc)
+    return True
 
 
-compile_all(globals(), ("_clip_block", "_corners", "_face", "_coverage", "_write", "_clipped", "_block", "_group_out",
-                         "_frame_rows", "_project"))
+compile_all(globals(), ("_finite", "_clip_block", "_corners", "_face", "_coverage", "_write", "_clipped", "_block",
+                         "_group_out", "_frame_rows", "_project"))
