@@ -204,48 +204,75 @@ def test_every_registered_strategy_keeps_the_contract(name):
 @pytest.mark.parametrize("cross_cost", [0.5, 2.0])
 def test_auto_keeps_the_candidate_whose_frames_were_faster_and_checks_again(cross_cost):
     """Frames planned by cross (pieces) cost ``cross_cost`` times strips' frames: the trial picks
-    the faster (after one round: without noise the lead is clear at once), the winner plans
-    every frame of the hold, the next trial decides again; two copies fed the same times decide
-    alike."""
+    the faster (after one mirrored pair of rounds: without noise the lead is clear at once), the
+    winner plans every frame of the hold, the next trial decides again; two copies fed the same
+    times decide alike."""
     from multigpu.strategies.auto import Auto
 
     rects, tris = workload(300, seed=11)
     time_of = lambda p: np.full(4, cross_cost if p.pieces is not None else 1.0)
     runs = []
     for _ in range(2):
-        auto = Auto((2, 2), (128, 128), 64, window=4, settle=1, rounds=2, hold=10)
-        cycle = auto.round_frames + auto.hold
+        auto = Auto((2, 2), (128, 128), 64, window=4, settle=1, rounds=4, hold=10)
+        trial = 2 * auto.round_frames
+        cycle = trial + auto.hold
         runs.append(simulate(auto, rects, tris, time_of, frames=2 * cycle))
     want = "cross" if cross_cost < 1 else "strips"
     doc = auto.report()
     assert doc["using"] == want and [t["chose"] for t in doc["trials"]] == [want, want]
-    assert [t["frames"] for t in doc["trials"]] == [auto.round_frames] * 2  # one round each: clear
+    assert [t["frames"] for t in doc["trials"]] == [trial] * 2  # one pair each: clear
     assert doc["trials"][0]["scores_ms"] == {"cross": cross_cost, "strips": 1.0}  # settled frames only
-    assert doc["trials"][0]["scored"] == [3, 3]
+    assert doc["trials"][0]["scored"] == [6, 6]
+    # the windows: cross, strips, then strips, cross (mirrored; a window's second frame: cross's
+    # first plan ever has no pieces to learn from yet)
+    assert [p.pieces is not None for p in runs[0][1:trial:auto.window]] == [True, False, False, True]
     for start in (0, cycle):  # the winner holds after each trial
-        held = runs[0][start + auto.round_frames:start + cycle]
+        held = runs[0][start + trial:start + cycle]
         assert all((p.pieces is not None) == (want == "cross") for p in held)
     assert doc["frames"]["cross"] + doc["frames"]["strips"] == len(runs[0])
     for a, b in zip(*runs):
         np.testing.assert_array_equal(a.regions, b.regions)
 
 
-@pytest.mark.parametrize("lead, rounds", [(0.5, 1), (0.01, 3)])
+@pytest.mark.parametrize("lead, rounds", [(0.5, 2), (0.01, 4)])
 def test_auto_ends_a_trial_early_only_on_a_clear_lead(lead, rounds):
     """Noisy times (sd 0.1): strips ahead by ``lead``. A lead of five standard deviations ends
-    the trial after the first round; one far inside the noise runs every round, and the
-    scores say how many frames each candidate was scored on."""
+    the trial after the first mirrored pair of rounds; one far inside the noise runs every
+    round, and the scores say how many frames each candidate was scored on."""
     from multigpu.strategies.auto import Auto
 
     rects, tris = workload(200, seed=12)
     rng = np.random.default_rng(3)
     time_of = lambda p: np.full(4, (1.0 + lead if p.pieces is not None else 1.0) + 0.1 * rng.standard_normal())
-    auto = Auto((2, 2), (128, 128), 64, window=6, settle=1, rounds=3, hold=5)
+    auto = Auto((2, 2), (128, 128), 64, window=6, settle=1, rounds=4, hold=5)
     simulate(auto, rects, tris, time_of, frames=auto.trial_frames + 1)
     t = auto.report()["trials"][0]
     assert t["frames"] == rounds * auto.round_frames and t["scored"] == [5 * rounds] * 2
-    if rounds == 1:
+    if rounds == 2:
         assert t["chose"] == "strips"
+
+
+@pytest.mark.parametrize("trend, ahead", [(0.01, "strips"), (-0.01, "cross")])
+def test_auto_trials_are_fair_to_both_candidates_on_a_moving_path(trend, ahead):
+    """Every frame costs ``trend`` more than the last (the camera turning towards or away from
+    the heavy part of a scene), and ``ahead`` is faster by less than the trend adds between two
+    windows: scored in mirrored rounds the trend costs both the same and ``ahead`` wins (in plain
+    alternation, cross going first, a rising trend would favour cross and a falling one strips)."""
+    from multigpu.strategies.auto import Auto
+
+    rects, tris = workload(200, seed=13)
+    frame = [0]
+
+    def time_of(p):
+        frame[0] += 1
+        faster = (p.pieces is None) == (ahead == "strips")
+        return np.full(4, 2.0 + trend * frame[0] - (0.02 if faster else 0.0))
+
+    auto = Auto((2, 2), (128, 128), 64, window=4, settle=1, rounds=2, hold=5)
+    simulate(auto, rects, tris, time_of, frames=auto.trial_frames + 1)
+    t = auto.report()["trials"][0]
+    other = "cross" if ahead == "strips" else "strips"
+    assert t["chose"] == ahead and t["scores_ms"][ahead] < t["scores_ms"][other]
 
 
 def test_auto_picks_cross_where_a_cost_hides_from_triangle_counts():

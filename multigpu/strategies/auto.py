@@ -6,12 +6,15 @@ objects, where cross's extra pieces draw objects twice. ``auto`` runs a short tr
 ``window`` frames, the candidates alternating, up to ``rounds`` windows each), scores each
 candidate by the mean slowest-rank render time of its frames (the first ``settle`` frames of a
 window not counted: a time-feedback strategy settling after a switch), and plans with the winner
-for ``hold`` frames before trying again. The trial ends early, after any whole round, once the
-best candidate is ahead of every other by ``z`` standard errors of the difference of means: the
-frames planned by a clear loser are what a trial costs (a wrong early call needs a difference
-small against the noise, which is a small loss). Only one candidate plans a frame, so balancing costs what
-the chosen one costs; every candidate learns from every frame's times, so none goes cold.
-Every rank sees the same gathered times, so every rank decides alike.
+for ``hold`` frames before trying again. Rounds run in mirrored pairs (A B, then B A): the camera
+keeps moving during a trial, and a scene growing heavier along the path would otherwise always
+favour the candidate that goes first; over a pair a linear trend costs both the same. The trial
+ends early, after any whole pair, once the best candidate is ahead of every other by ``z``
+standard errors of the difference of means: the frames planned by a clear loser are what a
+trial costs (a wrong early call needs a difference small against the noise, which is a small
+loss). Only one candidate plans a frame, so balancing costs what the chosen one costs; every
+candidate learns from every frame's times, so none goes cold. Every rank sees the same gathered
+times, so every rank decides alike.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ class Auto(Configured):
 
     window: int = 8  # frames per trial window
     settle: int = 2  # first frames of a window not scored
-    rounds: int = 3  # most windows per candidate per trial
+    rounds: int = 4  # most windows per candidate per trial (rounds run in mirrored pairs)
     hold: int = 200  # frames the winner plans between trials
     z: float = 2.5  # a trial ends after a round once the best leads by this many standard errors
 
@@ -60,19 +63,27 @@ class Auto(Configured):
     def round_frames(self) -> int:
         return self.window * len(self.candidates)
 
+    def _window(self, step: int) -> tuple[int, bool]:
+        """The candidate planning trial step ``step`` and whether the frame is scored: rounds
+        in mirrored pairs (even rounds in candidate order, odd rounds reversed)."""
+        k = len(self.candidates)
+        at = (step % self.round_frames) // self.window
+        i = at if (step // self.round_frames) % 2 == 0 else k - 1 - at
+        return i, step % self.window >= self.settle
+
     @property
     def trial_frames(self) -> int:
         """The longest a trial runs (``rounds`` whole rounds)."""
         return self.round_frames * self.rounds
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
-        if self._trial_end is None and self._step and self._step % self.round_frames == 0 and (
-                self._step >= self.trial_frames or self._clear()):
+        pair = 2 * self.round_frames  # a trial ends early only after whole mirrored pairs
+        if self._trial_end is None and self._step and (self._step >= self.trial_frames or (
+                self._step % pair == 0 and self._clear())):
             self._decide()
             self._trial_end = self._step
         if self._trial_end is None:
-            i, pos = (self._step // self.window) % len(self.candidates), self._step % self.window
-            scored = pos >= self.settle
+            i, scored = self._window(self._step)
         else:
             i, scored = self.chosen, False
         part = self.candidates[i].plan(rects, tris, coverage)
