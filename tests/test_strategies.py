@@ -226,6 +226,9 @@ def test_auto_keeps_the_candidate_whose_frames_were_faster_and_checks_again(cros
     # the windows: cross, strips, then strips, cross (mirrored; a window's second frame: cross's
     # first plan ever has no pieces to learn from yet)
     assert [p.pieces is not None for p in runs[0][1:trial:auto.window]] == [True, False, False, True]
+    # a re-check starts with the candidate in use: cross, strips, strips, cross only if cross won
+    again = [p.pieces is not None for p in runs[0][cycle + 1:cycle + trial:auto.window]]
+    assert again == ([True, False, False, True] if want == "cross" else [False, True, True, False])
     for start in (0, cycle):  # the winner holds after each trial
         held = runs[0][start + trial:start + cycle]
         assert all((p.pieces is not None) == (want == "cross") for p in held)

@@ -6,9 +6,10 @@ objects, where cross's extra pieces draw objects twice. ``auto`` runs a short tr
 ``window`` frames, the candidates alternating, up to ``rounds`` windows each), scores each
 candidate by the mean slowest-rank render time of its frames (the first ``settle`` frames of a
 window not counted: a time-feedback strategy settling after a switch), and plans with the winner
-for ``hold`` frames before trying again. Rounds run in mirrored pairs (A B, then B A): the camera
-keeps moving during a trial, and a scene growing heavier along the path would otherwise always
-favour the candidate that goes first; over a pair a linear trend costs both the same. The trial
+for ``hold`` frames before trying again. Rounds run in mirrored pairs (A B, then B A, A the
+candidate in use): the camera keeps moving during a trial, and a scene growing heavier along the
+path would otherwise always favour the candidate that goes first; over a pair a linear trend
+costs both the same. The trial
 ends early, after any whole pair, once the best candidate is ahead of every other by ``z``
 standard errors of the difference of means: the frames planned by a clear loser are what a
 trial costs (a wrong early call needs a difference small against the noise, which is a small
@@ -65,11 +66,13 @@ class Auto(Configured):
 
     def _window(self, step: int) -> tuple[int, bool]:
         """The candidate planning trial step ``step`` and whether the frame is scored: rounds
-        in mirrored pairs (even rounds in candidate order, odd rounds reversed)."""
+        in mirrored pairs (even rounds in order, odd rounds reversed), the order starting with
+        the candidate in use, so a trial that confirms it has switched only for the windows
+        the others needed."""
         k = len(self.candidates)
         at = (step % self.round_frames) // self.window
-        i = at if (step // self.round_frames) % 2 == 0 else k - 1 - at
-        return i, step % self.window >= self.settle
+        at = at if (step // self.round_frames) % 2 == 0 else k - 1 - at
+        return (self.chosen + at) % k, step % self.window >= self.settle
 
     @property
     def trial_frames(self) -> int:
