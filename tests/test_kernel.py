@@ -274,3 +274,32 @@ def test_compiled_fill_line_equals_fill_prefix(size):
     want, want_total = fill_prefix(task, spans, density)
     got, got_total = _fill_line(task.idx, spans, density, reg, task.axis, task.a, task.b, task.cuts)
     assert np.array_equal(got, want) and got_total == want_total
+
+
+# -- the cost model's least-squares fit (core/kernel/fit.py) against its numpy predecessor
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(4, 120), pixels=st.booleans(), has_tris=st.booleans(),
+       noise=st.sampled_from([0.0, 1e-6, 0.01, 0.5]))
+def test_compiled_fit_keeps_the_terms_and_coefficients_of_numpys(seed, rows, pixels, has_tris, noise):
+    """Random samples (a pixel term or not, triangles or none, noise from none to large): the
+    compiled fit and its uncompiled self agree bit for bit; against numpy's inverse-based fit
+    the same terms are kept and the coefficients agree to rounding; a singular system (no
+    triangles, no pixels) is solved by numpy's pseudo-inverse as before."""
+    from multigpu.strategies.cost import CostModel
+
+    rng = np.random.default_rng(seed)
+    tri = rng.uniform(0, 1e5, rows) * has_tris
+    px = rng.uniform(0, 3e5, rows) * (rng.random() < 0.8)
+    y = 1e-4 * tri + (2e-6 * px if pixels else 0.0) + 0.5 + rng.normal(0, noise, rows) if noise else \
+        1e-4 * tri + (2e-6 * px if pixels else 0.0) + 0.5
+    data = np.column_stack([tri, px, y])
+    fitted = []
+    for how in ("compiled", "plain", "numpy"):
+        m = CostModel((2, 2), (64, 64), 8, compiled=how == "compiled")
+        m._fit_numpy(data) if how == "numpy" else m._fit(data)
+        fitted.append(m)
+    a, b, ref = fitted
+    assert np.array_equal(a.coef, b.coef) and a.kept == b.kept and a.why == b.why
+    assert a.kept == ref.kept
+    np.testing.assert_allclose(a.coef, ref.coef, rtol=1e-6, atol=1e-12)

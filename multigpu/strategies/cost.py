@@ -8,8 +8,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from multigpu.core import kernel
 from multigpu.core.balance import Partition, partition
+from multigpu.core.kernel.fit import fit_terms
 from multigpu.strategies.base import Configured, coverage_of, rank_pixels
+
+TERMS = ("triangles", "pixels")  # the fitted terms, in the order of ``fit_terms``' output
 
 
 @dataclass
@@ -67,6 +71,22 @@ class CostModel(Configured):
         self.history.append(tuple(self.kept))
 
     def _fit(self, data: np.ndarray) -> None:
+        """The fit of ``core/kernel/fit.py`` (compiled, or its plain-Python self: the same
+        coefficients), blended into the current ones; numpy's where the system is singular."""
+        fit = fit_terms if kernel.use(self.compiled) else getattr(fit_terms, "py_func", fit_terms)
+        out = np.empty(10)
+        if not fit(np.ascontiguousarray(data, dtype=np.float64), float(self.min_share), float(self.max_rel_se), out):
+            return self._fit_numpy(data)
+        b_tri, b_px, b_c, *_, code = out.tolist()
+        terms = [t for i, t in enumerate(TERMS) if int(code) >> i & 1]
+        verdicts = {t: (out[7 + i] == 1.0, float(out[3 + i]), float(out[5 + i])) for i, t in enumerate(TERMS)
+                    if t in terms}
+        new = np.array([max(b_tri, 0.0) if "triangles" in terms else 0.0,
+                        max(b_px, 0.0) if "pixels" in terms else 0.0, b_c])
+        self._update(new, terms, verdicts)
+
+    def _fit_numpy(self, data: np.ndarray) -> None:
+        """The same fit in numpy, with the pseudo-inverse where the normal equations are singular."""
         y = data[:, 2]
         full = np.column_stack([data[:, 0], data[:, 1], np.ones_like(y)])  # triangles, pixels, 1
         scale = np.maximum(np.abs(full).max(axis=0), 1e-300)
@@ -102,6 +122,11 @@ class CostModel(Configured):
         for i, t in enumerate(terms):
             new[0 if t == "triangles" else 1] = max(beta[i], 0.0)
         new[2] = beta[-1]
+        self._update(new, terms, verdicts)
+
+    def _update(self, new: np.ndarray, terms: list[str], verdicts: dict) -> None:
+        """Blend the fitted coefficients ``new`` into the current ones; keep ``terms`` if the
+        first passed its tests (``verdicts``: term -> (passed, share, rel. s.e.))."""
         if new[0] <= 0 and new[1] <= 0:  # nothing explains the time: stay on triangles
             new[0] = 1.0
         self.coef = (1 - self.damping) * self.coef + self.damping * new

@@ -7,11 +7,12 @@ make hundreds of C-level calls.
   arrays, prefix/postfix sums, the split nearest balRatio; the cost model's fill term too), T'
   masks and loads;
 * ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks;
-* ``draws.py``: a rank's mask to run-merged draw commands.
+* ``draws.py``: a rank's mask to run-merged draw commands;
+* ``fit.py``: the cost model's least-squares fit and term selection.
 
 Time feedback and the static tiles run the walk with cuts found without objects. Not compiled
-(numpy): the cost model's per-rank pixel features and least-squares fit (``cost``,
-``adaptive``), sphere bounds, and the ``db`` and ``bins`` decompositions.
+(numpy): the cost model's per-rank pixel features (``cost``, ``adaptive``) and ``adaptive``'s
+per-object corrections, sphere bounds, and the ``db`` and ``bins`` decompositions.
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
@@ -118,6 +119,9 @@ def warm() -> float:
     tris = np.array([3, 5, 7], dtype=np.int64)
     cross.observe(0, cross.plan(rects, tris), np.array([1.0, 2.0, 3.0, 4.0]))
     cross.plan(rects, tris)
+    from multigpu.core.kernel.fit import fit_terms
+
+    fit_terms(np.array([[1.0, 2.0, 3.0], [2.0, 1.0, 4.0], [3.0, 3.0, 5.0], [4.0, 1.0, 7.0]]), 0.05, 0.5, np.empty(10))
     from multigpu.core.kernel.draws import _commands
 
     _commands(np.ones(2, dtype=np.bool_), np.arange(2, dtype=np.int64), np.array([0, 3, 6], dtype=np.int64))
