@@ -303,3 +303,24 @@ def test_compiled_fit_keeps_the_terms_and_coefficients_of_numpys(seed, rows, pix
     assert np.array_equal(a.coef, b.coef) and a.kept == b.kept and a.why == b.why
     assert a.kept == ref.kept
     np.testing.assert_allclose(a.coef, ref.coef, rtol=1e-6, atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 80), k=st.integers(1, 6), weightings=st.sampled_from([0, 1, 2]))
+def test_compiled_rank_pixels_equal_the_reference(seed, n, k, weightings):
+    """The cost model's pixel feature: the same sums, bit for bit, with no coverage, one
+    coverage and two stacked (adaptive's), objects off screen and ranks with nothing visible."""
+    from multigpu.strategies.base import rank_pixels
+
+    rng = np.random.default_rng(seed)
+    lo = rng.uniform(-0.2, 1.0, (n, 2))
+    rects = np.c_[lo, lo + rng.exponential(0.2, (n, 2))]
+    rects[rng.random(n) < 0.1] = np.nan
+    size = (int(rng.integers(1, 300)), int(rng.integers(1, 300)))
+    visible = rng.random((k, n)) < 0.6
+    edges = np.sort(rng.integers(0, size[0] + 1, (k, 2)), axis=1)
+    regions = np.c_[edges[:, 0], np.zeros(k, np.int64), edges[:, 1], np.full(k, size[1])]
+    cov = [None, rng.random(n), rng.random((2, n)) * 3][weightings]
+    got = rank_pixels(rects, visible, regions, size, cov, compiled=True)
+    ref = rank_pixels(rects, visible, regions, size, cov, compiled=False)
+    assert got.shape == ref.shape and np.array_equal(got, ref)

@@ -50,7 +50,7 @@ class Adaptive(CostModel):
         vis = p.visible
         loads = vis @ tris.astype(np.int64)
         px, px_corr = rank_pixels(np.asarray(rects, np.float64), vis, p.regions, self.size,
-                                  np.stack([cov, cov * self.corr]), p.spans).T
+                                  np.stack([cov, cov * self.corr]), p.spans, self.compiled).T
         # the fit sees raw features; the correction step, this partition's prediction
         features = {"triangles": loads.astype(np.float64), "pixels": px,
                     "predicted": a * (vis @ (tris * self.corr)) + b * px_corr + c}

@@ -16,7 +16,9 @@ from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
+from multigpu.core import kernel
 from multigpu.core.balance import Partition
+from multigpu.core.kernel.pixels import rank_pixels as _compiled_pixels
 from multigpu.core.regions import pixel_spans
 
 
@@ -67,19 +69,30 @@ def coverage_of(coverage: np.ndarray | None, n: int) -> np.ndarray:
 
 
 def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, size,
-                coverage: np.ndarray | None = None, spans: np.ndarray | None = None) -> np.ndarray:
+                coverage: np.ndarray | None = None, spans: np.ndarray | None = None,
+                compiled: bool | None = None) -> np.ndarray:
     """(K,) pixels each rank fills by the rect estimate: its visible objects' rects clipped to
     its region, times their silhouette ``coverage`` (fraction of the rect, default 1), summed
-    (overlapping objects count once each: depth complexity). A (M, N) ``coverage`` gives (K, M):
-    several weightings of the same clipped areas in one pass. ``spans`` (the partition's) saves
-    recomputing the pixel spans."""
+    in object order (overlapping objects count once each: depth complexity). A (M, N)
+    ``coverage`` gives (K, M): several weightings of the same clipped areas in one pass.
+    ``spans`` (the partition's) saves recomputing the pixel spans. ``compiled`` (None: where
+    numba is installed) runs ``core/kernel/pixels.py``, the same sums bit for bit."""
     sp = pixel_spans(rects, size)[0].T if spans is None else spans  # (4, N) int32, once per frame
     cov = None if coverage is None else np.asarray(coverage, dtype=np.float64)
+    if kernel.use(compiled):
+        weights = np.ones((1, visible.shape[1])) if cov is None else np.atleast_2d(cov)
+        out = np.empty((len(regions), weights.shape[0]))
+        _compiled_pixels(np.ascontiguousarray(sp), visible, np.asarray(regions, dtype=np.int64),
+                        np.ascontiguousarray(weights), out)
+        return out[:, 0] if cov is None or cov.ndim == 1 else out
     out = np.zeros((len(regions),) + (() if cov is None or cov.ndim == 1 else cov.shape[:1]))
     for k, (x0, y0, x1, y1) in enumerate(regions):  # K ranks, not objects
         idx = np.flatnonzero(visible[k])
         w = np.minimum(sp[2].take(idx), x1 - 1) - np.maximum(sp[0].take(idx), x0) + 1
         h = np.minimum(sp[3].take(idx), y1 - 1) - np.maximum(sp[1].take(idx), y0) + 1
         area = np.maximum(w, 0).astype(np.float64) * np.maximum(h, 0)
-        out[k] = area.sum() if cov is None else cov.take(idx, axis=-1) @ area
+        if cov is None:  # whole pixel counts: exact in any order
+            out[k] = area.sum()
+        elif idx.size:  # in object order, as the kernel adds them
+            out[k] = np.cumsum(cov.take(idx, axis=-1) * area, axis=-1)[..., -1]
     return out

@@ -57,7 +57,7 @@ class CostModel(Configured):
                 p = Partition(p.regions, p.visible @ np.asarray(tris, np.int64), p.visible, p.splits, p.split_pixels)
         else:
             p = partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
-        px = rank_pixels(np.asarray(rects, np.float64), p.visible, p.regions, self.size, cov, p.spans)
+        px = rank_pixels(np.asarray(rects, np.float64), p.visible, p.regions, self.size, cov, p.spans, self.compiled)
         return replace(p, features={"triangles": p.loads.astype(np.float64), "pixels": px})
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:

@@ -8,11 +8,12 @@ make hundreds of C-level calls.
   masks and loads;
 * ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks;
 * ``draws.py``: a rank's mask to run-merged draw commands;
-* ``fit.py``: the cost model's least-squares fit and term selection.
+* ``fit.py``: the cost model's least-squares fit and term selection;
+* ``pixels.py``: the cost model's per-rank pixel feature.
 
 Time feedback and the static tiles run the walk with cuts found without objects. Not compiled
-(numpy): the cost model's per-rank pixel features (``cost``, ``adaptive``) and ``adaptive``'s
-per-object corrections, sphere bounds, and the ``db`` and ``bins`` decompositions.
+(numpy): ``adaptive``'s per-object corrections, sphere bounds, and the ``db`` and ``bins``
+decompositions.
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
@@ -120,6 +121,10 @@ def warm() -> float:
     cross.observe(0, cross.plan(rects, tris), np.array([1.0, 2.0, 3.0, 4.0]))
     cross.plan(rects, tris)
     from multigpu.core.kernel.fit import fit_terms
+    from multigpu.core.kernel.pixels import rank_pixels
+
+    rank_pixels(np.zeros((4, 2), dtype=np.int32), np.ones((1, 2), dtype=np.bool_), np.array([[0, 0, 4, 4]]),
+                np.ones((1, 2)), np.empty((1, 1)))
 
     fit_terms(np.array([[1.0, 2.0, 3.0], [2.0, 1.0, 4.0], [3.0, 3.0, 5.0], [4.0, 1.0, 7.0]]), 0.05, 0.5, np.empty(10))
     from multigpu.core.kernel.draws import _commands
