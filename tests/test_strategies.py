@@ -278,6 +278,34 @@ def test_auto_trials_are_fair_to_both_candidates_on_a_moving_path(trend, ahead):
     assert t["chose"] == ahead and t["scores_ms"][ahead] < t["scores_ms"][other]
 
 
+@pytest.mark.parametrize("ahead, drop", [("strips", True), ("cross", False)])
+def test_auto_scores_frames_against_their_load_through_a_step(ahead, drop):
+    """Half the scene leaves the view (``drop``) or comes into it during the trial, after the
+    middle windows of a mirrored pair (a step, not a trend: the walkthrough turning a corner).
+    ``ahead`` is 10 % faster at any load, yet by raw mean times the other would win, its frames
+    lying on the light side of the step. Scored against each frame's triangles in view,
+    ``ahead`` wins, with the load slope the times have (1: time proportional to load)."""
+    from multigpu.strategies.auto import Auto
+
+    rects, tris = workload(400, seed=14)
+    half = rects.copy()
+    half[::2] = np.nan  # the half that leaves or enters the view
+    before, after = (rects, half) if drop else (half, rects)
+    # windows: cross 0-3, strips 4-7, strips 8-11, cross 12-15; the step after frame 11
+    auto = Auto((2, 2), (128, 128), 64, window=4, settle=1, rounds=2, hold=5)
+    for f in range(auto.trial_frames + 1):
+        r = before if f < 12 else after
+        p = auto.plan(r, tris)
+        faster = (p.pieces is None) == (ahead == "strips")
+        in_view = tris[~np.isnan(r[:, 0])].sum()
+        auto.observe(f, p, np.full(4, in_view * 1e-3 * (0.9 if faster else 1.0)))
+    t = auto.report()["trials"][0]
+    other = "cross" if ahead == "strips" else "strips"
+    assert t["chose"] == ahead and t["scores_ms"][ahead] < t["scores_ms"][other]
+    assert t["load_slope"] == pytest.approx(1.0, abs=1e-6)
+    assert t["frames"] == 2 * auto.round_frames  # no noise: clear after the first pair
+
+
 def test_auto_picks_cross_where_a_cost_hides_from_triangle_counts():
     """Objects in one corner cost 5x per triangle: strips, balancing triangles, leaves that
     rank slow; cross follows the measured times, and auto settles on it."""

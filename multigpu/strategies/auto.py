@@ -3,19 +3,23 @@
 No single strategy wins everywhere (docs/RESULTS.md, payoff): cross-segment balancing leads on
 scenes of many small objects, the paper's strips on scenes of few large or triangle-bound
 objects, where cross's extra pieces draw objects twice. ``auto`` runs a short trial (windows of
-``window`` frames, the candidates alternating, up to ``rounds`` windows each), scores each
-candidate by the mean slowest-rank render time of its frames (the first ``settle`` frames of a
-window not counted: a time-feedback strategy settling after a switch), and plans with the winner
-for ``hold`` frames before trying again. Rounds run in mirrored pairs (A B, then B A, A the
-candidate in use): the camera keeps moving during a trial, and a scene growing heavier along the
-path would otherwise always favour the candidate that goes first; over a pair a linear trend
-costs both the same. The trial
-ends early, after any whole pair, once the best candidate is ahead of every other by ``z``
-standard errors of the difference of means: the frames planned by a clear loser are what a
-trial costs (a wrong early call needs a difference small against the noise, which is a small
-loss). Only one candidate plans a frame, so balancing costs what the chosen one costs; every
-candidate learns from every frame's times, so none goes cold. Every rank sees the same gathered
-times, so every rank decides alike.
+``window`` frames, the candidates alternating, up to ``rounds`` windows each), plans with the
+winner for ``hold`` frames, then tries again. The first ``settle`` frames of a window are not
+scored (a time-feedback strategy settling after a switch).
+
+Scoring. The camera keeps moving during a trial, so a frame's time says as much about where the
+camera looks as about who planned it. Each scored frame's slowest-rank render time ``y`` is
+therefore compared through its load ``x``, the triangles of every object in view (the same for
+every candidate: it comes from the projected rects, before any partition): least squares of
+``log y = a_candidate + b log(1 + x)`` over the trial's frames. ``a`` is a candidate's time at a
+common load; the one with the lowest wins. ``b`` is dropped (plain mean log times) where the
+loads do not vary or the fit gives a slope no renderer has (outside 0..2). Rounds also run in
+mirrored pairs (A B, then B A, A the candidate in use), so a trend the load does not explain
+costs both the same over a pair. The trial ends early, after any whole pair, once the best
+candidate is ahead of every other by ``z`` standard errors of the difference: the frames planned
+by a clear loser are what a trial costs. Only one candidate plans a frame, so balancing costs
+what the chosen one costs; every candidate learns from every frame's times, so none goes cold.
+Every rank sees the same gathered times and rects, so every rank decides alike.
 """
 
 from __future__ import annotations
@@ -55,8 +59,8 @@ class Auto(Configured):
         self.chosen = 0  # cross until a trial says otherwise
         self._step = 0  # plans made in the current cycle (trial, then hold)
         self._trial_end: int | None = None  # the step the current trial ended at (None: trialling)
-        self._made: deque = deque(maxlen=16)  # (partition, candidate, scored) of recent plans
-        self._scores: list[list[float]] = [[] for _ in self.candidates]
+        self._made: deque = deque(maxlen=16)  # (partition, candidate, load or None) of recent plans
+        self._scores: list[tuple[int, float, float]] = []  # (candidate, load, slowest time) of scored frames
         self.trials: deque = deque(maxlen=REPORT_TRIALS)
         self.frames = np.zeros(len(self.candidates), dtype=np.int64)  # frames each candidate planned
 
@@ -90,44 +94,89 @@ class Auto(Configured):
         else:
             i, scored = self.chosen, False
         part = self.candidates[i].plan(rects, tris, coverage)
-        self._made.append((part, i, scored))
+        # a scored frame's load: the triangles in view (NaN rects are the unseen objects)
+        load = float(np.sum(tris, where=rects[:, 0] == rects[:, 0])) if scored else None
+        self._made.append((part, i, load))
         self.frames[i] += 1
         self._step += 1
         if self._trial_end is not None and self._step >= self._trial_end + self.hold:
             self._step, self._trial_end = 0, None
         return part
 
+    def effects(self) -> tuple[np.ndarray, np.ndarray, float | None]:
+        """Each candidate's log time at the trial's mean load, their covariance and the load
+        slope (None: dropped) from the scored frames; NaN effects where a candidate has none."""
+        k = len(self.candidates)
+        cand = np.array([c for c, _, _ in self._scores], dtype=np.int64)
+        lx = np.log1p(np.array([x for _, x, _ in self._scores]))
+        ly = np.log(np.maximum(np.array([y for _, _, y in self._scores]), 1e-9))
+        seen = np.bincount(cand, minlength=k) > 0
+        A = np.zeros((len(cand), k + 1))
+        A[np.arange(len(cand)), cand] = 1.0
+        A[:, k] = lx - lx.mean() if len(lx) else 0.0
+        cols = np.flatnonzero(np.r_[seen, True])
+        coef, slope = self._fit(A[:, cols], ly)
+        if slope is None or not 0.0 <= slope <= 2.0:  # no load term (flat loads or an implausible slope)
+            cols = cols[:-1]
+            coef, slope = self._fit(A[:, cols], ly)[0], None
+        effects, cov = np.full(k, np.nan), np.full((k, k), np.inf)
+        m = int(seen.sum())
+        effects[seen] = coef[:m]
+        n, p = A.shape[0], len(cols)
+        if n > p:
+            resid = ly - A[:, cols] @ coef
+            inv = np.linalg.pinv(A[:, cols].T @ A[:, cols])
+            s2 = float(resid @ resid) / (n - p)
+            sel = np.flatnonzero(seen)
+            cov[np.ix_(sel, sel)] = s2 * inv[:m, :m]
+        return effects, cov, slope
+
+    @staticmethod
+    def _fit(A: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float | None]:
+        """Least-squares coefficients and the last one (the load slope) where the design has
+        full rank (None: the loads are confounded or flat)."""
+        coef, _, rank, _ = np.linalg.lstsq(A, y, rcond=None)
+        return coef, (float(coef[-1]) if rank == A.shape[1] else None)
+
     def _clear(self) -> bool:
-        """Whether the best mean scored time leads every other candidate's by ``z`` standard
-        errors of the difference (every candidate with two scores at least)."""
-        if min(len(s) for s in self._scores) < 2:
+        """Whether the best candidate's effect leads every other's by ``z`` standard errors of
+        the difference (every candidate with two scored frames at least)."""
+        counts = np.bincount([c for c, _, _ in self._scores], minlength=len(self.candidates))
+        if counts.min() < 2:
             return False
-        means = np.array([np.mean(s) for s in self._scores])
-        var_n = np.array([np.var(s, ddof=1) / len(s) for s in self._scores])  # squared standard errors
-        best = int(np.argmin(means))
-        others = np.arange(len(means)) != best
-        return bool(np.all(means[others] - means[best] > self.z * np.sqrt(var_n[others] + var_n[best])))
+        eff, cov, _ = self.effects()
+        best = int(np.argmin(eff))
+        for o in range(len(eff)):
+            if o != best:
+                se = np.sqrt(max(cov[o, o] + cov[best, best] - 2 * cov[o, best], 0.0))
+                if not eff[o] - eff[best] > self.z * se:
+                    return False
+        return True
 
     def _decide(self) -> None:
-        """The candidate with the lowest mean scored time (ties and missing scores keep the
-        current choice); the scores start afresh."""
-        means = [float(np.mean(s)) if s else np.inf for s in self._scores]
+        """The candidate with the lowest effect (ties and missing scores keep the current
+        choice); the scores start afresh. The report gives each candidate's time at the
+        trial's mean load (ms)."""
+        eff, _, slope = self.effects() if self._scores else (np.full(len(self.candidates), np.nan), None, None)
+        means = np.where(np.isnan(eff), np.inf, eff)
         best = int(np.argmin(means))
         if means[best] < means[self.chosen]:
             self.chosen = best
-        self.trials.append({"scores_ms": {c.name: round(m, 3) if np.isfinite(m) else None
+        counts = np.bincount([c for c, _, _ in self._scores], minlength=len(self.candidates))
+        self.trials.append({"scores_ms": {c.name: round(float(np.exp(m)), 3) if np.isfinite(m) else None
                                           for c, m in zip(self.candidates, means)},
+                            "load_slope": None if slope is None else round(slope, 3),
                             "chose": self.candidates[self.chosen].name, "frames": self._step,
-                            "scored": [len(s) for s in self._scores]})
-        self._scores = [[] for _ in self.candidates]
+                            "scored": counts.tolist()})
+        self._scores = []
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         for c in self.candidates:  # every candidate learns from every frame
             c.observe(frame, partition, times)
-        for n, (part, i, scored) in enumerate(self._made):
+        for n, (part, i, load) in enumerate(self._made):
             if part is partition:
-                if scored:
-                    self._scores[i].append(float(np.max(times)))
+                if load is not None:
+                    self._scores.append((i, load, float(np.max(times))))
                 for _ in range(n + 1):  # it and older plans (never observed now): their masks go
                     self._made.popleft()
                 break
