@@ -101,6 +101,27 @@ def test_compiled_projection_equals_the_reference(data, n, s, dtype, near, fov):
     same_rects(centre - h * s, centre + h * s, view, proj, dtype)
 
 
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 30))
+def test_compiled_clip_matrix_and_rects_under_dense_matrices(seed, n):
+    """A camera's matrices are sparse (two terms per entry of proj @ view: any order adds them
+    alike); under dense ones the kernel's proj @ view must still add its four products in the
+    reference's order, so the rects stay equal bit for bit."""
+    from multigpu.core.box_tables import clip_matrix
+    from multigpu.core.camera import look_at, perspective
+    from multigpu.core.kernel.project import _clip_matrix
+
+    rng = np.random.default_rng(seed)
+    mix = np.eye(4) + rng.uniform(-0.3, 0.3, (4, 4))  # a dense clip-space map
+    view = look_at([0, -6, 1], [0, 0, 0], [0, 0, 1]) + rng.uniform(-1e-3, 1e-3, (4, 4))
+    proj = mix @ perspective(60, 1.0, 0.1, 100)
+    np.testing.assert_array_equal(_clip_matrix(proj, view), clip_matrix(proj, view))
+    np.testing.assert_allclose(clip_matrix(proj, view), proj @ view, rtol=1e-12, atol=1e-15)
+    c = rng.uniform(-3, 3, (n, 3))
+    h = rng.uniform(0, 1, (n, 3))
+    same_rects(c - h, c + h, view, proj, np.float64)
+
+
 def test_compiled_projection_on_a_walkthrough():
     from multigpu.core.camera import frame_matrices
     from multigpu.scene.models import SceneSpec, load_scene

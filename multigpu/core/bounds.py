@@ -21,11 +21,11 @@ import math
 
 import numpy as np
 
-# corner sign patterns of a box, (8, 3)
-_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
-# the 12 edges as pairs of corner indices (corners differing in exactly one sign)
-_EDGES = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)
-                   if np.count_nonzero(_SIGNS[i] != _SIGNS[j]) == 1])
+from multigpu.core.box_tables import EDGES as _EDGES
+from multigpu.core.box_tables import FACES as _FACES
+from multigpu.core.box_tables import NEXT as _NEXT
+from multigpu.core.box_tables import SIGNS as _SIGNS
+from multigpu.core.box_tables import clip_matrix
 
 
 def _check(view, proj) -> np.ndarray:
@@ -38,19 +38,19 @@ def _check(view, proj) -> np.ndarray:
         raise ValueError("view and projection must be 4x4 matrices")
     if not math.isfinite(view.sum() + proj.sum()):
         raise ValueError("view and projection matrices must be finite")
-    return proj @ view
+    return clip_matrix(proj, view)
 
 
-def _product(view, proj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """view and proj as float64 arrays (refused unless 4x4) and proj @ view, with as few numpy
-    calls as can be: every frame pays each one's cold-cache cost. Entries are not tested."""
+def _as_matrices(view, proj) -> tuple[np.ndarray, np.ndarray]:
+    """view and proj as float64 arrays, refused unless 4x4, with as few numpy calls as can be:
+    every frame pays each one's cold-cache cost. Entries are not tested (the kernel does)."""
     if view.__class__ is not np.ndarray or view.dtype != np.float64:
         view = np.asarray(view, dtype=np.float64)
     if proj.__class__ is not np.ndarray or proj.dtype != np.float64:
         proj = np.asarray(proj, dtype=np.float64)
     if view.shape != (4, 4) or proj.shape != (4, 4):
         raise ValueError("view and projection must be 4x4 matrices")
-    return view, proj, proj @ view
+    return view, proj
 
 
 _SHIFT = np.array([[0.5], [0.5], [0.5], [0.5]])
@@ -115,11 +115,11 @@ class BoxProjector:
         the cost model's estimate of the fragments an object generates per rect pixel.
         """
         n = len(self)
-        if self.compiled:  # the kernel tests the matrices' entries: here just their shapes
-            view, proj, M = _product(view, proj)
+        if self.compiled:  # the kernel tests the matrices' entries and forms proj @ view: here just shapes
+            view, proj = _as_matrices(view, proj)
             out = np.empty((4, n))
-            if not self._kernel(self.grouped, self.plain_boxes, self.half, view, proj, M, self.widen, FAR_TOL, _SIGNS,
-                                _EDGES, _FACES, _NEXT, out, coverage, self.plain):
+            if not self._kernel(self.grouped, self.plain_boxes, self.half, view, proj, self.widen, FAR_TOL, out,
+                                coverage, self.plain):
                 raise ValueError("view and projection matrices must be finite")
             return out.T
         M = _check(view, proj)
@@ -129,13 +129,6 @@ class BoxProjector:
             _boxes_block(self.center[:, s:e], self.half[:, s:e], self.half64[:, s:e], M, self.dtype, out[:, s:e],
                          None if coverage is None else coverage[s:e])
         return out.T
-
-
-# the 6 faces of a box as corner cycles (corner k: bit 2 = x, bit 1 = y, bit 0 = z)
-_FACES = np.array([[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4], [1, 3, 7, 5]])
-
-
-_NEXT = np.roll(_FACES, -1, axis=1)  # each face corner's successor around the cycle
 
 
 def _silhouette_fraction(x: np.ndarray, y: np.ndarray, ext) -> np.ndarray:

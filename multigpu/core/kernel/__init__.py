@@ -81,18 +81,16 @@ def _no_splits(k: int) -> tuple[np.ndarray, np.ndarray]:
     return _NO_SPLITS[k]
 
 
-def project_boxes(grouped, plain_boxes, half, view, proj, M, widen, far_tol, signs, edges, faces, nxt, out,
-                  coverage=None, plain: int = -1) -> bool:
+def project_boxes(grouped, plain_boxes, half, view, proj, widen, far_tol, out, coverage=None, plain: int = -1) -> bool:
     """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage;
     ``grouped``: ``project.spatial_groups`` of the boxes (culled a group at a time);
     ``plain_boxes``: (centres, half extents) in object order, used where the groups cull
-    fewer than half the boxes (``plain`` -1; 1: always, 0: never; the same rects). ``M`` is
-    ``proj @ view``; False (nothing written) when ``view`` or ``proj`` has an entry that is
-    not finite."""
+    fewer than half the boxes (``plain`` -1; 1: always, 0: never; the same rects). False
+    (nothing written) when ``view`` or ``proj`` has an entry that is not finite."""
     order, center, half64, starts, gbox = grouped
     cov = _NO_COVERAGE if coverage is None else coverage
-    return _project(center, half, half64, order, starts, gbox, plain_boxes[0], plain_boxes[1], plain, view, proj, M,
-                    widen, far_tol, signs, edges, faces, nxt, out, cov, coverage is not None)
+    return _project(center, half, half64, order, starts, gbox, plain_boxes[0], plain_boxes[1], plain, view, proj,
+                    widen, far_tol, out, cov, coverage is not None)
 
 
 _NO_COVERAGE = np.empty(0)

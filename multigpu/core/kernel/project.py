@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.core.box_tables import EDGES, FACES, NEXT, SIGNS
 from multigpu.core.kernel.jit import compile_all
 
 
@@ -256,8 +257,18 @@ def _finite(a):
     return True
 
 
-def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, view, proj, M, widen, far_tol,
-             signs, edges, faces, nxt, out, cov, with_cov):
+def _clip_matrix(proj, view):
+    """``proj @ view``, each entry's four products added left to right (``box_tables.clip_matrix``)."""
+    M = np.empty((4, 4))
+    for i in range(4):
+        for j in range(4):
+            M[i, j] = (proj[i, 0] * view[0, j] + proj[i, 1] * view[1, j] + proj[i, 2] * view[2, j]
+                       + proj[i, 3] * view[3, j])
+    return M
+
+
+def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, view, proj, widen, far_tol, out, cov,
+             with_cov):
     """Rects (4, N) into ``out`` (NaN: culled or off screen) and, ``with_cov``, silhouette
     coverage into ``cov``. The boxes come in a spatial order (``order[j]``: the object at sorted
     position j; ``center``/``half64`` sorted), in groups of neighbours (``groups``: G+1 starts,
@@ -267,10 +278,13 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
     instead (``pcenter``/``phalf64``: unsorted): no gathering, and the rects written in
     sequence rather than scattered at random (at 10^6 boxes the scatter alone costs ~8 ms).
     The rects are the same either way: a group's test only culls boxes their own tests cull.
-    ``M``: ``proj @ view``. False, with nothing written, when ``view`` or ``proj`` is not
-    finite (the caller refuses them), else True."""
+    The box tables (``box_tables``) are compile-time constants, not arguments. False, with
+    nothing written, when ``view`` or ``proj`` is not finite (the caller refuses them), else
+    True."""
     if not (_finite(view) and _finite(proj)):
         return False
+    M = _clip_matrix(proj, view)
+    signs, edges, faces, nxt = SIGNS, EDGES, FACES, NEXT
     Mc, reach_rows = _frame_rows(M, half)
     c_lo, c_hi = 0.5 + widen * -0.5, 0.5 + widen * 0.5
     cc = np.empty(4)
@@ -330,5 +344,5 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
     return True
 
 
-compile_all(globals(), ("_finite", "_clip_block", "_corners", "_face", "_coverage", "_write", "_clipped", "_block",
-                         "_group_out", "_frame_rows", "_project"))
+compile_all(globals(), ("_finite", "_clip_matrix", "_clip_block", "_corners", "_face", "_coverage", "_write",
+                         "_clipped", "_block", "_group_out", "_frame_rows", "_project"))
