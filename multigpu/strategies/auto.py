@@ -110,7 +110,7 @@ class Auto(Configured):
         cand = np.array([c for c, _, _ in self._scores], dtype=np.int64)
         lx = np.log1p(np.array([x for _, x, _ in self._scores]))
         ly = np.log(np.maximum(np.array([y for _, _, y in self._scores]), 1e-9))
-        seen = np.bincount(cand, minlength=k) > 0
+        seen = self._counts() > 0
         A = np.zeros((len(cand), k + 1))
         A[np.arange(len(cand)), cand] = 1.0
         A[:, k] = lx - lx.mean() if len(lx) else 0.0
@@ -131,6 +131,10 @@ class Auto(Configured):
             cov[np.ix_(sel, sel)] = s2 * inv[:m, :m]
         return effects, cov, slope
 
+    def _counts(self) -> np.ndarray:
+        """Scored frames per candidate in the current trial."""
+        return np.bincount([c for c, _, _ in self._scores], minlength=len(self.candidates))
+
     @staticmethod
     def _fit(A: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float | None]:
         """Least-squares coefficients and the last one (the load slope) where the design has
@@ -141,8 +145,7 @@ class Auto(Configured):
     def _clear(self) -> bool:
         """Whether the best candidate's effect leads every other's by ``z`` standard errors of
         the difference (every candidate with two scored frames at least)."""
-        counts = np.bincount([c for c, _, _ in self._scores], minlength=len(self.candidates))
-        if counts.min() < 2:
+        if self._counts().min() < 2:
             return False
         eff, cov, _ = self.effects()
         best = int(np.argmin(eff))
@@ -162,12 +165,11 @@ class Auto(Configured):
         best = int(np.argmin(means))
         if means[best] < means[self.chosen]:
             self.chosen = best
-        counts = np.bincount([c for c, _, _ in self._scores], minlength=len(self.candidates))
         self.trials.append({"scores_ms": {c.name: round(float(np.exp(m)), 3) if np.isfinite(m) else None
                                           for c, m in zip(self.candidates, means)},
                             "load_slope": None if slope is None else round(slope, 3),
                             "chose": self.candidates[self.chosen].name, "frames": self._step,
-                            "scored": counts.tolist()})
+                            "scored": self._counts().tolist()})
         self._scores = []
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
