@@ -42,7 +42,8 @@ def _spans(rt, W, H, tris, axis, table, s, e):
     (4, N), which rects are on screen, the on-screen objects in order, and what
     ``balance.validate_inputs`` checks per object, made in this pass instead of numpy ones:
     whether any row is inverted (xmin > xmax or ymin > ymax), any weight is not finite or
-    negative, and the weights' total (uint64, wrapping as numpy's sum does). Where ``table`` is
+    negative, and the weights' total (uint64, wrapping as numpy's sum does); an empty ``tris``
+    (no weights: cross-segment masks) skips the weight checks and needs an empty ``table``. Where ``table`` is
     not empty, the same pass also adds each on-screen object's ``tris`` to the Start/End
     arrays ``s``/``e`` at the strips ``table`` gives its first and last pixel along ``axis``
     (the root node's, in the walk's order: the same sums), so the root's objects are not read
@@ -56,14 +57,16 @@ def _spans(rt, W, H, tris, axis, table, s, e):
     not_finite = negative = False
     total = np.uint64(0)
     fused = table.shape[0] > 0
+    weighed = tris.shape[0] > 0
     for i in range(n):
-        w = tris[i]
-        if w != w or w == np.inf or w == -np.inf:  # float weights only
-            not_finite = True
-        elif w < 0:
-            negative = True
-        if w >= 0 and w < 1.8e19:  # every int64 weight; the total is read for integer weights only
-            total += np.uint64(w)
+        if weighed:
+            w = tris[i]
+            if w != w or w == np.inf or w == -np.inf:  # float weights only
+                not_finite = True
+            elif w < 0:
+                negative = True
+            if w >= 0 and w < 1.8e19:  # every int64 weight; the total is read for integer weights only
+                total += np.uint64(w)
         if rt[0, i] > rt[2, i] or rt[1, i] > rt[3, i]:  # False for NaN rows
             inverted = True
         if rt[2, i] >= 0.0 and rt[0, i] <= 1.0 and rt[3, i] >= 0.0 and rt[1, i] <= 1.0:  # False for NaN rows
