@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from multigpu.core.balance import partition
-from multigpu.core.bounds import BoxProjector, SphereProjector
+from multigpu.core.bounds import BoxProjector
 from multigpu.core.camera import Camera, frame_matrices
 from multigpu.core.regions import overlaps, pixel_spans
+from multigpu.core.spheres import SphereProjector
 from multigpu.core.triangles import triangle_objects, triangle_rects
 from multigpu.errors import InputError
 from multigpu.gpu.render import RegionRenderer, choose_method, create_context

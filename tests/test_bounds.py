@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from multigpu.core.bounds import BoxProjector, SphereProjector, project_boxes, project_spheres
+from multigpu.core.bounds import BoxProjector, project_boxes
 from multigpu.core.camera import look_at, perspective
+from multigpu.core.spheres import SphereProjector, project_spheres
 
 V = look_at([0, -10, 2], [0, 0, 0], [0, 0, 1])
 P = perspective(60, 1.5, 0.1, 100)

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from multigpu.core.balance import partition, partition_tiles
-from multigpu.core.bounds import BoxProjector, SphereProjector
+from multigpu.core.bounds import BoxProjector
 from multigpu.core.camera import look_at, perspective
+from multigpu.core.spheres import SphereProjector
 from multigpu.studies.bench import synthetic_objects
 
 BMIN, BMAX, CENTERS, RADII, TRIS = synthetic_objects(3000, seed=9)

@@ -101,6 +101,41 @@ def test_compiled_projection_equals_the_reference(data, n, s, dtype, near, fov):
     same_rects(centre - h * s, centre + h * s, view, proj, dtype)
 
 
+@settings(max_examples=150, deadline=None)
+@given(data=st.data(), n=st.integers(0, 30), s=scale, shift=st.sampled_from([0.0, 1e7]),
+       along_up=st.booleans(), fov=st.floats(5.0, 150.0), size=st.tuples(st.integers(1, 4000), st.integers(1, 4000)))
+def test_compiled_frame_forms_the_reference_matrices_and_rects(data, n, s, shift, along_up, fov, size):
+    """``BoxProjector.frame`` compiled (the camera's matrices formed inside the projection
+    kernel) against the reference's ``frame_matrices`` and numpy projection: view, projection,
+    light, rects and coverage bit for bit; integer coordinates, a camera looking along its up
+    vector, and a position on its target (refused alike)."""
+    from multigpu.core.bounds import BoxProjector
+    from multigpu.core.camera import Camera, look_at, perspective
+
+    f = st.floats(-3.0, 3.0, allow_nan=False)
+    c = np.array(data.draw(st.lists(st.tuples(f, f, f), min_size=n, max_size=n)), dtype=np.float64).reshape(-1, 3)
+    h = np.abs(np.array(data.draw(st.lists(st.tuples(f, f, f), min_size=n, max_size=n)), dtype=np.float64)
+               ).reshape(-1, 3)
+    eye = tuple(float(v) * s + shift for v in data.draw(st.tuples(f, f, f)))
+    up = data.draw(st.sampled_from([(0, 0, 1), (0, 1, 0), (0.3, -2.0, 0.7)]))
+    step = tuple(2.0 * s * u for u in up) if along_up else \
+        tuple(float(v) * s + 1e-3 * s for v in data.draw(st.tuples(f, f, f)))
+    camera = Camera(eye, tuple(e + d for e, d in zip(eye, step)), up, fov, 0.1 * s, 1e3 * s)
+    boxes = (np.array(eye) + c * s - h * s, np.array(eye) + c * s + h * s)
+    ref_cov, got_cov = np.full(n, -1.0), np.full(n, -2.0)
+    ref = BoxProjector(*boxes, compiled=False).frame(camera, size, ref_cov)
+    got = BoxProjector(*boxes, compiled=True).frame(camera, size, got_cov)
+    for a, b in zip(ref, got):
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
+    assert np.array_equal(ref_cov, got_cov)
+    assert np.array_equal(ref[0], look_at(camera.position, camera.target, camera.up))
+    assert np.array_equal(ref[1], perspective(fov, size[0] / size[1], camera.near, camera.far))
+    on_target = Camera(eye, eye, (0, 0, 1), fov, 0.1 * s, 1e3 * s)
+    for compiled in (False, True):
+        with pytest.raises(ValueError, match="camera position and target coincide"):
+            BoxProjector(*boxes, compiled=compiled).frame(on_target, size)
+
+
 @settings(max_examples=100, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 30))
 def test_compiled_clip_matrix_and_rects_under_dense_matrices(seed, n):

@@ -28,20 +28,27 @@ class Camera:
 
 def look_at(eye, target, up) -> np.ndarray:
     """World-to-view matrix; the camera looks down -z with +y up."""
-    return np.array(_look_at_rows(eye, target, up))
+    return _frame(eye, target, up, 60.0, 1.0, 2.0, 1.0)[0].copy()
 
 
-def _look_at_rows(eye, target, up) -> list[list[float]]:
-    """``look_at`` as rows of Python floats. Scalar float arithmetic: it runs once per frame,
-    where numpy's per-call overhead (cross, norm) would cost tens of microseconds for nine
-    products."""
-    ex, ey, ez = (float(v) for v in eye)
-    fx, fy, fz = float(target[0]) - ex, float(target[1]) - ey, float(target[2]) - ez
+def perspective(fov_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """Symmetric GL perspective projection (vertical fov in degrees)."""
+    return _frame((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0), fov_deg, near, far, aspect)[1].copy()
+
+
+def camera_into(ex, ey, ez, tx, ty, tz, ux, uy, uz, fov_deg, near, far, aspect, out) -> bool:
+    """A camera's view (``out[0]``) and symmetric projection (``out[1]``) matrices, and the light
+    direction (``out[2, 0, :3]``: view^T (0.3, 0.5, 0.8), normalized: towards the viewer,
+    slightly above), written into ``out`` (3, 4, 4) float64, the other entries left as they
+    are. Scalar arithmetic on Python floats, one routine for both paths: here for numpy, and
+    compiled unchanged into the projection kernel (``kernel/project.py``), which forms a frame's
+    matrices and rects in one call; IEEE double either way, so the two agree bit for bit.
+    False (nothing written) where the position and target coincide or are not finite."""
+    fx, fy, fz = tx - ex, ty - ey, tz - ez
     norm = math.sqrt(fx * fx + fy * fy + fz * fz)
     if not math.isfinite(norm) or norm == 0:
-        raise ValueError("camera position and target coincide")
+        return False
     fx, fy, fz = fx / norm, fy / norm, fz / norm
-    ux, uy, uz = (float(v) for v in up)
     sx, sy, sz = fy * uz - fz * uy, fz * ux - fx * uz, fx * uy - fy * ux
     if math.sqrt(sx * sx + sy * sy + sz * sz) < 1e-12:  # looking along up: pick any perpendicular
         ux, uy, uz = (1.0, 0.0, 0.0) if abs(fx) < 0.9 else (0.0, 1.0, 0.0)
@@ -49,21 +56,31 @@ def _look_at_rows(eye, target, up) -> list[list[float]]:
     n = math.sqrt(sx * sx + sy * sy + sz * sz)
     sx, sy, sz = sx / n, sy / n, sz / n
     ux, uy, uz = sy * fz - sz * fy, sz * fx - sx * fz, sx * fy - sy * fx
-    return [[sx, sy, sz, -(sx * ex + sy * ey + sz * ez)],
-            [ux, uy, uz, -(ux * ex + uy * ey + uz * ez)],
-            [-fx, -fy, -fz, fx * ex + fy * ey + fz * ez],
-            [0.0, 0.0, 0.0, 1.0]]
-
-
-def perspective(fov_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
-    """Symmetric GL perspective projection (vertical fov in degrees)."""
-    return np.array(_perspective_rows(fov_deg, aspect, near, far))
-
-
-def _perspective_rows(fov_deg: float, aspect: float, near: float, far: float) -> list[list[float]]:
+    out[0, 0, 0], out[0, 0, 1], out[0, 0, 2], out[0, 0, 3] = sx, sy, sz, -(sx * ex + sy * ey + sz * ez)
+    out[0, 1, 0], out[0, 1, 1], out[0, 1, 2], out[0, 1, 3] = ux, uy, uz, -(ux * ex + uy * ey + uz * ez)
+    out[0, 2, 0], out[0, 2, 1], out[0, 2, 2], out[0, 2, 3] = -fx, -fy, -fz, fx * ex + fy * ey + fz * ez
+    out[0, 3, 0], out[0, 3, 1], out[0, 3, 2], out[0, 3, 3] = 0.0, 0.0, 0.0, 1.0
     t = near * math.tan(math.radians(fov_deg) / 2.0)
     r = t * aspect
-    return _frustum_rows(-r, r, -t, t, near, far)
+    out[1, 0, 0], out[1, 0, 1], out[1, 0, 2], out[1, 0, 3] = 2 * near / (r - -r), 0.0, (r + -r) / (r - -r), 0.0
+    out[1, 1, 0], out[1, 1, 1], out[1, 1, 2], out[1, 1, 3] = 0.0, 2 * near / (t - -t), (t + -t) / (t - -t), 0.0
+    out[1, 2, 0], out[1, 2, 1] = 0.0, 0.0
+    out[1, 2, 2], out[1, 2, 3] = -(far + near) / (far - near), -2 * far * near / (far - near)
+    out[1, 3, 0], out[1, 3, 1], out[1, 3, 2], out[1, 3, 3] = 0.0, 0.0, -1.0, 0.0
+    lx, ly, lz = 0.3 * sx + 0.5 * ux + 0.8 * -fx, 0.3 * sy + 0.5 * uy + 0.8 * -fy, 0.3 * sz + 0.5 * uz + 0.8 * -fz
+    m = math.sqrt(lx * lx + ly * ly + lz * lz)
+    out[2, 0, 0], out[2, 0, 1], out[2, 0, 2] = lx / m, ly / m, lz / m
+    return True
+
+
+def _frame(eye, target, up, fov_deg, near, far, aspect) -> np.ndarray:
+    """``camera_into`` on a fresh (3, 4, 4) array; refuses coinciding position and target."""
+    out = np.zeros((3, 4, 4))
+    if not camera_into(float(eye[0]), float(eye[1]), float(eye[2]), float(target[0]), float(target[1]),
+                       float(target[2]), float(up[0]), float(up[1]), float(up[2]), float(fov_deg), float(near),
+                       float(far), float(aspect), out):
+        raise ValueError("camera position and target coincide")
+    return out
 
 
 def frustum(left: float, right: float, bottom: float, top: float, near: float, far: float) -> np.ndarray:
@@ -99,13 +116,9 @@ def model_view(view: np.ndarray, origin) -> np.ndarray:
     return np.asarray(view, dtype=np.float64) @ t
 
 
-def frame_matrices(camera, size) -> tuple[np.ndarray, np.ndarray, tuple[float, float, float]]:
-    """view, projection (float64; views of one array: one numpy call per frame, not several)
-    and the light direction (towards the viewer, slightly above)."""
+def frame_matrices(camera, size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """view, projection (float64) and the (3,) light direction (towards the viewer, slightly
+    above) of ``camera`` on a ``size`` display: views of one array (``camera_into``)."""
     W, H = size
-    v = _look_at_rows(camera.position, camera.target, camera.up)
-    both = np.array((v, _perspective_rows(camera.fov, W / H, camera.near, camera.far)), dtype=np.float64)
-    (a0, a1, a2, _), (b0, b1, b2, _), (c0, c1, c2, _), _ = v
-    lx, ly, lz = 0.3 * a0 + 0.5 * b0 + 0.8 * c0, 0.3 * a1 + 0.5 * b1 + 0.8 * c1, 0.3 * a2 + 0.5 * b2 + 0.8 * c2
-    n = math.sqrt(lx * lx + ly * ly + lz * lz)  # view^T (0.3, 0.5, 0.8), normalized
-    return both[0], both[1], (lx / n, ly / n, lz / n)
+    out = _frame(camera.position, camera.target, camera.up, camera.fov, camera.near, camera.far, W / H)
+    return out[0], out[1], out[2, 0, :3]

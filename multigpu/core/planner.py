@@ -18,7 +18,6 @@ from typing import Callable
 import numpy as np
 
 from multigpu.core.bounds import make_projector
-from multigpu.core.camera import frame_matrices
 from multigpu.core.work import Work
 from multigpu.decompositions import make_decomposition
 from multigpu.strategies import REGISTRY as STRATEGIES
@@ -55,16 +54,13 @@ class Planner:
         """Plan with strategy ``balances[i]`` from the next frame on."""
         self.using = int(i)
 
-    def matrices(self, camera):
-        """(view, proj, light) of ``camera`` on the canvas."""
-        return frame_matrices(camera, self.canvas.size)
-
-    def rects(self, view: np.ndarray, proj: np.ndarray) -> np.ndarray:
-        """(N, 4) normalized object rects in the visible space (NaN: not seen); the coverage
-        too where the decomposition in use wants it."""
-        if self.decomposition.needs_coverage:
-            return self.canvas.to_visible(self.project(view, proj, self.coverage))
-        return self.canvas.to_visible(self.project(view, proj))
+    def frame(self, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(view, proj, light, rects) of ``camera`` on the canvas: the (N, 4) normalized object
+        rects in the visible space (NaN: not seen), and the coverage too where the
+        decomposition in use wants it. Compiled, matrices and rects come from one kernel call."""
+        cov = self.coverage if self.decomposition.needs_coverage else None
+        view, proj, light, rects = self.project.frame(camera, self.canvas.size, cov)
+        return view, proj, light, self.canvas.to_visible(rects)
 
     def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None) -> Work:
         """Frame ``frame``'s work on the canvas from its visible ``rects``. ``relay`` (screen
@@ -84,8 +80,8 @@ class Planner:
 
     def plan(self, frame: int, camera, relay: Callable | None = None) -> tuple[Work, tuple]:
         """Frame ``frame``'s work and its (view, proj, light)."""
-        view, proj, light = self.matrices(camera)
-        return self.work(frame, self.rects(view, proj), relay), (view, proj, light)
+        view, proj, light, rects = self.frame(camera)
+        return self.work(frame, rects, relay), (view, proj, light)
 
     def observe(self, frame: int, times: np.ndarray) -> None:
         """The measured (K,) per-rank render times of ``frame``, to the decomposition that

@@ -44,8 +44,8 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
     region = (tile // 2, tile // 2, tile // 2 + tile, tile // 2 + tile)  # a tile-sized centre region
     times = np.zeros(frames)
     for f in range(frames):  # frames, not objects
-        view, proj, light = planner.matrices(path.camera(f))
-        spans, onscreen = pixel_spans(planner.rects(view, proj), size)
+        view, proj, light, rects = planner.frame(path.camera(f))
+        spans, onscreen = pixel_spans(rects, size)
         mask = onscreen & overlaps(spans, region)  # the objects a rank rendering the region draws
         comm.Barrier()
         t0 = time.process_time()

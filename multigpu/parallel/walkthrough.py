@@ -18,9 +18,10 @@ import socket
 import numpy as np
 
 from multigpu.config import INTERACTIVE, MONITOR_BESIDE, WalkConfig, setup_timeout
-from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
+from multigpu.core.bounds import BoxProjector, make_projector
 from multigpu.core.camera import frame_matrices
 from multigpu.core.memory import release_heap
+from multigpu.core.spheres import SphereProjector
 from multigpu.errors import InputError, as_flags
 from multigpu.gpu.buffers import ensure_buffers
 from multigpu.parallel.exchange import agree, allgather_text

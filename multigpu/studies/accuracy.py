@@ -24,8 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.core.balance import partition
-from multigpu.core.bounds import BoxProjector, SphereProjector, make_projector
+from multigpu.core.bounds import BoxProjector, make_projector
 from multigpu.core.regions import overlaps, pixel_spans
+from multigpu.core.spheres import SphereProjector
 from multigpu.studies.bench import median_ms
 from multigpu.studies.tables import md_table, write_csv
 

@@ -41,9 +41,10 @@ def synthetic_objects(n: int, seed: int = 0):
 
 def bench_balance(quick: bool) -> list[dict]:
     from multigpu.core.balance import partition
-    from multigpu.core.bounds import BoxProjector, SphereProjector
+    from multigpu.core.bounds import BoxProjector
     from multigpu.core.camera import look_at, perspective
     from multigpu.core.memory import keep_heap
+    from multigpu.core.spheres import SphereProjector
 
     sizes = [10_000, 100_000] if quick else [100_000, 1_000_000]
     view = look_at([-40, -60, 40], [100, 60, 0], [0, 0, 1])

@@ -68,8 +68,7 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
         if f:  # the last frame's (random) times, observed where the frame loop does
             planner.observe(f - 1, 1.0 + rng.random(len(tiles)))
         marks.append(time.process_time())
-        view, proj, _ = planner.matrices(camera)  # in the frame loop's balance phase too
-        rects = planner.rects(view, proj)
+        rects = planner.frame(camera)[3]  # the camera's matrices too, as in the frame loop's balance phase
         marks.append(time.process_time())
         work = planner.work(f, rects)
         marks.append(time.process_time())

@@ -112,6 +112,11 @@ def warm() -> float:
     box = BoxProjector(np.array([[-1.0, -1, -1], [0, -6, 0]]), np.array([[1.0, 1, 1], [1, -4, 2]]), compiled=True)
     box(view, proj)
     box(view, proj, np.empty(2))
+    from multigpu.core.camera import Camera
+
+    camera = Camera((0.0, -5.0, 1.0), (0.0, 0.0, 0.0))
+    box.frame(camera, (64, 48))
+    box.frame(camera, (64, 48), np.empty(2))
     from multigpu.strategies.cross import CrossSegment
 
     cross = CrossSegment((2, 2), (64, 64), 16, compiled=True)

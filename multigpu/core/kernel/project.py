@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from multigpu.core.box_tables import EDGES, FACES, NEXT, SIGNS
+from multigpu.core.camera import camera_into as _camera_into  # compiled here: the frame's matrices in the same call
 from multigpu.core.kernel.jit import compile_all
 
 
@@ -344,5 +345,18 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
     return True
 
 
+def _project_camera(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, ex, ey, ez, tx, ty, tz, ux,
+                    uy, uz, fov, near, far, aspect, widen, far_tol, out, cov, with_cov, frame):
+    """A frame's matrices from its camera (``camera.camera_into`` into ``frame`` (3, 4, 4): view,
+    projection, light) and then ``_project`` with them, in one call: 0, or 1 where the camera's
+    position and target coincide, 2 where the matrices are not finite (nothing projected)."""
+    if not _camera_into(ex, ey, ez, tx, ty, tz, ux, uy, uz, fov, near, far, aspect, frame):
+        return 1
+    ok = _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, frame[0], frame[1], widen,
+                  far_tol, out, cov, with_cov)
+    return 0 if ok else 2
+
+
 compile_all(globals(), ("_finite", "_clip_matrix", "_clip_block", "_corners", "_face", "_coverage", "_write",
-                         "_clipped", "_block", "_group_out", "_frame_rows", "_project"))
+                         "_clipped", "_block", "_group_out", "_frame_rows", "_project", "_camera_into",
+                         "_project_camera"))
