@@ -78,12 +78,12 @@ def validate_inputs(rects, tris, grid, size, strips, rows: bool = True
     own pass over the objects, with the same refusals in the same order."""
     if not (isinstance(grid, (tuple, list)) and len(grid) == 2):
         raise ValueError(f"grid must be (rows, cols), got {grid!r}")
-    n_rows, cols = (int(g) for g in grid)
+    n_rows, cols = int(grid[0]), int(grid[1])
     if n_rows < 1 or cols < 1:
         raise ValueError(f"grid must have at least 1 row and 1 column, got {n_rows}x{cols}")
     if not (isinstance(size, (tuple, list)) and len(size) == 2):
         raise ValueError(f"size must be (W, H), got {size!r}")
-    W, H = (int(s) for s in size)
+    W, H = int(size[0]), int(size[1])
     if W > MAX_PIXELS or H > MAX_PIXELS:
         raise ValueError(f"display {W}x{H} exceeds {MAX_PIXELS} pixels along an axis")
     if W < cols or H < n_rows:

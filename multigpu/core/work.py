@@ -60,9 +60,8 @@ def from_partition(part: Partition, tris: np.ndarray) -> Work:
     """A screen partition as work: one piece per rank, or the partition's own pieces."""
     if part.pieces is not None:  # the partition's loads already count an object once per piece
         return Work(tuple(part.pieces), tuple(part.piece_visible), np.asarray(part.loads), False, part)
-    rects = tuple(part.regions[k:k + 1] for k in range(len(part.regions)))
-    masks = tuple(part.visible[k:k + 1] for k in range(len(part.regions)))
-    return Work(rects, masks, np.asarray(part.loads), False, part)
+    # rank k's (1, 4) rect and (1, N) mask: views, split off by one C-level iteration each
+    return Work(tuple(part.regions[:, None]), tuple(part.visible[:, None]), np.asarray(part.loads), False, part)
 
 
 @dataclass(frozen=True)

@@ -147,7 +147,7 @@ class CrossSegment(Configured):
         if partition.pieces is not None:
             self._pieces = partition.pieces
         else:
-            self._pieces = tuple(partition.regions[r:r + 1] for r in range(len(partition.regions)))
+            self._pieces = tuple(partition.regions[:, None])  # one (1, 4) piece per rank
         self._times = np.asarray(times, dtype=np.float64).copy()
 
     def report(self) -> dict:
