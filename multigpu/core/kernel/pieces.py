@@ -135,7 +135,7 @@ def _masks(rt, tris, W, H, prects, powner, k):
     T' masks, loads (an object drawn in two pieces counts twice) and bounding regions."""
     n = rt.shape[1]
     none = np.empty(0, dtype=np.int64)
-    spans, _, _, members = _spans(rt, W, H, none, 0, none, none, none)  # the strategy validated its rects
+    spans, on, _, _ = _spans(rt, W, H, none, 0, none, none, none)  # the strategy validated its rects
     P = prects.shape[0]
     masks = np.zeros((P, n), dtype=np.bool_)
     visible = np.zeros((k, n), dtype=np.bool_)
@@ -152,9 +152,8 @@ def _masks(rt, tris, W, H, prects, powner, k):
             regions[r, 0], regions[r, 1], regions[r, 2], regions[r, 3] = x0, y0, x1, y1
             seen[r] = True
         total = loads[r]
-        for t in range(members.shape[0]):  # the on-screen objects, in order
-            o = members[t]
-            if spans[0, o] < x1 and spans[2, o] >= x0 and spans[1, o] < y1 and spans[3, o] >= y0:
+        for o in range(n):  # every object, in order: a sequential pass beats gathering the on-screen ones
+            if on[o] and spans[0, o] < x1 and spans[2, o] >= x0 and spans[1, o] < y1 and spans[3, o] >= y0:
                 masks[p, o] = True
                 visible[r, o] = True
                 total += tris[o]
