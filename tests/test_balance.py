@@ -231,25 +231,36 @@ def test_huge_wall_balances_within_int32_spans():
     assert (p.loads == loads).all()
 
 
+def _balancer(tiles: bool, compiled: bool):
+    """The tree walk, or the ``none`` baseline's tiles (the same walk with fixed cuts)."""
+    if tiles:
+        return lambda r, t: partition_tiles(r, t, (2, 2), (64, 64), compiled=compiled)
+    return lambda r, t: partition(r, t, (2, 2), (64, 64), 16, compiled=compiled)
+
+
+@pytest.mark.parametrize("tiles", [False, True])
 @pytest.mark.parametrize("compiled", [False, True])
 @pytest.mark.parametrize("bad", [[0.5, 0.1, 0.4, 0.2], [0.1, 0.6, 0.2, 0.5]])
-def test_an_inverted_rect_is_refused_by_either_path(compiled, bad):
+def test_an_inverted_rect_is_refused_by_either_path(compiled, bad, tiles):
     """The compiled walk checks inverted rows in its own pass over the rects, the numpy
-    reference before it starts: the same refusal, wherever the row is, NaN rows allowed."""
+    reference before it starts: the same refusal, wherever the row is, NaN rows allowed
+    (the balancer and the tiles of ``none`` alike)."""
     from multigpu.core import kernel
 
     if compiled and not kernel.available():
         pytest.skip("numba is not installed")
+    run = _balancer(tiles, compiled)
     rects = np.array([[0.1, 0.1, 0.3, 0.3], [np.nan] * 4, [0.2, 0.2, 0.9, 0.8]] * 50)
     tris = np.arange(1, len(rects) + 1)
-    partition(rects, tris, (2, 2), (64, 64), 16, compiled=compiled)  # NaN rows are unseen, not inverted
+    run(rects, tris)  # NaN rows are unseen, not inverted
     rects[77] = bad
     with pytest.raises(ValueError, match="inverted rows"):
-        partition(rects, tris, (2, 2), (64, 64), 16, compiled=compiled)
+        run(rects, tris)
 
 
+@pytest.mark.parametrize("tiles", [False, True])
 @pytest.mark.parametrize("compiled", [False, True])
-def test_bad_weights_are_refused_by_either_path_in_the_same_order(compiled):
+def test_bad_weights_are_refused_by_either_path_in_the_same_order(compiled, tiles):
     """The compiled walk checks the weights in its pass over the objects, the numpy reference
     before it starts: the same refusal for a weight that is negative or not finite, for a
     total past 2**62, and the weights' refusal before an inverted row's."""
@@ -259,7 +270,7 @@ def test_bad_weights_are_refused_by_either_path_in_the_same_order(compiled):
         pytest.skip("numba is not installed")
     rects = np.array([[0.1, 0.1, 0.3, 0.3], [np.nan] * 4, [0.2, 0.2, 0.9, 0.8]] * 20)
     n = len(rects)
-    run = lambda r, t: partition(r, t, (2, 2), (64, 64), 16, compiled=compiled)
+    run = _balancer(tiles, compiled)
     run(rects, np.arange(n))
     cases = [(np.r_[np.ones(n - 1), np.nan], "must be finite"), (np.r_[np.ones(n - 1), -np.inf], "must be finite"),
              (np.r_[np.arange(n - 1), -1], "non-negative"), (np.r_[np.ones(n - 1), -0.5], "non-negative"),

@@ -13,6 +13,7 @@ Integer weights (triangle counts) are summed exactly in int64 up to a total of 2
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -248,14 +249,15 @@ def partition_tiles(rects, tris, grid, size, compiled: bool | None = None) -> Pa
     are the tile boundaries in p-pos form. Compiled (``compiled`` as in ``partition``): the
     tree walk with the tile boundaries as its cuts, the same partition.
     """
-    rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, 2)
+    from multigpu.core import kernel
+
+    compiled = kernel.use(compiled)  # compiled, the walk makes the per-object checks in its own pass
+    rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, 2, rows=not compiled)
     rows, cols = tree.rows, tree.cols
     if W % cols or H % rows:
         raise ValueError(f"display {W}x{H} does not divide into {rows}x{cols} equal tiles")
-    from multigpu.core import kernel
-
-    if kernel.use(compiled):
-        return Partition(*kernel.strip_partition(rects, tris, tree, (W, H), 2, _tile_splits(tree, W, H)[1]))
+    if compiled:
+        return Partition(*kernel.strip_partition(rects, tris, tree, (W, H), 2, _tile_splits(rows, cols, W, H)[1]))
     regions = tile_regions(rows, cols, W // cols, H // rows)
     spans, onscreen = pixel_spans(rects, (W, H))
     K = tree.size
@@ -266,11 +268,15 @@ def partition_tiles(rects, tris, grid, size, compiled: bool | None = None) -> Pa
         idx = on[overlaps(spans[on], regions[k])]
         visible[k, idx] = True
         loads[k] = tris[idx].sum()
-    splits, split_pixels = _tile_splits(tree, W, H)
+    splits, split_pixels = _tile_splits(rows, cols, W, H)
     return Partition(regions, loads, visible, splits, split_pixels, np.ascontiguousarray(spans.T))
 
 
-def _tile_splits(tree: GpuTree, W: int, H: int) -> tuple[np.ndarray, np.ndarray]:
+@functools.lru_cache(maxsize=64)
+def _tile_splits(rows: int, cols: int, W: int, H: int) -> tuple[np.ndarray, np.ndarray]:
+    """The tile boundaries as every node's split (p-pos) and cut pixel: read-only, built once
+    per wall (asked for every frame)."""
+    tree = gpu_tree(rows, cols)
     tw, th = W // tree.cols, H // tree.rows
     splits = np.zeros(len(tree.internal))
     pixels = np.zeros(len(tree.internal), dtype=np.int64)
@@ -281,4 +287,6 @@ def _tile_splits(tree: GpuTree, W: int, H: int) -> tuple[np.ndarray, np.ndarray]
             a, b = (tree.rows - node.r1) * th, (tree.rows - node.r0) * th
             cut = (tree.rows - node.high.r1) * th
         splits[n], pixels[n] = (cut - a) / (b - a), cut
+    splits.setflags(write=False)
+    pixels.setflags(write=False)
     return splits, pixels
