@@ -46,3 +46,19 @@ def test_all_experiments_quick(tmp_path):
     one = [r for r in gpus if int(r["ranks"]) == 1]
     many = [r for r in gpus if int(r["ranks"]) > 1]
     assert one and many and all(float(r["render_speedup"]) > 1.0 for r in many), gpus
+
+
+def test_payoff_says_what_a_choosing_default_planned_with():
+    """The payoff page's account of ``auto``: the share of its frames the best strategy planned,
+    and the frame its choices would cost at its candidates' own frame times."""
+    from multigpu.studies.payoff import planned_by
+
+    rows = [{"scene": "city", "balance": b, "emulated_ms": ms}
+            for b, ms in (("cross", 3.0), ("strips", 4.0), ("auto", 3.5), ("none", 3.6))]
+    check = {"scene": "city", "best": "cross"}
+    got = planned_by(rows, check, [{"cross": 180, "strips": 60}, {"cross": 240}, {"cross": 120, "strips": 120}])
+    assert got["by_best"] == "75%"  # the median of 0.75, 1.0, 0.5
+    # shares 0.75 and 0.25 (medians of 0.25, 0, 0.5), renormalised: 0.75 * 3 + 0.25 * 4 = 3.25
+    assert got["expected_of_best"] == f"{3.0 / 3.25:.3f}"
+    assert planned_by(rows, check, [{}, {}]) == {"by_best": "-", "expected_of_best": "-"}  # not a choosing default
+    assert planned_by(rows, {"scene": "city", "best": "time"}, [{"cross": 240}])["by_best"] == "-"

@@ -85,6 +85,9 @@ def exp_payoff(s: Settings, out: Path) -> str:
     write_csv(out / "payoff_ranking.csv", ranking)
     per_round = {key: [r.summary["emulated_frame_ms"] for r in rs] for key, rs in runs.items()}
     checks = default_checks(rows, bounds, per_round)
+    default = checks[0]["default"] if checks else None
+    for c in checks:  # which candidates planned the default's frames (auto), round by round
+        c.update(planned_by(rows, c, [_planned(r.summary) for r in runs[(c["scene"], default)]]))
     write_csv(out / "payoff_default.csv", checks)
     return _page(s, rows, bounds, ranking, verdict, checks, rounds)
 
@@ -134,6 +137,14 @@ def _page(s: Settings, rows, bounds, ranking, verdict: str, checks, rounds: int)
                           ("paired_min", "min", ".3f"), ("paired_max", "max", ".3f")]), "",
         "`Default / best` compares medians over rounds; `paired by round` takes the best's frame over the "
         "default's within each round (they ran minutes apart), the median of the rounds and their range.", "",
+        "What the default planned with (a default that chooses, as `auto` does): the share of its frames the best "
+        "strategy planned (median over rounds), and `Expected / best`, the best's frame over the frame the "
+        "default would have if each of its candidates' frames cost what that candidate's own runs cost: what "
+        "its choices and trial frames cost, the run-to-run noise aside. Where `Default / best` lies well below "
+        "it, the rest is that noise ('-': the default is the best, or the best is not its candidate).", "",
+        md_table(checks, [("scene", "Scene", ""), ("default", "Default", ""), ("best", "Best", ""),
+                          ("by_best", "Frames planned by the best", ""), ("expected_of_best", "Expected / best", ""),
+                          ("of_best", "Default / best", ".3f")]), "",
         "What stands between the default and the ideal frame, CPU ms per frame (medians over rounds): "
         "`Duplicated` = its mean render above `none`'s (objects two ranks draw, cross's pieces), `Imbalance "
         "left` = its slowest render above its mean times the floor, `Fixed extra` = its balancing + exchange + "
@@ -169,6 +180,26 @@ def default_checks(rows: list[dict], bounds: list[dict], per_round: dict | None 
                     "default_speedup": d["speedup_vs_none"], "of_best": of_best, "of_ceiling": of_ceiling,
                     "meets": "yes" if meets else "no", **paired, **gap(d, b)})
     return out
+
+
+def _planned(summary: dict) -> dict:
+    """Frames each candidate planned in a run of a choosing strategy (``auto``; {} for others)."""
+    return (summary.get("decomposition") or {}).get("strategy", {}).get("frames", {}) or {}
+
+
+def planned_by(rows: list[dict], check: dict, planned: list[dict]) -> dict:
+    """How a choosing default spent its frames on a scene: the share it planned with the best
+    strategy (median over rounds), and the frame it would have if each candidate's frames cost
+    what that candidate's own runs cost (``expected``: what its choices and trial frames cost,
+    run-to-run noise aside), as the best's frame over it. '-' where the default does not choose
+    or the best is not one of its candidates."""
+    mine = {r["balance"]: r["emulated_ms"] for r in rows if r["scene"] == check["scene"]}
+    names = sorted({c for p in planned for c in p})
+    if not planned or not names or check["best"] not in names or not all(c in mine for c in names):
+        return {"by_best": "-", "expected_of_best": "-"}
+    share = {c: float(np.median([p.get(c, 0) / max(sum(p.values()), 1) for p in planned])) for c in names}
+    expected = sum(share[c] * mine[c] for c in names) / sum(share.values())
+    return {"by_best": f"{share[check['best']]:.0%}", "expected_of_best": f"{mine[check['best']] / expected:.3f}"}
 
 
 def gap(d: dict, b: dict) -> dict:
