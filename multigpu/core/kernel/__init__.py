@@ -57,10 +57,14 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
         allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
         owner = np.repeat(np.arange(k), [len(p) for p in pieces])
     rt = np.ascontiguousarray(np.asarray(rects, dtype=np.float64).T)
-    shares, prects, powner, at, spans, masks, visible, loads, regions = _cross(
+    shares, ints, both, spans = _cross(
         allp, owner, np.asarray(times, dtype=np.float64), tiles, shares, float(damping), float(min_share), rt,
         np.asarray(tris, dtype=np.int64), int(size[0]), int(size[1]))
-    at = at.tolist()
+    at = ints[:k + 1].tolist()  # views of the packed arrays (their layout: pieces._cross)
+    q = at[k]
+    regions, loads = ints[k + 1:5 * k + 1].reshape(k, 4), ints[5 * k + 1:6 * k + 1]
+    prects, powner = ints[6 * k + 1:6 * k + 1 + 4 * q].reshape(q, 4), ints[6 * k + 1 + 4 * q:]
+    masks, visible = both[:q], both[q:]
     per_rank = tuple(prects[at[r]:at[r + 1]] for r in range(k))
     per_mask = tuple(masks[at[r]:at[r + 1]] for r in range(k))
     none, none_px = _no_splits(k)

@@ -131,14 +131,15 @@ def _cut(allp, owner, times, tiles, shares, damping, min_share):
 
 
 def _masks(rt, tris, W, H, prects, powner, k):
-    """Pixel spans, every piece's object mask (its rect overlaps the object's span), the ranks'
-    T' masks, loads (an object drawn in two pieces counts twice) and bounding regions."""
+    """Pixel spans; every piece's object mask (its rect overlaps the object's span) and the
+    ranks' T' masks, in one (P + K, N) array (pieces first); loads (an object drawn in two
+    pieces counts twice) and bounding regions."""
     n = rt.shape[1]
     none = np.empty(0, dtype=np.int64)
     spans, on, _, _ = _spans(rt, W, H, none, 0, none, none, none)  # the strategy validated its rects
     P = prects.shape[0]
-    masks = np.zeros((P, n), dtype=np.bool_)
-    visible = np.zeros((k, n), dtype=np.bool_)
+    both = np.zeros((P + k, n), dtype=np.bool_)
+    masks, visible = both[:P], both[P:]
     loads = np.zeros(k, dtype=tris.dtype)
     regions = np.zeros((k, 4), dtype=np.int64)
     seen = np.zeros(k, dtype=np.bool_)
@@ -158,21 +159,32 @@ def _masks(rt, tris, W, H, prects, powner, k):
                 visible[r, o] = True
                 total += tris[o]
         loads[r] = total
-    return spans, masks, visible, loads, regions
+    return spans, both, loads, regions
 
 
 def _cross(allp, owner, times, tiles, shares, damping, min_share, rt, tris, W, H):
-    """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan), and where each
-    rank's pieces start in the rank-major rects (``at``, K+1)."""
+    """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan), packed in four arrays
+    (every returned array costs a Python call to box it, paid again with the caches cold): the
+    new shares; the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
+    (Q)]``, ``at`` where each rank's pieces start in the rank-major pieces; the masks ``[pieces'
+    (Q, N) | ranks' T' (K, N)]``; the spans (4, N)."""
     k = tiles.shape[0]
     out, prects, powner = _cut(allp, owner, times, tiles, shares, damping, min_share)
-    spans, masks, visible, loads, regions = _masks(rt, tris, W, H, prects, powner, k)
-    at = np.zeros(k + 1, dtype=np.int64)
-    for p in range(powner.shape[0]):
-        at[powner[p] + 1] += 1
+    spans, both, loads, regions = _masks(rt, tris, W, H, prects, powner, k)
+    q = powner.shape[0]
+    ints = np.zeros(6 * k + 1 + 5 * q, dtype=np.int64)
+    for p in range(q):
+        ints[powner[p] + 1] += 1
     for r in range(k):
-        at[r + 1] += at[r]
-    return out, prects, powner, at, spans, masks, visible, loads, regions
+        ints[r + 1] += ints[r]
+        for c in range(4):
+            ints[k + 1 + 4 * r + c] = regions[r, c]
+        ints[5 * k + 1 + r] = loads[r]
+    for p in range(q):
+        for c in range(4):
+            ints[6 * k + 1 + 4 * p + c] = prects[p, c]
+        ints[6 * k + 1 + 4 * q + p] = powner[p]
+    return out, ints, both, spans
 
 
 compile_all(globals(), ("_profiles", "_seqsum", "_cut", "_masks", "_cross"))
