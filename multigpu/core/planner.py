@@ -37,6 +37,7 @@ class Planner:
         self.balances = list(STRATEGIES) if screen else [cfg.decomposition]
         self.using = self.balances.index(cfg.balance) if screen else 0
         self._built: dict[int, object] = {}
+        self._using = None  # the decomposition in use, once built
         self._planned: dict[int, tuple[object, Work]] = {}
         self.project = make_projector(scene, cfg.bounds)
         self.coverage = np.ones(scene.n_objects)  # per-object silhouette coverage, for strategies that use it
@@ -44,15 +45,17 @@ class Planner:
     @property
     def decomposition(self):
         """The decomposition planning with the strategy in use (built at its first use)."""
-        if self.using not in self._built:
-            cfg = self.cfg
-            balance = self.balances[self.using] if cfg.decomposition == "screen" else cfg.balance
-            self._built[self.using] = make_decomposition(cfg, self.scene, balance, self.rank)
-        return self._built[self.using]
+        if self._using is None:
+            if self.using not in self._built:
+                cfg = self.cfg
+                balance = self.balances[self.using] if cfg.decomposition == "screen" else cfg.balance
+                self._built[self.using] = make_decomposition(cfg, self.scene, balance, self.rank)
+            self._using = self._built[self.using]
+        return self._using
 
     def use(self, i: int) -> None:
         """Plan with strategy ``balances[i]`` from the next frame on."""
-        self.using = int(i)
+        self.using, self._using = int(i), None
 
     def frame(self, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(view, proj, light, rects) of ``camera`` on the canvas: the (N, 4) normalized object
@@ -87,8 +90,9 @@ class Planner:
         """The measured (K,) per-rank render times of ``frame``, to the decomposition that
         planned it, with the work it planned (a frame not planned here is ignored)."""
         got = self._planned.pop(frame, None)
-        for f in [f for f in self._planned if f < frame]:  # older frames will not be observed
-            del self._planned[f]
+        planned = self._planned
+        while planned and next(iter(planned)) < frame:  # older frames (planned first) will not be observed
+            del planned[next(iter(planned))]
         if got is not None:
             d, work = got
             d.observe(frame, work, times)
