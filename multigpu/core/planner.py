@@ -37,7 +37,6 @@ class Planner:
         self.balances = list(STRATEGIES) if screen else [cfg.decomposition]
         self.using = self.balances.index(cfg.balance) if screen else 0
         self._built: dict[int, object] = {}
-        self._using = None  # the decomposition in use, once built
         self._planned: dict[int, tuple[object, Work]] = {}
         self.project = make_projector(scene, cfg.bounds)
         self.coverage = np.ones(scene.n_objects)  # per-object silhouette coverage, for strategies that use it
@@ -45,17 +44,16 @@ class Planner:
     @property
     def decomposition(self):
         """The decomposition planning with the strategy in use (built at its first use)."""
-        if self._using is None:
-            if self.using not in self._built:
-                cfg = self.cfg
-                balance = self.balances[self.using] if cfg.decomposition == "screen" else cfg.balance
-                self._built[self.using] = make_decomposition(cfg, self.scene, balance, self.rank)
-            self._using = self._built[self.using]
-        return self._using
+        d = self._built.get(self.using)
+        if d is None:
+            cfg = self.cfg
+            balance = self.balances[self.using] if cfg.decomposition == "screen" else cfg.balance
+            d = self._built[self.using] = make_decomposition(cfg, self.scene, balance, self.rank)
+        return d
 
     def use(self, i: int) -> None:
         """Plan with strategy ``balances[i]`` from the next frame on."""
-        self.using, self._using = int(i), None
+        self.using = int(i)
 
     def frame(self, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(view, proj, light, rects) of ``camera`` on the canvas: the (N, 4) normalized object
@@ -91,8 +89,8 @@ class Planner:
         planned it, with the work it planned (a frame not planned here is ignored)."""
         got = self._planned.pop(frame, None)
         planned = self._planned
-        while planned and next(iter(planned)) < frame:  # older frames (planned first) will not be observed
-            del planned[next(iter(planned))]
+        while planned and (oldest := next(iter(planned))) < frame:  # older frames (planned first) will not be observed
+            del planned[oldest]
         if got is not None:
             d, work = got
             d.observe(frame, work, times)
