@@ -380,3 +380,65 @@ def test_compiled_rank_pixels_equal_the_reference(seed, n, k, weightings):
     got = rank_pixels(rects, visible, regions, size, cov, compiled=True)
     ref = rank_pixels(rects, visible, regions, size, cov, compiled=False)
     assert got.shape == ref.shape and np.array_equal(got, ref)
+
+
+
+#: run in a fresh interpreter: in the test process, earlier tests may have compiled a signature warm() misses
+_AFTER_WARM = """
+import importlib, json, pkgutil, sys
+import numpy as np
+from multigpu.config import WalkConfig
+from multigpu.core import kernel
+from multigpu.core.drawlist import DrawList
+from multigpu.core.kernel.jit import numba
+from multigpu.core.planner import Planner
+from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
+from multigpu.scene.models import SceneSpec, load_scene
+from multigpu.scene.paths import generate
+from multigpu.strategies import REGISTRY
+
+def dispatchers():
+    found = {}
+    for info in pkgutil.iter_modules(kernel.__path__):
+        module = importlib.import_module(f"{kernel.__name__}.{info.name}")
+        for name, value in vars(module).items():
+            if isinstance(value, numba.core.dispatcher.Dispatcher):
+                found[f"{info.name}.{name}"] = value
+    return found
+
+kernel.warm()
+before = {name: len(d.signatures) for name, d in dispatchers().items()}
+scene, _ = load_scene(SceneSpec(scene=sys.argv[1], triangles=20_000))
+path = generate("walkthrough", scene, 6)
+draws = DrawList(scene)
+times = np.random.default_rng(0).random((len(path), 4)) + 1.0
+for decomposition in DECOMPOSITIONS:
+    for balance in REGISTRY if decomposition == "screen" else ["strips"]:
+        cfg = WalkConfig(grid=(2, 2), tile=(64, 64), balance=balance, decomposition=decomposition)
+        for rank in (0, None):
+            planner = Planner(cfg, scene, rank=rank)
+            for f in range(len(path)):
+                if f:
+                    planner.observe(f - 1, times[f - 1])
+                work, _ = planner.plan(f, path.camera(f))
+                for mask in work.masks[0]:
+                    draws.commands(mask)
+print(json.dumps({name: [str(s) for s in d.signatures[before[name]:]] for name, d in dispatchers().items()
+                  if len(d.signatures) != before[name]}))
+"""
+
+
+@pytest.mark.parametrize("scene_name", ["plant", "city"])
+def test_frames_after_warm_compile_nothing(scene_name):
+    """``kernel.warm()`` at setup covers every signature a run uses: in a fresh interpreter,
+    frames planned afterwards with every strategy and decomposition, for one rank and for all,
+    add none (a signature missed costs its compile, or its load from numba's cache, inside the
+    first frame: 26-40 ms of CPU for ``none``'s read-only tile cuts before warm() planned it)."""
+    import json
+    import subprocess
+    import sys
+
+    got = subprocess.run([sys.executable, "-c", _AFTER_WARM, scene_name], capture_output=True, text=True,
+                         timeout=600)
+    assert got.returncode == 0, got.stderr[-2000:]
+    assert json.loads(got.stdout.strip().splitlines()[-1]) == {}

@@ -101,7 +101,9 @@ _NO_COVERAGE = np.empty(0)
 
 
 def warm() -> float:
-    """Compile (or load from numba's cache) every signature a run uses; seconds it took."""
+    """Compile (or load from numba's cache) every signature a run uses (every registered
+    strategy plans a few frames); seconds it took. tests/test_kernel.py checks that frames
+    planned afterwards, with every strategy and decomposition, compile nothing."""
     if not available():
         return 0.0
     from multigpu.core.bounds import BoxProjector
@@ -121,12 +123,13 @@ def warm() -> float:
     camera = Camera((0.0, -5.0, 1.0), (0.0, 0.0, 0.0))
     box.frame(camera, (64, 48))
     box.frame(camera, (64, 48), np.empty(2))
-    from multigpu.strategies.cross import CrossSegment
+    from multigpu.strategies import REGISTRY
 
-    cross = CrossSegment((2, 2), (64, 64), 16, compiled=True)
-    tris = np.array([3, 5, 7], dtype=np.int64)
-    cross.observe(0, cross.plan(rects, tris), np.array([1.0, 2.0, 3.0, 4.0]))
-    cross.plan(rects, tris)
+    tris, coverage, times = np.array([3, 5, 7], dtype=np.int64), np.array([0.5, 1.0, 1.0]), np.arange(1.0, 5.0)
+    for cls in REGISTRY.values():  # every strategy's plans, the ones that learn from measured times too
+        strategy = cls((2, 2), (64, 64), 16, compiled=True)
+        for f in range(4):
+            strategy.observe(f, strategy.plan(rects, tris, coverage), times + f)
     from multigpu.core.kernel.fit import fit_terms
     from multigpu.core.kernel.pixels import rank_pixels
 
