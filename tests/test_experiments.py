@@ -62,3 +62,25 @@ def test_payoff_says_what_a_choosing_default_planned_with():
     assert got["expected_of_best"] == f"{3.0 / 3.25:.3f}"
     assert planned_by(rows, check, [{}, {}]) == {"by_best": "-", "expected_of_best": "-"}  # not a choosing default
     assert planned_by(rows, {"scene": "city", "best": "time"}, [{"cross": 240}])["by_best"] == "-"
+
+
+def test_payoff_splits_the_default_against_the_best_at_its_first_trial():
+    """The best's frame over the default's, paired by round, on the frames of the default's
+    first trial and after it; '-' where there is no trial to split at."""
+    from multigpu.studies.payoff import first_trial
+
+    def run(frames, trials=None):
+        strategy = {"name": "auto", "trials": trials} if trials is not None else {"name": "cross"}
+        return {"per_frame_emulated_ms": frames, "decomposition": {"strategy": strategy}}
+
+    auto = [run([6.0] * 4 + [4.0] * 6, [{"frames": 4}]), run([5.0] * 2 + [4.0] * 8, [{"frames": 2}, {"frames": 9}]),
+            run([6.0] * 4 + [5.0] * 6, [{"frames": 4}])]
+    best = [run([3.0] * 10), run([4.0] * 10), run([4.5] * 10)]
+    got = first_trial(auto, best)
+    assert got["trial_frames"] == "2-4"
+    assert got["trial_of_best"] == f"{0.75:.3f}"  # 3/6, 4/5, 4.5/6: median 0.75
+    assert got["after_of_best"] == f"{0.9:.3f}"  # 3/4, 4/4, 4.5/5
+    dash = {"trial_frames": "-", "trial_of_best": "-", "after_of_best": "-"}
+    assert first_trial(best, best) == dash  # no trial: the default does not choose
+    assert first_trial(auto, []) == dash  # the default is the best
+    assert first_trial([run([5.0] * 10, [{"frames": 10}])], best[:1]) == dash  # a trial as long as the run

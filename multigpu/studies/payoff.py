@@ -88,6 +88,8 @@ def exp_payoff(s: Settings, out: Path) -> str:
     default = checks[0]["default"] if checks else None
     for c in checks:  # which candidates planned the default's frames (auto), round by round
         c.update(planned_by(rows, c, [_planned(r.summary) for r in runs[(c["scene"], default)]]))
+        c.update(first_trial([r.summary for r in runs[(c["scene"], default)]],
+                             [r.summary for r in runs[(c["scene"], c["best"])]] if c["best"] != default else []))
     write_csv(out / "payoff_default.csv", checks)
     return _page(s, rows, bounds, ranking, verdict, checks, rounds)
 
@@ -141,10 +143,16 @@ def _page(s: Settings, rows, bounds, ranking, verdict: str, checks, rounds: int)
         "strategy planned (median over rounds), and `Expected / best`, the best's frame over the frame the "
         "default would have if each of its candidates' frames cost what that candidate's own runs cost: what "
         "its choices and trial frames cost, the run-to-run noise aside. Where `Default / best` lies well below "
-        "it, the rest is that noise ('-': the default is the best, or the best is not its candidate).", "",
+        "it, the rest is that noise or what its trial frames cost beyond its candidates' average frames ('-': "
+        "the default is the best, or the best is not its candidate). The last three columns pair the "
+        "default's run with the best's of the same round frame by frame: the best's mean frame over the "
+        "default's on the frames of the default's first trial (`First trial`, in frames, the candidates "
+        "alternating) and on the frames after it, medians over rounds ('-': the default holds no trial).", "",
         md_table(checks, [("scene", "Scene", ""), ("default", "Default", ""), ("best", "Best", ""),
                           ("by_best", "Frames planned by the best", ""), ("expected_of_best", "Expected / best", ""),
-                          ("of_best", "Default / best", ".3f")]), "",
+                          ("of_best", "Default / best", ".3f"), ("trial_frames", "First trial", ""),
+                          ("trial_of_best", "Best / default in it", ""),
+                          ("after_of_best", "Best / default after it", "")]), "",
         "What stands between the default and the ideal frame, CPU ms per frame (medians over rounds): "
         "`Duplicated` = its mean render above `none`'s (objects two ranks draw, cross's pieces), `Imbalance "
         "left` = its slowest render above its mean times the floor, `Fixed extra` = its balancing + exchange + "
@@ -200,6 +208,32 @@ def planned_by(rows: list[dict], check: dict, planned: list[dict]) -> dict:
     share = {c: float(np.median([p.get(c, 0) / max(sum(p.values()), 1) for p in planned])) for c in names}
     expected = sum(share[c] * mine[c] for c in names) / sum(share.values())
     return {"by_best": f"{share[check['best']]:.0%}", "expected_of_best": f"{mine[check['best']] / expected:.3f}"}
+
+
+def first_trial(default: list[dict], best: list[dict]) -> dict:
+    """Where a choosing default's frames went against the best strategy's, round by round
+    (summaries paired by round): the best's mean frame over the default's on the frames of the
+    default's first trial (the frames it alternated candidates on) and on the frames after it
+    (medians over rounds), and the trial's length in frames. '-' where the default holds no
+    trial (it does not choose) or is the best (``best`` empty)."""
+    none = {"trial_frames": "-", "trial_of_best": "-", "after_of_best": "-"}
+    trials = [((d.get("decomposition") or {}).get("strategy") or {}).get("trials") for d in default]
+    from multigpu.strategies.auto import REPORT_TRIALS
+
+    if not default or len(best) != len(default) or not all(trials) or max(map(len, trials)) >= REPORT_TRIALS:
+        return none  # no trial, nothing to pair, or the first trial no longer in the report
+    n, during, after = [], [], []
+    for d, b, t in zip(default, best, trials):
+        k = int(t[0]["frames"])
+        fd, fb = np.asarray(d["per_frame_emulated_ms"]), np.asarray(b["per_frame_emulated_ms"])
+        if not 0 < k < min(len(fd), len(fb)):
+            return none
+        n.append(k)
+        during.append(fb[:k].mean() / fd[:k].mean())
+        after.append(fb[k:].mean() / fd[k:].mean())
+    frames = f"{min(n)}" if min(n) == max(n) else f"{min(n)}-{max(n)}"
+    return {"trial_frames": frames, "trial_of_best": f"{np.median(during):.3f}",
+            "after_of_best": f"{np.median(after):.3f}"}
 
 
 def gap(d: dict, b: dict) -> dict:
