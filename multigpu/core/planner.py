@@ -40,6 +40,9 @@ class Planner:
         self._planned: dict[int, tuple[object, Work]] = {}
         self.project = make_projector(scene, cfg.bounds)
         self.coverage = np.ones(scene.n_objects)  # per-object silhouette coverage, for strategies that use it
+        # triangles per object, formed once (``scene.tris`` divides every object's index count:
+        # ~12 us of CPU per frame with the caches cold)
+        self.tris = scene.tris
 
     @property
     def decomposition(self):
@@ -67,7 +70,7 @@ class Planner:
         """Frame ``frame``'s work on the canvas from its visible ``rects``. ``relay`` (screen
         only): called with a thunk that computes the partition, it returns the partition to use
         (``--partition broadcast``: rank 0 computes it, every rank receives it)."""
-        d, tris = self.decomposition, self.scene.tris
+        d, tris = self.decomposition, self.tris
         cov = self.coverage if d.needs_coverage else None
         if relay is not None:
             work = d.from_partition(relay(lambda: d.partition(rects, tris, cov)), tris)

@@ -152,13 +152,15 @@ def _masks(rt, tris, W, H, prects, powner, k):
         else:
             regions[r, 0], regions[r, 1], regions[r, 2], regions[r, 3] = x0, y0, x1, y1
             seen[r] = True
-        total = loads[r]
-        for o in range(n):  # every object, in order: a sequential pass beats gathering the on-screen ones
-            if on[o] and spans[0, o] < x1 and spans[2, o] >= x0 and spans[1, o] < y1 and spans[3, o] >= y0:
+    for o in range(n):  # one sequential pass over the objects, the pieces tested for those on screen
+        if not on[o]:
+            continue
+        s0, s1, s2, s3 = spans[0, o], spans[1, o], spans[2, o], spans[3, o]
+        for p in range(P):  # integer loads: the same sums in any order
+            if s0 < prects[p, 2] and s2 >= prects[p, 0] and s1 < prects[p, 3] and s3 >= prects[p, 1]:
                 masks[p, o] = True
-                visible[r, o] = True
-                total += tris[o]
-        loads[r] = total
+                visible[powner[p], o] = True
+                loads[powner[p]] += tris[o]
     return spans, both, loads, regions
 
 
