@@ -237,6 +237,29 @@ def test_auto_keeps_the_candidate_whose_frames_were_faster_and_checks_again(cros
         np.testing.assert_array_equal(a.regions, b.regions)
 
 
+def test_auto_holds_a_confirmed_choice_longer_and_a_new_one_briefly():
+    """Re-checks that keep the candidate in use double the hold after them, up to ``max_hold``;
+    a re-check that switches (the scene's winner changed) restores ``hold``."""
+    from multigpu.strategies.auto import Auto
+
+    rects, tris = workload(200, seed=15)
+    frame = [0]
+
+    def time_of(p):  # strips faster until frame 150, cross after it
+        frame[0] += 1
+        slow = (p.pieces is not None) == (frame[0] <= 150)
+        return np.full(4, 2.0 if slow else 1.0)
+
+    auto = Auto((2, 2), (128, 128), 64, window=4, settle=1, rounds=4, hold=10, max_hold=40)
+    simulate(auto, rects, tris, time_of, frames=260)
+    trials = auto.report()["trials"]
+    # 16-frame trials (one mirrored pair: the lead is clear), then: hold 10, 20, 40, 40 (capped)
+    assert [(t["chose"], t["hold"]) for t in trials[:4]] == [("strips", h) for h in (10, 20, 40, 40)]
+    assert ("cross", 10) in [(t["chose"], t["hold"]) for t in trials[4:]]  # the switch: a short hold again
+    with pytest.raises(ValueError, match="max_hold"):
+        Auto((2, 2), (128, 128), 64, hold=10, max_hold=5)
+
+
 @pytest.mark.parametrize("lead, rounds", [(0.5, 2), (0.01, 4)])
 def test_auto_ends_a_trial_early_only_on_a_clear_lead(lead, rounds):
     """Noisy times (sd 0.1): strips ahead by ``lead``. A lead of five standard deviations ends

@@ -4,8 +4,10 @@ No single strategy wins everywhere (docs/RESULTS.md, payoff): cross-segment bala
 scenes of many small objects, the paper's strips on scenes of few large or triangle-bound
 objects, where cross's extra pieces draw objects twice. ``auto`` runs a short trial (windows of
 ``window`` frames, the candidates alternating, up to ``rounds`` windows each), plans with the
-winner for ``hold`` frames, then tries again. The first ``settle`` frames of a window are not
-scored (a time-feedback strategy settling after a switch).
+winner for ``hold`` frames, then tries again. A re-check that keeps the candidate in use doubles
+the hold that follows (up to ``max_hold``), a switch restores ``hold``: on a long flight whose
+winner does not change, the frames re-checks spend on the loser become rare. The first
+``settle`` frames of a window are not scored (a time-feedback strategy settling after a switch).
 
 Scoring. The camera keeps moving during a trial, so a frame's time says as much about where the
 camera looks as about who planned it. Each scored frame's slowest-rank render time ``y`` is
@@ -45,18 +47,21 @@ class Auto(Configured):
     window: int = 8  # frames per trial window
     settle: int = 2  # first frames of a window not scored
     rounds: int = 4  # most windows per candidate per trial (rounds run in mirrored pairs)
-    hold: int = 200  # frames the winner plans between trials
+    hold: int = 200  # frames the winner plans between trials (after a switch)
+    max_hold: int = 800  # the longest hold, reached by doubling after trials that keep the choice
     z: float = 2.5  # a trial ends after a round once the best leads by this many standard errors
 
     name = "auto"
     reproducible = False  # it follows measured times
 
     def __post_init__(self):
-        if not 0 <= self.settle < self.window or self.rounds < 1 or self.hold < 0 or not self.z > 0:
-            raise ValueError("auto: need 0 <= settle < window, rounds >= 1, hold >= 0, z > 0")
+        if (not 0 <= self.settle < self.window or self.rounds < 1 or not 0 <= self.hold <= self.max_hold
+                or not self.z > 0):
+            raise ValueError("auto: need 0 <= settle < window, rounds >= 1, 0 <= hold <= max_hold, z > 0")
         args = (self.grid, self.size, self.strips, self.compiled)
         self.candidates = (CrossSegment(*args), Strips(*args))
         self.chosen = 0  # cross until a trial says otherwise
+        self._hold = self.hold  # the hold after the current trial
         self._step = 0  # plans made in the current cycle (trial, then hold)
         self._trial_end: int | None = None  # the step the current trial ended at (None: trialling)
         self._made: deque = deque(maxlen=16)  # (partition, candidate, load or None) of recent plans
@@ -99,7 +104,7 @@ class Auto(Configured):
         self._made.append((part, i, load))
         self.frames[i] += 1
         self._step += 1
-        if self._trial_end is not None and self._step >= self._trial_end + self.hold:
+        if self._trial_end is not None and self._step >= self._trial_end + self._hold:
             self._step, self._trial_end = 0, None
         return part
 
@@ -164,11 +169,13 @@ class Auto(Configured):
         means = np.where(np.isnan(eff), np.inf, eff)
         best = int(np.argmin(means))
         if means[best] < means[self.chosen]:
-            self.chosen = best
+            self.chosen, self._hold = best, self.hold
+        elif self.trials:  # kept after a re-check: hold it longer (the first trial sets ``hold``)
+            self._hold = min(2 * self._hold, self.max_hold)
         self.trials.append({"scores_ms": {c.name: round(float(np.exp(m)), 3) if np.isfinite(m) else None
                                           for c, m in zip(self.candidates, means)},
                             "load_slope": None if slope is None else round(slope, 3),
-                            "chose": self.candidates[self.chosen].name, "frames": self._step,
+                            "chose": self.candidates[self.chosen].name, "frames": self._step, "hold": self._hold,
                             "scored": self._counts().tolist()})
         self._scores = []
 
