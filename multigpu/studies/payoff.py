@@ -192,9 +192,14 @@ def default_checks(rows: list[dict], bounds: list[dict], per_round: dict | None 
     return out
 
 
+def _strategy_report(summary: dict) -> dict:
+    """The strategy's report in a run's summary ({} where there is none)."""
+    return (summary.get("decomposition") or {}).get("strategy") or {}
+
+
 def _planned(summary: dict) -> dict:
     """Frames each candidate planned in a run of a choosing strategy (``auto``; {} for others)."""
-    return (summary.get("decomposition") or {}).get("strategy", {}).get("frames", {}) or {}
+    return _strategy_report(summary).get("frames", {}) or {}
 
 
 def planned_by(rows: list[dict], check: dict, planned: list[dict]) -> dict:
@@ -218,10 +223,10 @@ def first_trial(default: list[dict], best: list[dict]) -> dict:
     default's first trial (the frames it alternated candidates on) and on the frames after it
     (medians over rounds), and the trial's length in frames. '-' where the default holds no
     trial (it does not choose) or is the best (``best`` empty)."""
-    none = {"trial_frames": "-", "trial_of_best": "-", "after_of_best": "-"}
-    trials = [((d.get("decomposition") or {}).get("strategy") or {}).get("trials") for d in default]
     from multigpu.strategies.auto import REPORT_TRIALS
 
+    none = {"trial_frames": "-", "trial_of_best": "-", "after_of_best": "-"}
+    trials = [_strategy_report(d).get("trials") for d in default]
     if not default or len(best) != len(default) or not all(trials) or max(map(len, trials)) >= REPORT_TRIALS:
         return none  # no trial, nothing to pair, or the first trial no longer in the report
     n, during, after = [], [], []
