@@ -138,8 +138,9 @@ class CrossSegment(Configured):
                 regions[r] = [pr[:, 0].min(), pr[:, 1].min(), pr[:, 2].max(), pr[:, 3].max()]
                 visible[r, on] = hit.any(axis=0)
                 loads[r] = int(np.broadcast_to(tris_on, hit.shape).sum(where=hit))
+        # no spans: only the cost model reads a partition's, from its own strips partitions
         return Partition(regions, loads, visible, np.zeros(max(k - 1, 0)), np.zeros(max(k - 1, 0), dtype=np.int64),
-                         np.ascontiguousarray(sp), tuple(prects), tuple(pvis))
+                         None, tuple(prects), tuple(pvis))
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         features = partition.features

@@ -47,7 +47,7 @@ def use(compiled: bool | None) -> bool:
 
 def cross_partition(pieces, times, tiles, shares, damping: float, min_share: float, rects, tris, size):
     """``strategies.cross``: the new segment shares, and the partition's fields (regions, loads,
-    T' masks, splits, split pixels, spans, pieces and their masks per rank, and the pieces flat
+    T' masks, splits, split pixels, no spans, pieces and their masks per rank, and the pieces flat
     for the next frame: ``{"pieces": (Q, 4), "owner": (Q,)}``) from the last frame's pieces
     (that flat form, or per rank) and measured ``times``. One compiled call."""
     k = len(tiles)
@@ -57,7 +57,7 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
         allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
         owner = np.repeat(np.arange(k), [len(p) for p in pieces])
     rt = np.ascontiguousarray(np.asarray(rects, dtype=np.float64).T)
-    shares, ints, both, spans = _cross(
+    shares, ints, both = _cross(
         allp, owner, np.asarray(times, dtype=np.float64), tiles, shares, float(damping), float(min_share), rt,
         np.asarray(tris, dtype=np.int64), int(size[0]), int(size[1]))
     at = ints[:k + 1].tolist()  # views of the packed arrays (their layout: pieces._cross)
@@ -68,7 +68,7 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
     per_rank = tuple(prects[at[r]:at[r + 1]] for r in range(k))
     per_mask = tuple(masks[at[r]:at[r + 1]] for r in range(k))
     none, none_px = _no_splits(k)
-    return shares, (regions, loads, visible, none, none_px, spans, per_rank, per_mask,
+    return shares, (regions, loads, visible, none, none_px, None, per_rank, per_mask,
                     {"pieces": prects, "owner": powner})
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 
 from multigpu.core.kernel.jit import compile_all
-from multigpu.core.kernel.walk import _spans
 
 
 def _profiles(allp, owner, k, times, tiles):
@@ -131,12 +130,12 @@ def _cut(allp, owner, times, tiles, shares, damping, min_share):
 
 
 def _masks(rt, tris, W, H, prects, powner, k):
-    """Pixel spans; every piece's object mask (its rect overlaps the object's span) and the
-    ranks' T' masks, in one (P + K, N) array (pieces first); loads (an object drawn in two
-    pieces counts twice) and bounding regions."""
+    """Every piece's object mask (its rect overlaps the object's pixel span) and the ranks' T'
+    masks, in one (P + K, N) array (pieces first); loads (an object drawn in two pieces counts
+    twice) and bounding regions. One pass over the rects: an object's span is formed where it
+    is tested, as ``walk._spans`` forms it, and not kept (cross-segment partitions carry no
+    spans: only the cost model reads them, from its own partitions)."""
     n = rt.shape[1]
-    none = np.empty(0, dtype=np.int64)
-    spans, on, _, _ = _spans(rt, W, H, none, 0, none, none, none)  # the strategy validated its rects
     P = prects.shape[0]
     both = np.zeros((P + k, n), dtype=np.bool_)
     masks, visible = both[:P], both[P:]
@@ -152,27 +151,30 @@ def _masks(rt, tris, W, H, prects, powner, k):
         else:
             regions[r, 0], regions[r, 1], regions[r, 2], regions[r, 3] = x0, y0, x1, y1
             seen[r] = True
+    w1, h1 = W - 1.0, H - 1.0
     for o in range(n):  # one sequential pass over the objects, the pieces tested for those on screen
-        if not on[o]:
+        a0, a1, a2, a3 = rt[0, o], rt[1, o], rt[2, o], rt[3, o]
+        if not (a2 >= 0.0 and a0 <= 1.0 and a3 >= 0.0 and a1 <= 1.0):  # off screen, or NaN
             continue
-        s0, s1, s2, s3 = spans[0, o], spans[1, o], spans[2, o], spans[3, o]
+        s0, s1 = np.int32(min(max(a0 * W, 0.0), w1)), np.int32(min(max(a1 * H, 0.0), h1))
+        s2, s3 = np.int32(min(max(a2 * W, 0.0), w1)), np.int32(min(max(a3 * H, 0.0), h1))
         for p in range(P):  # integer loads: the same sums in any order
             if s0 < prects[p, 2] and s2 >= prects[p, 0] and s1 < prects[p, 3] and s3 >= prects[p, 1]:
                 masks[p, o] = True
                 visible[powner[p], o] = True
                 loads[powner[p]] += tris[o]
-    return spans, both, loads, regions
+    return both, loads, regions
 
 
 def _cross(allp, owner, times, tiles, shares, damping, min_share, rt, tris, W, H):
-    """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan), packed in four arrays
+    """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan), packed in three arrays
     (every returned array costs a Python call to box it, paid again with the caches cold): the
     new shares; the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
     (Q)]``, ``at`` where each rank's pieces start in the rank-major pieces; the masks ``[pieces'
-    (Q, N) | ranks' T' (K, N)]``; the spans (4, N)."""
+    (Q, N) | ranks' T' (K, N)]``."""
     k = tiles.shape[0]
     out, prects, powner = _cut(allp, owner, times, tiles, shares, damping, min_share)
-    spans, both, loads, regions = _masks(rt, tris, W, H, prects, powner, k)
+    both, loads, regions = _masks(rt, tris, W, H, prects, powner, k)
     q = powner.shape[0]
     ints = np.zeros(6 * k + 1 + 5 * q, dtype=np.int64)
     for p in range(q):
@@ -186,7 +188,7 @@ def _cross(allp, owner, times, tiles, shares, damping, min_share, rt, tris, W, H
         for c in range(4):
             ints[6 * k + 1 + 4 * p + c] = prects[p, c]
         ints[6 * k + 1 + 4 * q + p] = powner[p]
-    return out, ints, both, spans
+    return out, ints, both
 
 
 compile_all(globals(), ("_profiles", "_seqsum", "_cut", "_masks", "_cross"))
