@@ -77,9 +77,10 @@ class Planner:
         else:
             work = d.plan(frame, rects, tris, cov) if cov is not None else d.plan(frame, rects, tris)
         work = self.canvas.to_canvas(work, rects, tris)
-        self._planned[frame] = (d, work)
-        if len(self._planned) > KEEP:
-            del self._planned[min(self._planned)]
+        planned = self._planned
+        planned[frame] = (d, work)
+        if len(planned) > KEEP:  # the oldest (frames are planned in order)
+            del planned[next(iter(planned))]
         return work
 
     def plan(self, frame: int, camera, relay: Callable | None = None) -> tuple[Work, tuple]:

@@ -26,7 +26,7 @@ class Screen:
         return cls(make_strategy(balance, cfg.grid, cfg.size, cfg.strips))
 
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
-        return from_partition(self.partition(rects, tris, coverage), tris)
+        return from_partition(self.strategy.plan(rects, tris, coverage), tris)
 
     def partition(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None):
         """The strategy's partition alone (``--partition broadcast``: rank 0 plans it, every

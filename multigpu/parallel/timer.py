@@ -22,15 +22,17 @@ class Timer:
 
     @contextmanager
     def phase(self, name: str):
-        w0, c0 = time.perf_counter(), time.process_time()
+        w0 = time.perf_counter()
         if self.start is None:
             self.start = w0
-        try:
+        c0 = time.process_time()  # the CPU clock read last here and first below: the phase's CPU
+        try:                      # time holds its body, not the timer's own bookkeeping
             yield
         finally:
+            c1 = time.process_time()
             self.end = time.perf_counter()
             self.wall[name] = self.wall.get(name, 0.0) + (self.end - w0) * 1e3
-            self.cpu[name] = self.cpu.get(name, 0.0) + (time.process_time() - c0) * 1e3
+            self.cpu[name] = self.cpu.get(name, 0.0) + (c1 - c0) * 1e3
 
     def ms(self, *names: str) -> float:
         """Wall-clock milliseconds spent in these phases."""

@@ -54,14 +54,16 @@ class CrossSegment(Configured):
         self._flat: dict | None = None  # the same pieces flat, where the kernel planned them
         self._times: np.ndarray | None = None
         self.shares = np.ones(len(self.tiles))
+        self._compiled = kernel.use(self.compiled)  # once, not per frame
+        self.size = (int(W), int(H))  # the kernel's argument types, fixed here once
+        self.damping, self.min_share = float(self.damping), float(self.min_share)
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
         if self._pieces is None:
             return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         tris = np.asarray(tris)
-        if kernel.use(self.compiled) and tris.dtype.kind in "iu":
-            last = self._flat if self._flat is not None else self._pieces
-            self.shares, part = kernel.cross_partition(last, self._times, self.tiles, self.shares,
+        if self._compiled and tris.dtype.kind in "iu":
+            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles, self.shares,
                                                        self.damping, self.min_share, rects, tris, self.size)
             return Partition(*part)
         k = len(self.tiles)
@@ -145,11 +147,9 @@ class CrossSegment(Configured):
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         features = partition.features
         self._flat = features if features is not None and "owner" in features else None
-        if partition.pieces is not None:
-            self._pieces = partition.pieces
-        else:
-            self._pieces = tuple(partition.regions[:, None])  # one (1, 4) piece per rank
-        self._times = np.asarray(times, dtype=np.float64).copy()
+        pieces = partition.pieces
+        self._pieces = pieces if pieces is not None else tuple(partition.regions[:, None])  # one (1, 4) piece per rank
+        self._times = np.array(times, dtype=np.float64)  # a copy: the caller's buffer changes
 
     def report(self) -> dict:
         return {"name": self.name, "segment_shares": [round(float(v), 3) for v in self.shares]}

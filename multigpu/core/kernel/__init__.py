@@ -56,20 +56,20 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
     else:
         allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
         owner = np.repeat(np.arange(k), [len(p) for p in pieces])
-    rt = np.ascontiguousarray(np.asarray(rects, dtype=np.float64).T)
-    shares, ints, both = _cross(
-        allp, owner, np.asarray(times, dtype=np.float64), tiles, shares, float(damping), float(min_share), rt,
-        np.asarray(tris, dtype=np.int64), int(size[0]), int(size[1]))
-    at = ints[:k + 1].tolist()  # views of the packed arrays (their layout: pieces._cross)
+    # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
+    rt = np.ascontiguousarray(rects.T, dtype=np.float64)
+    shares, ints, both = _cross(allp, owner, times, tiles, shares, damping, min_share, rt,
+                                np.asarray(tris, dtype=np.int64), size[0], size[1])
+    # views of the packed arrays (their layout: pieces._cross), split with few Python steps:
+    # with the caches cold after rendering, every step costs microseconds
+    at = ints[:k + 1].tolist()
     q = at[k]
-    regions, loads = ints[k + 1:5 * k + 1].reshape(k, 4), ints[5 * k + 1:6 * k + 1]
-    prects, powner = ints[6 * k + 1:6 * k + 1 + 4 * q].reshape(q, 4), ints[6 * k + 1 + 4 * q:]
-    masks, visible = both[:q], both[q:]
-    per_rank = tuple(prects[at[r]:at[r + 1]] for r in range(k))
-    per_mask = tuple(masks[at[r]:at[r + 1]] for r in range(k))
+    prects = ints[6 * k + 1:6 * k + 1 + 4 * q].reshape(q, 4)
+    cuts = list(zip(at[:-1], at[1:]))
     none, none_px = _no_splits(k)
-    return shares, (regions, loads, visible, none, none_px, None, per_rank, per_mask,
-                    {"pieces": prects, "owner": powner})
+    return shares, (ints[k + 1:5 * k + 1].reshape(k, 4), ints[5 * k + 1:6 * k + 1], both[q:], none, none_px, None,
+                    tuple([prects[a:b] for a, b in cuts]), tuple([both[a:b] for a, b in cuts]),
+                    {"pieces": prects, "owner": ints[6 * k + 1 + 4 * q:]})
 
 
 _NO_SPLITS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
