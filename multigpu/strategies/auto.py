@@ -67,7 +67,7 @@ class Auto(Configured):
         self._made: deque = deque(maxlen=16)  # (partition, candidate, load or None) of recent plans
         self._scores: list[tuple[int, float, float]] = []  # (candidate, load, slowest time) of scored frames
         self.trials: deque = deque(maxlen=REPORT_TRIALS)
-        self.frames = np.zeros(len(self.candidates), dtype=np.int64)  # frames each candidate planned
+        self.frames = [0] * len(self.candidates)  # frames each candidate planned
 
     @property
     def round_frames(self) -> int:
@@ -89,22 +89,23 @@ class Auto(Configured):
         return self.round_frames * self.rounds
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
-        pair = 2 * self.round_frames  # a trial ends early only after whole mirrored pairs
-        if self._trial_end is None and self._step and (self._step >= self.trial_frames or (
-                self._step % pair == 0 and self._clear())):
-            self._decide()
-            self._trial_end = self._step
-        if self._trial_end is None:
-            i, scored = self._window(self._step)
-        else:
-            i, scored = self.chosen, False
-        part = self.candidates[i].plan(rects, tris, coverage)
-        # a scored frame's load: the triangles in view (NaN rects are the unseen objects)
-        load = float(np.sum(tris, where=rects[:, 0] == rects[:, 0])) if scored else None
+        step, end = self._step, self._trial_end
+        if end is None:  # trialling (a trial ends early only after whole mirrored pairs)
+            if step and (step >= self.trial_frames or (step % (2 * self.round_frames) == 0 and self._clear())):
+                self._decide()
+                self._trial_end = end = step
+        if end is None:
+            i, scored = self._window(step)
+            part = self.candidates[i].plan(rects, tris, coverage)
+            # a scored frame's load: the triangles in view (NaN rects are the unseen objects)
+            load = float(np.sum(tris, where=rects[:, 0] == rects[:, 0])) if scored else None
+        else:  # holding the choice: the plan and the bookkeeping only
+            i, load = self.chosen, None
+            part = self.candidates[i].plan(rects, tris, coverage)
         self._made.append((part, i, load))
         self.frames[i] += 1
-        self._step += 1
-        if self._trial_end is not None and self._step >= self._trial_end + self._hold:
+        self._step = step = step + 1
+        if end is not None and step >= end + self._hold:
             self._step, self._trial_end = 0, None
         return part
 
