@@ -32,6 +32,7 @@ class Planner:
     def __init__(self, cfg, scene, rank: int | None = None):
         self.cfg, self.scene, self.rank = cfg, scene, rank
         self.canvas = cfg.canvas
+        self._bezels = self.canvas.bezels  # without bezels the visible space is the canvas: no calls per frame
         screen = cfg.decomposition == "screen"
         # what an operator cycles through: every strategy of the screen decomposition, else just that one
         self.balances = list(STRATEGIES) if screen else [cfg.decomposition]
@@ -64,7 +65,7 @@ class Planner:
         decomposition in use wants it. Compiled, matrices and rects come from one kernel call."""
         cov = self.coverage if self.decomposition.needs_coverage else None
         view, proj, light, rects = self.project.frame(camera, self.canvas.size, cov)
-        return view, proj, light, self.canvas.to_visible(rects)
+        return view, proj, light, self.canvas.to_visible(rects) if self._bezels else rects
 
     def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None) -> Work:
         """Frame ``frame``'s work on the canvas from its visible ``rects``. ``relay`` (screen
@@ -76,7 +77,8 @@ class Planner:
             work = d.from_partition(relay(lambda: d.partition(rects, tris, cov)), tris)
         else:
             work = d.plan(frame, rects, tris, cov) if cov is not None else d.plan(frame, rects, tris)
-        work = self.canvas.to_canvas(work, rects, tris)
+        if self._bezels:
+            work = self.canvas.to_canvas(work, rects, tris)
         planned = self._planned
         planned[frame] = (d, work)
         if len(planned) > KEEP:  # the oldest (frames are planned in order)
