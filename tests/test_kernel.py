@@ -262,6 +262,32 @@ def test_compiled_draw_commands_equal_the_reference(data, n):
         assert ref.dtype == got.dtype and np.array_equal(ref, got)
 
 
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 6), most=st.integers(0, 30), grid=st.booleans())
+def test_compiled_transfers_equal_the_reference(seed, k, most, grid):
+    """A frame's transfers: the same parts in the same (sender, receiver, index) order from any
+    pieces (ranks with none, empty and overlapping rects) and tiles (a grid, or any rects)."""
+    from unittest import mock
+
+    from multigpu.core import work as work_module
+    from multigpu.core.regions import tile_regions
+    from multigpu.core.work import Work, transfers
+
+    rng = np.random.default_rng(seed)
+
+    def rects(m):
+        lo = rng.integers(-20, 100, (m, 2))
+        return np.concatenate([lo, lo + rng.integers(0, 60, (m, 2))], axis=1).astype(np.int64)
+
+    tiles = tile_regions(1, k, 40, 50) if grid else rects(k)
+    work = Work(tuple(rects(int(rng.integers(0, most + 1))) for _ in range(k)), (), np.zeros(k, dtype=np.int64))
+    ref = transfers(work, tiles, compiled=False)  # the plain loop at any size
+    with mock.patch.object(work_module, "SMALL", -1):  # the compiled pass at any size
+        got = transfers(work, tiles, compiled=True)
+    assert got == ref
+    assert all(type(v) is int for p in got for v in (p.sender, p.receiver, p.index, *p.rect))
+
+
 @settings(max_examples=200, deadline=None)
 @given(data=st.data(), rows=st.integers(1, 4), cols=st.integers(1, 4), n=st.integers(0, 60),
        integer=st.booleans(), strips=st.sampled_from([2, 3, 7, 64, 2048]), scalar=st.booleans())

@@ -111,6 +111,10 @@ class BoxProjector:
             order, center, half64, starts, gbox = self.grouped
             self._boxes = (center, self.half, half64, order, starts, gbox, *self.plain_boxes)  # the kernel's own order
             self._camera_kernel = _project_camera
+            # ``frame``'s outputs, two sets used in turn: a frame's rects and matrices stay valid
+            # through the next call (no array allocated per frame: ~15 us of CPU with cold caches)
+            self._outputs = [(np.empty((4, len(self))), np.zeros((3, 4, 4))) for _ in range(2)]
+            self._turn = 0
 
     def __len__(self) -> int:
         return self.center.shape[1]
@@ -141,12 +145,15 @@ class BoxProjector:
     def frame(self, camera, size, coverage: np.ndarray | None = None) -> tuple:
         """(view, proj, light, rects) of ``camera`` on a ``size`` display: ``frame_matrices``
         and then this projector's rects. Compiled, one kernel call forms both (the per-frame
-        fixed cost is mostly per call and per Python line, the caches cold after rendering)."""
+        fixed cost is mostly per call and per Python line, the caches cold after rendering)
+        into arrays this projector owns and reuses every other call: they stay valid through
+        the next ``frame`` call, not longer (copy them to keep them)."""
         if not self.compiled:
             view, proj, light = frame_matrices(camera, size)
             return view, proj, light, self(view, proj, coverage)
         (ex, ey, ez), (tx, ty, tz), (ux, uy, uz) = camera.position, camera.target, camera.up
-        out, m = np.empty((4, len(self))), np.zeros((3, 4, 4))
+        self._turn ^= 1
+        out, m = self._outputs[self._turn]
         status = self._camera_kernel(*self._boxes, self.plain, float(ex), float(ey), float(ez), float(tx),
                                      float(ty), float(tz), float(ux), float(uy), float(uz), float(camera.fov),
                                      float(camera.near), float(camera.far), size[0] / size[1], self.widen, FAR_TOL,

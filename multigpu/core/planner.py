@@ -62,7 +62,8 @@ class Planner:
     def frame(self, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(view, proj, light, rects) of ``camera`` on the canvas: the (N, 4) normalized object
         rects in the visible space (NaN: not seen), and the coverage too where the
-        decomposition in use wants it. Compiled, matrices and rects come from one kernel call."""
+        decomposition in use wants it. Compiled, matrices and rects come from one kernel call,
+        into the projector's own arrays: valid through the next call, not longer."""
         cov = self.coverage if self.decomposition.needs_coverage else None
         view, proj, light, rects = self.project.frame(camera, self.canvas.size, cov)
         return view, proj, light, self.canvas.to_visible(rects) if self._bezels else rects

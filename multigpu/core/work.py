@@ -1,5 +1,5 @@
 """One frame's work, whatever the decomposition: who renders which pixels with which objects,
-and where the pixels go. Pure numpy.
+and where the pixels go. Pure numpy (the transfers compiled where numba is installed).
 
 A rank renders one or more pixel rects ("pieces"), each with its own object mask: one rect per
 rank for the paper's screen partition, a rank's bins for static bin patterns, a rect per
@@ -13,10 +13,13 @@ owner keeps the nearest fragment.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from multigpu.core import kernel
 from multigpu.core.balance import Partition
+from multigpu.core.kernel.parts import _parts
 
 
 @dataclass(frozen=True)
@@ -64,9 +67,9 @@ def from_partition(part: Partition, tris: np.ndarray) -> Work:
     return Work(tuple(part.regions[:, None]), tuple(part.visible[:, None]), np.asarray(part.loads), False, part)
 
 
-@dataclass(frozen=True)
-class Piece:
-    """Part ``rect`` of sender's piece ``index`` that lands on receiver's tile."""
+class Piece(NamedTuple):
+    """Part ``rect`` of sender's piece ``index`` that lands on receiver's tile (a named tuple:
+    a frame makes a few, built at C speed)."""
 
     sender: int
     receiver: int
@@ -79,23 +82,32 @@ class Piece:
         return (x1 - x0) * (y1 - y0)
 
 
-def transfers(work: Work, tiles: np.ndarray) -> list[Piece]:
+#: up to this many (piece, tile) pairs a frame's transfers are found by a plain loop, cheaper
+#: than any array call with the caches cold (every screen strategy on walls of up to 16 tiles);
+#: bins and bigger walls take the compiled pass
+SMALL = 64
+
+
+def transfers(work: Work, tiles: np.ndarray, compiled: bool | None = None) -> list[Piece]:
     """Every non-empty (piece, tile) intersection, sorted by (sender, receiver, piece index):
-    the order both ends pack and unpack one pair's message in."""
-    T = np.asarray(tiles, dtype=np.int64)
-    counts = [len(r) for r in work.rects]
-    if not sum(counts):
-        return []
-    R = np.concatenate([np.asarray(r, dtype=np.int64).reshape(-1, 4) for r in work.rects])  # every piece
-    sender = np.repeat(np.arange(len(counts)), counts)
-    index = np.arange(len(R)) - np.repeat(np.cumsum(counts) - counts, counts)  # piece index within its rank
-    lo = np.maximum(R[:, None, :2], T[None, :, :2])
-    hi = np.minimum(R[:, None, 2:], T[None, :, 2:])
-    p, t = np.nonzero((hi > lo).all(axis=-1))  # (pieces, tiles) that meet
-    order = np.lexsort((index[p], t, sender[p]))
-    p, t = p[order], t[order]
-    cut = np.concatenate([lo[p, t], hi[p, t]], axis=1).tolist()
-    return [Piece(s, r, i, tuple(c)) for s, r, i, c in zip(sender[p].tolist(), t.tolist(), index[p].tolist(), cut)]
+    the order both ends pack and unpack one pair's message in. Past ``SMALL`` pairs the
+    compiled pass (``core/kernel/parts.py``, the same parts) where numba is installed
+    (``compiled`` None) or asked for; ``compiled=False`` always loops."""
+    pieces = [np.asarray(r, dtype=np.int64).reshape(-1, 4).tolist() for r in work.rects]  # ranks, not objects
+    T = np.asarray(tiles, dtype=np.int64).tolist()
+    counts = [len(p) for p in pieces]
+    if sum(counts) * len(T) > SMALL and kernel.use(compiled):
+        R = np.array([rect for mine in pieces for rect in mine], dtype=np.int64).reshape(-1, 4)
+        rows = _parts(R, np.array(counts, dtype=np.int64), np.array(T, dtype=np.int64).reshape(-1, 4))
+        return [Piece(s, r, i, (x0, y0, x1, y1)) for s, r, i, x0, y0, x1, y1 in rows.tolist()]
+    out = []
+    for s, mine in enumerate(pieces):  # senders, tiles, the sender's pieces: the sorted order
+        for r, (a0, b0, a1, b1) in enumerate(T):
+            for i, (x0, y0, x1, y1) in enumerate(mine):
+                lx, ly, hx, hy = max(x0, a0), max(y0, b0), min(x1, a1), min(y1, b1)
+                if hx > lx and hy > ly:
+                    out.append(Piece(s, r, i, (lx, ly, hx, hy)))
+    return out
 
 
 def pieces_tile_display(work: Work, size) -> bool:

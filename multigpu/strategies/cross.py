@@ -54,6 +54,7 @@ class CrossSegment(Configured):
         self._flat: dict | None = None  # the same pieces flat, where the kernel planned them
         self._times: np.ndarray | None = None
         self.shares = np.ones(len(self.tiles))
+        self._spare = np.empty(len(self.tiles))  # the compiled kernel's new shares go here (no array to box)
         self._compiled = kernel.use(self.compiled)  # once, not per frame
         self.size = (int(W), int(H))  # the kernel's argument types, fixed here once
         self.damping, self.min_share = float(self.damping), float(self.min_share)
@@ -63,8 +64,10 @@ class CrossSegment(Configured):
             return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         tris = np.asarray(tris)
         if self._compiled and tris.dtype.kind in "iu":
-            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles, self.shares,
-                                                       self.damping, self.min_share, rects, tris, self.size)
+            # the new shares into the spare (K,) array, the old ones the spare for the next frame
+            new, self._spare = self._spare, self.shares
+            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles, self._spare,
+                                                       self.damping, self.min_share, rects, tris, self.size, new)
             return Partition(*part)
         k = len(self.tiles)
         profiles, loads = self._profiles()

@@ -8,6 +8,7 @@ make hundreds of C-level calls.
   masks and loads;
 * ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks;
 * ``draws.py``: a rank's mask to run-merged draw commands;
+* ``parts.py``: a frame's transfers, every (piece, tile) overlap in message order;
 * ``fit.py``: the cost model's least-squares fit and term selection;
 * ``pixels.py``: the cost model's per-rank pixel feature.
 
@@ -45,21 +46,24 @@ def use(compiled: bool | None) -> bool:
     return available() if compiled is None else bool(compiled)
 
 
-def cross_partition(pieces, times, tiles, shares, damping: float, min_share: float, rects, tris, size):
-    """``strategies.cross``: the new segment shares, and the partition's fields (regions, loads,
-    T' masks, splits, split pixels, no spans, pieces and their masks per rank, and the pieces flat
-    for the next frame: ``{"pieces": (Q, 4), "owner": (Q,)}``) from the last frame's pieces
-    (that flat form, or per rank) and measured ``times``. One compiled call."""
+def cross_partition(pieces, times, tiles, shares, damping: float, min_share: float, rects, tris, size,
+                    out: np.ndarray | None = None):
+    """``strategies.cross``: the new segment shares (into ``out`` where given, a (K,) float64
+    array other than ``shares``), and the partition's fields (regions, loads, T' masks, splits,
+    split pixels, no spans, pieces and their masks per rank, and the pieces flat for the next
+    frame: ``{"pieces": (Q, 4), "owner": (Q,)}``) from the last frame's pieces (that flat form,
+    or per rank) and measured ``times``. One compiled call."""
     k = len(tiles)
     if isinstance(pieces, dict):  # the last frame's flat pieces, as this function returned them
         allp, owner = pieces["pieces"], pieces["owner"]
     else:
         allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
         owner = np.repeat(np.arange(k), [len(p) for p in pieces])
+    new = np.empty(k) if out is None else out
     # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
-    rt = np.ascontiguousarray(rects.T, dtype=np.float64)
-    shares, ints, both = _cross(allp, owner, times, tiles, shares, damping, min_share, rt,
-                                np.asarray(tris, dtype=np.int64), size[0], size[1])
+    ints, both = _cross(allp, owner, times, tiles, shares, new, damping, min_share,
+                        np.ascontiguousarray(rects.T, dtype=np.float64), np.asarray(tris, dtype=np.int64), size[0],
+                        size[1])
     # views of the packed arrays (their layout: pieces._cross), split with few Python steps:
     # with the caches cold after rendering, every step costs microseconds
     at = ints[:k + 1].tolist()
@@ -67,9 +71,9 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
     prects = ints[6 * k + 1:6 * k + 1 + 4 * q].reshape(q, 4)
     cuts = list(zip(at[:-1], at[1:]))
     none, none_px = _no_splits(k)
-    return shares, (ints[k + 1:5 * k + 1].reshape(k, 4), ints[5 * k + 1:6 * k + 1], both[q:], none, none_px, None,
-                    tuple([prects[a:b] for a, b in cuts]), tuple([both[a:b] for a, b in cuts]),
-                    {"pieces": prects, "owner": ints[6 * k + 1 + 4 * q:]})
+    return new, (ints[k + 1:5 * k + 1].reshape(k, 4), ints[5 * k + 1:6 * k + 1], both[q:], none, none_px, None,
+                 tuple([prects[a:b] for a, b in cuts]), tuple([both[a:b] for a, b in cuts]),
+                 {"pieces": prects, "owner": ints[6 * k + 1 + 4 * q:]})
 
 
 _NO_SPLITS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -140,6 +144,9 @@ def warm() -> float:
     from multigpu.core.kernel.draws import _commands
 
     _commands(np.ones(2, dtype=np.bool_), np.arange(2, dtype=np.int64), np.array([0, 3, 6], dtype=np.int64))
+    from multigpu.core.kernel.parts import _parts
+
+    _parts(np.array([[0, 0, 4, 4]]), np.array([1]), np.array([[0, 0, 2, 2]]))
     return time.perf_counter() - t0
 
 

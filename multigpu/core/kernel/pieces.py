@@ -65,16 +65,15 @@ def _seqsum(x):
     return s
 
 
-def _cut(allp, owner, times, tiles, shares, damping, min_share):
-    """The view equalizer's new shares and every rank's pieces: (shares, rects (Q, 4), owner (Q,)),
-    rank-major, each rank's pieces in segment order."""
+def _cut(allp, owner, times, tiles, shares, out, damping, min_share):
+    """The view equalizer's new shares (into ``out``) and every rank's pieces: (rects (Q, 4),
+    owner (Q,)), rank-major, each rank's pieces in segment order."""
     k = tiles.shape[0]
     axes, a0s, lens, prof, loads = _profiles(allp, owner, k, times, tiles)
     total = _seqsum(loads)
     new = np.empty(k)
     for t in range(k):
         new[t] = k * loads[t] / total if total > 0 else 1.0
-    out = np.empty(k)
     for t in range(k):
         out[t] = max((1 - damping) * new[t] + damping * shares[t], min_share)
     scale = k / _seqsum(out)
@@ -126,7 +125,7 @@ def _cut(allp, owner, times, tiles, shares, damping, min_share):
             who[q], seg[q] = helpers[j], t
             q += 1
     order = np.argsort(who[:q] * k + seg[:q], kind="mergesort")  # rank-major, segments in order
-    return out, rects[:q][order].copy(), who[:q][order].copy()
+    return rects[:q][order].copy(), who[:q][order].copy()
 
 
 def _masks(rt, tris, W, H, prects, powner, k):
@@ -166,14 +165,14 @@ def _masks(rt, tris, W, H, prects, powner, k):
     return both, loads, regions
 
 
-def _cross(allp, owner, times, tiles, shares, damping, min_share, rt, tris, W, H):
-    """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan), packed in three arrays
-    (every returned array costs a Python call to box it, paid again with the caches cold): the
-    new shares; the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
+def _cross(allp, owner, times, tiles, shares, new, damping, min_share, rt, tris, W, H):
+    """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan): the new shares into
+    ``new`` and the rest packed in two arrays (every returned array costs a Python call to box
+    it, paid again with the caches cold): the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
     (Q)]``, ``at`` where each rank's pieces start in the rank-major pieces; the masks ``[pieces'
     (Q, N) | ranks' T' (K, N)]``."""
     k = tiles.shape[0]
-    out, prects, powner = _cut(allp, owner, times, tiles, shares, damping, min_share)
+    prects, powner = _cut(allp, owner, times, tiles, shares, new, damping, min_share)
     both, loads, regions = _masks(rt, tris, W, H, prects, powner, k)
     q = powner.shape[0]
     ints = np.zeros(6 * k + 1 + 5 * q, dtype=np.int64)
@@ -188,7 +187,7 @@ def _cross(allp, owner, times, tiles, shares, damping, min_share, rt, tris, W, H
         for c in range(4):
             ints[6 * k + 1 + 4 * p + c] = prects[p, c]
         ints[6 * k + 1 + 4 * q + p] = powner[p]
-    return out, ints, both
+    return ints, both
 
 
 compile_all(globals(), ("_profiles", "_seqsum", "_cut", "_masks", "_cross"))
