@@ -66,16 +66,25 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
         buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
         inbox[s] = buf
         requests.append(comm.Irecv([buf, MPI.BYTE], source=s, tag=TAG))
+    # colour parts tile the display, so their order is free: this rank's own go in while the
+    # messages travel (fewer polls of the wait); depth parts merge in ascending sender order
+    early = () if with_depth else [me] if me in incoming else ()
+    for s in early:
+        _merge(color, depth, tile, [(p, *_local(p, rects[me], rendered)) for p in incoming[s]])
     wait_all(requests, timeout, "frame exchange")
     for s in sorted(incoming):  # ascending sender: the depth tie rule
+        if s in early:
+            continue
         parts = incoming[s]
-        if s == me:
-            views = [(p, *_local(p, rects[me], rendered)) for p in parts]
-        else:
-            views = _unpack(inbox[s], parts, with_depth)
-        for p, rgb, z in views:
-            merge_part(color, depth, tile[:2], p.rect, rgb, z)
+        views = [(p, *_local(p, rects[me], rendered)) for p in parts] if s == me else _unpack(inbox[s], parts,
+                                                                                               with_depth)
+        _merge(color, depth, tile, views)
     return sent, zbytes
+
+
+def _merge(color, depth, tile, views) -> None:
+    for p, rgb, z in views:  # parts, not pixels
+        merge_part(color, depth, tile[:2], p.rect, rgb, z)
 
 
 class Messages:
