@@ -104,9 +104,11 @@ def transfers(work: Work, tiles: np.ndarray, compiled: bool | None = None) -> li
     for s, mine in enumerate(pieces):  # senders, tiles, the sender's pieces: the sorted order
         for r, (a0, b0, a1, b1) in enumerate(T):
             for i, (x0, y0, x1, y1) in enumerate(mine):
-                lx, ly, hx, hy = max(x0, a0), max(y0, b0), min(x1, a1), min(y1, b1)
-                if hx > lx and hy > ly:
-                    out.append(Piece(s, r, i, (lx, ly, hx, hy)))
+                lx, hx = (x0 if x0 > a0 else a0), (x1 if x1 < a1 else a1)  # no builtin calls: ~4x fewer C calls
+                if hx > lx:
+                    ly, hy = (y0 if y0 > b0 else b0), (y1 if y1 < b1 else b1)
+                    if hy > ly:
+                        out.append(Piece(s, r, i, (lx, ly, hx, hy)))
     return out
 
 
