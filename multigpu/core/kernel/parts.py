@@ -1,7 +1,8 @@
-"""A frame's transfers compiled (``core.work.transfers``): every (piece, tile) overlap in
-(sender, receiver, piece index) order in one pass over the pieces, where the reference makes
-some thirty numpy calls on a handful of rects (~0.15 ms of CPU per frame with the caches cold
-after rendering). The same parts (tests/test_kernel.py)."""
+"""A frame's transfers compiled (``core.work.transfers``) for many pieces (bins, big walls):
+every (piece, tile) overlap in (sender, receiver, piece index) order in one pass. A screen
+partition's few pairs take ``transfers``' plain loop, the reference these parts equal
+(tests/test_kernel.py); the numpy version both replace made some thirty calls on a handful of
+rects, ~0.15 ms of CPU per frame with the caches cold after rendering."""
 
 from __future__ import annotations
 
