@@ -104,7 +104,7 @@ def choose_split(s: np.ndarray, e: np.ndarray, ratio: float, cuts: np.ndarray, v
         below, total = fill
         left = left + below
         right = right + (total - below)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # inf: as far from balRatio as can be
         diff = np.abs(left / right - ratio)
     diff[(left <= 0) | (right <= 0) | ~valid] = np.inf
     best = diff.min()
