@@ -68,12 +68,12 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
         requests.append(comm.Irecv([buf, MPI.BYTE], source=s, tag=TAG))
     # colour parts tile the display, so their order is free: this rank's own go in while the
     # messages travel (fewer polls of the wait); depth parts merge in ascending sender order
-    early = () if with_depth else [me] if me in incoming else ()
-    for s in early:
-        _merge(color, depth, tile, [(p, *_local(p, rects[me], rendered)) for p in incoming[s]])
+    early = me in incoming and not with_depth
+    if early:
+        _merge(color, depth, tile, [(p, *_local(p, rects[me], rendered)) for p in incoming[me]])
     wait_all(requests, timeout, "frame exchange")
     for s in sorted(incoming):  # ascending sender: the depth tie rule
-        if s in early:
+        if s == me and early:
             continue
         parts = incoming[s]
         views = [(p, *_local(p, rects[me], rendered)) for p in parts] if s == me else _unpack(inbox[s], parts,
