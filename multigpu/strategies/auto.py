@@ -94,14 +94,10 @@ class Auto(Configured):
             if step and (step >= self.trial_frames or (step % (2 * self.round_frames) == 0 and self._clear())):
                 self._decide()
                 self._trial_end = end = step
-        if end is None:
-            i, scored = self._window(step)
-            part = self.candidates[i].plan(rects, tris, coverage)
-            # a scored frame's load: the triangles in view (NaN rects are the unseen objects)
-            load = float(np.sum(tris, where=rects[:, 0] == rects[:, 0])) if scored else None
-        else:  # holding the choice: the plan and the bookkeeping only
-            i, load = self.chosen, None
-            part = self.candidates[i].plan(rects, tris, coverage)
+        i, scored = self._window(step) if end is None else (self.chosen, False)  # trialling, or holding the choice
+        part = self.candidates[i].plan(rects, tris, coverage)
+        # a scored frame's load: the triangles in view (NaN rects are the unseen objects)
+        load = float(np.sum(tris, where=rects[:, 0] == rects[:, 0])) if scored else None
         self._made.append((part, i, load))
         self.frames[i] += 1
         self._step = step = step + 1

@@ -64,10 +64,11 @@ class CrossSegment(Configured):
             return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         tris = np.asarray(tris)
         if self._compiled and tris.dtype.kind in "iu":
-            # the new shares into the spare (K,) array, the old ones the spare for the next frame
-            new, self._spare = self._spare, self.shares
-            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles, self._spare,
-                                                       self.damping, self.min_share, rects, tris, self.size, new)
+            old = self.shares  # the new shares go into the spare array; the old one is the next spare
+            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles, old,
+                                                       self.damping, self.min_share, rects, tris, self.size,
+                                                       self._spare)
+            self._spare = old
             return Partition(*part)
         k = len(self.tiles)
         profiles, loads = self._profiles()
