@@ -28,6 +28,7 @@ from multigpu.core.box_tables import NEXT as _NEXT
 from multigpu.core.box_tables import SIGNS as _SIGNS
 from multigpu.core.box_tables import clip_matrix
 from multigpu.core.camera import frame_matrices
+from multigpu.core.kernel.jit import entry
 
 if TYPE_CHECKING:
     from multigpu.core.spheres import SphereProjector
@@ -111,6 +112,7 @@ class BoxProjector:
             order, center, half64, starts, gbox = self.grouped
             self._boxes = (center, self.half, half64, order, starts, gbox, *self.plain_boxes)  # the kernel's own order
             self._camera_kernel = _project_camera
+            self._entry = None  # its entry point for ``frame``'s own argument types (bound at the first frame)
             # ``frame``'s outputs, two sets used in turn: a frame's rects and matrices stay valid
             # through the next call (no array allocated per frame: ~15 us of CPU with cold caches)
             self._outputs = [(np.empty((4, len(self))), np.zeros((3, 4, 4))) for _ in range(2)]
@@ -154,10 +156,16 @@ class BoxProjector:
         (ex, ey, ez), (tx, ty, tz), (ux, uy, uz) = camera.position, camera.target, camera.up
         self._turn ^= 1
         out, m = self._outputs[self._turn]
-        status = self._camera_kernel(*self._boxes, self.plain, float(ex), float(ey), float(ez), float(tx),
-                                     float(ty), float(tz), float(ux), float(uy), float(uz), float(camera.fov),
-                                     float(camera.near), float(camera.far), size[0] / size[1], self.widen, FAR_TOL,
-                                     out, _NO_COVERAGE if coverage is None else coverage, coverage is not None, m)
+        args = (*self._boxes, self.plain, float(ex), float(ey), float(ez), float(tx), float(ty), float(tz), float(ux),
+                float(uy), float(uz), float(camera.fov), float(camera.near), float(camera.far),
+                float(size[0] / size[1]), self.widen, FAR_TOL, out, _NO_COVERAGE if coverage is None else coverage,
+                coverage is not None, m)
+        if coverage is None:  # every argument this projector's own or a float: the kernel's entry point
+            if self._entry is None:
+                self._entry = entry(self._camera_kernel, args)
+            status = self._entry(*args)
+        else:  # the caller's coverage array: numba checks its type
+            status = self._camera_kernel(*args)
         if status:
             raise ValueError("camera position and target coincide" if status == 1
                              else "view and projection matrices must be finite")

@@ -38,6 +38,8 @@ class Planner:
         self.balances = list(STRATEGIES) if screen else [cfg.decomposition]
         self.using = self.balances.index(cfg.balance) if screen else 0
         self._built: dict[int, object] = {}
+        self._d = None  # the decomposition in use, once built (``use`` clears it): no lookups per frame
+        self._size = self.canvas.size
         self._planned: dict[int, tuple[object, Work]] = {}
         self.project = make_projector(scene, cfg.bounds)
         self.coverage = np.ones(scene.n_objects)  # per-object silhouette coverage, for strategies that use it
@@ -53,31 +55,33 @@ class Planner:
             cfg = self.cfg
             balance = self.balances[self.using] if cfg.decomposition == "screen" else cfg.balance
             d = self._built[self.using] = make_decomposition(cfg, self.scene, balance, self.rank)
+        self._d = d
         return d
 
     def use(self, i: int) -> None:
         """Plan with strategy ``balances[i]`` from the next frame on."""
         self.using = int(i)
+        self._d = None
 
     def frame(self, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(view, proj, light, rects) of ``camera`` on the canvas: the (N, 4) normalized object
         rects in the visible space (NaN: not seen), and the coverage too where the
         decomposition in use wants it. Compiled, matrices and rects come from one kernel call,
         into the projector's own arrays: valid through the next call, not longer."""
-        cov = self.coverage if self.decomposition.needs_coverage else None
-        view, proj, light, rects = self.project.frame(camera, self.canvas.size, cov)
+        d = self._d or self.decomposition
+        view, proj, light, rects = self.project.frame(camera, self._size, self.coverage if d.needs_coverage else None)
         return view, proj, light, self.canvas.to_visible(rects) if self._bezels else rects
 
     def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None) -> Work:
         """Frame ``frame``'s work on the canvas from its visible ``rects``. ``relay`` (screen
         only): called with a thunk that computes the partition, it returns the partition to use
         (``--partition broadcast``: rank 0 computes it, every rank receives it)."""
-        d, tris = self.decomposition, self.tris
-        cov = self.coverage if d.needs_coverage else None
+        d, tris = self._d or self.decomposition, self.tris
         if relay is not None:
+            cov = self.coverage if d.needs_coverage else None
             work = d.from_partition(relay(lambda: d.partition(rects, tris, cov)), tris)
         else:
-            work = d.plan(frame, rects, tris, cov) if cov is not None else d.plan(frame, rects, tris)
+            work = d.plan(frame, rects, tris, self.coverage) if d.needs_coverage else d.plan(frame, rects, tris)
         if self._bezels:
             work = self.canvas.to_canvas(work, rects, tris)
         planned = self._planned

@@ -60,6 +60,8 @@ class Auto(Configured):
             raise ValueError("auto: need 0 <= settle < window, rounds >= 1, 0 <= hold <= max_hold, z > 0")
         args = (self.grid, self.size, self.strips, self.compiled)
         self.candidates = (CrossSegment(*args), Strips(*args))
+        # the candidates that learn from measured times (a no-op ``observe`` is not called per frame)
+        self._learners = tuple(c for c in self.candidates if type(c).observe is not Configured.observe)
         self.chosen = 0  # cross until a trial says otherwise
         self._hold = self.hold  # the hold after the current trial
         self._step = 0  # plans made in the current cycle (trial, then hold)
@@ -177,7 +179,7 @@ class Auto(Configured):
         self._scores = []
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
-        for c in self.candidates:  # every candidate learns from every frame
+        for c in self._learners:  # every candidate learns from every frame
             c.observe(frame, partition, times)
         for n, (part, i, load) in enumerate(self._made):
             if part is partition:

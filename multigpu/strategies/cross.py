@@ -56,20 +56,22 @@ class CrossSegment(Configured):
         self.shares = np.ones(len(self.tiles))
         self._spare = np.empty(len(self.tiles))  # the compiled kernel's new shares go here (no array to box)
         self._compiled = kernel.use(self.compiled)  # once, not per frame
+        self._integer = None  # the integer weights array last seen (checked once, not per frame)
+        self._bound: dict = {}  # the kernel's entry point for this strategy's own argument types
         self.size = (int(W), int(H))  # the kernel's argument types, fixed here once
         self.damping, self.min_share = float(self.damping), float(self.min_share)
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
         if self._pieces is None:
             return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
-        tris = np.asarray(tris)
-        if self._compiled and tris.dtype.kind in "iu":
+        if self._compiled and (tris is self._integer or self._integers(tris)):
             old = self.shares  # the new shares go into the spare array; the old one is the next spare
             self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles, old,
                                                        self.damping, self.min_share, rects, tris, self.size,
-                                                       self._spare)
+                                                       self._spare, self._bound)
             self._spare = old
             return Partition(*part)
+        tris = np.asarray(tris)
         k = len(self.tiles)
         profiles, loads = self._profiles()
         total = _seqsum(loads)
@@ -147,6 +149,14 @@ class CrossSegment(Configured):
         # no spans: only the cost model reads a partition's, from its own strips partitions
         return Partition(regions, loads, visible, np.zeros(max(k - 1, 0)), np.zeros(max(k - 1, 0), dtype=np.int64),
                          None, tuple(prects), tuple(pvis))
+
+    def _integers(self, tris) -> bool:
+        """Whether ``tris`` holds integers (the compiled plan's weights), kept when it is an
+        array: the planner passes the same array every frame, checked once."""
+        if tris.__class__ is np.ndarray and tris.dtype.kind in "iu":
+            self._integer = tris
+            return True
+        return np.asarray(tris).dtype.kind in "iu"
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         features = partition.features

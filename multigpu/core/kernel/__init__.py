@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from multigpu.core.kernel.jit import numba
+from multigpu.core.kernel.jit import entry, numba
 from multigpu.core.kernel.pieces import _cross
 from multigpu.core.kernel.project import _project
 from multigpu.core.kernel.walk import strip_partition, tree_arrays
@@ -47,23 +47,33 @@ def use(compiled: bool | None) -> bool:
 
 
 def cross_partition(pieces, times, tiles, shares, damping: float, min_share: float, rects, tris, size,
-                    out: np.ndarray | None = None):
+                    out: np.ndarray | None = None, bound: dict | None = None):
     """``strategies.cross``: the new segment shares (into ``out`` where given, a (K,) float64
     array other than ``shares``), and the partition's fields (regions, loads, T' masks, splits,
     split pixels, no spans, pieces and their masks per rank, and the pieces flat for the next
     frame: ``{"pieces": (Q, 4), "owner": (Q,)}``) from the last frame's pieces (that flat form,
-    or per rank) and measured ``times``. One compiled call."""
+    or per rank) and measured ``times``. One compiled call. ``bound``: a dict the caller keeps
+    between calls that passes the same types every call (``times``, ``tiles``, ``shares``,
+    ``out``: C-contiguous float64, int64, float64, float64 arrays; ``damping``, ``min_share``
+    floats; ``size`` ints): the kernel's entry point is kept there and called directly where
+    the pieces are flat (``jit.entry``)."""
     k = len(tiles)
-    if isinstance(pieces, dict):  # the last frame's flat pieces, as this function returned them
+    call = _cross
+    flat = isinstance(pieces, dict)
+    if flat:  # the last frame's flat pieces, as this function returned them
         allp, owner = pieces["pieces"], pieces["owner"]
+        if bound is not None:
+            call = bound.get("cross", _cross)
     else:
         allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
         owner = np.repeat(np.arange(k), [len(p) for p in pieces])
     new = np.empty(k) if out is None else out
     # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
-    ints, both = _cross(allp, owner, times, tiles, shares, new, damping, min_share,
-                        np.ascontiguousarray(rects.T, dtype=np.float64), np.asarray(tris, dtype=np.int64), size[0],
-                        size[1])
+    args = (allp, owner, times, tiles, shares, new, damping, min_share, np.ascontiguousarray(rects.T, dtype=np.float64),
+            np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1])
+    if flat and call is _cross and bound is not None:  # bind the entry point once
+        call = bound["cross"] = entry(_cross, args)
+    ints, both = call(*args)
     # views of the packed arrays (their layout: pieces._cross), split with few Python steps:
     # with the caches cold after rendering, every step costs microseconds
     at = ints[:k + 1].tolist()
