@@ -14,19 +14,17 @@ Integer weights (triangle counts) are summed exactly in int64 up to a total of 2
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from multigpu.core.regions import MAX_PIXELS, overlaps, pixel_spans, tile_regions
+from multigpu.core import kernel  # module-level: a function-level import costs a Python call per frame
+from multigpu.core.regions import MAX_PIXELS, MAX_TOTAL, overlaps, pixel_spans, tile_regions
 from multigpu.core.splits import SplitTask, strip_chooser
 from multigpu.core.tree import VERTICAL, GpuTree, gpu_tree
 
-MAX_TOTAL = 2**62
 
-
-@dataclass(frozen=True)
-class Partition:
+class Partition(NamedTuple):
     """The result of one frame's balancing.
 
     regions : (K, 4) int64  ``[x0, y0, x1, y1)`` render region per rank label; they tile the
@@ -45,6 +43,9 @@ class Partition:
     features : None, or what the strategy that planned it needs to learn from its measured
         times (the cost model's per-rank triangles, pixels and prediction): a strategy's
         ``observe`` reads the partition it is given, never state a later ``plan`` changed.
+
+    Immutable; a named tuple, not a frozen dataclass: one is made every frame, and a frozen
+    dataclass sets each of its nine fields through ``object.__setattr__``.
     """
 
     regions: np.ndarray
@@ -173,8 +174,6 @@ def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool 
     """
     rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, strips)
     strips = int(strips)
-    from multigpu.core import kernel
-
     if getattr(choose, "object_free", False) and kernel.use(compiled):
         cuts = node_cuts(tree, (W, H), strips, choose)
         return Partition(*kernel.strip_partition(rects, tris, tree, (W, H), strips, cuts))
@@ -228,8 +227,6 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
         same partition, bit for bit); None uses it where numba is installed, False runs this
         module's numpy reference.
     """
-    from multigpu.core import kernel
-
     density = None
     if fill is not None:
         density = np.broadcast_to(np.asarray(fill, dtype=np.float64), np.shape(rects)[:1])
@@ -249,8 +246,6 @@ def partition_tiles(rects, tris, grid, size, compiled: bool | None = None) -> Pa
     are the tile boundaries in p-pos form. Compiled (``compiled`` as in ``partition``): the
     tree walk with the tile boundaries as its cuts, the same partition.
     """
-    from multigpu.core import kernel
-
     compiled = kernel.use(compiled)  # compiled, the walk makes the per-object checks in its own pass
     rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, 2, rows=not compiled)
     rows, cols = tree.rows, tree.cols

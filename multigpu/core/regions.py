@@ -15,6 +15,8 @@ import numpy as np
 # displays are limited to MAX_PIXELS per axis so every coordinate fits
 SPAN_DTYPE = np.int32
 MAX_PIXELS = 2**30
+# integer weights (triangle counts) must sum below this, so every sum fits int64
+MAX_TOTAL = 2**62
 
 
 def tile_regions(rows: int, cols: int, tw: int, th: int) -> np.ndarray:

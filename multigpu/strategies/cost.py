@@ -4,7 +4,7 @@ measured per-rank render times; the pixel term is kept only where the scene need
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -58,7 +58,7 @@ class CostModel(Configured):
         else:
             p = partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         px = rank_pixels(np.asarray(rects, np.float64), p.visible, p.regions, self.size, cov, p.spans, self.compiled)
-        return replace(p, features={"triangles": p.loads.astype(np.float64), "pixels": px})
+        return p._replace(features={"triangles": p.loads.astype(np.float64), "pixels": px})
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         """One sample per rank from the features of the partition it planned for ``frame``."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from multigpu.core.kernel.jit import compile_all
+from multigpu.core.regions import MAX_TOTAL
 
 #: displays up to this many pixels along an axis look strips up in a table (as splits.py does)
 TABLE_MAX = 1 << 16
@@ -268,24 +269,25 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
     covered pixel of each object. Integer loads are exact sums; float loads are summed again by
     numpy as the reference sums them (pairwise)."""
     shape = (tree.rows, tree.cols)
-    if shape not in _TREES:
-        _TREES[shape] = tree_arrays(tree)
-    nodes, leaves = _TREES[shape]
+    if shape not in _TREES:  # with the chooser's cuts (-1) for every node: the kernel only reads them
+        nodes, leaves = tree_arrays(tree)
+        _TREES[shape] = (nodes, leaves, np.full(len(nodes), -1, dtype=np.int64))
+    nodes, leaves, free = _TREES[shape]
     if cuts is None:
-        cuts = np.full(len(nodes), -1, dtype=np.int64)
+        cuts = free
     rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
     regions, loads, visible, splits, split_pixels, spans, (inverted, not_finite, negative, total) = _walk(
         rt, tris, int(size[0]), int(size[1]), int(strips), nodes, leaves, cuts,
         _NO_FILL if density is None else density)
-    from multigpu.core import balance
+    if not_finite or negative or inverted or (tris.dtype.kind == "i" and int(total) >= MAX_TOTAL):
+        from multigpu.core import balance  # the refusals' words (imported here: balance imports this module)
 
-    if not_finite:  # the reference's order: weights, their total, then the rects
-        raise ValueError(balance.NOT_FINITE)
-    if negative:
-        raise ValueError(balance.NEGATIVE)
-    if tris.dtype.kind == "i" and int(total) >= balance.MAX_TOTAL:
-        raise ValueError(balance.TOO_MANY)
-    if inverted:
+        if not_finite:  # the reference's order: weights, their total, then the rects
+            raise ValueError(balance.NOT_FINITE)
+        if negative:
+            raise ValueError(balance.NEGATIVE)
+        if tris.dtype.kind == "i" and int(total) >= MAX_TOTAL:
+            raise ValueError(balance.TOO_MANY)
         raise ValueError(balance.INVERTED)
     if tris.dtype.kind == "f":
         loads = np.array([tris[v].sum() for v in visible], dtype=tris.dtype)  # K ranks, not objects
