@@ -18,26 +18,25 @@ def _profiles(allp, owner, k, times, tiles):
     """Per segment: axis (0: x), start, length, time profile along its longer axis (rows of
     ``prof``), and its total time (``loads``)."""
     P, T = allp.shape[0], tiles.shape[0]
-    rank_area = np.zeros(k)
+    floats = np.zeros(k + P + T)  # one allocation where three were: each costs ~0.4 us with the caches cold
+    rank_area, density, loads = floats[:k], floats[k:k + P], floats[k + P:]
     for p in range(P):
         rank_area[owner[p]] += np.float64((allp[p, 2] - allp[p, 0]) * (allp[p, 3] - allp[p, 1]))
-    density = np.empty(P)
     for p in range(P):
         density[p] = times[owner[p]] / max(rank_area[owner[p]], 1.0)
-    inter = np.zeros((P, T), dtype=np.int64)
+    ints = np.zeros((3 + P, T), dtype=np.int64)  # axes, starts, lengths, then the (P, T) overlaps
+    axes, a0s, lens, inter = ints[0], ints[1], ints[2], ints[3:]
     for p in range(P):
         for t in range(T):
             w = min(allp[p, 2], tiles[t, 2]) - max(allp[p, 0], tiles[t, 0])
             h = min(allp[p, 3], tiles[t, 3]) - max(allp[p, 1], tiles[t, 1])
             inter[p, t] = max(w, 0) * max(h, 0)
-    loads = np.zeros(T)
     longest = 0
     for t in range(T):
         loads[t] = density[0] * inter[0, t] if P else 0.0
         for p in range(1, P):
             loads[t] += density[p] * inter[p, t]
         longest = max(longest, tiles[t, 2] - tiles[t, 0], tiles[t, 3] - tiles[t, 1])
-    axes, a0s, lens = np.zeros(T, np.int64), np.zeros(T, np.int64), np.zeros(T, np.int64)
     prof = np.zeros((T, longest))
     for t in range(T):
         x0, y0, x1, y1 = tiles[t, 0], tiles[t, 1], tiles[t, 2], tiles[t, 3]
@@ -65,13 +64,16 @@ def _seqsum(x):
     return s
 
 
-def _cut(allp, owner, times, tiles, shares, out, damping, min_share):
-    """The view equalizer's new shares (into ``out``) and every rank's pieces: (rects (Q, 4),
-    owner (Q,)), rank-major, each rank's pieces in segment order."""
+def _cut(allp, owner, times, tiles, shares, out, damping, min_share, packed):
+    """The view equalizer's new shares (into ``out``) and every rank's pieces, rank-major, each
+    rank's pieces in segment order, written into ``packed`` (``_cross``'s layout: rects (Q, 4)
+    from 6K + 1, owners (Q,) after them); returns Q. Few allocations: each costs ~0.4 us of
+    CPU with the caches cold (ad hoc), and a frame's plan made some forty."""
     k = tiles.shape[0]
     axes, a0s, lens, prof, loads = _profiles(allp, owner, k, times, tiles)
     total = _seqsum(loads)
-    new = np.empty(k)
+    floats = np.zeros((3, k))
+    new, start, used = floats[0], floats[1], floats[2]
     for t in range(k):
         new[t] = k * loads[t] / total if total > 0 else 1.0
     for t in range(k):
@@ -79,15 +81,14 @@ def _cut(allp, owner, times, tiles, shares, out, damping, min_share):
     scale = k / _seqsum(out)
     for t in range(k):
         out[t] = out[t] * scale
-    start = np.zeros(k)
     for t in range(1, k):
         start[t] = start[t - 1] + out[t - 1]
     rects = np.zeros((2 * k * k, 4), dtype=np.int64)
-    who = np.zeros(2 * k * k, dtype=np.int64)
-    seg = np.zeros(2 * k * k, dtype=np.int64)
+    ids = np.zeros((3, 2 * k * k), dtype=np.int64)
+    who, seg, helpers = ids[0], ids[1], ids[2]
+    cum_at = np.empty(prof.shape[1])  # every segment's cumulative profile and cuts, in turn
+    cuts_at = np.empty(k + 1, dtype=np.int64)
     q = 0
-    used = np.empty(k)
-    helpers = np.empty(k, dtype=np.int64)
     for t in range(k):  # segments
         lo_r, hi_r = start[t], start[t] + out[t]
         m = 0
@@ -97,14 +98,14 @@ def _cut(allp, owner, times, tiles, shares, out, damping, min_share):
                 helpers[m], used[m] = r, u
                 m += 1
         n = lens[t]
-        cum = np.empty(n)
+        cum = cum_at[:n]
         positive = False
         for i in range(n):
             positive |= prof[t, i] > 0
         for i in range(n):
             cum[i] = (cum[i - 1] if i else 0.0) + prof[t, i] if positive else i + 1.0
         usum = _seqsum(used[:m])
-        cuts = np.empty(m + 1, dtype=np.int64)
+        cuts = cuts_at[:m + 1]
         cuts[0], cuts[m] = 0, n
         acc = 0.0
         for j in range(m - 1):
@@ -124,32 +125,44 @@ def _cut(allp, owner, times, tiles, shares, out, damping, min_share):
                 rects[q, 0], rects[q, 1], rects[q, 2], rects[q, 3] = x0, a0s[t] + c0, x1, a0s[t] + c1
             who[q], seg[q] = helpers[j], t
             q += 1
-    order = np.argsort(who[:q] * k + seg[:q], kind="mergesort")  # rank-major, segments in order
-    return rects[:q][order].copy(), who[:q][order].copy()
+    # rank-major, segments in order: a stable insertion sort of the few pieces (numpy's
+    # mergesort and the gathers after it allocated five arrays)
+    order = np.empty(q, dtype=np.int64)
+    for i in range(q):
+        key, j = who[i] * k + seg[i], i
+        while j > 0 and who[order[j - 1]] * k + seg[order[j - 1]] > key:
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = i
+    at = 6 * k + 1
+    for i in range(q):
+        o = order[i]
+        for c in range(4):
+            packed[at + 4 * i + c] = rects[o, c]
+        packed[at + 4 * q + i] = who[o]
+    return q
 
 
-def _masks(rt, tris, W, H, prects, powner, k):
+def _masks(rt, tris, W, H, prects, powner, k, packed):
     """Every piece's object mask (its rect overlaps the object's pixel span) and the ranks' T'
-    masks, in one (P + K, N) array (pieces first); loads (an object drawn in two pieces counts
-    twice) and bounding regions. One pass over the rects: an object's span is formed where it
-    is tested, as ``walk._spans`` forms it, and not kept (cross-segment partitions carry no
+    masks, in one (P + K, N) array (pieces first, returned); loads (an object drawn in two
+    pieces counts twice) and bounding regions into ``packed`` (``_cross``'s layout, the pieces'
+    starts per rank already there). One pass over the rects: an object's span is formed where
+    it is tested, as ``walk._spans`` forms it, and not kept (cross-segment partitions carry no
     spans: only the cost model reads them, from its own partitions)."""
     n = rt.shape[1]
     P = prects.shape[0]
     both = np.zeros((P + k, n), dtype=np.bool_)
     masks, visible = both[:P], both[P:]
-    loads = np.zeros(k, dtype=tris.dtype)
-    regions = np.zeros((k, 4), dtype=np.int64)
-    seen = np.zeros(k, dtype=np.bool_)
+    regions, loads = packed[k + 1:5 * k + 1], packed[5 * k + 1:6 * k + 1]
     for p in range(P):
         r = powner[p]
         x0, y0, x1, y1 = prects[p, 0], prects[p, 1], prects[p, 2], prects[p, 3]
-        if seen[r]:
-            regions[r, 0], regions[r, 1] = min(regions[r, 0], x0), min(regions[r, 1], y0)
-            regions[r, 2], regions[r, 3] = max(regions[r, 2], x1), max(regions[r, 3], y1)
+        if p > packed[r]:  # not the rank's first piece (the pieces are rank-major)
+            regions[4 * r], regions[4 * r + 1] = min(regions[4 * r], x0), min(regions[4 * r + 1], y0)
+            regions[4 * r + 2], regions[4 * r + 3] = max(regions[4 * r + 2], x1), max(regions[4 * r + 3], y1)
         else:
-            regions[r, 0], regions[r, 1], regions[r, 2], regions[r, 3] = x0, y0, x1, y1
-            seen[r] = True
+            regions[4 * r], regions[4 * r + 1], regions[4 * r + 2], regions[4 * r + 3] = x0, y0, x1, y1
     w1, h1 = W - 1.0, H - 1.0
     for o in range(n):  # one sequential pass over the objects, the pieces tested for those on screen
         a0, a1, a2, a3 = rt[0, o], rt[1, o], rt[2, o], rt[3, o]
@@ -162,7 +175,7 @@ def _masks(rt, tris, W, H, prects, powner, k):
                 masks[p, o] = True
                 visible[powner[p], o] = True
                 loads[powner[p]] += tris[o]
-    return both, loads, regions
+    return both
 
 
 def _cross(allp, owner, times, tiles, shares, new, damping, min_share, rt, tris, W, H):
@@ -170,24 +183,18 @@ def _cross(allp, owner, times, tiles, shares, new, damping, min_share, rt, tris,
     ``new`` and the rest packed in two arrays (every returned array costs a Python call to box
     it, paid again with the caches cold): the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
     (Q)]``, ``at`` where each rank's pieces start in the rank-major pieces; the masks ``[pieces'
-    (Q, N) | ranks' T' (K, N)]``."""
+    (Q, N) | ranks' T' (K, N)]``. ``tris``: int64."""
     k = tiles.shape[0]
-    prects, powner = _cut(allp, owner, times, tiles, shares, new, damping, min_share)
-    both, loads, regions = _masks(rt, tris, W, H, prects, powner, k)
-    q = powner.shape[0]
-    ints = np.zeros(6 * k + 1 + 5 * q, dtype=np.int64)
+    packed = np.zeros(6 * k + 1 + 5 * 2 * k * k, dtype=np.int64)  # room for the most pieces ``_cut`` makes
+    q = _cut(allp, owner, times, tiles, shares, new, damping, min_share, packed)
+    at = 6 * k + 1
+    prects, powner = packed[at:at + 4 * q].reshape((q, 4)), packed[at + 4 * q:at + 5 * q]
     for p in range(q):
-        ints[powner[p] + 1] += 1
+        packed[powner[p] + 1] += 1
     for r in range(k):
-        ints[r + 1] += ints[r]
-        for c in range(4):
-            ints[k + 1 + 4 * r + c] = regions[r, c]
-        ints[5 * k + 1 + r] = loads[r]
-    for p in range(q):
-        for c in range(4):
-            ints[6 * k + 1 + 4 * p + c] = prects[p, c]
-        ints[6 * k + 1 + 4 * q + p] = powner[p]
-    return ints, both
+        packed[r + 1] += packed[r]
+    both = _masks(rt, tris, W, H, prects, powner, k, packed)
+    return packed[:at + 5 * q], both
 
 
 compile_all(globals(), ("_profiles", "_seqsum", "_cut", "_masks", "_cross"))
