@@ -103,7 +103,8 @@ def project_boxes(grouped, plain_boxes, half, view, proj, widen, far_tol, out, c
     """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage;
     ``grouped``: ``project.spatial_groups`` of the boxes (culled a group at a time);
     ``plain_boxes``: (centres, half extents) in object order, used where the groups cull
-    fewer than half the boxes (``plain`` -1; 1: always, 0: never; the same rects). False
+    fewer than half the boxes (an eighth up to ``project.SCATTER_FREE`` boxes; ``plain`` -1;
+    1: always, 0: never; the same rects). False
     (nothing written) when ``view`` or ``proj`` has an entry that is not finite."""
     order, center, half64, starts, gbox = grouped
     cov = _NO_COVERAGE if coverage is None else coverage
