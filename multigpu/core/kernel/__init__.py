@@ -58,12 +58,9 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
     floats; ``size`` ints): the kernel's entry point is kept there and called directly where
     the pieces are flat (``jit.entry``)."""
     k = len(tiles)
-    call = _cross
     flat = isinstance(pieces, dict)
     if flat:  # the last frame's flat pieces, as this function returned them
         allp, owner = pieces["pieces"], pieces["owner"]
-        if bound is not None:
-            call = bound.get("cross", _cross)
     else:
         allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
         owner = np.repeat(np.arange(k), [len(p) for p in pieces])
@@ -71,8 +68,11 @@ def cross_partition(pieces, times, tiles, shares, damping: float, min_share: flo
     # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
     args = (allp, owner, times, tiles, shares, new, damping, min_share, np.ascontiguousarray(rects.T, dtype=np.float64),
             np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1])
-    if flat and call is _cross and bound is not None:  # bind the entry point once
-        call = bound["cross"] = entry(_cross, args)
+    call = _cross
+    if flat and bound is not None:  # the entry point, bound at the first flat call
+        call = bound.get("cross")
+        if call is None:
+            call = bound["cross"] = entry(_cross, args)
     ints, both = call(*args)
     # views of the packed arrays (their layout: pieces._cross), split with few Python steps:
     # with the caches cold after rendering, every step costs microseconds
