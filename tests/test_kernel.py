@@ -262,6 +262,23 @@ def test_compiled_draw_commands_equal_the_reference(data, n):
         assert ref.dtype == got.dtype and np.array_equal(ref, got)
 
 
+@settings(max_examples=100, deadline=None)
+@given(data=st.data(), n=st.integers(0, 60), integer=st.booleans())
+def test_compiled_trial_load_equals_the_reference(data, n, integer):
+    """``auto``'s trial load (the triangles of the objects in view, NaN rects unseen): the same
+    value compiled as numpy's masked sum, integer or float weights, C or transposed rects."""
+    from multigpu.strategies.auto import Auto
+
+    x0 = np.array(data.draw(st.lists(coord, min_size=n, max_size=n)), dtype=np.float64)
+    rects = np.stack([x0, x0, x0 + 0.1, x0 + 0.1], axis=1)
+    values = st.integers(0, 10**9) if integer else st.floats(0, 1e6, allow_nan=False)
+    tris = np.array(data.draw(st.lists(values, min_size=n, max_size=n)), dtype=np.int64 if integer else np.float64)
+    ref = Auto((2, 2), (64, 64), compiled=False)._load(rects, tris)
+    for r in (rects, np.ascontiguousarray(rects.T).T):
+        got = Auto((2, 2), (64, 64), compiled=True)._load(r, tris)
+        assert got == ref or (not integer and got == pytest.approx(ref, rel=1e-12)), (got, ref)
+
+
 @settings(max_examples=150, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 6), most=st.integers(0, 30), grid=st.booleans())
 def test_compiled_transfers_equal_the_reference(seed, k, most, grid):

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from multigpu.core import kernel
 from multigpu.core.balance import Partition
 from multigpu.strategies.base import Configured
 from multigpu.strategies.cross import CrossSegment
@@ -70,6 +71,7 @@ class Auto(Configured):
         self._scores: list[tuple[int, float, float]] = []  # (candidate, load, slowest time) of scored frames
         self.trials: deque = deque(maxlen=REPORT_TRIALS)
         self.frames = [0] * len(self.candidates)  # frames each candidate planned
+        self._compiled = kernel.use(self.compiled)  # the trial's load in one compiled pass
 
     @property
     def round_frames(self) -> int:
@@ -98,14 +100,20 @@ class Auto(Configured):
                 self._trial_end = end = step
         i, scored = self._window(step) if end is None else (self.chosen, False)  # trialling, or holding the choice
         part = self.candidates[i].plan(rects, tris, coverage)
-        # a scored frame's load: the triangles in view (NaN rects are the unseen objects)
-        load = float(np.sum(tris, where=rects[:, 0] == rects[:, 0])) if scored else None
+        load = self._load(rects, tris) if scored else None
         self._made.append((part, i, load))
         self.frames[i] += 1
         self._step = step = step + 1
         if end is not None and step >= end + self._hold:
             self._step, self._trial_end = 0, None
         return part
+
+    def _load(self, rects: np.ndarray, tris: np.ndarray) -> float:
+        """A scored frame's load: the triangles in view (NaN rects are the unseen objects);
+        compiled where it can be (numpy's masked sum: ~75 us for 6,690 objects, caches warm)."""
+        if self._compiled:
+            return kernel.seen_triangles(rects, tris)
+        return float(np.sum(tris, where=rects[:, 0] == rects[:, 0]))
 
     def effects(self) -> tuple[np.ndarray, np.ndarray, float | None]:
         """Each candidate's log time at the trial's mean load, their covariance and the load

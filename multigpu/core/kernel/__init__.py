@@ -9,6 +9,7 @@ make hundreds of C-level calls.
 * ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks;
 * ``draws.py``: a rank's mask to run-merged draw commands;
 * ``parts.py``: a frame's transfers, every (piece, tile) overlap in message order;
+* ``seen.py``: the triangles of the objects in view (``auto``'s trial load);
 * ``fit.py``: the cost model's least-squares fit and term selection;
 * ``pixels.py``: the cost model's per-rank pixel feature.
 
@@ -31,6 +32,7 @@ import numpy as np
 from multigpu.core.kernel.jit import entry, numba
 from multigpu.core.kernel.pieces import _cross
 from multigpu.core.kernel.project import _project
+from multigpu.core.kernel.seen import seen_triangles as _seen
 from multigpu.core.kernel.walk import strip_partition, tree_arrays
 
 
@@ -115,6 +117,12 @@ def project_boxes(grouped, plain_boxes, half, view, proj, widen, far_tol, out, c
 _NO_COVERAGE = np.empty(0)
 
 
+def seen_triangles(rects: np.ndarray, tris: np.ndarray) -> float:
+    """The triangles of the objects in view: ``tris`` summed over the (N, 4) ``rects`` that
+    are not NaN, in one compiled pass (the projector's rects give a contiguous first column)."""
+    return float(_seen(np.ascontiguousarray(rects[:, 0]), np.asarray(tris)))
+
+
 def warm() -> float:
     """Compile (or load from numba's cache) every signature a run uses (every registered
     strategy plans a few frames); seconds it took. tests/test_kernel.py checks that frames
@@ -161,4 +169,5 @@ def warm() -> float:
     return time.perf_counter() - t0
 
 
-__all__ = ["available", "use", "cross_partition", "warm", "strip_partition", "tree_arrays", "project_boxes"]
+__all__ = ["available", "use", "cross_partition", "warm", "strip_partition", "tree_arrays", "project_boxes",
+           "seen_triangles"]
