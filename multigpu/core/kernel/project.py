@@ -40,11 +40,13 @@ def _coverage(cx, cy, faces, nxt, x0, y0, x1, y1):
     return min(max(quarter / rect, 0.0), 1.0)
 
 
-def _write(out, i, x0, y0, x1, y1, c_lo, c_hi):
-    """``bounds._write_rects`` for one box: NDC extents to a clipped normalized rect, or NaN."""
+def _write(out, i, x0, y0, x1, y1, c_lo, c_hi, filled):
+    """``bounds._write_rects`` for one box: NDC extents to a clipped normalized rect, or NaN
+    (left as it is where the caller ``filled`` every rect with NaN already)."""
     x0, y0, x1, y1 = x0 * 0.5 + c_lo, y0 * 0.5 + c_lo, x1 * 0.5 + c_hi, y1 * 0.5 + c_hi
     if x1 < 0.0 or x0 > 1.0 or y1 < 0.0 or y0 > 1.0:
-        out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
+        if not filled:
+            out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
         return
     out[0, i] = min(max(x0, 0.0), 1.0)
     out[1, i] = min(max(y0, 0.0), 1.0)
@@ -52,7 +54,7 @@ def _write(out, i, x0, y0, x1, y1, c_lo, c_hi):
     out[3, i] = min(max(y1, 0.0), 1.0)
 
 
-def _clipped(M, cc, h, signs, edges, out, i):
+def _clipped(M, cc, h, signs, edges, out, i, filled):
     """``bounds._clipped_rects`` for one box crossing the near plane: the extents of its corners
     in front of the plane and of its edges' crossings with it, projected."""
     P = np.empty((4, 8))
@@ -80,7 +82,7 @@ def _clipped(M, cc, h, signs, edges, out, i):
             lo_x, lo_y, hi_x, hi_y = min(lo_x, x), min(lo_y, y), max(hi_x, x), max(hi_y, y)
     if not kept:  # nothing in front: off screen
         lo_x, lo_y, hi_x, hi_y = 2.0, 2.0, 3.0, 3.0
-    _write(out, i, lo_x, lo_y, hi_x, hi_y, 0.5, 0.5)
+    _write(out, i, lo_x, lo_y, hi_x, hi_y, 0.5, 0.5, filled)
 
 
 #: boxes per block: the corner passes run over a block's arrays (in cache), so they vectorize
@@ -164,56 +166,85 @@ def _clip_block(center, half64, M, rr, far_tol, s0, m, base, state):
         base[0, j], base[1, j], base[2, j] = x, y, w
 
 
-def _corners(base, off, sg, cx, cy, ext, m):
-    """NDC x, y (8, m) of the corners of a block's boxes, in the corner dtype: per clip row
-    ((b + sx*hx*m0) + sy*hy*m1) + sz*hz*m2 (a sign times a value is exact, and b + -a is
-    b - a: the reference's values), then divided by w; and their extents ``ext`` (4, m).
-    Branch-free inner loops."""
-    for k in range(8):  # corner k: bit 2 = x, bit 1 = y, bit 0 = z
-        sx, sy, sz = sg[(k >> 2) & 1], sg[(k >> 1) & 1], sg[k & 1]
-        for j in range(m):
-            vx = base[0, j] + sx * off[0, 0, j] + sy * off[0, 1, j] + sz * off[0, 2, j]
-            vy = base[1, j] + sx * off[1, 0, j] + sy * off[1, 1, j] + sz * off[1, 2, j]
-            vw = base[2, j] + sx * off[2, 0, j] + sy * off[2, 1, j] + sz * off[2, 2, j]
-            x, y = vx / vw, vy / vw
-            cx[k, j], cy[k, j] = x, y
-            if k == 0:
-                ext[0, j], ext[1, j], ext[2, j], ext[3, j] = x, y, x, y
-            else:
-                ext[0, j], ext[1, j] = min(ext[0, j], x), min(ext[1, j], y)
-                ext[2, j], ext[3, j] = max(ext[2, j], x), max(ext[3, j], y)
+def _eight(b, o0, o1, o2):
+    """A clip row's value at a box's 8 corners (corner k: bit 2 = x, bit 1 = y, bit 0 = z;
+    bit set: +): ((b +- o0) +- o1) +- o2, the reference's ((b + sx*o0) + sy*o1) + sz*o2 (a sign
+    times a value is exact, b + -a is b - a), the corners sharing signs sharing the sums."""
+    a0, a1 = b - o0, b + o0
+    b00, b01, b10, b11 = a0 - o1, a0 + o1, a1 - o1, a1 + o1
+    return (b00 - o2, b00 + o2, b01 - o2, b01 + o2, b10 - o2, b10 + o2, b11 - o2, b11 + o2)
+
+
+def _grow(e, x, y):
+    """Extents ``e`` (lo x, lo y, hi x, hi y) taking in the point (x, y)."""
+    return min(e[0], x), min(e[1], y), max(e[2], x), max(e[3], y)
+
+
+def _rows(base, half64, s0, j, Mc):
+    """Clip x, y, w of box j's 8 corners (``_eight`` each), in the corner dtype: its half
+    extents cast to it, times the row's entries, about its centre's clip values ``base``."""
+    cast = Mc.dtype.type
+    h0, h1, h2 = cast(half64[0, s0 + j]), cast(half64[1, s0 + j]), cast(half64[2, s0 + j])
+    return (_eight(base[0, j], h0 * Mc[0, 0], h1 * Mc[0, 1], h2 * Mc[0, 2]),
+            _eight(base[1, j], h0 * Mc[1, 0], h1 * Mc[1, 1], h2 * Mc[1, 2]),
+            _eight(base[2, j], h0 * Mc[2, 0], h1 * Mc[2, 1], h2 * Mc[2, 2]))
+
+
+def _corners(base, half64, s0, Mc, ext, m):
+    """The NDC extents ``ext`` (4, m) of the corners of a block's boxes in the corner dtype
+    (x / w, y / w in corner order, taken in as ``bounds._boxes_block`` reduces them). One
+    straight pass per box with no branch and no array but the extents written: it vectorizes
+    across the boxes."""
+    for j in range(m):
+        X, Y, W = _rows(base, half64, s0, j, Mc)
+        x, y = X[0] / W[0], Y[0] / W[0]
+        e = (x, y, x, y)
+        e = _grow(e, X[1] / W[1], Y[1] / W[1])
+        e = _grow(e, X[2] / W[2], Y[2] / W[2])
+        e = _grow(e, X[3] / W[3], Y[3] / W[3])
+        e = _grow(e, X[4] / W[4], Y[4] / W[4])
+        e = _grow(e, X[5] / W[5], Y[5] / W[5])
+        e = _grow(e, X[6] / W[6], Y[6] / W[6])
+        e = _grow(e, X[7] / W[7], Y[7] / W[7])
+        ext[0, j], ext[1, j], ext[2, j], ext[3, j] = e
+
+
+def _box_corners(base, half64, s0, j, Mc, cx, cy):
+    """NDC x, y (8,) of box j's corners into ``cx``, ``cy`` (the coverage's shoelace reads
+    them): ``_corners``' values, one box at a time."""
+    X, Y, W = _rows(base, half64, s0, j, Mc)
+    for k in range(8):
+        cx[k], cy[k] = X[k] / W[k], Y[k] / W[k]
 
 
 def _block(center, half64, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov, with_cov,
-           s0, m, idx, base, off, sg, cx, cy, ext, state, cc):
+           s0, m, idx, base, cx, cy, ext, state, cc, filled):
     """Rects of ``m`` boxes from ``s0`` of ``center``/``half64`` into ``out`` (and ``cov``) at
     the indices ``idx[:m]``: culled by the planes, corners projected block-wide (branch-free
-    passes over arrays in cache), near-plane crossings clipped one by one."""
+    passes over arrays in cache), near-plane crossings clipped one by one. ``filled``: every
+    rect is NaN and every coverage 1 already, so only the boxes in view are written (scattered
+    writes, one cache line each)."""
     _clip_block(center, half64, M, reach_rows, far_tol, s0, m, base, state)
-    for r in range(3):
-        for a in range(3):
-            for j in range(m):  # half64 cast to the corner dtype is ``half``: one array less to read
-                off[r, a, j] = half64[a, s0 + j]
-            for j in range(m):
-                off[r, a, j] = off[r, a, j] * Mc[r, a]
-    _corners(base, off, sg, cx, cy, ext, m)
+    _corners(base, half64, s0, Mc, ext, m)
     for j in range(m):
         i = idx[j]
-        if with_cov:
+        if with_cov and not filled:
             cov[i] = 1.0
         if state[j] == 2:
-            out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
+            if not filled:
+                out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
         elif state[j] == 1:
             c0, c1, c2 = center[0, s0 + j], center[1, s0 + j], center[2, s0 + j]
             for r in range(4):
                 cc[r] = M[r, 0] * c0 + M[r, 1] * c1 + M[r, 2] * c2 + M[r, 3]
-            _clipped(M, cc, half64[:, s0 + j], signs, edges, out, i)
+            _clipped(M, cc, half64[:, s0 + j], signs, edges, out, i, filled)
         else:
             e0, e1, e2, e3 = np.float64(ext[0, j]), np.float64(ext[1, j]), np.float64(ext[2, j]), \
                 np.float64(ext[3, j])
             if with_cov:
-                cov[i] = _coverage(cx[:, j], cy[:, j], faces, nxt, e0, e1, e2, e3)
-            _write(out, i, e0, e1, e2, e3, c_lo, c_hi)
+                _box_corners(base, half64, s0, j, Mc, cx, cy)
+                cov[i] = _coverage(cx, cy, faces, nxt, e0, e1, e2, e3)
+            _write(out, i, e0, e1, e2, e3, c_lo, c_hi, filled)
 
 
 def _group_out(M, rr, c0, c1, c2, h0, h1, h2):
@@ -300,12 +331,9 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
     bh = np.empty((3, BLOCK))
     idx = np.empty(BLOCK, dtype=np.int64)
     base = np.empty((3, BLOCK), dtype=half.dtype)  # the centres' clip x, y, w cast to the corner dtype
-    off = np.empty((3, 3, BLOCK), dtype=half.dtype)  # [row, axis]: half extent times the row's entry
-    cx = np.empty((8, BLOCK), dtype=half.dtype)
-    cy = np.empty((8, BLOCK), dtype=half.dtype)
+    cx = np.empty(8, dtype=half.dtype)  # one box's corners, for its coverage
+    cy = np.empty(8, dtype=half.dtype)
     ext = np.empty((4, BLOCK), dtype=half.dtype)
-    sg = np.empty(2, dtype=half.dtype)
-    sg[0], sg[1] = -1.0, 1.0
     state = np.empty(BLOCK, dtype=np.int8)
     n_groups = groups.size - 1
     gout = np.zeros(n_groups, dtype=np.bool_)
@@ -322,7 +350,7 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
             for j in range(m):
                 idx[j] = s0 + j
             _block(pcenter, phalf64, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov,
-                   with_cov, s0, m, idx, base, off, sg, cx, cy, ext, state, cc)
+                   with_cov, s0, m, idx, base, cx, cy, ext, state, cc, False)
         return True
     # culled boxes' rects: NaN written in sequence over every row first (a write per culled box
     # scattered by ``order`` would touch every cache line of ``out`` at random), the others
@@ -337,7 +365,7 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
             continue
         if m + (g1 - g0) > BLOCK:
             _block(bc, bh, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov, with_cov,
-                   0, m, idx, base, off, sg, cx, cy, ext, state, cc)
+                   0, m, idx, base, cx, cy, ext, state, cc, True)
             m = 0
         for a in range(3):
             for j in range(g1 - g0):
@@ -348,7 +376,7 @@ def _project(center, half, half64, order, groups, gbox, pcenter, phalf64, plain,
         m += g1 - g0
     if m:
         _block(bc, bh, M, Mc, reach_rows, far_tol, c_lo, c_hi, signs, edges, faces, nxt, out, cov, with_cov,
-               0, m, idx, base, off, sg, cx, cy, ext, state, cc)
+               0, m, idx, base, cx, cy, ext, state, cc, True)
     return True
 
 
@@ -364,6 +392,6 @@ def _project_camera(center, half, half64, order, groups, gbox, pcenter, phalf64,
     return 0 if ok else 2
 
 
-compile_all(globals(), ("_finite", "_clip_matrix", "_clip_block", "_corners", "_face", "_coverage", "_write",
-                         "_clipped", "_block", "_group_out", "_frame_rows", "_project", "_camera_into",
-                         "_project_camera"))
+compile_all(globals(), ("_finite", "_clip_matrix", "_clip_block", "_eight", "_grow", "_rows", "_corners",
+                         "_box_corners", "_face", "_coverage", "_write", "_clipped", "_block", "_group_out",
+                         "_frame_rows", "_project", "_camera_into", "_project_camera"))
