@@ -67,7 +67,7 @@ class Auto(Configured):
         self._hold = self.hold  # the hold after the current trial
         self._step = 0  # plans made in the current cycle (trial, then hold)
         self._trial_end: int | None = None  # the step the current trial ended at (None: trialling)
-        self._made: deque = deque(maxlen=16)  # (partition, candidate, load or None) of recent plans
+        self._made: deque = deque(maxlen=16)  # (partition, candidate, load or None) of recent trial plans
         self._scores: list[tuple[int, float, float]] = []  # (candidate, load, slowest time) of scored frames
         self.trials: deque = deque(maxlen=REPORT_TRIALS)
         self.frames = [0] * len(self.candidates)  # frames each candidate planned
@@ -98,10 +98,13 @@ class Auto(Configured):
             if step and (step >= self.trial_frames or (step % (2 * self.round_frames) == 0 and self._clear())):
                 self._decide()
                 self._trial_end = end = step
-        i, scored = self._window(step) if end is None else (self.chosen, False)  # trialling, or holding the choice
-        part = self.candidates[i].plan(rects, tris, coverage)
-        load = self._load(rects, tris) if scored else None
-        self._made.append((part, i, load))
+        if end is None:  # trialling: the plan is remembered for its score
+            i, scored = self._window(step)
+            part = self.candidates[i].plan(rects, tris, coverage)
+            self._made.append((part, i, self._load(rects, tris) if scored else None))
+        else:  # holding the choice: nothing to score
+            i = self.chosen
+            part = self.candidates[i].plan(rects, tris, coverage)
         self.frames[i] += 1
         self._step = step = step + 1
         if end is not None and step >= end + self._hold:
@@ -189,7 +192,7 @@ class Auto(Configured):
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         for c in self._learners:  # every candidate learns from every frame
             c.observe(frame, partition, times)
-        for n, (part, i, load) in enumerate(self._made):
+        for n, (part, i, load) in enumerate(self._made):  # trial plans (none are added while holding)
             if part is partition:
                 if load is not None:
                     self._scores.append((i, load, float(np.max(times))))
