@@ -98,13 +98,10 @@ class Auto(Configured):
             if step and (step >= self.trial_frames or (step % (2 * self.round_frames) == 0 and self._clear())):
                 self._decide()
                 self._trial_end = end = step
-        if end is None:  # trialling: the plan is remembered for its score
-            i, scored = self._window(step)
-            part = self.candidates[i].plan(rects, tris, coverage)
+        i, scored = self._window(step) if end is None else (self.chosen, False)  # trialling, or holding the choice
+        part = self.candidates[i].plan(rects, tris, coverage)
+        if end is None:  # a trial plan is remembered for its score (holding, nothing is scored)
             self._made.append((part, i, self._load(rects, tris) if scored else None))
-        else:  # holding the choice: nothing to score
-            i = self.chosen
-            part = self.candidates[i].plan(rects, tris, coverage)
         self.frames[i] += 1
         self._step = step = step + 1
         if end is not None and step >= end + self._hold:
