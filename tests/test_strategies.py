@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from multigpu.core import kernel
 from multigpu.core.balance import partition, tree_partition
 from multigpu.core.regions import pixel_spans
 from multigpu.core.splits import fill_prefix, strip_chooser
@@ -355,6 +356,80 @@ def test_rank_pixels_uses_the_partition_spans():
     p = partition(rects, tris, (2, 2), (128, 128), 64)
     np.testing.assert_array_equal(rank_pixels(rects, p.visible, p.regions, (128, 128)),
                                   rank_pixels(rects, p.visible, p.regions, (128, 128), spans=p.spans))
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_cross_segment_helpers_take_at_least_min_help(compiled):
+    """Nearly even loads leave every segment's share near one rank: with ``min_help`` 0 the
+    view equalizer's layout gives a neighbour slivers of a segment (a render pass each); with
+    the default no rank helps a segment with less than ``min_help`` of its unit, unless it is
+    the segment's only helper, and the pieces still tile the display."""
+    from multigpu.core.work import from_partition, pieces_tile_display
+
+    if compiled and not kernel.available():
+        pytest.skip("numba is not installed")
+    rects, tris = workload(400, seed=21)
+    size = (128, 128)
+    rng = np.random.default_rng(5)
+    time_of = lambda p: 1.0 + 0.08 * rng.standard_normal(4)  # even loads, noisy times
+
+    def overlaps(strategy, part):
+        """(its unit's overlap with the segment, ranks drawing it) per rank drawing a segment."""
+        order = list(strategy.order)
+        start = np.zeros(len(order))
+        start[strategy.order] = np.r_[0.0, np.cumsum(strategy.shares[strategy.order])[:-1]]
+        area = lambda p, t: max(min(p[2], t[2]) - max(p[0], t[0]), 0) * max(min(p[3], t[3]) - max(p[1], t[1]), 0)
+        got = []
+        for t, tile in enumerate(strategy.tiles):
+            ranks = [r for r, pieces in enumerate(part.pieces)
+                     if any(area(p, tile) > 0 for p in np.asarray(pieces).reshape(-1, 4))]
+            lo, hi = start[t], start[t] + strategy.shares[t]
+            got += [(min(order.index(r) + 1, hi) - max(order.index(r), lo), len(ranks)) for r in ranks]
+        return got
+
+    smallest = {}
+    for min_help in (0.0, 0.1):
+        cross = CrossSegment((2, 2), size, 64, compiled=compiled, min_help=min_help)
+        seen = []
+        for f in range(40):
+            part = cross.plan(rects, tris)
+            if f:
+                assert pieces_tile_display(from_partition(part, tris), size)
+                seen += [u for u, ranks in overlaps(cross, part) if ranks > 1]
+            cross.observe(f, part, time_of(part))
+        smallest[min_help] = min(seen)
+    assert smallest[0.0] < 0.05  # slivers without the rule
+    assert smallest[0.1] >= 0.1
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_cross_segment_pieces_of_a_row_join_into_one_pass_per_rank(compiled):
+    """On a one-row wall the resource axis runs along the row and every segment is cut across
+    x, its helpers on their own side: whatever the shares, each rank's pieces join into one
+    rect (one render pass), and the pieces still tile the display. On a 2x2 wall, the help
+    along each row joins the same way (most ranks render one rect)."""
+    from multigpu.core.work import from_partition, pieces_tile_display
+
+    if compiled and not kernel.available():
+        pytest.skip("numba is not installed")
+    rects, tris = workload(500, seed=23)
+    rng = np.random.default_rng(8)
+    for grid, size in (((1, 4), (256, 64)), ((2, 2), (128, 128))):
+        cross = CrossSegment(grid, size, 64, compiled=compiled, min_help=0.0)
+        single, shared = [], 0
+        for f in range(30):
+            part = cross.plan(rects, tris)
+            cross.observe(f, part, rng.uniform(0.5, 3.0, 4))  # shares far from even
+            if f:
+                assert pieces_tile_display(from_partition(part, tris), size)
+                single += [len(p) == 1 for p in part.pieces]
+                own = [len(p) == 1 and np.array_equal(np.asarray(p)[0], t) for p, t in zip(part.pieces, cross.tiles)]
+                shared += not all(own)  # some rank drew more or less than its own tile
+        if grid == (1, 4):
+            assert all(single)
+        else:
+            assert np.mean(single) > 0.6
+        assert shared  # the shares moved pieces between ranks
 
 
 def test_cross_segment_moves_resources_to_the_heavy_segment():

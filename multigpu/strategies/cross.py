@@ -4,11 +4,20 @@ equalizer over per-segment load equalizers).
 Each display tile is a segment. From the last frame's measured times (each rank's time spread
 evenly over the pixels it rendered), every segment's load is known. The view equalizer gives
 segment t a share ``r_t = K * L_t / sum(L)`` of the K ranks (damped, and never zero), and lays
-the shares out along one resource axis in tile order: rank k is the unit ``[k, k+1)`` of that
-axis, so it helps the segments its unit overlaps, usually its own and a neighbour. Each
-segment is then split among its helpers by its own load equalizer: cuts across the segment's
-longer axis where the measured time profile reaches each helper's share. A rank may thus
-render pieces of two segments; the pieces tile the display and travel to their tiles' owners.
+the shares out along one resource axis, the tiles in a serpentine order (along the first row,
+back along the next, ...): the rank owning the p-th tile of that order is the unit ``[p, p+1)``
+of the axis, so it helps the segments its unit overlaps, usually its own and a neighbour, by at
+least ``min_help`` of its unit. Each segment is then split among its helpers by its own load
+equalizer: cuts across the segment's longer axis where the measured time profile reaches each
+helper's share, a helper from a neighbour along that axis taking the strip on its own side.
+
+Beyond Equalizer's layout (tiles in label order, helpers from the low end), which gives a
+rank helping a neighbour a second, separate piece: here the help along a row is the strip
+beside the helper's own tile, and a rank's pieces that share a whole edge join into one rect,
+one render pass. A pass draws every object its rect touches, whole, so a second one costs far
+more than its pixels (a 3-pixel piece beside a city tile: ~1 ms of CPU against ~4 ms for the
+tile, nothing when joined; ad hoc, docs/BENCHMARKS.md). ``min_help`` keeps slivers of help
+away where they would not join. The pieces tile the display and travel to their tiles' owners.
 Follows measured times, so not bit-reproducible between runs.
 """
 
@@ -36,20 +45,58 @@ def _overlap_area(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.clip(hi - lo, 0, None).prod(axis=-1)
 
 
+def serpentine(rows: int, cols: int) -> np.ndarray:
+    """Segments (tile labels, column-major, row 0 at the top) along the resource axis: along
+    the first row, back along the next, and so on, so consecutive segments always share an
+    edge, and mostly a vertical one: square or wide tiles are cut across x, and a rank helping
+    its neighbour in a row takes the strip beside its own tile."""
+    return np.array([c * rows + r for r in range(rows) for c in (range(cols) if r % 2 == 0 else range(cols)[::-1])],
+                    dtype=np.int64)
+
+
+def _join(rects: list) -> list[np.ndarray]:
+    """A rank's pieces with any two that share a whole edge joined (the first such pair first,
+    until none is left): one render pass draws an object both touch once, not twice, and a pass
+    costs more than its pixels (a 3-pixel piece of a city tile: ~1 ms of CPU, ad hoc)."""
+    rects = [list(r) for r in rects]
+    i = 0
+    while i < len(rects):  # pieces, not objects (at most a few)
+        for j in range(i + 1, len(rects)):
+            a, b = rects[i], rects[j]
+            if a[1] == b[1] and a[3] == b[3] and (a[2] == b[0] or b[2] == a[0]):
+                rects[i] = [min(a[0], b[0]), a[1], max(a[2], b[2]), a[3]]
+            elif a[0] == b[0] and a[2] == b[2] and (a[3] == b[1] or b[3] == a[1]):
+                rects[i] = [a[0], min(a[1], b[1]), a[2], max(a[3], b[3])]
+            else:
+                continue
+            del rects[j]
+            i = -1  # start again from the first piece
+            break
+        i += 1
+    return [np.array(r, dtype=np.int64) for r in rects]
+
+
 @dataclass
 class CrossSegment(Configured):
     """Resources move between display segments by load, then each segment is split by time."""
 
     damping: float = 0.5
     min_share: float = 0.02  # a segment keeps at least this share of a rank
+    # a rank helps a segment with at least this much of its unit, else the segment's other
+    # helpers take that sliver: a piece that does not join the rank's others costs a render
+    # pass of every object it touches, more than a sliver of share moves (0: every overlap helps)
+    min_help: float = 0.1
 
     name = "cross"
     reproducible = False  # it follows measured times
 
     def __post_init__(self):
+        if not 0.0 <= self.min_help <= 1.0:
+            raise ValueError(f"cross: min_help must lie in [0, 1], got {self.min_help}")
         rows, cols = self.grid
         W, H = self.size
         self.tiles = tile_regions(rows, cols, W // cols, H // rows)
+        self.order = serpentine(rows, cols)  # position on the resource axis -> segment (and its own rank)
         self._pieces: tuple | None = None
         self._flat: dict | None = None  # the same pieces flat, where the kernel planned them
         self._times: np.ndarray | None = None
@@ -59,16 +106,16 @@ class CrossSegment(Configured):
         self._integer = None  # the integer weights array last seen (checked once, not per frame)
         self._bound: dict = {}  # the kernel's entry point for this strategy's own argument types
         self.size = (int(W), int(H))  # the kernel's argument types, fixed here once
-        self.damping, self.min_share = float(self.damping), float(self.min_share)
+        self.damping, self.min_share, self.min_help = float(self.damping), float(self.min_share), float(self.min_help)
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
         if self._pieces is None:
             return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         if self._compiled and (tris is self._integer or self._integers(tris)):
             old = self.shares  # the new shares go into the spare array; the old one is the next spare
-            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles, old,
-                                                       self.damping, self.min_share, rects, tris, self.size,
-                                                       self._spare, self._bound)
+            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles,
+                                                       self.order, old, self.damping, self.min_share, self.min_help,
+                                                       rects, tris, self.size, self._spare, self._bound)
             self._spare = old
             return Partition(*part)
         tris = np.asarray(tris)
@@ -104,26 +151,52 @@ class CrossSegment(Configured):
             profiles.append((ax, a0, prof))
         return profiles, loads
 
+    def _reverse(self, p: int, ax: int, helpers: list[int], used: np.ndarray) -> bool:
+        """Whether segment ``order[p]``'s helpers run from the high end of its cut axis ``ax``:
+        those from a neighbour along that axis (in the resource order; the one helping more
+        where both do) get the strip on its side, so such a rank's pieces here and in its own
+        segment meet along a whole edge and join."""
+        order, tiles, t = self.order, self.tiles, self.order[p]
+        at = np.array(helpers)
+        before, after = (float(np.cumsum(np.r_[0.0, used[m]])[-1]) for m in (at < p, at > p))  # added in order
+        side = lambda q: 0 if tiles[q][1] == tiles[t][1] and tiles[q][3] == tiles[t][3] else 1  # same row: x
+        prev = p > 0 and side(order[p - 1]) == ax
+        nxt = p + 1 < len(order) and side(order[p + 1]) == ax
+        if prev and (before >= after or not nxt):
+            return bool(tiles[order[p - 1]][ax] > tiles[t][ax])
+        if nxt:
+            return bool(tiles[order[p + 1]][ax] < tiles[t][ax])
+        return False
+
     def _split(self, profiles) -> list[list[np.ndarray]]:
-        """Rank k's unit [k, k+1) of the resource axis against each segment's share: cuts."""
-        k = len(self.tiles)
-        start = np.concatenate([[0.0], np.cumsum(self.shares)[:-1]])
-        pieces: list[list[np.ndarray]] = [[] for _ in range(k)]
-        for t, (ax, a0, prof) in enumerate(profiles):  # segments
+        """The resource axis, unit by unit in the serpentine order, against each segment's share:
+        cuts, then each rank's pieces in segment order with those that share an edge joined."""
+        k, order = len(self.tiles), self.order
+        start = np.zeros(k)
+        start[order] = np.concatenate([[0.0], np.cumsum(self.shares[order])[:-1]])
+        pieces: list[list] = [[] for _ in range(k)]
+        for p, t in enumerate(order):  # segments along the resource axis
             lo_r, hi_r = start[t], start[t] + self.shares[t]
-            helpers = [r for r in range(k) if min(r + 1, hi_r) - max(r, lo_r) > 1e-12]
-            used = np.array([min(r + 1, hi_r) - max(r, lo_r) for r in helpers])
-            cum = np.cumsum(prof) if prof.sum() > 0 else np.arange(1, prof.size + 1, dtype=np.float64)
+            over = np.array([min(q + 1, hi_r) - max(q, lo_r) for q in range(k)])  # units, not objects
+            helpers = [q for q in range(k) if over[q] > 1e-12 and over[q] >= self.min_help]
+            helpers = helpers or [int(np.argmax(over))]  # a sliver of one rank: that rank alone
+            used = over[helpers]
+            ax, a0, prof = profiles[t]
+            rev = self._reverse(p, ax, helpers, used)
+            prof = prof[::-1] if rev else prof
+            n = prof.size
+            cum = np.cumsum(prof) if prof.sum() > 0 else np.arange(1, n + 1, dtype=np.float64)
             targets = np.cumsum(used)[:-1] / _seqsum(used) * cum[-1]
-            cuts = np.concatenate([[0], np.searchsorted(cum, targets, side="left") + 1, [prof.size]])
-            cuts = np.maximum.accumulate(np.minimum(cuts, prof.size))
+            cuts = np.concatenate([[0], np.searchsorted(cum, targets, side="left") + 1, [n]])
+            cuts = np.maximum.accumulate(np.minimum(cuts, n))
             x0, y0, x1, y1 = self.tiles[t]
-            for r, c0, c1 in zip(helpers, cuts[:-1], cuts[1:]):
+            for q, c0, c1 in zip(helpers, cuts[:-1], cuts[1:]):
                 if c1 <= c0:
                     continue
+                c0, c1 = (n - c1, n - c0) if rev else (c0, c1)
                 rect = [a0 + c0, y0, a0 + c1, y1] if ax == 0 else [x0, a0 + c0, x1, a0 + c1]
-                pieces[r].append(np.array(rect, dtype=np.int64))
-        return pieces
+                pieces[order[q]].append((t, rect))
+        return [_join([r for _, r in sorted(mine, key=lambda x: x[0])]) for mine in pieces]
 
     def _partition(self, pieces, rects, tris) -> Partition:
         spans, onscreen = pixel_spans(rects, self.size)

@@ -1,7 +1,8 @@
 """Cross-segment balancing compiled (``strategies/cross.py``): the segments' time profiles from
 the last frame's pieces and times, the view equalizer's damped shares, the cuts that give each
-helper its share of a segment, and then every piece's object mask, the ranks' T' masks, loads
-and bounding regions: two compiled calls where the reference makes some 600 numpy calls.
+helper its share of a segment, each rank's pieces joined where they share an edge, and then
+every piece's object mask, the ranks' T' masks, loads and bounding regions: one compiled call
+where the reference makes some 600 numpy calls.
 
 Same operations in the same order as the reference (sequential sums), so pieces, masks and
 loads are identical (tests/test_kernel.py).
@@ -57,6 +58,55 @@ def _profiles(allp, owner, k, times, tiles):
     return axes, a0s, lens, prof, loads
 
 
+def _reverse(tiles, order, p, ax, helpers, used, m):
+    """``strategies.cross``'s ``_reverse``: whether segment ``order[p]``'s helpers (positions
+    on the resource axis) run from the high end of its cut axis ``ax``."""
+    t, k = order[p], order.shape[0]
+    before, after = 0.0, 0.0
+    for j in range(m):
+        if helpers[j] < p:
+            before += used[j]
+        elif helpers[j] > p:
+            after += used[j]
+    prev = p > 0 and _side(tiles, order[p - 1], t) == ax
+    nxt = p + 1 < k and _side(tiles, order[p + 1], t) == ax
+    if prev and (before >= after or not nxt):
+        return tiles[order[p - 1], ax] > tiles[t, ax]
+    if nxt:
+        return tiles[order[p + 1], ax] < tiles[t, ax]
+    return False
+
+
+def _side(tiles, q, t):
+    """The axis that separates neighbouring tiles ``q`` and ``t`` (0: x, same row)."""
+    return 0 if tiles[q, 1] == tiles[t, 1] and tiles[q, 3] == tiles[t, 3] else 1
+
+
+def _join(rects, lo, hi):
+    """``strategies.cross``'s ``_join`` on one rank's pieces, rows ``lo:hi`` of ``rects`` (in
+    segment order): any two that share a whole edge joined, in place; returns the new end."""
+    i = lo
+    while i < hi:
+        joined = False
+        for j in range(i + 1, hi):
+            a0, a1, a2, a3 = rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3]
+            b0, b1, b2, b3 = rects[j, 0], rects[j, 1], rects[j, 2], rects[j, 3]
+            if a1 == b1 and a3 == b3 and (a2 == b0 or b2 == a0):
+                rects[i, 0], rects[i, 2] = min(a0, b0), max(a2, b2)
+            elif a0 == b0 and a2 == b2 and (a3 == b1 or b3 == a1):
+                rects[i, 1], rects[i, 3] = min(a1, b1), max(a3, b3)
+            else:
+                continue
+            for r in range(j, hi - 1):  # the pieces after j move up
+                for c in range(4):
+                    rects[r, c] = rects[r + 1, c]
+            hi -= 1
+            joined = True
+            break
+        i = lo if joined else i + 1
+    return hi
+
+
 def _seqsum(x):
     s = x[0]
     for i in range(1, x.shape[0]):
@@ -64,10 +114,62 @@ def _seqsum(x):
     return s
 
 
-def _cut(allp, owner, times, tiles, shares, out, damping, min_share, packed):
+def _helpers(lo_r, hi_r, k, min_help, helpers, used):
+    """The units (positions on the resource axis) helping the segment at ``[lo_r, hi_r)`` and
+    how much, into ``helpers`` and ``used``: those with at least ``min_help`` of their unit,
+    else the one with the most; returns how many."""
+    m, best, most = 0, 0, -1.0
+    for r in range(k):
+        u = min(r + 1.0, hi_r) - max(r * 1.0, lo_r)
+        if u > most:
+            best, most = r, u
+        if u > 1e-12 and u >= min_help:
+            helpers[m], used[m] = r, u
+            m += 1
+    if m == 0:
+        helpers[0], used[0], m = best, most, 1
+    return m
+
+
+def _pack(rects, who, seg, q, k, packed):
+    """The ``q`` pieces (``rects``, owners ``who``, segments ``seg``) rank-major, each rank's in
+    segment order and joined (``_join``), into ``packed`` (``_cross``'s layout); returns how
+    many are left."""
+    # rank-major, segments in order: a stable insertion sort of the few pieces (numpy's
+    # mergesort and the gathers after it allocated five arrays)
+    order_q = np.empty(q, dtype=np.int64)
+    for i in range(q):
+        key, j = who[i] * k + seg[i], i
+        while j > 0 and who[order_q[j - 1]] * k + seg[order_q[j - 1]] > key:
+            order_q[j] = order_q[j - 1]
+            j -= 1
+        order_q[j] = i
+    ranked = rects[k * k:k * k + q]  # the sorted pieces (at most K per segment: q <= K * K)
+    for i in range(q):
+        for c in range(4):
+            ranked[i, c] = rects[order_q[i], c]
+    at, n_out, i = 6 * k + 1, 0, 0
+    while i < q:  # each rank's pieces joined, then packed; the owners into ``seg`` (read no more)
+        r, e = who[order_q[i]], i
+        while e < q and who[order_q[e]] == r:
+            e += 1
+        end = _join(ranked, i, e)
+        for j in range(i, end):
+            for c in range(4):
+                packed[at + 4 * n_out + c] = ranked[j, c]
+            seg[n_out] = r
+            n_out += 1
+        i = e
+    for j in range(n_out):
+        packed[at + 4 * n_out + j] = seg[j]
+    return n_out
+
+
+def _cut(allp, owner, times, tiles, order, shares, out, damping, min_share, min_help, packed):
     """The view equalizer's new shares (into ``out``) and every rank's pieces, rank-major, each
-    rank's pieces in segment order, written into ``packed`` (``_cross``'s layout: rects (Q, 4)
-    from 6K + 1, owners (Q,) after them); returns Q. Few allocations: each costs ~0.4 us of
+    rank's pieces in segment order and joined where they share an edge, written into
+    ``packed`` (``_cross``'s layout: rects (Q, 4) from 6K + 1, owners (Q,) after them); returns
+    Q. ``order``: the segments along the resource axis. Few allocations: each costs ~0.4 us of
     CPU with the caches cold (ad hoc), and a frame's plan made some forty."""
     k = tiles.shape[0]
     axes, a0s, lens, prof, loads = _profiles(allp, owner, k, times, tiles)
@@ -81,29 +183,27 @@ def _cut(allp, owner, times, tiles, shares, out, damping, min_share, packed):
     scale = k / _seqsum(out)
     for t in range(k):
         out[t] = out[t] * scale
-    for t in range(1, k):
-        start[t] = start[t - 1] + out[t - 1]
+    for p in range(1, k):
+        start[order[p]] = start[order[p - 1]] + out[order[p - 1]]
     rects = np.zeros((2 * k * k, 4), dtype=np.int64)
     ids = np.zeros((3, 2 * k * k), dtype=np.int64)
     who, seg, helpers = ids[0], ids[1], ids[2]
     cum_at = np.empty(prof.shape[1])  # every segment's cumulative profile and cuts, in turn
     cuts_at = np.empty(k + 1, dtype=np.int64)
     q = 0
-    for t in range(k):  # segments
+    for p in range(k):  # segments along the resource axis
+        t = order[p]
         lo_r, hi_r = start[t], start[t] + out[t]
-        m = 0
-        for r in range(k):
-            u = min(r + 1.0, hi_r) - max(r * 1.0, lo_r)
-            if u > 1e-12:
-                helpers[m], used[m] = r, u
-                m += 1
-        n = lens[t]
+        m = _helpers(lo_r, hi_r, k, min_help, helpers, used)
+        ax, a0, n = axes[t], a0s[t], lens[t]
+        rev = _reverse(tiles, order, p, ax, helpers, used, m)
         cum = cum_at[:n]
         positive = False
         for i in range(n):
             positive |= prof[t, i] > 0
         for i in range(n):
-            cum[i] = (cum[i - 1] if i else 0.0) + prof[t, i] if positive else i + 1.0
+            v = prof[t, n - 1 - i] if rev else prof[t, i]
+            cum[i] = (cum[i - 1] if i else 0.0) + v if positive else i + 1.0
         usum = _seqsum(used[:m])
         cuts = cuts_at[:m + 1]
         cuts[0], cuts[m] = 0, n
@@ -119,28 +219,15 @@ def _cut(allp, owner, times, tiles, shares, out, damping, min_share, packed):
             c0, c1 = cuts[j], cuts[j + 1]
             if c1 <= c0:
                 continue
-            if axes[t] == 0:
-                rects[q, 0], rects[q, 1], rects[q, 2], rects[q, 3] = a0s[t] + c0, y0, a0s[t] + c1, y1
+            if rev:
+                c0, c1 = n - c1, n - c0
+            if ax == 0:
+                rects[q, 0], rects[q, 1], rects[q, 2], rects[q, 3] = a0 + c0, y0, a0 + c1, y1
             else:
-                rects[q, 0], rects[q, 1], rects[q, 2], rects[q, 3] = x0, a0s[t] + c0, x1, a0s[t] + c1
-            who[q], seg[q] = helpers[j], t
+                rects[q, 0], rects[q, 1], rects[q, 2], rects[q, 3] = x0, a0 + c0, x1, a0 + c1
+            who[q], seg[q] = order[helpers[j]], t
             q += 1
-    # rank-major, segments in order: a stable insertion sort of the few pieces (numpy's
-    # mergesort and the gathers after it allocated five arrays)
-    order = np.empty(q, dtype=np.int64)
-    for i in range(q):
-        key, j = who[i] * k + seg[i], i
-        while j > 0 and who[order[j - 1]] * k + seg[order[j - 1]] > key:
-            order[j] = order[j - 1]
-            j -= 1
-        order[j] = i
-    at = 6 * k + 1
-    for i in range(q):
-        o = order[i]
-        for c in range(4):
-            packed[at + 4 * i + c] = rects[o, c]
-        packed[at + 4 * q + i] = who[o]
-    return q
+    return _pack(rects, who, seg, q, k, packed)
 
 
 def _masks(rt, tris, W, H, prects, powner, k, packed):
@@ -178,7 +265,7 @@ def _masks(rt, tris, W, H, prects, powner, k, packed):
     return both
 
 
-def _cross(allp, owner, times, tiles, shares, new, damping, min_share, rt, tris, W, H):
+def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, rt, tris, W, H):
     """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan): the new shares into
     ``new`` and the rest packed in two arrays (every returned array costs a Python call to box
     it, paid again with the caches cold): the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
@@ -186,7 +273,7 @@ def _cross(allp, owner, times, tiles, shares, new, damping, min_share, rt, tris,
     (Q, N) | ranks' T' (K, N)]``. ``tris``: int64."""
     k = tiles.shape[0]
     packed = np.zeros(6 * k + 1 + 5 * 2 * k * k, dtype=np.int64)  # room for the most pieces ``_cut`` makes
-    q = _cut(allp, owner, times, tiles, shares, new, damping, min_share, packed)
+    q = _cut(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, packed)
     at = 6 * k + 1
     prects, powner = packed[at:at + 4 * q].reshape((q, 4)), packed[at + 4 * q:at + 5 * q]
     for p in range(q):
@@ -197,4 +284,5 @@ def _cross(allp, owner, times, tiles, shares, new, damping, min_share, rt, tris,
     return packed[:at + 5 * q], both
 
 
-compile_all(globals(), ("_profiles", "_seqsum", "_cut", "_masks", "_cross"))
+compile_all(globals(), ("_profiles", "_reverse", "_side", "_join", "_helpers", "_pack", "_seqsum", "_cut", "_masks",
+                        "_cross"))
