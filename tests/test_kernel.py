@@ -225,6 +225,9 @@ def test_every_strategy_compiled_equals_the_reference(name, data, rows, cols, n,
     got = REGISTRY[name](ref.grid, size, ref.strips, compiled=True)
     if name == "cross":  # slivers of help kept (0), dropped (the default), a whole unit or more needed
         ref.min_help = got.min_help = data.draw(st.sampled_from([0.0, 0.1, 0.5, 1.0]))
+        if data.draw(st.booleans()):  # Equalizer's layout
+            ref = REGISTRY[name](ref.grid, size, ref.strips, compiled=False, min_help=ref.min_help, layout="equalizer")
+            got = REGISTRY[name](ref.grid, size, ref.strips, compiled=True, min_help=ref.min_help, layout="equalizer")
     for f in range(frames):
         pts = np.array(data.draw(st.lists(st.tuples(coord, coord, coord, coord), min_size=n, max_size=n)),
                        dtype=np.float64).reshape(-1, 4)

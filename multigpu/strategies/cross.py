@@ -45,6 +45,10 @@ def _overlap_area(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.clip(hi - lo, 0, None).prod(axis=-1)
 
 
+#: how segments are laid out on the resource axis and cut (``CrossSegment.layout``)
+LAYOUTS = ("joined", "equalizer")
+
+
 def serpentine(rows: int, cols: int) -> np.ndarray:
     """Segments (tile labels, column-major, row 0 at the top) along the resource axis: along
     the first row, back along the next, and so on, so consecutive segments always share an
@@ -86,6 +90,10 @@ class CrossSegment(Configured):
     # helpers take that sliver: a piece that does not join the rank's others costs a render
     # pass of every object it touches, more than a sliver of share moves (0: every overlap helps)
     min_help: float = 0.1
+    # "joined": the serpentine order, helpers cut from their own side, a rank's pieces that
+    # share an edge joined; "equalizer": Equalizer's layout (tiles in label order, helpers from
+    # a segment's low end, every piece its own pass), kept to measure the difference against
+    layout: str = "joined"
 
     name = "cross"
     reproducible = False  # it follows measured times
@@ -93,10 +101,14 @@ class CrossSegment(Configured):
     def __post_init__(self):
         if not 0.0 <= self.min_help <= 1.0:
             raise ValueError(f"cross: min_help must lie in [0, 1], got {self.min_help}")
+        if self.layout not in LAYOUTS:
+            raise ValueError(f"cross: unknown layout '{self.layout}' (known: {', '.join(LAYOUTS)})")
         rows, cols = self.grid
         W, H = self.size
         self.tiles = tile_regions(rows, cols, W // cols, H // rows)
-        self.order = serpentine(rows, cols)  # position on the resource axis -> segment (and its own rank)
+        # position on the resource axis -> segment (and its own rank)
+        self.order = serpentine(rows, cols) if self.layout == "joined" else np.arange(rows * cols, dtype=np.int64)
+        self._joined = self.layout == "joined"
         self._pieces: tuple | None = None
         self._flat: dict | None = None  # the same pieces flat, where the kernel planned them
         self._times: np.ndarray | None = None
@@ -115,7 +127,7 @@ class CrossSegment(Configured):
             old = self.shares  # the new shares go into the spare array; the old one is the next spare
             self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles,
                                                        self.order, old, self.damping, self.min_share, self.min_help,
-                                                       rects, tris, self.size, self._spare, self._bound)
+                                                       self._joined, rects, tris, self.size, self._spare, self._bound)
             self._spare = old
             return Partition(*part)
         tris = np.asarray(tris)
@@ -156,6 +168,8 @@ class CrossSegment(Configured):
         those from a neighbour along that axis (in the resource order; the one helping more
         where both do) get the strip on its side, so such a rank's pieces here and in its own
         segment meet along a whole edge and join."""
+        if not self._joined:
+            return False
         order, tiles, t = self.order, self.tiles, self.order[p]
         at = np.array(helpers)
         before, after = (float(np.cumsum(np.r_[0.0, used[m]])[-1]) for m in (at < p, at > p))  # added in order
@@ -196,7 +210,8 @@ class CrossSegment(Configured):
                 c0, c1 = (n - c1, n - c0) if rev else (c0, c1)
                 rect = [a0 + c0, y0, a0 + c1, y1] if ax == 0 else [x0, a0 + c0, x1, a0 + c1]
                 pieces[order[q]].append((t, rect))
-        return [_join([r for _, r in sorted(mine, key=lambda x: x[0])]) for mine in pieces]
+        ranked = [[r for _, r in sorted(mine, key=lambda x: x[0])] for mine in pieces]
+        return [_join(mine) if self._joined else [np.array(r, dtype=np.int64) for r in mine] for mine in ranked]
 
     def _partition(self, pieces, rects, tris) -> Partition:
         spans, onscreen = pixel_spans(rects, self.size)

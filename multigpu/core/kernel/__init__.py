@@ -49,15 +49,16 @@ def use(compiled: bool | None) -> bool:
 
 
 def cross_partition(pieces, times, tiles, order, shares, damping: float, min_share: float, min_help: float,
-                    rects, tris, size, out: np.ndarray | None = None, bound: dict | None = None):
+                    join: bool, rects, tris, size, out: np.ndarray | None = None, bound: dict | None = None):
     """``strategies.cross``: the new segment shares (into ``out`` where given, a (K,) float64
     array other than ``shares``), and the partition's fields (regions, loads, T' masks, splits,
     split pixels, no spans, pieces and their masks per rank, and the pieces flat for the next
     frame: ``{"pieces": (Q, 4), "owner": (Q,)}``) from the last frame's pieces (that flat form,
-    or per rank) and measured ``times``; ``order``: the segments along the resource axis. One
-    compiled call. ``bound``: a dict the caller keeps between calls that passes the same types
-    every call (``times``, ``tiles``, ``order``, ``shares``, ``out``: C-contiguous float64,
-    int64, int64, float64, float64 arrays; ``damping``, ``min_share``, ``min_help`` floats;
+    or per rank) and measured ``times``; ``order``: the segments along the resource axis;
+    ``join``: helpers cut from their own side and a rank's pieces joined. One compiled call.
+    ``bound``: a dict the caller keeps between calls that passes the same types every call
+    (``times``, ``tiles``, ``order``, ``shares``, ``out``: C-contiguous float64, int64, int64,
+    float64, float64 arrays; ``damping``, ``min_share``, ``min_help`` floats; ``join`` a bool;
     ``size`` ints): the kernel's entry point is kept there and called directly where the pieces
     are flat (``jit.entry``)."""
     k = len(tiles)
@@ -69,7 +70,7 @@ def cross_partition(pieces, times, tiles, order, shares, damping: float, min_sha
         owner = np.repeat(np.arange(k), [len(p) for p in pieces])
     new = np.empty(k) if out is None else out
     # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
-    args = (allp, owner, times, tiles, order, shares, new, damping, min_share, min_help,
+    args = (allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join,
             np.ascontiguousarray(rects.T, dtype=np.float64),
             np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1])
     call = _cross

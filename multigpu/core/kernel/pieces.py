@@ -131,10 +131,10 @@ def _helpers(lo_r, hi_r, k, min_help, helpers, used):
     return m
 
 
-def _pack(rects, who, seg, q, k, packed):
+def _pack(rects, who, seg, q, k, join, packed):
     """The ``q`` pieces (``rects``, owners ``who``, segments ``seg``) rank-major, each rank's in
-    segment order and joined (``_join``), into ``packed`` (``_cross``'s layout); returns how
-    many are left."""
+    segment order and joined (``_join``) where ``join``, into ``packed`` (``_cross``'s layout);
+    returns how many are left."""
     # rank-major, segments in order: a stable insertion sort of the few pieces (numpy's
     # mergesort and the gathers after it allocated five arrays)
     order_q = np.empty(q, dtype=np.int64)
@@ -153,7 +153,7 @@ def _pack(rects, who, seg, q, k, packed):
         r, e = who[order_q[i]], i
         while e < q and who[order_q[e]] == r:
             e += 1
-        end = _join(ranked, i, e)
+        end = _join(ranked, i, e) if join else e
         for j in range(i, end):
             for c in range(4):
                 packed[at + 4 * n_out + c] = ranked[j, c]
@@ -165,7 +165,7 @@ def _pack(rects, who, seg, q, k, packed):
     return n_out
 
 
-def _cut(allp, owner, times, tiles, order, shares, out, damping, min_share, min_help, packed):
+def _cut(allp, owner, times, tiles, order, shares, out, damping, min_share, min_help, join, packed):
     """The view equalizer's new shares (into ``out``) and every rank's pieces, rank-major, each
     rank's pieces in segment order and joined where they share an edge, written into
     ``packed`` (``_cross``'s layout: rects (Q, 4) from 6K + 1, owners (Q,) after them); returns
@@ -196,7 +196,7 @@ def _cut(allp, owner, times, tiles, order, shares, out, damping, min_share, min_
         lo_r, hi_r = start[t], start[t] + out[t]
         m = _helpers(lo_r, hi_r, k, min_help, helpers, used)
         ax, a0, n = axes[t], a0s[t], lens[t]
-        rev = _reverse(tiles, order, p, ax, helpers, used, m)
+        rev = join and _reverse(tiles, order, p, ax, helpers, used, m)
         cum = cum_at[:n]
         positive = False
         for i in range(n):
@@ -227,7 +227,7 @@ def _cut(allp, owner, times, tiles, order, shares, out, damping, min_share, min_
                 rects[q, 0], rects[q, 1], rects[q, 2], rects[q, 3] = x0, a0 + c0, x1, a0 + c1
             who[q], seg[q] = order[helpers[j]], t
             q += 1
-    return _pack(rects, who, seg, q, k, packed)
+    return _pack(rects, who, seg, q, k, join, packed)
 
 
 def _masks(rt, tris, W, H, prects, powner, k, packed):
@@ -265,7 +265,7 @@ def _masks(rt, tris, W, H, prects, powner, k, packed):
     return both
 
 
-def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, rt, tris, W, H):
+def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, rt, tris, W, H):
     """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan): the new shares into
     ``new`` and the rest packed in two arrays (every returned array costs a Python call to box
     it, paid again with the caches cold): the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
@@ -273,7 +273,7 @@ def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, mi
     (Q, N) | ranks' T' (K, N)]``. ``tris``: int64."""
     k = tiles.shape[0]
     packed = np.zeros(6 * k + 1 + 5 * 2 * k * k, dtype=np.int64)  # room for the most pieces ``_cut`` makes
-    q = _cut(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, packed)
+    q = _cut(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, packed)
     at = 6 * k + 1
     prects, powner = packed[at:at + 4 * q].reshape((q, 4)), packed[at + 4 * q:at + 5 * q]
     for p in range(q):

@@ -1,0 +1,134 @@
+"""``multigpu bench passes``: what a second render pass costs, and what joining a rank's pieces
+saves ``cross``.
+
+Part 1, one pass against two. Along each scene's walkthrough (plant and city, a 2x2 wall of
+256x256 tiles), one rank renders its tile alone; its tile and a separate piece of ``w`` pixels
+beside it (a second pass: its own clear, draw of every object the piece touches, whole, and
+read-back); and the tile and that strip as one rect (one pass). Printed: the extra CPU time of
+each over the tile alone, medians over frames.
+
+Part 2, the layouts of ``cross``. One process plays the wall's four ranks in turn: each renders
+its pieces (process CPU time) and the strategy learns from those times, as in a run, with
+Equalizer's layout (tiles in label order, helpers from a segment's low end, every piece its own
+pass) and with the joined layout (``strategies/cross.py``), alternated over rounds. Printed:
+render passes per rank, triangles drawn, mean and slowest rank's render CPU per frame (the
+slowest is the emulated render), medians over rounds. The render phase alone: no MPI, no
+exchange, and the ranks do not share cores, so the figures are steadier than a run's. It
+prints figures and asserts nothing.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+GRID, TILE = (2, 2), (256, 256)
+WIDTHS = (3, 26, 64)  # pixels of the second piece
+
+
+def bench_passes(quick: bool) -> list[dict]:
+    from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.scene.models import SceneSpec, load_scene
+
+    frames, rounds, triangles = (24, 1, 20_000) if quick else (240, 3, 100_000)
+    ctx, _ = create_context()
+    rows: list[dict] = []
+    print(f"bench passes: 2x2 wall of 256x256, walkthrough of {frames} frames, process CPU time; "
+          "part 1: one rank's tile with a w-pixel piece as a second pass or joined (extra ms over the tile alone, "
+          "median over frames)")
+    print(f"{'scene':<6} {'tile ms':>8} " + " ".join(f"{f'+{w}px pass':>11} {f'+{w}px joined':>12}" for w in WIDTHS))
+    scenes = {name: load_scene(SceneSpec(scene=name, triangles=triangles))[0] for name in ("plant", "city")}
+    for name, scene in scenes.items():
+        renderer = RegionRenderer(ctx, scene, (GRID[1] * TILE[0], GRID[0] * TILE[1]))
+        row = _pass_cost(scene, renderer, frames)
+        rows.append({"scene": name, "part": "passes", **row})
+        print(f"{name:<6} {row['tile_ms']:8.2f} " + " ".join(f"{row[f'pass_{w}']:11.3f} {row[f'joined_{w}']:12.3f}"
+                                                          for w in WIDTHS))
+        renderer.release()
+    print(f"part 2: cross, Equalizer's layout against joined pieces, {rounds} alternated rounds (medians), "
+          "render CPU ms per frame")
+    print(f"{'scene':<6} {'layout':<10} {'passes/rank':>11} {'tris/frame':>10} {'mean':>7} {'slowest':>8} {'imb':>6}")
+    for name, scene in scenes.items():
+        renderer = RegionRenderer(ctx, scene, (GRID[1] * TILE[0], GRID[0] * TILE[1]))
+        got: dict[str, list[dict]] = {"equalizer": [], "joined": []}
+        for r in range(rounds):
+            for layout in (("equalizer", "joined") if r % 2 == 0 else ("joined", "equalizer")):
+                got[layout].append(_emulate(scene, renderer, frames, layout))
+        for layout, runs in got.items():
+            row = {k: float(np.median([x[k] for x in runs])) for k in runs[0]}
+            rows.append({"scene": name, "part": "layouts", "layout": layout, **row})
+            print(f"{name:<6} {layout:<10} {row['passes']:11.2f} {row['tris']:10.0f} {row['mean_ms']:7.2f} "
+                  f"{row['slowest_ms']:8.2f} {row['slowest_ms'] / row['mean_ms']:6.3f}")
+        renderer.release()
+    return rows
+
+
+def _frames(scene, frames: int, balance: str):
+    from multigpu.config import WalkConfig
+    from multigpu.core.planner import Planner
+    from multigpu.scene.paths import generate
+
+    cfg = WalkConfig(grid=GRID, tile=TILE, balance=balance)
+    return Planner(cfg, scene, rank=None), generate("walkthrough", scene, frames), cfg
+
+
+def _pass_cost(scene, renderer, frames: int) -> dict:
+    """Extra CPU ms of a w-pixel piece beside the tile, as a second pass and joined (medians)."""
+    from multigpu.core.regions import pixel_spans
+
+    planner, path, cfg = _frames(scene, frames, "none")
+    tile = tuple(int(v) for v in cfg.canvas.tiles()[1])  # the bottom-left tile; the pieces right of it
+
+    def mask(rects, box):
+        spans, on = pixel_spans(rects, cfg.canvas.size)
+        x0, y0, x1, y1 = box
+        return on & (spans[:, 0] < x1) & (spans[:, 2] >= x0) & (spans[:, 1] < y1) & (spans[:, 3] >= y0)
+
+    def cpu(fn) -> float:
+        t0 = time.process_time()
+        fn()
+        return (time.process_time() - t0) * 1e3
+
+    x0, y0, x1, y1 = tile
+    got: dict[str, list[float]] = {"tile_ms": []}
+    for f in range(len(path)):  # frames, not objects
+        view, proj, light, rects = planner.frame(path.camera(f))
+        rects = rects.copy()
+
+        def draw(box):
+            renderer.render(view, proj, light, box, mask(rects, box))
+
+        alone = cpu(lambda: draw(tile))
+        got["tile_ms"].append(alone)
+        for w in WIDTHS:
+            got.setdefault(f"pass_{w}", []).append(cpu(lambda: (draw(tile), draw((x1, y0, x1 + w, y1)))) - alone)
+            got.setdefault(f"joined_{w}", []).append(cpu(lambda: draw((x0, y0, x1 + w, y1))) - alone)
+    return {k: float(np.median(v)) for k, v in got.items()}
+
+
+def _emulate(scene, renderer, frames: int, layout: str) -> dict:
+    """The wall's ranks in turn under ``cross`` with ``layout``: their render CPU fed back."""
+    from multigpu.strategies.cross import CrossSegment
+
+    planner, path, cfg = _frames(scene, frames, "cross")
+    planner.decomposition.strategy = CrossSegment(cfg.grid, cfg.size, cfg.strips, layout=layout)
+    k = GRID[0] * GRID[1]
+    slowest, mean, passes, tris = [], [], [], []
+    for f in range(len(path)):  # frames, then ranks and their pieces: not objects
+        view, proj, light, rects = planner.frame(path.camera(f))
+        work = planner.work(f, rects)
+        times = np.zeros(k)
+        for r in range(k):
+            t0 = time.process_time()
+            for rect, m in zip(work.rects[r], work.masks[r]):
+                renderer.render(view, proj, light, rect, m)
+            times[r] = (time.process_time() - t0) * 1e3
+        planner.observe(f, times)
+        if f >= 8:  # past the first frames (cross starts from the paper's strips)
+            slowest.append(times.max())
+            mean.append(times.mean())
+            passes.append(np.mean([len(p) for p in work.rects]))
+            tris.append(work.loads.sum())
+    return {"passes": float(np.mean(passes)), "tris": float(np.mean(tris)), "mean_ms": float(np.mean(mean)),
+            "slowest_ms": float(np.mean(slowest))}
