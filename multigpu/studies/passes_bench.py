@@ -9,12 +9,13 @@ each over the tile alone, medians over frames.
 
 Part 2, the layouts of ``cross``. One process plays the wall's four ranks in turn: each renders
 its pieces (process CPU time) and the strategy learns from those times, as in a run, with
-Equalizer's layout (tiles in label order, helpers from a segment's low end, every piece its own
-pass) and with the joined layout (``strategies/cross.py``), alternated over rounds. Printed:
-render passes per rank, triangles drawn, mean and slowest rank's render CPU per frame (the
-slowest is the emulated render), medians over rounds. The render phase alone: no MPI, no
-exchange, and the ranks do not share cores, so the figures are steadier than a run's. It
-prints figures and asserts nothing.
+Equalizer's layout (tiles in label order, helpers from a segment's low end, every overlap a
+helper and every piece its own pass: ``cross`` before its pieces were joined) and with the
+joined layout (``strategies/cross.py``), alternated over rounds. Printed: render passes per
+rank, triangles drawn, mean and slowest rank's render CPU per frame (the slowest is the
+emulated render), medians over rounds. The render phase alone: no MPI, no exchange, and the
+ranks do not share cores, so the figures are steadier than a run's. It prints figures and
+asserts nothing.
 """
 
 from __future__ import annotations
@@ -112,7 +113,8 @@ def _emulate(scene, renderer, frames: int, layout: str) -> dict:
     from multigpu.strategies.cross import CrossSegment
 
     planner, path, cfg = _frames(scene, frames, "cross")
-    planner.decomposition.strategy = CrossSegment(cfg.grid, cfg.size, cfg.strips, layout=layout)
+    options = {"min_help": 0.0} if layout == "equalizer" else {}  # Equalizer's: every overlap helps
+    planner.decomposition.strategy = CrossSegment(cfg.grid, cfg.size, cfg.strips, layout=layout, **options)
     k = GRID[0] * GRID[1]
     slowest, mean, passes, tris = [], [], [], []
     for f in range(len(path)):  # frames, then ranks and their pieces: not objects
