@@ -16,7 +16,7 @@ rank helping a neighbour a second, separate piece: here the help along a row is 
 beside the helper's own tile, and a rank's pieces that share a whole edge join into one rect,
 one render pass. A pass draws every object its rect touches, whole, so a second one costs far
 more than its pixels (a 3-pixel piece beside a city tile: ~1 ms of CPU against ~4 ms for the
-tile, nothing when joined; ad hoc, docs/BENCHMARKS.md). ``min_help`` keeps slivers of help
+tile, nothing when joined: ``multigpu bench passes``). ``min_help`` keeps slivers of help
 away where they would not join. The pieces tile the display and travel to their tiles' owners.
 Follows measured times, so not bit-reproducible between runs.
 """
@@ -61,7 +61,7 @@ def serpentine(rows: int, cols: int) -> np.ndarray:
 def _join(rects: list) -> list[np.ndarray]:
     """A rank's pieces with any two that share a whole edge joined (the first such pair first,
     until none is left): one render pass draws an object both touch once, not twice, and a pass
-    costs more than its pixels (a 3-pixel piece of a city tile: ~1 ms of CPU, ad hoc)."""
+    costs more than its pixels (a 3-pixel piece of a city tile: ~1 ms of CPU, ``bench passes``)."""
     rects = [list(r) for r in rects]
     i = 0
     while i < len(rects):  # pieces, not objects (at most a few)
