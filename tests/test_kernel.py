@@ -228,6 +228,7 @@ def test_every_strategy_compiled_equals_the_reference(name, data, rows, cols, n,
         if data.draw(st.booleans()):  # Equalizer's layout
             ref = REGISTRY[name](ref.grid, size, ref.strips, compiled=False, min_help=ref.min_help, layout="equalizer")
             got = REGISTRY[name](ref.grid, size, ref.strips, compiled=True, min_help=ref.min_help, layout="equalizer")
+        ref.pixel_weight = got.pixel_weight = data.draw(st.sampled_from([0.0, 0.5, 3.0]))  # the time model's
     for f in range(frames):
         pts = np.array(data.draw(st.lists(st.tuples(coord, coord, coord, coord), min_size=n, max_size=n)),
                        dtype=np.float64).reshape(-1, 4)
@@ -238,10 +239,38 @@ def test_every_strategy_compiled_equals_the_reference(name, data, rows, cols, n,
         a, b = ref.plan(rects, tris), got.plan(rects, tris)
         same_partition(a, b)
         assert np.array_equal(getattr(ref, "shares", 0), getattr(got, "shares", 0))
+        if name == "cross" and f:  # the pieces' weights the next frame learns from
+            assert np.array_equal(a.features["mass"], b.features["mass"])
         times = np.array(data.draw(st.lists(st.sampled_from([0.0, 1e-9, 0.5, 1.0, 3.0, 40.0]), min_size=k,
                                             max_size=k)))
         ref.observe(f, a, times)
         got.observe(f, b, times)
+
+
+@pytest.mark.parametrize("grid", [(2, 2), (1, 3)])
+def test_compiled_cross_equals_the_reference_past_its_sample(grid):
+    """Past ``SAMPLE`` objects on screen the time profiles weigh every k-th object for k: the
+    kernel and the reference still plan the same pieces, weights and shares, frame after frame."""
+    from multigpu.core.kernel.pieces import SAMPLE
+
+    rng = np.random.default_rng(7)
+    n = 3 * SAMPLE + 5
+    size = (grid[1] * 90, grid[0] * 70)
+    ref = REGISTRY["cross"](grid, size, 2048, compiled=False)
+    got = REGISTRY["cross"](grid, size, 2048, compiled=True)
+    for f in range(4):
+        lo = rng.random((n, 2)) * 1.2 - 0.1
+        rects = np.concatenate([lo, lo + rng.random((n, 2)) * 0.2], axis=1)
+        tris = rng.integers(0, 5000, n)
+        a, b = ref.plan(rects, tris), got.plan(rects, tris)
+        same_partition(a, b)
+        assert np.array_equal(ref.shares, got.shares)
+        if f:
+            assert np.array_equal(a.features["mass"], b.features["mass"])
+        times = rng.random(grid[0] * grid[1]) * 10
+        ref.observe(f, a, times)
+        got.observe(f, b, times)
+    assert not np.allclose(got.shares, 1.0)  # the shares moved: the profiles were used
 
 
 @settings(max_examples=100, deadline=None)

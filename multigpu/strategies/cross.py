@@ -1,8 +1,16 @@
 """``cross``: cross-segment load balancing (Erol, Eilemann, Pajarola 2011; Equalizer's view
 equalizer over per-segment load equalizers).
 
-Each display tile is a segment. From the last frame's measured times (each rank's time spread
-evenly over the pixels it rendered), every segment's load is known. The view equalizer gives
+Each display tile is a segment. From the last frame's measured times and a per-pixel time model,
+every segment's load is known: a pixel weighs ``pixel_weight`` times the mean triangles per
+pixel on screen, plus the triangles of every object over it (each object's triangles spread
+evenly over its rect). A rank's measured time over its pieces' weight in the frame it rendered
+is its time per unit of weight; this frame's weight along a segment's axis, at the rate of the
+last frame's pieces there, is the segment's time profile. Where the camera moved, the weight
+moves with the objects before any time is measured for it (Equalizer spreads a rank's time
+evenly over its pixels, one frame late). Past ``SAMPLE`` objects on screen every k-th stands for
+k in the profiles: they place a few cuts.
+The view equalizer gives
 segment t a share ``r_t = K * L_t / sum(L)`` of the K ranks (damped, and never zero), and lays
 the shares out along one resource axis, the tiles in a serpentine order (along the first row,
 back along the next, ...): the rank owning the p-th tile of that order is the unit ``[p, p+1)``
@@ -29,6 +37,7 @@ import numpy as np
 
 from multigpu.core import kernel
 from multigpu.core.balance import Partition, partition
+from multigpu.core.kernel.pieces import SAMPLE
 from multigpu.core.regions import pixel_spans, tile_regions
 from multigpu.strategies.base import Configured
 
@@ -38,11 +47,28 @@ def _seqsum(x: np.ndarray) -> float:
     return float(np.cumsum(x)[-1])
 
 
-def _overlap_area(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(P, T) pixel areas of every rect of ``a`` (P, 4) within every rect of ``b`` (T, 4)."""
-    lo = np.maximum(a[:, None, :2], b[None, :, :2])
-    hi = np.minimum(a[:, None, 2:], b[None, :, 2:])
-    return np.clip(hi - lo, 0, None).prod(axis=-1)
+def _density(rects: np.ndarray, tris: np.ndarray, size: tuple[int, int], pixel_weight: float):
+    """The time model's weights: on-screen objects' inclusive pixel spans (M, 4) int64, their
+    triangles per pixel of span (M,), and a pixel's own weight (``pixel_weight`` times the
+    triangles on screen per display pixel)."""
+    spans, on = pixel_spans(rects, size)
+    s = spans[on].astype(np.int64)
+    t = np.asarray(tris, dtype=np.int64)[on]
+    d = t / ((s[:, 2] - s[:, 0] + 1) * (s[:, 3] - s[:, 1] + 1))
+    return s, d, pixel_weight * float(t.sum()) / (size[0] * size[1])
+
+
+def _overlap(s: np.ndarray, lo: int, hi: int, c: int) -> np.ndarray:
+    """Pixels of every inclusive span ``s[:, c]..s[:, c + 2]`` within ``[lo, hi)``."""
+    return np.clip(np.minimum(s[:, c + 2] + 1, hi) - np.maximum(s[:, c], lo), 0, None)
+
+
+def _mass(model, rect) -> float:
+    """The weight of ``rect`` ``[x0, y0, x1, y1)`` under ``model`` (``_density``'s triple)."""
+    s, d, beta = model
+    x0, y0, x1, y1 = (int(v) for v in rect)
+    acc = float(np.cumsum(d * _overlap(s, x0, x1, 0) * _overlap(s, y0, y1, 1))[-1]) if len(d) else 0.0
+    return beta * ((x1 - x0) * (y1 - y0)) + acc
 
 
 #: how segments are laid out on the resource axis and cut (``CrossSegment.layout``)
@@ -94,6 +120,9 @@ class CrossSegment(Configured):
     # share an edge joined; "equalizer": Equalizer's layout (tiles in label order, helpers from
     # a segment's low end, every piece its own pass), kept to measure the difference against
     layout: str = "joined"
+    # a pixel's weight in the time model, as a multiple of the triangles on screen per display
+    # pixel (its fill, clear and read-back beside its share of the geometry)
+    pixel_weight: float = 0.5
 
     name = "cross"
     reproducible = False  # it follows measured times
@@ -101,6 +130,8 @@ class CrossSegment(Configured):
     def __post_init__(self):
         if not 0.0 <= self.min_help <= 1.0:
             raise ValueError(f"cross: min_help must lie in [0, 1], got {self.min_help}")
+        if not self.pixel_weight >= 0.0:
+            raise ValueError(f"cross: pixel_weight must be >= 0, got {self.pixel_weight}")
         if self.layout not in LAYOUTS:
             raise ValueError(f"cross: unknown layout '{self.layout}' (known: {', '.join(LAYOUTS)})")
         rows, cols = self.grid
@@ -112,6 +143,7 @@ class CrossSegment(Configured):
         self._pieces: tuple | None = None
         self._flat: dict | None = None  # the same pieces flat, where the kernel planned them
         self._times: np.ndarray | None = None
+        self._mass: np.ndarray | None = None
         self.shares = np.ones(len(self.tiles))
         self._spare = np.empty(len(self.tiles))  # the compiled kernel's new shares go here (no array to box)
         self._compiled = kernel.use(self.compiled)  # once, not per frame
@@ -119,47 +151,66 @@ class CrossSegment(Configured):
         self._bound: dict = {}  # the kernel's entry point for this strategy's own argument types
         self.size = (int(W), int(H))  # the kernel's argument types, fixed here once
         self.damping, self.min_share, self.min_help = float(self.damping), float(self.min_share), float(self.min_help)
+        self.pixel_weight = float(self.pixel_weight)
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
         if self._pieces is None:
             return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled)
         if self._compiled and (tris is self._integer or self._integers(tris)):
             old = self.shares  # the new shares go into the spare array; the old one is the next spare
-            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._times, self.tiles,
-                                                       self.order, old, self.damping, self.min_share, self.min_help,
-                                                       self._joined, rects, tris, self.size, self._spare, self._bound)
+            self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._mass, self._times,
+                                                       self.tiles, self.order, old, self.damping, self.min_share,
+                                                       self.min_help, self._joined, self.pixel_weight, rects, tris,
+                                                       self.size, self._spare, self._bound)
             self._spare = old
             return Partition(*part)
         tris = np.asarray(tris)
         k = len(self.tiles)
-        profiles, loads = self._profiles()
+        model = _density(rects, tris, self.size, self.pixel_weight)
+        profiles, loads = self._profiles(model)
         total = _seqsum(loads)
         new = k * loads / total if total > 0 else np.ones(k)
         shares = (1 - self.damping) * new + self.damping * self.shares
         shares = np.maximum(shares, self.min_share)
         self.shares = shares * (k / _seqsum(shares))
         pieces = self._split(profiles)
-        return self._partition(pieces, rects, tris)
+        return self._partition(pieces, rects, tris, model)
 
-    def _profiles(self):
-        """Per segment: the time profile along its longer axis, and its total time."""
-        owner = np.concatenate([np.full(len(p), k) for k, p in enumerate(self._pieces)])
-        allp = np.concatenate([np.asarray(p, np.int64).reshape(-1, 4) for p in self._pieces])
-        area = (allp[:, 2] - allp[:, 0]) * (allp[:, 3] - allp[:, 1])
-        per_rank_area = np.bincount(owner, weights=area, minlength=len(self._pieces))
-        density = self._times[owner] / np.maximum(per_rank_area[owner], 1.0)  # time per pixel, per piece
-        inter = _overlap_area(allp, self.tiles)  # (P, T)
-        loads = np.cumsum(density[:, None] * inter, axis=0)[-1]  # added in piece order
-        profiles = []
-        for t, (x0, y0, x1, y1) in enumerate(self.tiles):  # segments, then their pieces: not objects
+    def _profiles(self, model):
+        """Per segment: the time profile along its longer axis (the last frame's pieces at their
+        rank's time per unit of weight, weighed with ``model``, this frame's), and its total."""
+        allp = [np.asarray(p, np.int64).reshape(-1, 4) for p in self._pieces]
+        mass = self._mass  # the pieces' weights in the frame they were rendered, else this frame's
+        mass = [_mass(model, p) for ps in allp for p in ps] if mass is None else list(mass)
+        rate, at = [], 0
+        for r, ps in enumerate(allp):  # ranks, not objects
+            w = sum(mass[at:at + len(ps)], 0.0)
+            at += len(ps)
+            rate.append(self._times[r] / w if w > 0 else 0.0)
+        s, d, beta = model
+        loads, profiles = np.zeros(len(self.tiles)), []
+        for t, (x0, y0, x1, y1) in enumerate(self.tiles):  # segments, then the pieces: not objects
             ax = 0 if x1 - x0 >= y1 - y0 else 1
-            a0, a1 = (x0, x1) if ax == 0 else (y0, y1)
-            prof = np.zeros(a1 - a0)
-            for j in np.flatnonzero(inter[:, t]):
-                px0, py0, px1, py1 = allp[j]
-                lo, hi = (max(px0, x0), min(px1, x1)) if ax == 0 else (max(py0, y0), min(py1, y1))
-                across = (min(py1, y1) - max(py0, y0)) if ax == 0 else (min(px1, x1) - max(px0, x0))
-                prof[lo - a0:hi - a0] += density[j] * across
+            (a0, a1), (c0, c1) = ((x0, x1), (y0, y1)) if ax == 0 else ((y0, y1), (x0, x1))
+            rr = np.zeros(a1 - a0 + 1)  # the pieces' rates along the axis, each by its extent across
+            for r, ps in enumerate(allp):
+                for px0, py0, px1, py1 in ps.tolist():
+                    q0, q1, q2, q3 = max(px0, x0), max(py0, y0), min(px1, x1), min(py1, y1)
+                    if q2 > q0 and q3 > q1:
+                        lo, hi, across = (q0, q2, q3 - q1) if ax == 0 else (q1, q3, q2 - q0)
+                        rr[lo - a0] += rate[r] * across
+                        rr[hi - a0] -= rate[r] * across
+            step = max(len(d) // SAMPLE, 1)  # many objects: every step-th stands for step
+            sd = s[::step]
+            oc = _overlap(sd, c0, c1, 1 - ax)  # this frame's weight along the axis: each object's
+            a = np.minimum(np.maximum(sd[:, ax], a0), a1)  # triangles over its span, by its extent across
+            b = np.maximum(np.minimum(sd[:, ax + 2] + 1, a1), a0)
+            hit = (oc > 0) & (b > a)
+            v = (d[::step] * step * oc)[hit]
+            g = np.zeros(a1 - a0 + 1)
+            np.add.at(g, np.stack([a[hit] - a0, b[hit] - a0], axis=1).ravel(), np.stack([v, -v], axis=1).ravel())
+            prof = np.cumsum(rr)[:-1] / (c1 - c0) * (np.cumsum(g)[:-1] + beta * (c1 - c0))
+            loads[t] = _seqsum(prof)
             profiles.append((ax, a0, prof))
         return profiles, loads
 
@@ -213,7 +264,7 @@ class CrossSegment(Configured):
         ranked = [[r for _, r in sorted(mine, key=lambda x: x[0])] for mine in pieces]
         return [_join(mine) if self._joined else [np.array(r, dtype=np.int64) for r in mine] for mine in ranked]
 
-    def _partition(self, pieces, rects, tris) -> Partition:
+    def _partition(self, pieces, rects, tris, model) -> Partition:
         spans, onscreen = pixel_spans(rects, self.size)
         on = np.flatnonzero(onscreen)
         sp = spans.T
@@ -234,9 +285,10 @@ class CrossSegment(Configured):
                 regions[r] = [pr[:, 0].min(), pr[:, 1].min(), pr[:, 2].max(), pr[:, 3].max()]
                 visible[r, on] = hit.any(axis=0)
                 loads[r] = int(np.broadcast_to(tris_on, hit.shape).sum(where=hit))
+        mass = np.array([_mass(model, p) for pr in prects for p in pr], dtype=np.float64)  # pieces, not objects
         # no spans: only the cost model reads a partition's, from its own strips partitions
         return Partition(regions, loads, visible, np.zeros(max(k - 1, 0)), np.zeros(max(k - 1, 0), dtype=np.int64),
-                         None, tuple(prects), tuple(pvis))
+                         None, tuple(prects), tuple(pvis), {"mass": mass})
 
     def _integers(self, tris) -> bool:
         """Whether ``tris`` holds integers (the compiled plan's weights), kept when it is an
@@ -247,8 +299,10 @@ class CrossSegment(Configured):
         return np.asarray(tris).dtype.kind in "iu"
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
-        features = partition.features
-        self._flat = features if features is not None and "owner" in features else None
+        features = partition.features if partition.features is not None else {}
+        self._flat = features if "owner" in features else None
+        # the pieces' weights in the frame they were planned for (None: planned by another strategy)
+        self._mass = features.get("mass")
         pieces = partition.pieces
         self._pieces = pieces if pieces is not None else tuple(partition.regions[:, None])  # one (1, 4) piece per rank
         self._times = np.array(times, dtype=np.float64)  # a copy: the caller's buffer changes

@@ -48,37 +48,41 @@ def use(compiled: bool | None) -> bool:
     return available() if compiled is None else bool(compiled)
 
 
-def cross_partition(pieces, times, tiles, order, shares, damping: float, min_share: float, min_help: float,
-                    join: bool, rects, tris, size, out: np.ndarray | None = None, bound: dict | None = None):
+def cross_partition(pieces, mass, times, tiles, order, shares, damping: float, min_share: float, min_help: float,
+                    join: bool, pixel_weight: float, rects, tris, size, out: np.ndarray | None = None,
+                    bound: dict | None = None):
     """``strategies.cross``: the new segment shares (into ``out`` where given, a (K,) float64
     array other than ``shares``), and the partition's fields (regions, loads, T' masks, splits,
     split pixels, no spans, pieces and their masks per rank, and the pieces flat for the next
-    frame: ``{"pieces": (Q, 4), "owner": (Q,)}``) from the last frame's pieces (that flat form,
-    or per rank) and measured ``times``; ``order``: the segments along the resource axis;
-    ``join``: helpers cut from their own side and a rank's pieces joined. One compiled call.
+    frame: ``{"pieces": (Q, 4), "owner": (Q,), "mass": (Q,)}``, their weights in the time model)
+    from the last frame's pieces (that flat form, or per rank), their weights ``mass`` (None:
+    weighed now; ignored where the flat form carries them) and measured ``times``; ``order``:
+    the segments along the resource axis; ``join``: helpers cut from their own side and a rank's
+    pieces joined; ``pixel_weight``: the model's. One compiled call.
     ``bound``: a dict the caller keeps between calls that passes the same types every call
     (``times``, ``tiles``, ``order``, ``shares``, ``out``: C-contiguous float64, int64, int64,
     float64, float64 arrays; ``damping``, ``min_share``, ``min_help`` floats; ``join`` a bool;
-    ``size`` ints): the kernel's entry point is kept there and called directly where the pieces
-    are flat (``jit.entry``)."""
+    ``size`` ints, ``pixel_weight`` a float): the kernel's entry point is kept there and called
+    directly where the pieces are flat (``jit.entry``)."""
     k = len(tiles)
     flat = isinstance(pieces, dict)
     if flat:  # the last frame's flat pieces, as this function returned them
-        allp, owner = pieces["pieces"], pieces["owner"]
+        allp, owner, mass = pieces["pieces"], pieces["owner"], pieces["mass"]
     else:
         allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
         owner = np.repeat(np.arange(k), [len(p) for p in pieces])
+        mass = np.zeros(0) if mass is None else np.ascontiguousarray(mass, dtype=np.float64)
     new = np.empty(k) if out is None else out
     # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
     args = (allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join,
             np.ascontiguousarray(rects.T, dtype=np.float64),
-            np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1])
+            np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1], mass, pixel_weight)
     call = _cross
     if flat and bound is not None:  # the entry point, bound at the first flat call
         call = bound.get("cross")
         if call is None:
             call = bound["cross"] = entry(_cross, args)
-    ints, both = call(*args)
+    ints, both, weights = call(*args)
     # views of the packed arrays (their layout: pieces._cross), split with few Python steps:
     # with the caches cold after rendering, every step costs microseconds
     at = ints[:k + 1].tolist()
@@ -88,7 +92,7 @@ def cross_partition(pieces, times, tiles, order, shares, damping: float, min_sha
     none, none_px = _no_splits(k)
     return new, (ints[k + 1:5 * k + 1].reshape(k, 4), ints[5 * k + 1:6 * k + 1], both[q:], none, none_px, None,
                  tuple([prects[a:b] for a, b in cuts]), tuple([both[a:b] for a, b in cuts]),
-                 {"pieces": prects, "owner": ints[6 * k + 1 + 4 * q:]})
+                 {"pieces": prects, "owner": ints[6 * k + 1 + 4 * q:], "mass": weights})
 
 
 _NO_SPLITS: dict[int, tuple[np.ndarray, np.ndarray]] = {}

@@ -1,11 +1,12 @@
 """Cross-segment balancing compiled (``strategies/cross.py``): the segments' time profiles from
-the last frame's pieces and times, the view equalizer's damped shares, the cuts that give each
-helper its share of a segment, each rank's pieces joined where they share an edge, and then
-every piece's object mask, the ranks' T' masks, loads and bounding regions: one compiled call
-where the reference makes some 600 numpy calls.
+the last frame's pieces, their weights and times and this frame's rects (the time model), the
+view equalizer's damped shares, the cuts that give each helper its share of a segment, each
+rank's pieces joined where they share an edge, and then every piece's object mask and weight,
+the ranks' T' masks, loads and bounding regions: one compiled call where the reference makes
+some 600 numpy calls.
 
-Same operations in the same order as the reference (sequential sums), so pieces, masks and
-loads are identical (tests/test_kernel.py).
+Same operations in the same order as the reference (sequential sums), so pieces, masks, weights
+and loads are identical (tests/test_kernel.py).
 """
 
 from __future__ import annotations
@@ -14,47 +15,121 @@ import numpy as np
 
 from multigpu.core.kernel.jit import compile_all
 
+#: the most objects on screen the time profiles weigh one by one (more: every k-th stands for k,
+#: in ``strategies.cross`` too); a profile places a few cuts, and each object costs ~15 ns
+SAMPLE = 8192
 
-def _profiles(allp, owner, k, times, tiles):
-    """Per segment: axis (0: x), start, length, time profile along its longer axis (rows of
-    ``prof``), and its total time (``loads``)."""
-    P, T = allp.shape[0], tiles.shape[0]
-    floats = np.zeros(k + P + T)  # one allocation where three were: each costs ~0.4 us with the caches cold
-    rank_area, density, loads = floats[:k], floats[k:k + P], floats[k + P:]
-    for p in range(P):
-        rank_area[owner[p]] += np.float64((allp[p, 2] - allp[p, 0]) * (allp[p, 3] - allp[p, 1]))
-    for p in range(P):
-        density[p] = times[owner[p]] / max(rank_area[owner[p]], 1.0)
-    ints = np.zeros((3 + P, T), dtype=np.int64)  # axes, starts, lengths, then the (P, T) overlaps
-    axes, a0s, lens, inter = ints[0], ints[1], ints[2], ints[3:]
-    for p in range(P):
-        for t in range(T):
-            w = min(allp[p, 2], tiles[t, 2]) - max(allp[p, 0], tiles[t, 0])
-            h = min(allp[p, 3], tiles[t, 3]) - max(allp[p, 1], tiles[t, 1])
-            inter[p, t] = max(w, 0) * max(h, 0)
-    longest = 0
-    for t in range(T):
-        loads[t] = density[0] * inter[0, t] if P else 0.0
-        for p in range(1, P):
-            loads[t] += density[p] * inter[p, t]
-        longest = max(longest, tiles[t, 2] - tiles[t, 0], tiles[t, 3] - tiles[t, 1])
-    prof = np.zeros((T, longest))
+
+def _model(rt, tris, W, H, pixel_weight):
+    """``strategies.cross._density``: the on-screen objects (their indices, M), their inclusive
+    pixel spans (M, 4) int64 and triangles per pixel of span (M,), and a pixel's own weight."""
+    n = rt.shape[1]
+    spans = np.empty((n, 4), dtype=np.int64)
+    d = np.empty(n)
+    on = np.empty(n, dtype=np.int64)
+    m, total = 0, 0
+    w1, h1 = W - 1.0, H - 1.0
+    for o in range(n):  # the spans as ``_masks`` formed them, kept for the on-screen objects
+        a0, a1, a2, a3 = rt[0, o], rt[1, o], rt[2, o], rt[3, o]
+        if not (a2 >= 0.0 and a0 <= 1.0 and a3 >= 0.0 and a1 <= 1.0):  # off screen, or NaN
+            continue
+        s0, s1 = np.int64(np.int32(min(max(a0 * W, 0.0), w1))), np.int64(np.int32(min(max(a1 * H, 0.0), h1)))
+        s2, s3 = np.int64(np.int32(min(max(a2 * W, 0.0), w1))), np.int64(np.int32(min(max(a3 * H, 0.0), h1)))
+        spans[m, 0], spans[m, 1], spans[m, 2], spans[m, 3] = s0, s1, s2, s3
+        d[m] = tris[o] / ((s2 - s0 + 1) * (s3 - s1 + 1))
+        total += tris[o]
+        on[m] = o
+        m += 1
+    return on[:m], spans[:m], d[:m], pixel_weight * np.float64(total) / (W * H)
+
+
+def _mass(on, spans, d, beta, x0, y0, x1, y1):
+    """``strategies.cross._mass``: the weight of the rect ``[x0, y0, x1, y1)``."""
+    acc = 0.0
+    for i in range(on.shape[0]):
+        ox = min(spans[i, 2] + 1, x1) - max(spans[i, 0], x0)
+        oy = min(spans[i, 3] + 1, y1) - max(spans[i, 1], y0)
+        if ox > 0 and oy > 0:
+            acc += d[i] * ox * oy
+    return beta * ((x1 - x0) * (y1 - y0)) + acc
+
+
+def _axes(tiles):
+    """Per segment: the axis it is cut across (0: x, its longer), its start and length on it."""
+    T = tiles.shape[0]
+    ints = np.zeros((3, T), dtype=np.int64)
     for t in range(T):
         x0, y0, x1, y1 = tiles[t, 0], tiles[t, 1], tiles[t, 2], tiles[t, 3]
         ax = 0 if x1 - x0 >= y1 - y0 else 1
-        a0, a1 = (x0, x1) if ax == 0 else (y0, y1)
-        axes[t], a0s[t], lens[t] = ax, a0, a1 - a0
+        ints[0, t], ints[1, t], ints[2, t] = ax, (x0, y0)[ax], (x1 - x0, y1 - y0)[ax]
+    return ints[0], ints[1], ints[2]
+
+
+def _profiles(allp, owner, k, times, tiles, mass, on, spans, d, beta):
+    """Per segment: axis (0: x), start, length, time profile along its longer axis (rows of
+    ``prof``), and its total time (``loads``): this frame's weight along the axis (``on``,
+    ``spans``, ``d``, ``beta``: ``_model``) times the rate of the last frame's pieces
+    (``allp``, rank-major) over each position, each piece's rank's time per unit of ``mass``
+    (their weights when planned; empty: weighed now), averaged across the axis. One pass over
+    the objects, each adding to the segments its span meets (found by division: the segments
+    are a grid of equal tiles) without a test per segment (unpredictable, so slow)."""
+    P, T = allp.shape[0], tiles.shape[0]
+    floats = np.zeros(2 * k + T)  # one allocation where three were: each costs ~0.4 us with the caches cold
+    rank_w, rate, loads = floats[:k], floats[k:2 * k], floats[2 * k:]
+    for p in range(P):
+        x0, y0, x1, y1 = allp[p, 0], allp[p, 1], allp[p, 2], allp[p, 3]
+        rank_w[owner[p]] += mass[p] if mass.shape[0] == P else _mass(on, spans, d, beta, x0, y0, x1, y1)
+    for r in range(k):
+        rate[r] = times[r] / rank_w[r] if rank_w[r] > 0 else 0.0
+    axes, a0s, lens = _axes(tiles)
+    longest = 0
+    for t in range(T):
+        longest = max(longest, lens[t])
+    diffs = np.zeros((2, T, longest + 1))  # the weight's and the rate's differences along each axis
+    g, rr = diffs[0], diffs[1]
+    for t in range(T):  # the pieces' rates over each segment, in piece order
+        x0, y0, x1, y1 = tiles[t, 0], tiles[t, 1], tiles[t, 2], tiles[t, 3]
         for j in range(P):
-            if inter[j, t] == 0:
-                continue
-            px0, py0, px1, py1 = allp[j, 0], allp[j, 1], allp[j, 2], allp[j, 3]
-            if ax == 0:
-                lo, hi, across = max(px0, x0), min(px1, x1), min(py1, y1) - max(py0, y0)
-            else:
-                lo, hi, across = max(py0, y0), min(py1, y1), min(px1, x1) - max(px0, x0)
-            v = density[j] * across
-            for i in range(lo - a0, hi - a0):
-                prof[t, i] += v
+            q0, q1 = max(allp[j, 0], x0), max(allp[j, 1], y0)
+            q2, q3 = min(allp[j, 2], x1), min(allp[j, 3], y1)
+            if q2 > q0 and q3 > q1:
+                lo, hi, across = (q0, q2, q3 - q1) if axes[t] == 0 else (q1, q3, q2 - q0)
+                rr[t, lo - a0s[t]] += rate[owner[j]] * across
+                rr[t, hi - a0s[t]] -= rate[owner[j]] * across
+    tw, th = tiles[0, 2] - tiles[0, 0], tiles[0, 3] - tiles[0, 1]  # a grid of equal tiles from (0, 0)
+    cols, rows = tiles[:, 2].max() // tw, tiles[:, 3].max() // th
+    label = np.empty((rows, cols), dtype=np.int64)
+    for t in range(T):
+        label[tiles[t, 1] // th, tiles[t, 0] // tw] = t
+    span_x, span_y = spans[:, 2].max() + 2 if on.shape[0] else 1, spans[:, 3].max() + 2 if on.shape[0] else 1
+    col_of, row_of = np.empty(span_x, dtype=np.int64), np.empty(span_y, dtype=np.int64)  # no division per object
+    for x in range(span_x):
+        col_of[x] = min(x // tw, cols - 1)
+    for y in range(span_y):
+        row_of[y] = min(y // th, rows - 1)
+    step = max(on.shape[0] // SAMPLE, 1)  # past SAMPLE objects on screen, every step-th stands for step
+    for i in range(0, on.shape[0], step):  # each object's start and end along the segments it meets, in order
+        s0, s1, s2, s3, dd = spans[i, 0], spans[i, 1], spans[i, 2] + 1, spans[i, 3] + 1, d[i] * step
+        for cy in range(row_of[s1], row_of[s3 - 1] + 1):
+            for cx in range(col_of[s0], col_of[s2 - 1] + 1):
+                t = label[cy, cx]
+                x0, y0, x1, y1 = tiles[t, 0], tiles[t, 1], tiles[t, 2], tiles[t, 3]
+                if axes[t] == 0:
+                    oc, a, b = max(min(s3, y1) - max(s1, y0), 0), min(max(s0, x0), x1), max(min(s2, x1), x0)
+                else:
+                    oc, a, b = max(min(s2, x1) - max(s0, x0), 0), min(max(s1, y0), y1), max(min(s3, y1), y0)
+                x = dd * oc * (b > a)  # nothing met (a span past the last tile) adds 0.0
+                g[t, a - a0s[t]] += x
+                g[t, b - a0s[t]] -= x
+    prof = np.zeros((T, longest))
+    for t in range(T):
+        across = (tiles[t, 3] - tiles[t, 1]) if axes[t] == 0 else (tiles[t, 2] - tiles[t, 0])
+        w, r = 0.0, 0.0
+        for i in range(lens[t]):
+            w += g[t, i]
+            r += rr[t, i]
+            prof[t, i] = r / across * (w + beta * across)
+        loads[t] = _seqsum(prof[t, :lens[t]])
     return axes, a0s, lens, prof, loads
 
 
@@ -165,14 +240,16 @@ def _pack(rects, who, seg, q, k, join, packed):
     return n_out
 
 
-def _cut(allp, owner, times, tiles, order, shares, out, damping, min_share, min_help, join, packed):
+def _cut(allp, owner, times, tiles, order, shares, out, damping, min_share, min_help, join, packed, mass, model):
     """The view equalizer's new shares (into ``out``) and every rank's pieces, rank-major, each
     rank's pieces in segment order and joined where they share an edge, written into
     ``packed`` (``_cross``'s layout: rects (Q, 4) from 6K + 1, owners (Q,) after them); returns
-    Q. ``order``: the segments along the resource axis. Few allocations: each costs ~0.4 us of
-    CPU with the caches cold (ad hoc), and a frame's plan made some forty."""
+    Q. ``order``: the segments along the resource axis; ``mass``, ``model``: ``_profiles``'.
+    Few allocations: each costs ~0.4 us of CPU with the caches cold (ad hoc), and a frame's
+    plan made some forty."""
     k = tiles.shape[0]
-    axes, a0s, lens, prof, loads = _profiles(allp, owner, k, times, tiles)
+    on, spans, d, beta = model
+    axes, a0s, lens, prof, loads = _profiles(allp, owner, k, times, tiles, mass, on, spans, d, beta)
     total = _seqsum(loads)
     floats = np.zeros((3, k))
     new, start, used = floats[0], floats[1], floats[2]
@@ -230,14 +307,15 @@ def _cut(allp, owner, times, tiles, order, shares, out, damping, min_share, min_
     return _pack(rects, who, seg, q, k, join, packed)
 
 
-def _masks(rt, tris, W, H, prects, powner, k, packed):
+def _masks(tris, n, prects, powner, k, packed, model, mass):
     """Every piece's object mask (its rect overlaps the object's pixel span) and the ranks' T'
     masks, in one (P + K, N) array (pieces first, returned); loads (an object drawn in two
     pieces counts twice) and bounding regions into ``packed`` (``_cross``'s layout, the pieces'
-    starts per rank already there). One pass over the rects: an object's span is formed where
-    it is tested, as ``walk._spans`` forms it, and not kept (cross-segment partitions carry no
-    spans: only the cost model reads them, from its own partitions)."""
-    n = rt.shape[1]
+    starts per rank already there); every piece's weight (``_mass``, with ``d``, ``beta``:
+    ``_model``'s) into ``mass``. One pass over the objects on screen, their spans
+    ``model``'s (cross-segment partitions carry no spans: only the cost model reads them, from
+    its own partitions)."""
+    on, spans, d, beta = model
     P = prects.shape[0]
     both = np.zeros((P + k, n), dtype=np.bool_)
     masks, visible = both[:P], both[P:]
@@ -250,39 +328,45 @@ def _masks(rt, tris, W, H, prects, powner, k, packed):
             regions[4 * r + 2], regions[4 * r + 3] = max(regions[4 * r + 2], x1), max(regions[4 * r + 3], y1)
         else:
             regions[4 * r], regions[4 * r + 1], regions[4 * r + 2], regions[4 * r + 3] = x0, y0, x1, y1
-    w1, h1 = W - 1.0, H - 1.0
-    for o in range(n):  # one sequential pass over the objects, the pieces tested for those on screen
-        a0, a1, a2, a3 = rt[0, o], rt[1, o], rt[2, o], rt[3, o]
-        if not (a2 >= 0.0 and a0 <= 1.0 and a3 >= 0.0 and a1 <= 1.0):  # off screen, or NaN
-            continue
-        s0, s1 = np.int32(min(max(a0 * W, 0.0), w1)), np.int32(min(max(a1 * H, 0.0), h1))
-        s2, s3 = np.int32(min(max(a2 * W, 0.0), w1)), np.int32(min(max(a3 * H, 0.0), h1))
+    for i in range(on.shape[0]):  # one sequential pass over the objects on screen, the pieces tested
+        o = on[i]
+        s0, s1, s2, s3 = spans[i, 0], spans[i, 1], spans[i, 2], spans[i, 3]
         for p in range(P):  # integer loads: the same sums in any order
             if s0 < prects[p, 2] and s2 >= prects[p, 0] and s1 < prects[p, 3] and s3 >= prects[p, 1]:
                 masks[p, o] = True
                 visible[powner[p], o] = True
                 loads[powner[p]] += tris[o]
+                ox = min(s2 + 1, prects[p, 2]) - max(s0, prects[p, 0])
+                oy = min(s3 + 1, prects[p, 3]) - max(s1, prects[p, 1])
+                mass[p] += d[i] * ox * oy
+    for p in range(P):
+        mass[p] = beta * ((prects[p, 2] - prects[p, 0]) * (prects[p, 3] - prects[p, 1])) + mass[p]
     return both
 
 
-def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, rt, tris, W, H):
+def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, rt, tris, W, H,
+           mass, pixel_weight):
     """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan): the new shares into
     ``new`` and the rest packed in two arrays (every returned array costs a Python call to box
     it, paid again with the caches cold): the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
     (Q)]``, ``at`` where each rank's pieces start in the rank-major pieces; the masks ``[pieces'
-    (Q, N) | ranks' T' (K, N)]``. ``tris``: int64."""
+    (Q, N) | ranks' T' (K, N)]``; and the pieces' weights (Q,) under this frame's model, which
+    the next frame's ``mass`` reads. ``tris``: int64; ``mass``: the last frame's pieces' weights
+    when they were planned (empty: weighed with this frame's rects)."""
     k = tiles.shape[0]
     packed = np.zeros(6 * k + 1 + 5 * 2 * k * k, dtype=np.int64)  # room for the most pieces ``_cut`` makes
-    q = _cut(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, packed)
+    model = _model(rt, tris, W, H, pixel_weight)
+    q = _cut(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, packed, mass, model)
     at = 6 * k + 1
     prects, powner = packed[at:at + 4 * q].reshape((q, 4)), packed[at + 4 * q:at + 5 * q]
     for p in range(q):
         packed[powner[p] + 1] += 1
     for r in range(k):
         packed[r + 1] += packed[r]
-    both = _masks(rt, tris, W, H, prects, powner, k, packed)
-    return packed[:at + 5 * q], both
+    weights = np.zeros(q)
+    both = _masks(tris, rt.shape[1], prects, powner, k, packed, model, weights)
+    return packed[:at + 5 * q], both, weights
 
 
-compile_all(globals(), ("_profiles", "_reverse", "_side", "_join", "_helpers", "_pack", "_seqsum", "_cut", "_masks",
-                        "_cross"))
+compile_all(globals(), ("_model", "_mass", "_axes", "_profiles", "_reverse", "_side", "_join", "_helpers", "_pack",
+                        "_seqsum", "_cut", "_masks", "_cross"))
