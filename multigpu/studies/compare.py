@@ -100,8 +100,9 @@ def _discussion(rows: list[dict]) -> str:
         f"**Sort-first methods.** `time` reaches {time['vs_strips']:.2f}x of `strips` (paper {17.65 / 22.16:.2f}x) "
         f"and `cross` {cross['vs_strips']:.2f}x (paper {11.71 / 22.16:.2f}x). Render-time imbalance: strips "
         f"{strips['imb_render']:.3f}, time {time['imb_render']:.3f}, cross {cross['imb_render']:.3f}. Time-based "
-        "methods see only last frame's per-rank times, spread evenly over each rank's pixels, and react one frame "
-        "late, while the strip split counts the triangles each region will hold in this frame. "
+        "methods learn from last frame's per-rank times (`time` spreads them evenly over each rank's pixels and "
+        "reacts one frame late; `cross` weighs them by where this frame's triangles lie), while the strip split "
+        "counts the triangles each region will hold in this frame. "
         f"`cross` renders {cross['pieces_per_rank']:.2f} pieces per rank per frame on average (a rank helps a "
         "neighbouring segment), which costs a draw and a message per piece.", "",
         f"**Sort-last (`db`).** {db['vs_strips']:.2f}x of `strips` (paper {10.72 / 22.16:.2f}x): no geometry is "
