@@ -221,14 +221,14 @@ def test_every_strategy_compiled_equals_the_reference(name, data, rows, cols, n,
     tw, th = data.draw(st.integers(1, 80)), data.draw(st.integers(1, 80))
     size = (cols * tw, rows * th)
     k = rows * cols
-    ref = REGISTRY[name]((rows, cols), size, data.draw(st.sampled_from([2, 7, 2048])), compiled=False)
-    got = REGISTRY[name](ref.grid, size, ref.strips, compiled=True)
+    options = {}
     if name == "cross":  # slivers of help kept (0), dropped (the default), a whole unit or more needed
-        ref.min_help = got.min_help = data.draw(st.sampled_from([0.0, 0.1, 0.5, 1.0]))
-        if data.draw(st.booleans()):  # Equalizer's layout
-            ref = REGISTRY[name](ref.grid, size, ref.strips, compiled=False, min_help=ref.min_help, layout="equalizer")
-            got = REGISTRY[name](ref.grid, size, ref.strips, compiled=True, min_help=ref.min_help, layout="equalizer")
-        ref.pixel_weight = got.pixel_weight = data.draw(st.sampled_from([0.0, 0.5, 3.0]))  # the time model's
+        options = {"min_help": data.draw(st.sampled_from([0.0, 0.1, 0.5, 1.0])),
+                   "layout": data.draw(st.sampled_from(["joined", "equalizer"])),
+                   "model": data.draw(st.sampled_from(["weighted", "uniform"])),
+                   "pixel_weight": data.draw(st.sampled_from([0.0, 0.5, 3.0]))}
+    ref = REGISTRY[name]((rows, cols), size, data.draw(st.sampled_from([2, 7, 2048])), compiled=False, **options)
+    got = REGISTRY[name](ref.grid, size, ref.strips, compiled=True, **options)
     for f in range(frames):
         pts = np.array(data.draw(st.lists(st.tuples(coord, coord, coord, coord), min_size=n, max_size=n)),
                        dtype=np.float64).reshape(-1, 4)

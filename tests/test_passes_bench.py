@@ -1,28 +1,30 @@
-"""``bench passes`` measures what it names: both scenes, both parts, and the joined layout of
-``cross`` renders fewer passes per rank than Equalizer's on the same walkthroughs."""
+"""``bench passes`` measures what it names: both scenes, both parts, every variant of part 2, and
+the joined layout of ``cross`` renders fewer passes per rank than Equalizer's on the same
+walkthroughs."""
 
 import numpy as np
 import pytest
 
 
-def test_passes_bench_reports_pass_costs_and_both_layouts():
+def test_passes_bench_reports_pass_costs_and_every_variant():
     from multigpu.gpu.render import EglUnavailable, create_context
-    from multigpu.studies.passes_bench import WIDTHS, bench_passes
+    from multigpu.studies.passes_bench import VARIANTS, WIDTHS, bench_passes
 
     try:
         create_context()
     except EglUnavailable as exc:
         pytest.skip(str(exc))
     rows = bench_passes(quick=True)
-    got = {(r["scene"], r["part"], r.get("layout")) for r in rows}
+    got = {(r["scene"], r["part"], r.get("variant")) for r in rows}
     assert got == {(s, "passes", None) for s in ("plant", "city")} | {
-        (s, "layouts", layout) for s in ("plant", "city") for layout in ("equalizer", "joined")}
+        (s, "variants", v) for s in ("plant", "city") for v in VARIANTS}
     for r in rows:
-        values = [v for k, v in r.items() if k not in ("scene", "part", "layout")]
+        values = [v for k, v in r.items() if k not in ("scene", "part", "variant")]
         assert values and np.isfinite(values).all()
         if r["part"] == "passes":
             assert r["tile_ms"] > 0 and {f"pass_{w}" for w in WIDTHS} <= set(r)
     for scene in ("plant", "city"):
-        by = {r["layout"]: r for r in rows if r["scene"] == scene and r["part"] == "layouts"}
+        by = {r["variant"]: r for r in rows if r["scene"] == scene and r["part"] == "variants"}
         assert 1.0 <= by["joined"]["passes"] < by["equalizer"]["passes"]
+        assert 1.0 <= by["uniform"]["passes"] < by["equalizer"]["passes"]
         assert by["joined"]["tris"] > 0 and by["joined"]["slowest_ms"] >= by["joined"]["mean_ms"] > 0

@@ -359,6 +359,32 @@ def test_rank_pixels_uses_the_partition_spans():
 
 
 @pytest.mark.parametrize("compiled", [False, True])
+def test_cross_segment_load_moves_with_the_objects(compiled):
+    """The weighted time model weighs this frame's rects: when the objects move from the right
+    tile into the left one, the left segment gets more of the ranks in that same frame, before
+    any time is measured for it. Equalizer's uniform model (a rank's last time spread over its
+    last pixels) moves nothing until the times come."""
+    from multigpu.strategies.cross import CrossSegment
+
+    rng = np.random.default_rng(3)
+    size, n = (200, 100), 400
+    lo = rng.random((n, 2)) * [0.95, 0.9]
+    spread = np.concatenate([lo, lo + 0.05], axis=1)
+    left = spread * [0.5, 1.0, 0.5, 1.0]  # the same objects squeezed into the left tile
+    tris = np.full(n, 100)
+    shares = {}
+    for model in ("weighted", "uniform"):
+        cross = CrossSegment((1, 2), size, 64, compiled=compiled, model=model, damping=0.0)
+        for f in range(3):  # spread evenly, equal times: the segments' shares settle at one rank each
+            cross.observe(f, cross.plan(spread, tris), np.ones(2))
+        assert np.allclose(cross.shares, 1.0, atol=0.05), model
+        cross.plan(left, tris)
+        shares[model] = cross.shares.copy()
+    # the left tile is the first segment (labels column-major)
+    assert shares["weighted"][0] > 1.5 > shares["uniform"][0] and np.allclose(shares["uniform"], 1.0, atol=0.05)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
 def test_cross_segment_helpers_take_at_least_min_help(compiled):
     """Nearly even loads leave every segment's share near one rank: with ``min_help`` 0 the
     view equalizer's layout gives a neighbour slivers of a segment (a render pass each); with

@@ -47,12 +47,14 @@ def _seqsum(x: np.ndarray) -> float:
     return float(np.cumsum(x)[-1])
 
 
-def _density(rects: np.ndarray, tris: np.ndarray, size: tuple[int, int], pixel_weight: float):
+def _density(rects: np.ndarray, tris: np.ndarray, size: tuple[int, int], pixel_weight: float, uniform: bool):
     """The time model's weights: on-screen objects' inclusive pixel spans (M, 4) int64, their
     triangles per pixel of span (M,), and a pixel's own weight (``pixel_weight`` times the
-    triangles on screen per display pixel)."""
+    triangles on screen per display pixel); ``uniform``: every pixel weighs 1, objects nothing."""
     spans, on = pixel_spans(rects, size)
     s = spans[on].astype(np.int64)
+    if uniform:
+        return s, np.zeros(len(s)), 1.0
     t = np.asarray(tris, dtype=np.int64)[on]
     d = t / ((s[:, 2] - s[:, 0] + 1) * (s[:, 3] - s[:, 1] + 1))
     return s, d, pixel_weight * float(t.sum()) / (size[0] * size[1])
@@ -73,6 +75,8 @@ def _mass(model, rect) -> float:
 
 #: how segments are laid out on the resource axis and cut (``CrossSegment.layout``)
 LAYOUTS = ("joined", "equalizer")
+#: where a rank's time lies within its pieces (``CrossSegment.model``)
+MODELS = ("weighted", "uniform")
 
 
 def serpentine(rows: int, cols: int) -> np.ndarray:
@@ -123,6 +127,9 @@ class CrossSegment(Configured):
     # a pixel's weight in the time model, as a multiple of the triangles on screen per display
     # pixel (its fill, clear and read-back beside its share of the geometry)
     pixel_weight: float = 0.5
+    # "weighted": the model above; "uniform": Equalizer's, a rank's time spread evenly over the
+    # pixels it rendered (kept to measure the difference against)
+    model: str = "weighted"
 
     name = "cross"
     reproducible = False  # it follows measured times
@@ -132,6 +139,8 @@ class CrossSegment(Configured):
             raise ValueError(f"cross: min_help must lie in [0, 1], got {self.min_help}")
         if not self.pixel_weight >= 0.0:
             raise ValueError(f"cross: pixel_weight must be >= 0, got {self.pixel_weight}")
+        if self.model not in MODELS:
+            raise ValueError(f"cross: unknown model '{self.model}' (known: {', '.join(MODELS)})")
         if self.layout not in LAYOUTS:
             raise ValueError(f"cross: unknown layout '{self.layout}' (known: {', '.join(LAYOUTS)})")
         rows, cols = self.grid
@@ -152,6 +161,7 @@ class CrossSegment(Configured):
         self.size = (int(W), int(H))  # the kernel's argument types, fixed here once
         self.damping, self.min_share, self.min_help = float(self.damping), float(self.min_share), float(self.min_help)
         self.pixel_weight = float(self.pixel_weight)
+        self._uniform = self.model == "uniform"
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
         if self._pieces is None:
@@ -160,13 +170,14 @@ class CrossSegment(Configured):
             old = self.shares  # the new shares go into the spare array; the old one is the next spare
             self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._mass, self._times,
                                                        self.tiles, self.order, old, self.damping, self.min_share,
-                                                       self.min_help, self._joined, self.pixel_weight, rects, tris,
+                                                       self.min_help, self._joined, self.pixel_weight,
+                                                       self._uniform, rects, tris,
                                                        self.size, self._spare, self._bound)
             self._spare = old
             return Partition(*part)
         tris = np.asarray(tris)
         k = len(self.tiles)
-        model = _density(rects, tris, self.size, self.pixel_weight)
+        model = _density(rects, tris, self.size, self.pixel_weight, self._uniform)
         profiles, loads = self._profiles(model)
         total = _seqsum(loads)
         new = k * loads / total if total > 0 else np.ones(k)

@@ -1,5 +1,5 @@
 """``multigpu bench passes``: what a second render pass costs, and what joining a rank's pieces
-saves ``cross``.
+and weighing this frame's rects save ``cross``.
 
 Part 1, one pass against two. Along each scene's walkthrough (plant and city, a 2x2 wall of
 256x256 tiles), one rank renders its tile alone; its tile and a separate piece of ``w`` pixels
@@ -7,15 +7,16 @@ beside it (a second pass: its own clear, draw of every object the piece touches,
 read-back); and the tile and that strip as one rect (one pass). Printed: the extra CPU time of
 each over the tile alone, medians over frames.
 
-Part 2, the layouts of ``cross``. One process plays the wall's four ranks in turn: each renders
-its pieces (process CPU time) and the strategy learns from those times, as in a run, with
-Equalizer's layout (tiles in label order, helpers from a segment's low end, every overlap a
-helper and every piece its own pass: ``cross`` before its pieces were joined) and with the
-joined layout (``strategies/cross.py``), alternated over rounds. Printed: render passes per
-rank, triangles drawn, mean and slowest rank's render CPU per frame (the slowest is the
-emulated render), medians over rounds. The render phase alone: no MPI, no exchange, and the
-ranks do not share cores, so the figures are steadier than a run's. It prints figures and
-asserts nothing.
+Part 2, ``cross`` as Equalizer built it and as it is here. One process plays the wall's four
+ranks in turn: each renders its pieces (process CPU time) and the strategy learns from those
+times, as in a run, in three variants alternated over rounds: ``equalizer`` (Equalizer's layout,
+tiles in label order and helpers from a segment's low end, every overlap a helper and every
+piece its own pass, and its time model, a rank's time spread evenly over its pixels), ``uniform``
+(the joined layout of ``strategies/cross.py`` with that time model) and ``joined`` (the joined
+layout and the weighted time model: the default). Printed: render passes per rank, triangles
+drawn, mean and slowest rank's render CPU per frame (the slowest is the emulated render),
+medians over rounds. The render phase alone: no MPI, no exchange, and the ranks do not share
+cores, so the figures are steadier than a run's. It prints figures and asserts nothing.
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ import numpy as np
 
 GRID, TILE = (2, 2), (256, 256)
 WIDTHS = (3, 26, 64)  # pixels of the second piece
+#: part 2's variants of ``cross``: their options
+VARIANTS = {"equalizer": {"layout": "equalizer", "model": "uniform", "min_help": 0.0},  # every overlap helps
+            "uniform": {"model": "uniform"}, "joined": {}}
 
 
 def bench_passes(quick: bool) -> list[dict]:
@@ -47,19 +51,19 @@ def bench_passes(quick: bool) -> list[dict]:
         print(f"{name:<6} {row['tile_ms']:8.2f} " + " ".join(f"{row[f'pass_{w}']:11.3f} {row[f'joined_{w}']:12.3f}"
                                                           for w in WIDTHS))
         renderer.release()
-    print(f"part 2: cross, Equalizer's layout against joined pieces, {rounds} alternated rounds (medians), "
-          "render CPU ms per frame")
-    print(f"{'scene':<6} {'layout':<10} {'passes/rank':>11} {'tris/frame':>10} {'mean':>7} {'slowest':>8} {'imb':>6}")
+    print(f"part 2: cross as Equalizer built it (layout and time model), the joined layout with that time model, "
+          f"and the default, {rounds} alternated rounds (medians), render CPU ms per frame")
+    print(f"{'scene':<6} {'variant':<10} {'passes/rank':>11} {'tris/frame':>10} {'mean':>7} {'slowest':>8} {'imb':>6}")
     for name, scene in scenes.items():
         renderer = RegionRenderer(ctx, scene, (GRID[1] * TILE[0], GRID[0] * TILE[1]))
-        got: dict[str, list[dict]] = {"equalizer": [], "joined": []}
+        got: dict[str, list[dict]] = {v: [] for v in VARIANTS}
         for r in range(rounds):
-            for layout in (("equalizer", "joined") if r % 2 == 0 else ("joined", "equalizer")):
-                got[layout].append(_emulate(scene, renderer, frames, layout))
-        for layout, runs in got.items():
+            for variant in (list(VARIANTS) if r % 2 == 0 else list(VARIANTS)[::-1]):
+                got[variant].append(_emulate(scene, renderer, frames, VARIANTS[variant]))
+        for variant, runs in got.items():
             row = {k: float(np.median([x[k] for x in runs])) for k in runs[0]}
-            rows.append({"scene": name, "part": "layouts", "layout": layout, **row})
-            print(f"{name:<6} {layout:<10} {row['passes']:11.2f} {row['tris']:10.0f} {row['mean_ms']:7.2f} "
+            rows.append({"scene": name, "part": "variants", "variant": variant, **row})
+            print(f"{name:<6} {variant:<10} {row['passes']:11.2f} {row['tris']:10.0f} {row['mean_ms']:7.2f} "
                   f"{row['slowest_ms']:8.2f} {row['slowest_ms'] / row['mean_ms']:6.3f}")
         renderer.release()
     return rows
@@ -107,13 +111,12 @@ def _pass_cost(scene, renderer, frames: int) -> dict:
     return {k: float(np.median(v)) for k, v in got.items()}
 
 
-def _emulate(scene, renderer, frames: int, layout: str) -> dict:
-    """The wall's ranks in turn under ``cross`` with ``layout``: their render CPU fed back."""
+def _emulate(scene, renderer, frames: int, options: dict) -> dict:
+    """The wall's ranks in turn under ``cross`` with ``options``: their render CPU fed back."""
     from multigpu.strategies.cross import CrossSegment
 
     planner, path, cfg = _frames(scene, frames, "cross")
-    options = {"min_help": 0.0} if layout == "equalizer" else {}  # Equalizer's: every overlap helps
-    planner.decomposition.strategy = CrossSegment(cfg.grid, cfg.size, cfg.strips, layout=layout, **options)
+    planner.decomposition.strategy = CrossSegment(cfg.grid, cfg.size, cfg.strips, **options)
     k = GRID[0] * GRID[1]
     slowest, mean, passes, tris = [], [], [], []
     for f in range(len(path)):  # frames, then ranks and their pieces: not objects

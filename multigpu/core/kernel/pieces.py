@@ -20,9 +20,10 @@ from multigpu.core.kernel.jit import compile_all
 SAMPLE = 8192
 
 
-def _model(rt, tris, W, H, pixel_weight):
+def _model(rt, tris, W, H, pixel_weight, uniform):
     """``strategies.cross._density``: the on-screen objects (their indices, M), their inclusive
-    pixel spans (M, 4) int64 and triangles per pixel of span (M,), and a pixel's own weight."""
+    pixel spans (M, 4) int64 and triangles per pixel of span (M,), and a pixel's own weight
+    (``uniform``: 1, the objects' 0)."""
     n = rt.shape[1]
     spans = np.empty((n, 4), dtype=np.int64)
     d = np.empty(n)
@@ -36,11 +37,11 @@ def _model(rt, tris, W, H, pixel_weight):
         s0, s1 = np.int64(np.int32(min(max(a0 * W, 0.0), w1))), np.int64(np.int32(min(max(a1 * H, 0.0), h1)))
         s2, s3 = np.int64(np.int32(min(max(a2 * W, 0.0), w1))), np.int64(np.int32(min(max(a3 * H, 0.0), h1)))
         spans[m, 0], spans[m, 1], spans[m, 2], spans[m, 3] = s0, s1, s2, s3
-        d[m] = tris[o] / ((s2 - s0 + 1) * (s3 - s1 + 1))
+        d[m] = 0.0 if uniform else tris[o] / ((s2 - s0 + 1) * (s3 - s1 + 1))
         total += tris[o]
         on[m] = o
         m += 1
-    return on[:m], spans[:m], d[:m], pixel_weight * np.float64(total) / (W * H)
+    return on[:m], spans[:m], d[:m], 1.0 if uniform else pixel_weight * np.float64(total) / (W * H)
 
 
 def _mass(on, spans, d, beta, x0, y0, x1, y1):
@@ -345,7 +346,7 @@ def _masks(tris, n, prects, powner, k, packed, model, mass):
 
 
 def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, rt, tris, W, H,
-           mass, pixel_weight):
+           mass, pixel_weight, uniform):
     """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan): the new shares into
     ``new`` and the rest packed in two arrays (every returned array costs a Python call to box
     it, paid again with the caches cold): the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
@@ -355,7 +356,7 @@ def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, mi
     when they were planned (empty: weighed with this frame's rects)."""
     k = tiles.shape[0]
     packed = np.zeros(6 * k + 1 + 5 * 2 * k * k, dtype=np.int64)  # room for the most pieces ``_cut`` makes
-    model = _model(rt, tris, W, H, pixel_weight)
+    model = _model(rt, tris, W, H, pixel_weight, uniform)
     q = _cut(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, packed, mass, model)
     at = 6 * k + 1
     prects, powner = packed[at:at + 4 * q].reshape((q, 4)), packed[at + 4 * q:at + 5 * q]
