@@ -158,6 +158,7 @@ class CrossSegment(Configured):
         self._compiled = kernel.use(self.compiled)  # once, not per frame
         self._integer = None  # the integer weights array last seen (checked once, not per frame)
         self._bound: dict = {}  # the kernel's entry point for this strategy's own argument types
+        self._arrays: tuple | None = None  # the compiled time model's per-object scratch (``_scratch``)
         self.size = (int(W), int(H))  # the kernel's argument types, fixed here once
         self.damping, self.min_share, self.min_help = float(self.damping), float(self.min_share), float(self.min_help)
         self.pixel_weight = float(self.pixel_weight)
@@ -172,7 +173,7 @@ class CrossSegment(Configured):
                                                        self.tiles, self.order, old, self.damping, self.min_share,
                                                        self.min_help, self._joined, self.pixel_weight,
                                                        self._uniform, rects, tris,
-                                                       self.size, self._spare, self._bound)
+                                                       self.size, self._spare, self._bound, self._scratch(len(tris)))
             self._spare = old
             return Partition(*part)
         tris = np.asarray(tris)
@@ -300,6 +301,12 @@ class CrossSegment(Configured):
         # no spans: only the cost model reads a partition's, from its own strips partitions
         return Partition(regions, loads, visible, np.zeros(max(k - 1, 0)), np.zeros(max(k - 1, 0), dtype=np.int64),
                          None, tuple(prects), tuple(pvis), {"mass": mass})
+
+    def _scratch(self, n: int) -> tuple:
+        """The compiled time model's per-object arrays for ``n`` objects, kept between frames."""
+        if self._arrays is None or len(self._arrays[1]) != n:
+            self._arrays = kernel.scratch_for(n)
+        return self._arrays
 
     def _integers(self, tris) -> bool:
         """Whether ``tris`` holds integers (the compiled plan's weights), kept when it is an

@@ -48,9 +48,15 @@ def use(compiled: bool | None) -> bool:
     return available() if compiled is None else bool(compiled)
 
 
+def scratch_for(n: int) -> tuple:
+    """``cross_partition``'s per-object scratch for ``n`` objects (the time model's spans, weights
+    and on-screen objects), for a caller to keep between frames."""
+    return np.empty((n, 4), dtype=np.int64), np.empty(n), np.empty(n, dtype=np.int64)
+
+
 def cross_partition(pieces, mass, times, tiles, order, shares, damping: float, min_share: float, min_help: float,
                     join: bool, pixel_weight: float, uniform: bool, rects, tris, size,
-                    out: np.ndarray | None = None, bound: dict | None = None):
+                    out: np.ndarray | None = None, bound: dict | None = None, scratch: tuple | None = None):
     """``strategies.cross``: the new segment shares (into ``out`` where given, a (K,) float64
     array other than ``shares``), and the partition's fields (regions, loads, T' masks, splits,
     split pixels, no spans, pieces and their masks per rank, and the pieces flat for the next
@@ -63,7 +69,8 @@ def cross_partition(pieces, mass, times, tiles, order, shares, damping: float, m
     (``times``, ``tiles``, ``order``, ``shares``, ``out``: C-contiguous float64, int64, int64,
     float64, float64 arrays; ``damping``, ``min_share``, ``min_help``, ``pixel_weight`` floats;
     ``join``, ``uniform`` bools; ``size`` ints): the kernel's entry point is kept there and
-    called directly where the pieces are flat (``jit.entry``)."""
+    called directly where the pieces are flat (``jit.entry``). ``scratch``: the time model's
+    per-object arrays, ``scratch_for(len(tris))``, kept by the caller (None: made here)."""
     k = len(tiles)
     flat = isinstance(pieces, dict)
     if flat:  # the last frame's flat pieces, as this function returned them
@@ -76,7 +83,8 @@ def cross_partition(pieces, mass, times, tiles, order, shares, damping: float, m
     # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
     args = (allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join,
             np.ascontiguousarray(rects.T, dtype=np.float64),
-            np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1], mass, pixel_weight, uniform)
+            np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1], mass, pixel_weight, uniform,
+            *(scratch if scratch is not None else scratch_for(len(tris))))
     call = _cross
     if flat and bound is not None:  # the entry point, bound at the first flat call
         call = bound.get("cross")
@@ -176,5 +184,5 @@ def warm() -> float:
     return time.perf_counter() - t0
 
 
-__all__ = ["available", "use", "cross_partition", "warm", "strip_partition", "tree_arrays", "project_boxes",
-           "seen_triangles"]
+__all__ = ["available", "use", "cross_partition", "scratch_for", "warm", "strip_partition", "tree_arrays",
+           "project_boxes", "seen_triangles"]

@@ -20,14 +20,13 @@ from multigpu.core.kernel.jit import compile_all
 SAMPLE = 8192
 
 
-def _model(rt, tris, W, H, pixel_weight, uniform):
+def _model(rt, tris, W, H, pixel_weight, uniform, spans, d, on):
     """``strategies.cross._density``: the on-screen objects (their indices, M), their inclusive
     pixel spans (M, 4) int64 and triangles per pixel of span (M,), and a pixel's own weight
-    (``uniform``: 1, the objects' 0)."""
+    (``uniform``: 1, the objects' 0), written into the caller's ``spans`` (N, 4), ``d``, ``on``
+    (N,) and returned as their first M rows: fresh arrays of 10^5 rows would be page-faulted
+    every frame."""
     n = rt.shape[1]
-    spans = np.empty((n, 4), dtype=np.int64)
-    d = np.empty(n)
-    on = np.empty(n, dtype=np.int64)
     m, total = 0, 0
     w1, h1 = W - 1.0, H - 1.0
     for o in range(n):  # the spans as ``_masks`` formed them, kept for the on-screen objects
@@ -346,7 +345,7 @@ def _masks(tris, n, prects, powner, k, packed, model, mass):
 
 
 def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, rt, tris, W, H,
-           mass, pixel_weight, uniform):
+           mass, pixel_weight, uniform, spans, d, on):
     """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan): the new shares into
     ``new`` and the rest packed in two arrays (every returned array costs a Python call to box
     it, paid again with the caches cold): the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
@@ -356,7 +355,7 @@ def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, mi
     when they were planned (empty: weighed with this frame's rects)."""
     k = tiles.shape[0]
     packed = np.zeros(6 * k + 1 + 5 * 2 * k * k, dtype=np.int64)  # room for the most pieces ``_cut`` makes
-    model = _model(rt, tris, W, H, pixel_weight, uniform)
+    model = _model(rt, tris, W, H, pixel_weight, uniform, spans, d, on)
     q = _cut(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, packed, mass, model)
     at = 6 * k + 1
     prects, powner = packed[at:at + 4 * q].reshape((q, 4)), packed[at + 4 * q:at + 5 * q]
