@@ -9,10 +9,9 @@ is its time per unit of weight; this frame's weight along a segment's axis, at t
 last frame's pieces there, is the segment's time profile. Where the camera moved, the weight
 moves with the objects before any time is measured for it (Equalizer spreads a rank's time
 evenly over its pixels, one frame late). Past ``SAMPLE`` objects on screen every k-th stands for
-k in the profiles: they place a few cuts.
-The view equalizer gives
-segment t a share ``r_t = K * L_t / sum(L)`` of the K ranks (damped, and never zero), and lays
-the shares out along one resource axis, the tiles in a serpentine order (along the first row,
+k in the profiles: they place a few cuts. The view equalizer gives segment t a share
+``r_t = K * L_t / sum(L)`` of the K ranks (damped, and never zero), and lays the shares out
+along one resource axis, the tiles in a serpentine order (along the first row,
 back along the next, ...): the rank owning the p-th tile of that order is the unit ``[p, p+1)``
 of the axis, so it helps the segments its unit overlaps, usually its own and a neighbour, by at
 least ``min_help`` of its unit. Each segment is then split among its helpers by its own load
@@ -47,11 +46,12 @@ def _seqsum(x: np.ndarray) -> float:
     return float(np.cumsum(x)[-1])
 
 
-def _density(rects: np.ndarray, tris: np.ndarray, size: tuple[int, int], pixel_weight: float, uniform: bool):
-    """The time model's weights: on-screen objects' inclusive pixel spans (M, 4) int64, their
-    triangles per pixel of span (M,), and a pixel's own weight (``pixel_weight`` times the
-    triangles on screen per display pixel); ``uniform``: every pixel weighs 1, objects nothing."""
-    spans, on = pixel_spans(rects, size)
+def _density(spans: np.ndarray, on: np.ndarray, tris: np.ndarray, size: tuple[int, int], pixel_weight: float,
+             uniform: bool):
+    """The time model's weights from the frame's pixel spans and on-screen mask (``pixel_spans``):
+    on-screen objects' inclusive spans (M, 4) int64, their triangles per pixel of span (M,), and
+    a pixel's own weight (``pixel_weight`` times the triangles on screen per display pixel);
+    ``uniform``: every pixel weighs 1, objects nothing."""
     s = spans[on].astype(np.int64)
     if uniform:
         return s, np.zeros(len(s)), 1.0
@@ -178,7 +178,8 @@ class CrossSegment(Configured):
             return Partition(*part)
         tris = np.asarray(tris)
         k = len(self.tiles)
-        model = _density(rects, tris, self.size, self.pixel_weight, self._uniform)
+        spans, onscreen = pixel_spans(rects, self.size)  # once: the model and the masks read them
+        model = _density(spans, onscreen, tris, self.size, self.pixel_weight, self._uniform)
         profiles, loads = self._profiles(model)
         total = _seqsum(loads)
         new = k * loads / total if total > 0 else np.ones(k)
@@ -186,7 +187,7 @@ class CrossSegment(Configured):
         shares = np.maximum(shares, self.min_share)
         self.shares = shares * (k / _seqsum(shares))
         pieces = self._split(profiles)
-        return self._partition(pieces, rects, tris, model)
+        return self._partition(pieces, spans, onscreen, tris, model)
 
     def _profiles(self, model):
         """Per segment: the time profile along its longer axis (the last frame's pieces at their
@@ -276,8 +277,7 @@ class CrossSegment(Configured):
         ranked = [[r for _, r in sorted(mine, key=lambda x: x[0])] for mine in pieces]
         return [_join(mine) if self._joined else [np.array(r, dtype=np.int64) for r in mine] for mine in ranked]
 
-    def _partition(self, pieces, rects, tris, model) -> Partition:
-        spans, onscreen = pixel_spans(rects, self.size)
+    def _partition(self, pieces, spans, onscreen, tris, model) -> Partition:
         on = np.flatnonzero(onscreen)
         sp = spans.T
         lo_x, lo_y, hi_x, hi_y = (sp[i].take(on) for i in range(4))  # on-screen objects only

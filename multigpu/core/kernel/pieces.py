@@ -29,7 +29,7 @@ def _model(rt, tris, W, H, pixel_weight, uniform, spans, d, on):
     n = rt.shape[1]
     m, total = 0, 0
     w1, h1 = W - 1.0, H - 1.0
-    for o in range(n):  # the spans as ``_masks`` formed them, kept for the on-screen objects
+    for o in range(n):  # the spans as ``regions.pixel_spans`` forms them, for the on-screen objects
         a0, a1, a2, a3 = rt[0, o], rt[1, o], rt[2, o], rt[3, o]
         if not (a2 >= 0.0 and a0 <= 1.0 and a3 >= 0.0 and a1 <= 1.0):  # off screen, or NaN
             continue
@@ -71,7 +71,7 @@ def _profiles(allp, owner, k, times, tiles, mass, on, spans, d, beta):
     ``spans``, ``d``, ``beta``: ``_model``) times the rate of the last frame's pieces
     (``allp``, rank-major) over each position, each piece's rank's time per unit of ``mass``
     (their weights when planned; empty: weighed now), averaged across the axis. One pass over
-    the objects, each adding to the segments its span meets (found by division: the segments
+    the objects, each adding to the segments its span meets (found in lookup tables: the segments
     are a grid of equal tiles) without a test per segment (unpredictable, so slow)."""
     P, T = allp.shape[0], tiles.shape[0]
     floats = np.zeros(2 * k + T)  # one allocation where three were: each costs ~0.4 us with the caches cold
