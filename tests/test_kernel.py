@@ -226,7 +226,9 @@ def test_every_strategy_compiled_equals_the_reference(name, data, rows, cols, n,
         options = {"min_help": data.draw(st.sampled_from([0.0, 0.1, 0.5, 1.0])),
                    "layout": data.draw(st.sampled_from(["joined", "equalizer"])),
                    "model": data.draw(st.sampled_from(["weighted", "uniform"])),
-                   "pixel_weight": data.draw(st.sampled_from([0.0, 0.5, 3.0]))}
+                   "pixel_weight": data.draw(st.sampled_from([0.0, 0.5, 3.0])),
+                   "object_weight": data.draw(st.sampled_from([0.0, 1.0, 2.5])),
+                   "cover_weight": data.draw(st.sampled_from([0.0, 1.0, 2.5]))}
     ref = REGISTRY[name]((rows, cols), size, data.draw(st.sampled_from([2, 7, 2048])), compiled=False, **options)
     got = REGISTRY[name](ref.grid, size, ref.strips, compiled=True, **options)
     for f in range(frames):

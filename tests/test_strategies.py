@@ -481,3 +481,42 @@ def test_cross_segment_moves_resources_to_the_heavy_segment():
     imb = lambda t: t.max() / t.mean()
     assert imb(time_of(last)) < 0.8 * imb(time_of(none))
     assert cross.report()["name"] == "cross"
+
+
+def test_cross_time_model_weighs_objects_their_draws_and_their_cover():
+    """An object weighs its triangles, ``object_weight`` times the mean triangles per on-screen
+    object and ``cover_weight`` times the triangles per covered pixel on each pixel of its rect:
+    over the whole display the objects weigh their triangles times (1 + object_weight +
+    cover_weight), whatever their layout, and a small object draws no less than its own draw."""
+    from multigpu.core.regions import pixel_spans
+    from multigpu.strategies.cross import _density, _mass
+
+    rng = np.random.default_rng(4)
+    size = (120, 80)
+    rects, tris = workload(300, seed=4)
+    rects[:20] = np.nan  # off screen
+    tris = rng.integers(0, 500, len(rects))
+    spans, on = pixel_spans(rects, size)
+    total = float(tris[on].sum())
+    for pw, ow, cw in ((0.0, 0.0, 0.0), (0.5, 1.0, 1.0), (0.0, 2.5, 0.0), (0.0, 0.0, 2.5)):
+        model = _density(spans, on, tris, size, pw, ow, cw, False)
+        beta = model[2]
+        assert beta == pytest.approx(pw * total / (size[0] * size[1]))
+        whole = _mass(model, (0, 0, *size)) - beta * size[0] * size[1]
+        assert whole == pytest.approx(total * (1 + ow + cw), rel=1e-9)
+    # two objects: 10 triangles over 10x10 pixels, 30 on one pixel
+    spans = np.array([[0, 0, 9, 9], [20, 20, 20, 20]])
+    on, two = np.ones(2, dtype=bool), np.array([10, 30])
+    _, d, _ = _density(spans, on, two, (64, 64), 0.0, 1.0, 0.0, False)
+    np.testing.assert_allclose(d * [100, 1], [10 + 20, 30 + 20])  # each plus the mean object's 20
+    _, d, _ = _density(spans, on, two, (64, 64), 0.0, 0.0, 1.0, False)
+    np.testing.assert_allclose(d - [0.1, 30.0], 40 / 101)  # 40 triangles over 101 covered pixels
+
+
+@pytest.mark.parametrize("weight", ["pixel_weight", "object_weight", "cover_weight"])
+@pytest.mark.parametrize("bad", [-0.5, float("nan"), float("inf")])
+def test_cross_time_model_weights_are_checked(weight, bad):
+    from multigpu.strategies.cross import CrossSegment
+
+    with pytest.raises(ValueError, match=weight):
+        CrossSegment((2, 2), (128, 128), 64, **{weight: bad})

@@ -3,8 +3,11 @@ equalizer over per-segment load equalizers).
 
 Each display tile is a segment. From the last frame's measured times and a per-pixel time model,
 every segment's load is known: a pixel weighs ``pixel_weight`` times the mean triangles per
-pixel on screen, plus the triangles of every object over it (each object's triangles spread
-evenly over its rect). A rank's measured time over its pieces' weight in the frame it rendered
+pixel on screen, plus every object over it: its triangles and ``object_weight`` times the mean
+triangles per object on screen (its draw, its vertices set up whole), spread evenly over its
+rect, and ``cover_weight`` times the triangles per pixel of all the objects' rects (the
+fragments tested and shaded where objects overlap; ``multigpu bench imbalance`` found a rank's
+objects and their rects' pixels behind most of the imbalance its triangles left). A rank's measured time over its pieces' weight in the frame it rendered
 is its time per unit of weight; this frame's weight along a segment's axis, at the rate of the
 last frame's pieces there, is the segment's time profile. Where the camera moved, the weight
 moves with the objects before any time is measured for it (Equalizer spreads a rank's time
@@ -47,17 +50,25 @@ def _seqsum(x: np.ndarray) -> float:
 
 
 def _density(spans: np.ndarray, on: np.ndarray, tris: np.ndarray, size: tuple[int, int], pixel_weight: float,
-             uniform: bool):
+             object_weight: float, cover_weight: float, uniform: bool):
     """The time model's weights from the frame's pixel spans and on-screen mask (``pixel_spans``):
-    on-screen objects' inclusive spans (M, 4) int64, their triangles per pixel of span (M,), and
-    a pixel's own weight (``pixel_weight`` times the triangles on screen per display pixel);
-    ``uniform``: every pixel weighs 1, objects nothing."""
+    on-screen objects' inclusive spans (M, 4) int64, their weights per pixel of span (M,), and
+    a pixel's own weight (``pixel_weight`` times the triangles on screen per display pixel).
+    An object weighs its triangles plus ``object_weight`` times the mean triangles per on-screen
+    object, spread over its span, plus ``cover_weight`` times the triangles per pixel of all the
+    on-screen spans on every pixel of its own. ``uniform``: every pixel weighs 1, objects nothing."""
     s = spans[on].astype(np.int64)
     if uniform:
         return s, np.zeros(len(s)), 1.0
     t = np.asarray(tris, dtype=np.int64)[on]
-    d = t / ((s[:, 2] - s[:, 0] + 1) * (s[:, 3] - s[:, 1] + 1))
-    return s, d, pixel_weight * float(t.sum()) / (size[0] * size[1])
+    total = float(t.sum())
+    beta = pixel_weight * total / (size[0] * size[1])
+    if len(t) == 0:
+        return s, np.zeros(0), beta
+    area = (s[:, 2] - s[:, 0] + 1) * (s[:, 3] - s[:, 1] + 1)
+    per_object = object_weight * total / len(t)
+    per_pixel = cover_weight * total / float(area.sum())
+    return s, (t + per_object) / area + per_pixel, beta
 
 
 def _overlap(s: np.ndarray, lo: int, hi: int, c: int) -> np.ndarray:
@@ -127,6 +138,12 @@ class CrossSegment(Configured):
     # a pixel's weight in the time model, as a multiple of the triangles on screen per display
     # pixel (its fill, clear and read-back beside its share of the geometry)
     pixel_weight: float = 0.5
+    # an object's own weight, as a multiple of the mean triangles per object on screen (its
+    # draw, and its vertices set up whole wherever it is drawn)
+    object_weight: float = 1.0
+    # a pixel of an object's rect weighs this times the triangles per pixel of all the on-screen
+    # objects' rects (the fragments it tests and shades where objects overlap)
+    cover_weight: float = 1.0
     # "weighted": the model above; "uniform": Equalizer's, a rank's time spread evenly over the
     # pixels it rendered (kept to measure the difference against)
     model: str = "weighted"
@@ -137,8 +154,9 @@ class CrossSegment(Configured):
     def __post_init__(self):
         if not 0.0 <= self.min_help <= 1.0:
             raise ValueError(f"cross: min_help must lie in [0, 1], got {self.min_help}")
-        if not self.pixel_weight >= 0.0:
-            raise ValueError(f"cross: pixel_weight must be >= 0, got {self.pixel_weight}")
+        for weight in ("pixel_weight", "object_weight", "cover_weight"):
+            if not 0.0 <= getattr(self, weight) < float("inf"):
+                raise ValueError(f"cross: {weight} must be a finite number >= 0, got {getattr(self, weight)}")
         if self.model not in MODELS:
             raise ValueError(f"cross: unknown model '{self.model}' (known: {', '.join(MODELS)})")
         if self.layout not in LAYOUTS:
@@ -161,7 +179,8 @@ class CrossSegment(Configured):
         self._arrays: tuple | None = None  # the compiled time model's per-object scratch (``_scratch``)
         self.size = (int(W), int(H))  # the kernel's argument types, fixed here once
         self.damping, self.min_share, self.min_help = float(self.damping), float(self.min_share), float(self.min_help)
-        self.pixel_weight = float(self.pixel_weight)
+        self.pixel_weight, self.object_weight = float(self.pixel_weight), float(self.object_weight)
+        self.cover_weight = float(self.cover_weight)
         self._uniform = self.model == "uniform"
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
@@ -172,14 +191,16 @@ class CrossSegment(Configured):
             self.shares, part = kernel.cross_partition(self._flat or self._pieces, self._mass, self._times,
                                                        self.tiles, self.order, old, self.damping, self.min_share,
                                                        self.min_help, self._joined, self.pixel_weight,
-                                                       self._uniform, rects, tris,
+                                                       self.object_weight, self.cover_weight, self._uniform,
+                                                       rects, tris,
                                                        self.size, self._spare, self._bound, self._scratch(len(tris)))
             self._spare = old
             return Partition(*part)
         tris = np.asarray(tris)
         k = len(self.tiles)
         spans, onscreen = pixel_spans(rects, self.size)  # once: the model and the masks read them
-        model = _density(spans, onscreen, tris, self.size, self.pixel_weight, self._uniform)
+        model = _density(spans, onscreen, tris, self.size, self.pixel_weight, self.object_weight, self.cover_weight,
+                         self._uniform)
         profiles, loads = self._profiles(model)
         total = _seqsum(loads)
         new = k * loads / total if total > 0 else np.ones(k)

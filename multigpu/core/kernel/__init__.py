@@ -55,7 +55,8 @@ def scratch_for(n: int) -> tuple:
 
 
 def cross_partition(pieces, mass, times, tiles, order, shares, damping: float, min_share: float, min_help: float,
-                    join: bool, pixel_weight: float, uniform: bool, rects, tris, size,
+                    join: bool, pixel_weight: float, object_weight: float, cover_weight: float, uniform: bool,
+                    rects, tris, size,
                     out: np.ndarray | None = None, bound: dict | None = None, scratch: tuple | None = None):
     """``strategies.cross``: the new segment shares (into ``out`` where given, a (K,) float64
     array other than ``shares``), and the partition's fields (regions, loads, T' masks, splits,
@@ -64,10 +65,11 @@ def cross_partition(pieces, mass, times, tiles, order, shares, damping: float, m
     from the last frame's pieces (that flat form, or per rank), their weights ``mass`` (None:
     weighed now; ignored where the flat form carries them) and measured ``times``; ``order``:
     the segments along the resource axis; ``join``: helpers cut from their own side and a rank's
-    pieces joined; ``pixel_weight``, ``uniform``: the time model's. One compiled call.
+    pieces joined; ``pixel_weight``, ``object_weight``, ``cover_weight``, ``uniform``: the time
+    model's. One compiled call.
     ``bound``: a dict the caller keeps between calls that passes the same types every call
     (``times``, ``tiles``, ``order``, ``shares``, ``out``: C-contiguous float64, int64, int64,
-    float64, float64 arrays; ``damping``, ``min_share``, ``min_help``, ``pixel_weight`` floats;
+    float64, float64 arrays; ``damping``, ``min_share``, ``min_help`` and the model's weights floats;
     ``join``, ``uniform`` bools; ``size`` ints): the kernel's entry point is kept there and
     called directly where the pieces are flat (``jit.entry``). ``scratch``: the time model's
     per-object arrays, ``scratch_for(len(tris))``, kept by the caller (None: made here)."""
@@ -83,7 +85,8 @@ def cross_partition(pieces, mass, times, tiles, order, shares, damping: float, m
     # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
     args = (allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join,
             np.ascontiguousarray(rects.T, dtype=np.float64),
-            np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1], mass, pixel_weight, uniform,
+            np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1], mass, pixel_weight, object_weight,
+            cover_weight, uniform,
             *(scratch if scratch is not None else scratch_for(len(tris))))
     call = _cross
     if flat and bound is not None:  # the entry point, bound at the first flat call

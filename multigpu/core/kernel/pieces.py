@@ -20,14 +20,14 @@ from multigpu.core.kernel.jit import compile_all
 SAMPLE = 8192
 
 
-def _model(rt, tris, W, H, pixel_weight, uniform, spans, d, on):
+def _model(rt, tris, W, H, pixel_weight, object_weight, cover_weight, uniform, spans, d, on):
     """``strategies.cross._density``: the on-screen objects (their indices, M), their inclusive
-    pixel spans (M, 4) int64 and triangles per pixel of span (M,), and a pixel's own weight
+    pixel spans (M, 4) int64 and weights per pixel of span (M,), and a pixel's own weight
     (``uniform``: 1, the objects' 0), written into the caller's ``spans`` (N, 4), ``d``, ``on``
     (N,) and returned as their first M rows: fresh arrays of 10^5 rows would be page-faulted
     every frame."""
     n = rt.shape[1]
-    m, total = 0, 0
+    m, total, covered = 0, 0, 0
     w1, h1 = W - 1.0, H - 1.0
     for o in range(n):  # the spans as ``regions.pixel_spans`` forms them, for the on-screen objects
         a0, a1, a2, a3 = rt[0, o], rt[1, o], rt[2, o], rt[3, o]
@@ -36,11 +36,19 @@ def _model(rt, tris, W, H, pixel_weight, uniform, spans, d, on):
         s0, s1 = np.int64(np.int32(min(max(a0 * W, 0.0), w1))), np.int64(np.int32(min(max(a1 * H, 0.0), h1)))
         s2, s3 = np.int64(np.int32(min(max(a2 * W, 0.0), w1))), np.int64(np.int32(min(max(a3 * H, 0.0), h1)))
         spans[m, 0], spans[m, 1], spans[m, 2], spans[m, 3] = s0, s1, s2, s3
-        d[m] = 0.0 if uniform else tris[o] / ((s2 - s0 + 1) * (s3 - s1 + 1))
+        covered += (s2 - s0 + 1) * (s3 - s1 + 1)
         total += tris[o]
         on[m] = o
         m += 1
-    return on[:m], spans[:m], d[:m], 1.0 if uniform else pixel_weight * np.float64(total) / (W * H)
+    if uniform or m == 0:
+        d[:m] = 0.0
+        return on[:m], spans[:m], d[:m], 1.0 if uniform else pixel_weight * np.float64(total) / (W * H)
+    per_object = object_weight * np.float64(total) / m
+    per_pixel = cover_weight * np.float64(total) / np.float64(covered)
+    for i in range(m):  # the frame's means known: each object's weight spread over its span
+        area = (spans[i, 2] - spans[i, 0] + 1) * (spans[i, 3] - spans[i, 1] + 1)
+        d[i] = (tris[on[i]] + per_object) / area + per_pixel
+    return on[:m], spans[:m], d[:m], pixel_weight * np.float64(total) / (W * H)
 
 
 def _mass(on, spans, d, beta, x0, y0, x1, y1):
@@ -345,7 +353,7 @@ def _masks(tris, n, prects, powner, k, packed, model, mass):
 
 
 def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, rt, tris, W, H,
-           mass, pixel_weight, uniform, spans, d, on):
+           mass, pixel_weight, object_weight, cover_weight, uniform, spans, d, on):
     """``_cut`` then ``_masks`` in one call (a frame's cross-segment plan): the new shares into
     ``new`` and the rest packed in two arrays (every returned array costs a Python call to box
     it, paid again with the caches cold): the integers ``[at (K+1) | regions (K, 4) | loads (K) | pieces (Q, 4) | owner
@@ -355,7 +363,7 @@ def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, mi
     when they were planned (empty: weighed with this frame's rects)."""
     k = tiles.shape[0]
     packed = np.zeros(6 * k + 1 + 5 * 2 * k * k, dtype=np.int64)  # room for the most pieces ``_cut`` makes
-    model = _model(rt, tris, W, H, pixel_weight, uniform, spans, d, on)
+    model = _model(rt, tris, W, H, pixel_weight, object_weight, cover_weight, uniform, spans, d, on)
     q = _cut(allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join, packed, mass, model)
     at = 6 * k + 1
     prects, powner = packed[at:at + 4 * q].reshape((q, 4)), packed[at + 4 * q:at + 5 * q]
