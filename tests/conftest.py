@@ -3,6 +3,8 @@
 import os
 import tempfile
 
+import pytest
+
 os.environ.setdefault("MULTIGPU_CACHE", tempfile.mkdtemp(prefix="multigpu-cache-"))
 os.environ.setdefault("LP_NUM_THREADS", "1")
 
@@ -13,3 +15,14 @@ def pytest_sessionstart(session):
     from multigpu.core import kernel
 
     kernel.warm()
+
+
+@pytest.fixture
+def egl():
+    """A headless GL context, or the test skipped with the reason EGL is missing."""
+    from multigpu.gpu.render import EglUnavailable, create_context
+
+    try:
+        return create_context()
+    except EglUnavailable as exc:
+        pytest.skip(str(exc))

@@ -51,14 +51,9 @@ def test_split_sees_persistence_and_what_a_feature_explains():
     assert got["fit_leaves"] == pytest.approx(0.4, abs=0.1)
 
 
-def test_imbalance_bench_runs_both_scenes():
-    from multigpu.gpu.render import EglUnavailable, create_context
+def test_imbalance_bench_runs_both_scenes(egl):
     from multigpu.studies.imbalance_bench import bench_imbalance
 
-    try:
-        create_context()
-    except EglUnavailable as exc:
-        pytest.skip(str(exc))
     rows = bench_imbalance(quick=True)
     assert [r["scene"] for r in rows] == ["plant", "city"]
     for r in rows:

@@ -3,17 +3,11 @@ the joined layout of ``cross`` renders fewer passes per rank than Equalizer's on
 walkthroughs."""
 
 import numpy as np
-import pytest
 
 
-def test_passes_bench_reports_pass_costs_and_every_variant():
-    from multigpu.gpu.render import EglUnavailable, create_context
+def test_passes_bench_reports_pass_costs_and_every_variant(egl):
     from multigpu.studies.passes_bench import VARIANTS, WIDTHS, bench_passes
 
-    try:
-        create_context()
-    except EglUnavailable as exc:
-        pytest.skip(str(exc))
     rows = bench_passes(quick=True)
     got = {(r["scene"], r["part"], r.get("variant")) for r in rows}
     assert got == {(s, "passes", None) for s in ("plant", "city")} | {
