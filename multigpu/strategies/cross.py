@@ -7,7 +7,7 @@ pixel on screen, plus every object over it: its triangles and ``object_weight`` 
 triangles per object on screen (its draw, its vertices set up whole), spread evenly over its
 rect, and ``cover_weight`` times the triangles per pixel of all the objects' rects (the
 fragments tested and shaded where objects overlap; ``multigpu bench imbalance`` found a rank's
-objects and their rects' pixels behind most of the imbalance its triangles left). A rank's
+objects and their rects' pixels behind much of the imbalance its triangles left). A rank's
 measured time over its pieces' weight in the frame it rendered is its time per unit of weight;
 this frame's weight along a segment's axis, at the rate of the last frame's pieces there, is
 the segment's time profile. Where the camera moved, the weight moves with the objects before
