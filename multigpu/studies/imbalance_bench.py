@@ -24,8 +24,6 @@ Process CPU time, the render phase alone; no MPI. It prints figures and asserts 
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 #: the work's features, per rank and frame (``_features``)
@@ -59,23 +57,16 @@ def bench_imbalance(quick: bool) -> list[dict]:
 def _renders(scene, renderer, frames: int):
     """(F, K) first and second render CPU ms of every rank's work, and its (F, K, 5) features."""
     from multigpu.core.regions import pixel_spans
-    from multigpu.studies.passes_bench import _frames
+    from multigpu.studies.passes_bench import _frames, rank_times
 
     planner, path, cfg = _frames(scene, frames, "cross")
-    k = cfg.grid[0] * cfg.grid[1]
     tris = np.asarray(scene.tris, dtype=np.float64)
     first, second, feats = [], [], []
     for f in range(len(path)):  # frames, then ranks and their pieces: not objects
         view, proj, light, rects = planner.frame(path.camera(f))
         spans, on = pixel_spans(rects, cfg.canvas.size)
         work = planner.work(f, rects)
-        times = np.zeros((2, k))
-        for rep in range(2):
-            for r in range(k):
-                t0 = time.process_time()
-                for rect, m in zip(work.rects[r], work.masks[r]):
-                    renderer.render(view, proj, light, rect, m)
-                times[rep, r] = (time.process_time() - t0) * 1e3
+        times = [rank_times(renderer, work, view, proj, light) for _ in range(2)]  # the same work twice
         planner.observe(f, times[0])
         if f >= 8:  # past the first frames (cross starts from the paper's strips)
             first.append(times[0])
@@ -117,8 +108,8 @@ def split(first: np.ndarray, second: np.ndarray, feats: np.ndarray) -> dict:
     x = x.reshape(x.shape[0], -1).T
     coef, *_ = np.linalg.lstsq(x, y, rcond=None)
     left = max(float(np.mean((y - x @ coef) ** 2)) - noise / 2, 0.0)  # the residual's noise taken out
-    mean = lambda t: t.mean(axis=1)  # noqa: E731
-    return {"imbalance": float(first.max(axis=1).mean() / mean(first).mean()),
-            "imbalance_of_two": float(((first + second) / 2).max(axis=1).mean() / mean((first + second) / 2).mean()),
+    both = (first + second) / 2
+    return {"imbalance": float(first.max(axis=1).mean() / first.mean()),
+            "imbalance_of_two": float(both.max(axis=1).mean() / both.mean()),
             "deviation_sd": total ** 0.5, "repeatable_sd": repeat ** 0.5, "noise_sd": noise ** 0.5,
             "persists": persists, "fit_leaves": left / repeat if repeat > 0 else float("nan")}

@@ -111,23 +111,28 @@ def _pass_cost(scene, renderer, frames: int) -> dict:
     return {k: float(np.median(v)) for k, v in got.items()}
 
 
+def rank_times(renderer, work, view, proj, light) -> np.ndarray:
+    """(K,) process CPU ms of each rank rendering its pieces of ``work``, one rank after another."""
+    times = np.zeros(work.ranks)
+    for r in range(work.ranks):  # ranks and their pieces: not objects
+        t0 = time.process_time()
+        for rect, m in zip(work.rects[r], work.masks[r]):
+            renderer.render(view, proj, light, rect, m)
+        times[r] = (time.process_time() - t0) * 1e3
+    return times
+
+
 def _emulate(scene, renderer, frames: int, options: dict) -> dict:
     """The wall's ranks in turn under ``cross`` with ``options``: their render CPU fed back."""
     from multigpu.strategies.cross import CrossSegment
 
     planner, path, cfg = _frames(scene, frames, "cross")
     planner.decomposition.strategy = CrossSegment(cfg.grid, cfg.size, cfg.strips, **options)
-    k = GRID[0] * GRID[1]
     slowest, mean, passes, tris = [], [], [], []
     for f in range(len(path)):  # frames, then ranks and their pieces: not objects
         view, proj, light, rects = planner.frame(path.camera(f))
         work = planner.work(f, rects)
-        times = np.zeros(k)
-        for r in range(k):
-            t0 = time.process_time()
-            for rect, m in zip(work.rects[r], work.masks[r]):
-                renderer.render(view, proj, light, rect, m)
-            times[r] = (time.process_time() - t0) * 1e3
+        times = rank_times(renderer, work, view, proj, light)
         planner.observe(f, times)
         if f >= 8:  # past the first frames (cross starts from the paper's strips)
             slowest.append(times.max())
