@@ -19,6 +19,8 @@ SUMMARY_EVERY = 50
 SETUP_SECONDS = 1800.0
 #: where composed tiles go besides the outputs: nowhere, or a window on each rank's display
 PRESENTERS = ("headless", "window")
+#: frame exchange backends (``auto``: the node-shared window where it can be made, else messages)
+EXCHANGES = ("auto", "messages", "shared")
 #: ``--path interactive``: the camera is flown by hand from rank 0's window
 INTERACTIVE = "interactive"
 #: ``--monitor`` without a place: right of the wall, on a screen that holds the wall's canvas
@@ -71,7 +73,7 @@ class WalkConfig:
     device: int | None = None
     subfrustum: str = "auto"
     partition: str = "redundant"
-    exchange: str = "messages"  # or "shared": a node-shared MPI window when every rank is on one node
+    exchange: str = "auto"  # a node-shared MPI window where every rank is on one node, else messages
     decomposition: str = "screen"
     bin_size: int = 64
     bin_pattern: str = "diagonal"
@@ -105,8 +107,8 @@ class WalkConfig:
 
         if self.subfrustum not in METHODS:
             raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{self.subfrustum}'")
-        if self.exchange not in ("messages", "shared"):
-            raise InputError(f"--exchange must be 'messages' or 'shared', got '{self.exchange}'")
+        if self.exchange not in EXCHANGES:
+            raise InputError(f"--exchange must be one of {', '.join(EXCHANGES)}, got '{self.exchange}'")
         if self.partition not in ("redundant", "broadcast"):
             raise InputError(f"--partition must be 'redundant' or 'broadcast', got '{self.partition}'")
         from multigpu.decompositions import PATTERNS, RANGES

@@ -59,6 +59,8 @@ def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_pat
     s = json.loads((tmp_path / "wall" / "summary.json").read_text())
     assert [r["host"] for r in s["config"]["ranks"]] == ["a", "a", "b", "b"] and s["config"]["hosts"] == 2
     assert [r["node_rank"] for r in s["config"]["ranks"]] == [0, 1, 0, 1]
+    # the default exchange uses messages across hosts, and says why
+    assert s["config"]["exchange"] == "messages" and "several hosts" in s["config"]["exchange_why"]
     assert all(isinstance(r["egl_device"], int) for r in s["config"]["ranks"])  # one device here: 0
     assert s["config"]["scene"]["cached"] is False  # built here, once, by rank 0
     built = sorted(p.name for p in cache.rglob("*") if p.is_file())

@@ -219,18 +219,23 @@ def test_second_job_on_the_same_out_is_refused(tmp_path):
     _summary_matches_csv(tmp_path / "o")  # the first job's outputs are intact
 
 
-def test_disk_full_keeps_whole_rows_and_no_temp_files(tmp_path):
-    """RLIMIT_FSIZE makes writes past 20 kB fail (EFBIG, as a full disk gives ENOSPC)."""
+@pytest.mark.parametrize("mpi,exchange", [("default", "auto"), ("default", "shared"), ("openmpi", "auto")])
+def test_disk_full_keeps_whole_rows_and_no_temp_files(tmp_path, mpi, exchange):
+    """RLIMIT_FSIZE makes writes past 20 kB fail (EFBIG, as a full disk gives ENOSPC). The
+    shared window finds no room under that limit, so the job uses messages and says why (Open
+    MPI does not return from a failed window allocation)."""
     import subprocess
 
     from mpirun import ROOT
 
-    from multigpu.parallel.mpirun import find_launcher
+    from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
 
     out = tmp_path / "o"
-    launcher = find_launcher()
+    if mpi == "openmpi" and openmpi_on_path() is None:
+        pytest.skip("no Open MPI mpiexec here (Debian: apt install openmpi-bin)")
+    launcher = find_launcher() if mpi == "default" else launcher_for(openmpi_on_path())
     cmd = launcher.command(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "400", "--mosaic-every", "0",
-                               "--out", str(out)])
+                               "--exchange", exchange, "--out", str(out)])
     py = cmd.index("-m")  # python -m mpi4py ... -> python tests/fsize_limited.py BYTES -m multigpu ...
     cmd[py:py + 2] = [str(ROOT / "tests" / "fsize_limited.py"), "20000"]
     res = subprocess.run(cmd, cwd=ROOT, env=launcher.environ(), capture_output=True, text=True, timeout=120)
@@ -238,6 +243,7 @@ def test_disk_full_keeps_whole_rows_and_no_temp_files(tmp_path):
     assert "timings.csv" in res.stderr and res.stderr.count("multigpu: rank 0") == 1, res.stderr
     s = _summary_matches_csv(out)
     assert 0 < s["frames"] < 400 and s["complete"] is False
+    assert s["config"]["exchange"] == "messages" and "file-size limit" in s["config"]["exchange_why"]
     assert not [p.name for p in out.rglob(".*") if p.name != ".multigpu.lock"]
 
 

@@ -72,14 +72,15 @@ def test_broadcast_partition_equals_redundant(tmp_path, reference):
 
 @pytest.mark.parametrize("extra", [["--balance", "cross"], ["--decomposition", "db"]])
 def test_shared_window_and_messages_compose_the_same(tmp_path, reference, extra):
-    """One node: --exchange shared goes through a shared window, --exchange messages (the default)
-    sends messages. Both compose the one-rank render (colour pieces and depth-merged ones)."""
-    for mode in ("shared", "messages"):
+    """One node: --exchange auto (the default) and shared go through a shared window,
+    --exchange messages sends messages. All compose the one-rank render (colour pieces and
+    depth-merged ones)."""
+    for mode, used in (("auto", "shared"), ("shared", "shared"), ("messages", "messages")):
         out = walk(tmp_path, f"x_{mode}", (2, 2), ["--exchange", mode, *extra])
         for got, ref in zip(frames_of(out), reference):
             assert (got == ref).all()
         doc = json.loads((out / "summary.json").read_text())
-        assert doc["config"]["exchange"] == mode
+        assert doc["config"]["exchange"] == used and "exchange_why" not in doc["config"]
         assert doc["bytes_sent_per_frame"] > 0
 
 

@@ -96,7 +96,7 @@ class Messages:
     def __init__(self, comm, timeout: float):
         self.comm, self.timeout = comm, timeout
 
-    def publish(self, frame: int, me: int, rendered: list) -> None:
+    def publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
         """Messages leave in ``compose``."""
 
     def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,

@@ -82,7 +82,9 @@ class Frames:
         self.done = 0
         self.learn = None  # (frame, times): observed at the start of the next frame
         # the exchange backend: a node-shared window where asked for and possible, else messages
-        shared = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout) if cfg.exchange == "shared" else None
+        shared, why = None, None
+        if cfg.exchange != "messages":
+            shared, why = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout, cfg.exchange == "shared")
         self.exchange = shared or Messages(comm, cfg.timeout)
         self.window = presenter.mode == "window"
         self.live = None
@@ -99,6 +101,8 @@ class Frames:
             self.live = Live(cfg, comm, scene, self.planner.balances, self.planner.using, controls, monitor, start)
         doc = _config_doc(cfg, scene, load_info, self.n_frames, placement, renderer.method)
         doc["exchange"] = self.exchange.name
+        if why:
+            doc["exchange_why"] = f"messages: no shared window ({why})"
         self.config_doc = doc
         self.record = None
         if self.rank == 0:
@@ -120,14 +124,13 @@ class Frames:
             out.append(got if work.depth else (got, None))
         return out
 
-    def compose(self, f: int, work: Work, rendered: list) -> tuple[int, int]:
+    def compose(self, f: int, work: Work, rendered: list, plan: list) -> tuple[int, int]:
         """Frame exchange: the pieces travel to their tile owners, who copy or depth-merge them
         (the exchange backend: messages, or the node-shared window). Returns (bytes sent, of
         which depth)."""
         if work.depth:
             self.back[:] = self.background
             self.zback[:] = 1.0
-        plan = transfers(work, self.tiles)
         return self.exchange.compose(f, self.rank, work.rects, rendered, plan, self.tiles[self.rank], self.back,
                                      self.zback if work.depth else None)
 
@@ -213,12 +216,13 @@ class Frames:
             work, (view, proj, light) = self.planner.plan(f, camera, self.relay)
         with t.phase("render"):
             rendered = self.render(work, view, proj, light)
-        with t.phase("exchange"):  # pieces into the shared window before the barrier (messages: nothing)
-            self.exchange.publish(f, self.rank, rendered)
+        with t.phase("exchange"):  # parts for peers into the shared window before the barrier (messages: nothing)
+            plan = transfers(work, self.tiles)
+            self.exchange.publish(f, self.rank, work.rects, rendered, plan)
         with t.phase("sync"):
             barrier(self.comm, self.cfg.timeout)
         with t.phase("exchange"):
-            sent = self.compose(f, work, rendered)
+            sent = self.compose(f, work, rendered, plan)
         swapped, stop = self.present(t, work, control)
         self.gather_row(f, work, t, sent, swapped, stop)
         self.learn = (f, self.allrows[:, self.col["rendering_cpu_ms"]].copy())

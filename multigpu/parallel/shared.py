@@ -1,20 +1,23 @@
-"""Frame exchange through node-shared memory: every rank's rendered pieces in one MPI window.
+"""Frame exchange through node-shared memory: the parts peers need, in one MPI window.
 
-When all ranks run on one machine (the paper's multi-GPU workstation), a rank copies its
-rendered pieces into its own segment of an ``MPI_Win_allocate_shared`` window before the
-frame's barrier, and after it every tile owner copies (or depth-merges) the parts it needs
-straight from the senders' segments: one copy per pixel instead of pack, two message copies
-and unpack. Each segment has two halves used by alternate frames: a rank writes frame f+2's
-pieces only after the barrier of frame f+1, which every rank reaches after its reads of frame
-f, so a half is never overwritten while a peer still reads it. ``Win.Sync`` around the barrier
-orders the stores and loads (MPI's unified memory model).
+When all ranks run on one machine (the paper's multi-GPU workstation), a rank copies the parts
+of its rendered pieces that other tiles need into its own segment of an
+``MPI_Win_allocate_shared`` window before the frame's barrier, and after it every tile owner
+copies (or depth-merges) them straight from the senders' segments: one copy per pixel instead of
+pack, two message copies and unpack; a rank's own tile's parts never leave its pieces. Each
+segment has two halves used by alternate frames: a rank writes frame f+2's parts only after the
+barrier of frame f+1, which every rank reaches after its reads of frame f, so a half is never
+overwritten while a peer still reads it. ``Win.Sync`` around the barrier orders the stores and
+loads (MPI's unified memory model).
 
-Opt-in (``--exchange shared``): Open MPI backs the window with a file in its session directory,
-so a file-size limit or a full disk there can break it (measured: with Open MPI 4.1.4 a run
-under RLIMIT_FSIZE did not end, where with messages it ends with the disk-full error).
+The default where every rank shares a host (``--exchange auto``). MPI backs the window with a
+file in ``/dev/shm``, and Open MPI 4.1 does not return from the allocation when making that file
+fails (measured: under RLIMIT_FSIZE its run never ended, where MPICH's fails and the job uses
+messages). So before allocating, every rank checks that its file-size limit and the free space
+of ``/dev/shm`` hold the whole window (``room``), and all use messages where one does not.
 
-Layout of a segment half: the rank's pieces in order, each its RGB bytes, then (sort-last)
-its float32 depth.
+Layout of a segment half: the rank's parts for other tiles in ``transfers`` order, each its RGB
+bytes, then (sort-last) its float32 depth.
 """
 
 from __future__ import annotations
@@ -24,34 +27,66 @@ import numpy as np
 from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
 from multigpu.errors import InputError
-from multigpu.parallel.exchange import wait_all
+from multigpu.parallel.composite import _local, _pack, _unpack
+from multigpu.parallel.exchange import allgather_text, wait_all
 
 #: the most bytes a job may put in shared windows (all ranks, both halves) before it uses messages
 MAX_SHARED_BYTES = 1 << 30
 
 
+def room(nbytes: int, shm: str = "/dev/shm") -> str | None:
+    """Why this process cannot back a shared window of ``nbytes`` (None: it can): its file-size
+    limit, or the free space of ``shm`` where that exists (a container's is often 64 MiB)."""
+    import os
+    import resource
+
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if soft != resource.RLIM_INFINITY and soft < nbytes:
+        return f"the file-size limit ({soft} bytes) is below the {nbytes}-byte window"
+    try:
+        st = os.statvfs(shm)
+    except OSError:
+        return None
+    free = st.f_bavail * st.f_frsize
+    if free < nbytes:
+        return f"{shm} has {free} bytes free, below the {nbytes}-byte window"
+    return None
+
+
 class SharedPieces:
     """The ``shared`` exchange backend: every rank's segment of one shared window, as numpy
-    views; ``None`` from ``make`` when the window would be too big; refused (one line) when
-    the ranks do not share one host."""
+    views. ``make`` gives (None, why) when the window would be too big or finds no room, and
+    refuses (one line) when the ranks do not share one host and the user asked for it."""
 
-    def __init__(self, win, segments: list[np.ndarray], half: int):
-        self.win, self.segments, self.half = win, segments, half
+    def __init__(self, win, segments: list[np.ndarray], half: int, with_depth: bool):
+        self.win, self.segments, self.half, self.depth = win, segments, half, with_depth
 
     name = "shared"
 
     @classmethod
-    def make(cls, comm, size: tuple[int, int], with_depth: bool, timeout: float) -> "SharedPieces | None":
+    def make(cls, comm, size: tuple[int, int], with_depth: bool, timeout: float,
+             asked: bool = True) -> "tuple[SharedPieces | None, str | None]":
+        """The backend, or None and why not (every rank the same). ``asked``: the user chose
+        ``--exchange shared``, so ranks on several hosts are an error, not a reason."""
         from mpi4py import MPI
 
-        per_half = size[0] * size[1] * (7 if with_depth else 3)  # a rank's pieces never exceed the display
+        per_half = size[0] * size[1] * (7 if with_depth else 3)  # a rank's parts never exceed the display
+        K = comm.Get_size()
         node = comm.Split_type(MPI.COMM_TYPE_SHARED)
         try:
-            if node.Get_size() != comm.Get_size():  # every rank sees it: all refuse alike
-                raise InputError.of("exchange", "shared needs every rank on one host, but the job spans several "
-                                    "(use --exchange messages)")
-            if 2 * per_half * comm.Get_size() > MAX_SHARED_BYTES:
-                return None
+            if node.Get_size() != K:  # every rank sees it: all refuse alike
+                if asked:
+                    raise InputError.of("exchange", "shared needs every rank on one host, but the job spans "
+                                        "several (use --exchange messages)")
+                return None, "the ranks span several hosts"
+            total = 2 * per_half * K
+            if total > MAX_SHARED_BYTES:
+                return None, f"the window ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes"
+            why = room(total + K * 65536)  # + page rounding per segment
+            texts = allgather_text(comm, why or "", timeout, "shared window")
+            why = next((t for t in texts if t), None)
+            if why:  # before the allocation: Open MPI does not return from a failed one
+                return None, why
             ok = np.ones(1, dtype=np.int32)
             try:
                 win = MPI.Win.Allocate_shared(2 * per_half, 1, comm=node)
@@ -62,41 +97,26 @@ class SharedPieces:
             if not allok[0]:
                 if win is not None:
                     win.Free()
-                return None
-            order = np.zeros(comm.Get_size(), dtype=np.int32)  # node rank of every job rank
+                return None, "MPI could not allocate the window"
+            order = np.zeros(K, dtype=np.int32)  # node rank of every job rank
             wait_all([comm.Iallgather(np.array([node.Get_rank()], dtype=np.int32), order)], timeout, "shared window")
             segments = [np.frombuffer(win.Shared_query(int(order[r]))[0], dtype=np.uint8)[:2 * per_half]
-                        for r in range(comm.Get_size())]
+                        for r in range(K)]
             win.Lock_all(MPI.MODE_NOCHECK)
-            return cls(win, segments, per_half)
+            return cls(win, segments, per_half, with_depth), None
         finally:
             node.Free()
 
     def _base(self, frame: int) -> int:
         return (frame % 2) * self.half
 
-    def publish(self, frame: int, me: int, rendered: list) -> None:
-        """Copy this rank's rendered pieces ``(rgb, z or None)`` into its segment half."""
-        seg, at = self.segments[me], self._base(frame)
-        for rgb, z in rendered:  # pieces, not objects
-            n = rgb.size
-            seg[at:at + n] = rgb.reshape(-1)
-            at += n
-            if z is not None:
-                seg[at:at + 4 * z.size] = np.ascontiguousarray(z, dtype=np.float32).view(np.uint8).reshape(-1)
-                at += 4 * z.size
+    def publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
+        """Copy the parts of this rank's rendered pieces ``(rgb, z or None)`` that peers' tiles
+        need into its segment half, in ``plan`` order (its own tile's parts stay where they are)."""
+        out = [p for p in plan if p.sender == me and p.receiver != me]  # parts, not objects
+        if out:
+            _pack(self.segments[me][self._base(frame):], out, rects[me], rendered, self.depth)
         self.win.Sync()  # the stores, before the frame's barrier
-
-    def piece(self, frame: int, sender: int, rects, index: int, with_depth: bool):
-        """Views of ``sender``'s piece ``index`` (rgb (h, w, 3), z (h, w) or None)."""
-        seg, at = self.segments[sender], self._base(frame)
-        sizes = [(int(r[3] - r[1]), int(r[2] - r[0])) for r in np.asarray(rects, dtype=np.int64).reshape(-1, 4)]
-        per_px = 7 if with_depth else 3
-        at += sum(h * w for h, w in sizes[:index]) * per_px
-        h, w = sizes[index]
-        rgb = seg[at:at + 3 * h * w].reshape(h, w, 3)
-        z = seg[at + 3 * h * w:at + 7 * h * w].view(np.float32).reshape(h, w) if with_depth else None
-        return rgb, z
 
     def close(self, collective: bool = True) -> None:
         """End the access epoch; free the window too when every rank does so together."""
@@ -106,16 +126,23 @@ class SharedPieces:
 
     def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
                 depth: np.ndarray | None = None) -> tuple[int, int]:
-        """Compose rank ``me``'s tile from the senders' published pieces (after the barrier):
-        the same result as ``composite.composite``, parts in ascending sender order. Returns
-        the bytes peers read from this rank (colour and depth, of which depth)."""
+        """Compose rank ``me``'s tile from its own pieces and the senders' published parts (after
+        the barrier): the same result as ``composite.composite``, parts in ascending sender
+        order. Returns the bytes peers read from this rank (colour and depth, of which depth)."""
         self.win.Sync()  # the peers' stores, after the barrier
         with_depth = depth is not None
-        for p in sorted((p for p in plan if p.receiver == me), key=lambda p: (p.sender, p.index)):  # parts
-            rgb, z = self.piece(frame, p.sender, rects[p.sender], p.index, with_depth)
-            ox, oy = (int(v) for v in np.asarray(rects[p.sender], dtype=np.int64).reshape(-1, 4)[p.index, :2])
-            x0, y0, x1, y1 = p.rect
-            src = np.s_[y0 - oy:y1 - oy, x0 - ox:x1 - ox]
-            merge_part(color, depth, tile[:2], p.rect, rgb[src], None if z is None else z[src])
+        per_px = 7 if with_depth else 3
+        at: dict[int, int] = {}  # where each sender's next published part starts
+        for p in plan:  # sorted by (sender, receiver, index): K*K pairs x pieces, not objects
+            s = p.sender
+            if s == me or p.receiver == s:
+                if p.receiver == me:
+                    merge_part(color, depth, tile[:2], p.rect, *_local(p, rects[me], rendered))
+                continue
+            start = at.get(s, self._base(frame))
+            at[s] = start + p.pixels * per_px
+            if p.receiver == me:
+                (_, rgb, z), = _unpack(self.segments[s][start:], [p], with_depth)
+                merge_part(color, depth, tile[:2], p.rect, rgb, z)
         px = sum(p.pixels for p in plan if p.sender == me and p.receiver != me)  # read by peers
-        return px * (7 if with_depth else 3), px * 4 if with_depth else 0
+        return px * per_px, px * 4 if with_depth else 0

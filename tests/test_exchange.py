@@ -1,0 +1,87 @@
+"""The shared-window exchange in one process: K ranks' segments as plain arrays, so the layout
+of published parts (only what peers need, in ``transfers`` order) and the compose that reads it
+are checked without MPI; and ``room``, the check made before allocating a window."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from multigpu.core.work import Work, transfers
+from multigpu.parallel.shared import SharedPieces, room
+
+
+class _Win:
+    def Sync(self):  # noqa: N802 -- mpi4py's name
+        pass
+
+
+def _cuts(n: int, size: int, rng) -> list[int]:
+    return [0, *sorted(rng.choice(np.arange(1, size), n - 1, replace=False).tolist()), size]
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("with_depth", [False, True])
+def test_every_tile_composes_from_own_and_published_parts(seed, with_depth):
+    """Random pieces on a 2x2 wall (colour: a rank's pieces are cells of a random grid; depth:
+    overlapping rects): every rank's tile equals the tile painted straight from every piece."""
+    rng = np.random.default_rng(seed)
+    W, H, K = 64, 48, 4
+    tiles = np.array([[0, 0, 32, 24], [32, 0, 64, 24], [0, 24, 32, 48], [32, 24, 64, 48]])
+    if with_depth:
+        rects = []
+        for _ in range(K):
+            x0, y0 = int(rng.integers(0, W - 1)), int(rng.integers(0, H - 1))
+            rects.append(np.array([[x0, y0, int(rng.integers(x0 + 1, W + 1)), int(rng.integers(y0 + 1, H + 1))]]))
+    else:
+        xs, ys = _cuts(4, W, rng), _cuts(3, H, rng)
+        cells = [[xs[i], ys[j], xs[i + 1], ys[j + 1]] for i in range(4) for j in range(3)]
+        owner = rng.integers(0, K, len(cells))
+        rects = [np.array([c for c, o in zip(cells, owner) if o == k], dtype=np.int64).reshape(-1, 4)
+                 for k in range(K)]
+    work = Work(tuple(rects), tuple(np.ones((len(r), 1), bool) for r in rects), np.zeros(K, np.int64), with_depth)
+    plan = transfers(work, tiles)
+    rendered = [[(rng.integers(0, 256, (r[3] - r[1], r[2] - r[0], 3), dtype=np.uint8),
+                  rng.random((r[3] - r[1], r[2] - r[0]), dtype=np.float32) if with_depth else None) for r in rs]
+                for rs in rects]
+    per_half = W * H * (7 if with_depth else 3)
+    segments = [np.zeros(2 * per_half, np.uint8) for _ in range(K)]
+    ranks = [SharedPieces(_Win(), segments, per_half, with_depth) for _ in range(K)]
+    frame = 3
+    for k in range(K):
+        ranks[k].publish(frame, k, work.rects, rendered[k], plan)
+    # straight from every piece: ascending rank, nearer replaces (ties keep the lower rank)
+    want = np.zeros((H, W, 3), np.uint8)
+    wantz = np.ones((H, W), np.float32)
+    for k in range(K):
+        for (x0, y0, x1, y1), (rgb, z) in zip(rects[k], rendered[k]):
+            if with_depth:
+                near = z < wantz[y0:y1, x0:x1]
+                want[y0:y1, x0:x1][near] = rgb[near]
+                wantz[y0:y1, x0:x1][near] = z[near]
+            else:
+                want[y0:y1, x0:x1] = rgb
+    read = 0
+    for k in range(K):
+        x0, y0, x1, y1 = tiles[k]
+        color = np.zeros((y1 - y0, x1 - x0, 3), np.uint8)
+        depth = np.ones((y1 - y0, x1 - x0), np.float32) if with_depth else None
+        sent, zbytes = ranks[k].compose(frame, k, work.rects, rendered[k], plan, tiles[k], color, depth)
+        assert (color == want[y0:y1, x0:x1]).all()
+        away = sum(p.pixels for p in plan if p.sender == k and p.receiver != k)
+        assert sent == away * (7 if with_depth else 3) and zbytes == (4 * away if with_depth else 0)
+        read += away
+    assert read == sum(p.pixels for p in plan if p.sender != p.receiver)
+    assert not segments[0][:per_half].any()  # frame 3 wrote the second half only
+
+
+def test_room_sees_the_file_size_limit_and_free_space():
+    assert room(1) is None
+    huge = 1 << 62
+    got = room(huge)
+    assert got is not None and ("/dev/shm" in got or "file-size limit" in got)
+    code = ("import resource; resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000)); "
+            "from multigpu.parallel.shared import room; print(room(30000)); print(room(10000))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout.split("\n")
+    assert "file-size limit (20000 bytes)" in out[0] and "30000-byte window" in out[0] and out[1] == "None"
