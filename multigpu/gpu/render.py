@@ -286,6 +286,12 @@ class RegionRenderer:
             if len(cmds):
                 self.prog["mvp"].write(np.ascontiguousarray(m.T, dtype=np.float32))
                 self.vao.render_indirect(self.indirect, count=len(cmds))
+            if (cw, ch) == (w, h):  # one chunk (the usual): read straight into the result, no copy
+                self.fbo.read_into(out, viewport=(fx, fy, cw, ch), components=3, alignment=1)
+                if depth:
+                    self.fbo.read_into(zout, viewport=(fx, fy, cw, ch), components=1, attachment=-1, dtype="f4",
+                                       alignment=1)
+                continue
             rows, cols = slice(cy0 - y0, cy1 - y0), slice(cx0 - x0, cx1 - x0)
             data = self.fbo.read(viewport=(fx, fy, cw, ch), components=3, alignment=1)
             out[rows, cols] = np.frombuffer(data, dtype=np.uint8).reshape(ch, cw, 3)
