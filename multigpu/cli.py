@@ -4,7 +4,7 @@
     multigpu scene info SCENE_OR_FILE          objects, triangles, bounds, memory, load time
     multigpu path make KIND --out FILE         write a camera path file
     multigpu tree RxC                          print the GPU tree and each rank's ParInfo
-    multigpu bench balance|scene|render|frame|growth|floor|passes|imbalance|...  benchmarks (speed and memory figures)
+    multigpu bench balance|frame|passes|exchange|...  benchmarks (speed and memory figures)
     multigpu experiment NAME|all [--quick]     the paper's evaluation: CSV, plots, Markdown
     multigpu accuracy [--quick]                speed-for-accuracy trades: CSV + ACCURACY.md
 
@@ -89,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
     b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | passes | imbalance | "
-                                "memory | memory-steps | model-load")
+                                "exchange | memory | memory-steps | model-load")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
     b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)

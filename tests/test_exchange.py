@@ -13,8 +13,19 @@ from multigpu.parallel.shared import SharedPieces, room
 
 
 class _Win:
-    def Sync(self):  # noqa: N802 -- mpi4py's name
+    def Sync(self):  # noqa: N802 -- mpi4py's names
         pass
+
+
+class _Comm:
+    def __init__(self, rank: int, size: int):
+        self.rank, self.size = rank, size
+
+    def Get_rank(self):  # noqa: N802
+        return self.rank
+
+    def Get_size(self):  # noqa: N802
+        return self.size
 
 
 def _cuts(n: int, size: int, rng) -> list[int]:
@@ -47,7 +58,8 @@ def test_every_tile_composes_from_own_and_published_parts(seed, with_depth):
                 for rs in rects]
     per_half = W * H * (7 if with_depth else 3)
     segments = [np.zeros(2 * per_half, np.uint8) for _ in range(K)]
-    ranks = [SharedPieces(_Win(), segments, per_half, with_depth) for _ in range(K)]
+    ranks = [SharedPieces(_Comm(k, K), 1.0, _Win(), dict(enumerate(segments)), per_half, with_depth)
+             for k in range(K)]
     frame = 3
     for k in range(K):
         ranks[k].publish(frame, k, work.rects, rendered[k], plan)
@@ -85,3 +97,17 @@ def test_room_sees_the_file_size_limit_and_free_space():
             "from multigpu.parallel.shared import room; print(room(30000)); print(room(10000))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout.split("\n")
     assert "file-size limit (20000 bytes)" in out[0] and "30000-byte window" in out[0] and out[1] == "None"
+
+
+@pytest.mark.mpi
+def test_exchange_bench_runs_both_backends(egl):
+    """``bench exchange --quick``: every (scene, balance) with both backends; ``none`` keeps
+    every tile at home, so it sends nothing either way, while ``cross`` sends pieces."""
+    from multigpu.studies.exchange_bench import bench_exchange
+
+    rows = bench_exchange(quick=True)
+    assert [(r["scene"], r["balance"], r["exchange"]) for r in rows] == [
+        (s, b, x) for s in ("city", "plant") for b in ("cross", "none") for x in ("messages", "shared")]
+    for r in rows:
+        assert r["emulated_ms"] > 0 and r["wall_ms"] >= r["exchange_ms"] > 0 and r["exchange_cpu_ms"] > 0
+        assert (r["bytes_sent"] == 0) == (r["balance"] == "none"), r

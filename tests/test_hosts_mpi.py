@@ -2,7 +2,8 @@
 simhosts.py) of two ranks each, started through each MPI's own host placement and a remote
 shell. The wall equals the one-rank render bit for bit and the run ends with no MPI/UCX
 warnings; the summary says where each rank ran; a scene cache every host shares is built
-once; ``--exchange shared`` is refused across hosts. Every job runs under a hard timeout and
+once; the default exchange shares memory within a host and sends messages between hosts;
+``--exchange shared`` is refused across hosts. Every job runs under a hard timeout and
 every namespace process is killed by id."""
 
 import json
@@ -59,8 +60,8 @@ def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_pat
     s = json.loads((tmp_path / "wall" / "summary.json").read_text())
     assert [r["host"] for r in s["config"]["ranks"]] == ["a", "a", "b", "b"] and s["config"]["hosts"] == 2
     assert [r["node_rank"] for r in s["config"]["ranks"]] == [0, 1, 0, 1]
-    # the default exchange uses messages across hosts, and says why
-    assert s["config"]["exchange"] == "messages" and "several hosts" in s["config"]["exchange_why"]
+    # the default exchange: each host's ranks share a window, messages go between the hosts
+    assert s["config"]["exchange"] == "shared + messages" and "exchange_why" not in s["config"]
     assert all(isinstance(r["egl_device"], int) for r in s["config"]["ranks"])  # one device here: 0
     assert s["config"]["scene"]["cached"] is False  # built here, once, by rank 0
     built = sorted(p.name for p in cache.rglob("*") if p.is_file())
@@ -77,6 +78,23 @@ def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_pat
         assert got.shape == (H, W, 3) and (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} px"
     assert json.loads((tmp_path / "one" / "summary.json").read_text())["config"]["scene"]["cached"] is True
     assert sorted(p.name for p in cache.rglob("*") if p.is_file()) == built  # read, never rebuilt
+
+
+@pytest.mark.parametrize("extra", [["--balance", "cross"], ["--decomposition", "db"]])
+def test_each_host_shares_memory_and_messages_cross_hosts(tmp_path, hosts, launcher, extra):
+    """The default exchange on two hosts: cross's colour pieces and db's depth pieces reach
+    their tiles through each host's window and through messages between the hosts, and the
+    wall equals the one-rank render."""
+    env = {**hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache")}
+    res = run_mpi(4, args(tmp_path / "wall", extra=extra), env=env, launcher=launcher, hosts=HOSTS, timeout=180)
+    assert res.returncode == 0, res.stderr[-3000:]
+    s = json.loads((tmp_path / "wall" / "summary.json").read_text())
+    assert s["config"]["exchange"] == "shared + messages" and s["bytes_sent_per_frame"] > 0
+    ref = run_mpi(1, [*args(tmp_path / "one"), "--grid", "1x1", "--tile", f"{W}x{H}"],
+                  env={"MULTIGPU_CACHE": str(tmp_path / "cache")})
+    assert ref.returncode == 0, ref.stderr[-3000:]
+    for f, (got, want) in enumerate(zip(frames_of(tmp_path / "wall"), frames_of(tmp_path / "one"))):
+        assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} px"
 
 
 def test_shared_exchange_across_hosts_is_refused_in_one_line(tmp_path, hosts, launcher):

@@ -30,15 +30,15 @@ def _part(piece_px: np.ndarray, origin, rect) -> np.ndarray:
 
 
 def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, timeout: float, color: np.ndarray,
-              depth: np.ndarray | None = None) -> tuple[int, int]:
+              depth: np.ndarray | None = None, near: frozenset = frozenset(), read=None) -> tuple[int, int]:
     """Compose rank ``me``'s tile into ``color`` (th, tw, 3) [and ``depth`` (th, tw)].
 
     ``rects`` are every rank's pieces (``Work.rects``), ``rendered[j]`` rank ``me``'s piece j
     as ``(rgb, z)`` (z None without depth), ``plan`` the frame's ``transfers``. With ``depth``
-    the tile must hold the background at depth 1.0 on entry. Returns (bytes sent, of which
+    the tile must hold the background at depth 1.0 on entry. ``near``: ranks whose parts this
+    rank reads from shared memory instead of messages, ``read(sender, parts)`` giving their
+    views (``shared.py``; its own host's ranks). Returns (bytes sent as messages, of which
     depth bytes)."""
-    from mpi4py import MPI
-
     with_depth = depth is not None
     per_px = 7 if with_depth else 3
     outgoing: dict[int, list[Piece]] = {}
@@ -51,8 +51,10 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
     requests, keep = [], []
     sent = zbytes = 0
     for r, parts in outgoing.items():
-        if r == me:
+        if r == me or r in near:
             continue
+        from mpi4py import MPI  # here: a shared-memory exchange on one host sends nothing
+
         buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
         _pack(buf, parts, rects[me], rendered, with_depth)
         keep.append(buf)
@@ -61,8 +63,10 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
         zbytes += 4 * sum(p.pixels for p in parts) if with_depth else 0
     inbox = {}
     for s, parts in incoming.items():
-        if s == me:
+        if s == me or s in near:
             continue
+        from mpi4py import MPI
+
         buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
         inbox[s] = buf
         requests.append(comm.Irecv([buf, MPI.BYTE], source=s, tag=TAG))
@@ -76,8 +80,10 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
         if s == me and early:
             continue
         parts = incoming[s]
-        views = [(p, *_local(p, rects[me], rendered)) for p in parts] if s == me else _unpack(inbox[s], parts,
-                                                                                               with_depth)
+        if s == me:
+            views = [(p, *_local(p, rects[me], rendered)) for p in parts]
+        else:
+            views = read(s, parts) if s in near else _unpack(inbox[s], parts, with_depth)
         _merge(color, depth, tile, views)
     return sent, zbytes
 

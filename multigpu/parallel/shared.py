@@ -1,36 +1,37 @@
-"""Frame exchange through node-shared memory: the parts peers need, in one MPI window.
+"""Frame exchange through node-shared memory: the parts a host's ranks need from each other, in
+one MPI window per host; messages between hosts.
 
-When all ranks run on one machine (the paper's multi-GPU workstation), a rank copies the parts
-of its rendered pieces that other tiles need into its own segment of an
-``MPI_Win_allocate_shared`` window before the frame's barrier, and after it every tile owner
-copies (or depth-merges) them straight from the senders' segments: one copy per pixel instead of
-pack, two message copies and unpack; a rank's own tile's parts never leave its pieces. Each
-segment has two halves used by alternate frames: a rank writes frame f+2's parts only after the
-barrier of frame f+1, which every rank reaches after its reads of frame f, so a half is never
-overwritten while a peer still reads it. ``Win.Sync`` around the barrier orders the stores and
-loads (MPI's unified memory model).
+A rank copies the parts of its rendered pieces that tiles of its own host's ranks need into its
+segment of the host's ``MPI_Win_allocate_shared`` window before the frame's barrier, and after
+it every tile owner copies (or depth-merges) them straight from the senders' segments: one copy
+per pixel instead of pack, two message copies and unpack. A rank's own tile's parts never leave
+its pieces; parts for ranks on other hosts go as messages (``composite``, which also merges
+every part in ascending sender order), as DESIGN.md has it: shared per node, messages between
+nodes. Each segment has two halves used by alternate frames: a rank writes frame f+2's parts
+only after the barrier of frame f+1, which every rank reaches after its reads of frame f, so a
+half is never overwritten while a peer still reads it. ``Win.Sync`` around the barrier orders
+the stores and loads (MPI's unified memory model).
 
-The default where every rank shares a host (``--exchange auto``). MPI backs the window with a
-file in ``/dev/shm``, and Open MPI 4.1 does not return from the allocation when making that file
-fails (measured: under RLIMIT_FSIZE its run never ended, where MPICH's fails and the job uses
-messages). So before allocating, every rank checks that its file-size limit and the free space
-of ``/dev/shm`` hold the whole window (``room``), and all use messages where one does not.
+The default (``--exchange auto``). MPI backs the window with a file in ``/dev/shm``, and Open
+MPI 4.1 does not return from the allocation when making that file fails (measured: under
+RLIMIT_FSIZE its run never ended, where MPICH's fails and the job used messages). So before
+allocating, every rank checks that its file-size limit and the free space of ``/dev/shm`` hold
+its host's window (``room``), and all use messages where one does not.
 
-Layout of a segment half: the rank's parts for other tiles in ``transfers`` order, each its RGB
-bytes, then (sort-last) its float32 depth.
+Layout of a segment half: the rank's parts for its host's other ranks in ``transfers`` order,
+each its RGB bytes, then (sort-last) its float32 depth.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
 from multigpu.errors import InputError
-from multigpu.parallel.composite import _local, _pack, _unpack
+from multigpu.parallel.composite import _pack, _unpack, composite
 from multigpu.parallel.exchange import allgather_text, wait_all
 
-#: the most bytes a job may put in shared windows (all ranks, both halves) before it uses messages
+#: the most bytes a host's window may hold (its ranks, both halves) before the job uses messages
 MAX_SHARED_BYTES = 1 << 30
 
 
@@ -54,14 +55,18 @@ def room(nbytes: int, shm: str = "/dev/shm") -> str | None:
 
 
 class SharedPieces:
-    """The ``shared`` exchange backend: every rank's segment of one shared window, as numpy
-    views. ``make`` gives (None, why) when the window would be too big or finds no room, and
-    refuses (one line) when the ranks do not share one host and the user asked for it."""
+    """The node-shared exchange backend: the segments of this host's ranks in one shared window,
+    as numpy views; parts for ranks on other hosts go as messages (``composite``). ``make``
+    gives (None, why) when no two ranks share a host, the window would be too big, or a rank
+    finds no room; it refuses (one line) ranks on several hosts where the user asked for
+    ``--exchange shared``."""
 
-    def __init__(self, win, segments: list[np.ndarray], half: int, with_depth: bool):
+    def __init__(self, comm, timeout: float, win, segments: dict[int, np.ndarray], half: int, with_depth: bool):
+        self.comm, self.timeout, self.me = comm, timeout, comm.Get_rank()
         self.win, self.segments, self.half, self.depth = win, segments, half, with_depth
-
-    name = "shared"
+        self.host = frozenset(segments)  # the job ranks on this rank's host, itself included
+        self.near = self.host - {self.me}
+        self.name = "shared" if len(self.host) == comm.Get_size() else "shared + messages"
 
     @classmethod
     def make(cls, comm, size: tuple[int, int], with_depth: bool, timeout: float,
@@ -74,15 +79,17 @@ class SharedPieces:
         K = comm.Get_size()
         node = comm.Split_type(MPI.COMM_TYPE_SHARED)
         try:
-            if node.Get_size() != K:  # every rank sees it: all refuse alike
-                if asked:
-                    raise InputError.of("exchange", "shared needs every rank on one host, but the job spans "
-                                        "several (use --exchange messages)")
-                return None, "the ranks span several hosts"
-            total = 2 * per_half * K
-            if total > MAX_SHARED_BYTES:
-                return None, f"the window ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes"
-            why = room(total + K * 65536)  # + page rounding per segment
+            n = node.Get_size()
+            most = np.zeros(1, dtype=np.int64)
+            wait_all([comm.Iallreduce(np.array([n], dtype=np.int64), most, op=MPI.MAX)], timeout, "shared window")
+            if n != K and asked:  # every rank sees it: all refuse alike
+                raise InputError.of("exchange", "shared needs every rank on one host, but the job spans "
+                                    "several (use --exchange messages or auto)")
+            if most[0] < 2:
+                return None, "no two ranks share a host"
+            total = 2 * per_half * n  # this host's window
+            why = (f"the window ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes" if total > MAX_SHARED_BYTES
+                   else room(total + n * 65536))  # + page rounding per segment
             texts = allgather_text(comm, why or "", timeout, "shared window")
             why = next((t for t in texts if t), None)
             if why:  # before the allocation: Open MPI does not return from a failed one
@@ -98,12 +105,17 @@ class SharedPieces:
                 if win is not None:
                     win.Free()
                 return None, "MPI could not allocate the window"
-            order = np.zeros(K, dtype=np.int32)  # node rank of every job rank
-            wait_all([comm.Iallgather(np.array([node.Get_rank()], dtype=np.int32), order)], timeout, "shared window")
-            segments = [np.frombuffer(win.Shared_query(int(order[r]))[0], dtype=np.uint8)[:2 * per_half]
-                        for r in range(K)]
+            # every job rank's host (its host's lowest job rank) and node rank
+            lead = np.zeros(1, dtype=np.int64)
+            wait_all([node.Iallreduce(np.array([comm.Get_rank()], dtype=np.int64), lead, op=MPI.MIN)], timeout,
+                     "shared window")
+            mine = np.array([lead[0], node.Get_rank()], dtype=np.int64)
+            every = np.zeros((K, 2), dtype=np.int64)
+            wait_all([comm.Iallgather(mine, every)], timeout, "shared window")
+            segments = {r: np.frombuffer(win.Shared_query(int(every[r, 1]))[0], dtype=np.uint8)[:2 * per_half]
+                        for r in range(K) if every[r, 0] == lead[0]}
             win.Lock_all(MPI.MODE_NOCHECK)
-            return cls(win, segments, per_half, with_depth), None
+            return cls(comm, timeout, win, segments, per_half, with_depth), None
         finally:
             node.Free()
 
@@ -111,9 +123,11 @@ class SharedPieces:
         return (frame % 2) * self.half
 
     def publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
-        """Copy the parts of this rank's rendered pieces ``(rgb, z or None)`` that peers' tiles
-        need into its segment half, in ``plan`` order (its own tile's parts stay where they are)."""
-        out = [p for p in plan if p.sender == me and p.receiver != me]  # parts, not objects
+        """Copy the parts of this rank's rendered pieces ``(rgb, z or None)`` that tiles of this
+        host's other ranks need into its segment half, in ``plan`` order (its own tile's parts
+        stay where they are; parts for other hosts leave as messages in ``compose``)."""
+        near = self.near
+        out = [p for p in plan if p.sender == me and p.receiver in near]  # parts, not objects
         if out:
             _pack(self.segments[me][self._base(frame):], out, rects[me], rendered, self.depth)
         self.win.Sync()  # the stores, before the frame's barrier
@@ -126,23 +140,31 @@ class SharedPieces:
 
     def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
                 depth: np.ndarray | None = None) -> tuple[int, int]:
-        """Compose rank ``me``'s tile from its own pieces and the senders' published parts (after
-        the barrier): the same result as ``composite.composite``, parts in ascending sender
-        order. Returns the bytes peers read from this rank (colour and depth, of which depth)."""
+        """Compose rank ``me``'s tile from its own pieces, the parts this host's ranks published
+        (after the barrier) and messages from other hosts: the same result as
+        ``composite.composite`` alone, parts in ascending sender order. Returns the bytes others
+        get from this rank (colour and depth, of which depth)."""
         self.win.Sync()  # the peers' stores, after the barrier
         with_depth = depth is not None
-        per_px = 7 if with_depth else 3
-        at: dict[int, int] = {}  # where each sender's next published part starts
-        for p in plan:  # sorted by (sender, receiver, index): K*K pairs x pieces, not objects
-            s = p.sender
-            if s == me or p.receiver == s:
-                if p.receiver == me:
-                    merge_part(color, depth, tile[:2], p.rect, *_local(p, rects[me], rendered))
-                continue
-            start = at.get(s, self._base(frame))
-            at[s] = start + p.pixels * per_px
-            if p.receiver == me:
-                (_, rgb, z), = _unpack(self.segments[s][start:], [p], with_depth)
-                merge_part(color, depth, tile[:2], p.rect, rgb, z)
-        px = sum(p.pixels for p in plan if p.sender == me and p.receiver != me)  # read by peers
-        return px * per_px, px * 4 if with_depth else 0
+        views = self._views(frame, me, plan, with_depth)
+        sent, zbytes = composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth, self.near,
+                                 lambda s, parts: views[s])
+        near = self.near
+        px = sum(p.pixels for p in plan if p.sender == me and p.receiver in near)  # read by this host's ranks
+        return sent + px * (7 if with_depth else 3), zbytes + (4 * px if with_depth else 0)
+
+    def _views(self, frame: int, me: int, plan: list[Piece], with_depth: bool) -> dict[int, list]:
+        """Views ``(part, rgb, z)`` of the parts this host's other ranks published for rank
+        ``me``, by sender: a sender's segment holds its parts for its host's other ranks in
+        ``plan`` order."""
+        host, near, per_px, base = self.host, self.near, 7 if with_depth else 3, self._base(frame)
+        at: dict[int, int] = {}
+        views: dict[int, list] = {}
+        for p in plan:  # pieces x tiles, not objects
+            s, r = p.sender, p.receiver
+            if s in near and r in host and r != s:
+                start = at.get(s, base)
+                at[s] = start + p.pixels * per_px
+                if r == me:
+                    views.setdefault(s, []).extend(_unpack(self.segments[s][start:], [p], with_depth))
+        return views

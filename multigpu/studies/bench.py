@@ -198,6 +198,7 @@ def bench_render(quick: bool) -> list[dict]:
 
 
 def main(what: str, quick: bool = False) -> int:
+    from multigpu.studies.exchange_bench import bench_exchange
     from multigpu.studies.frame_bench import bench_frame, bench_growth
     from multigpu.studies.imbalance_bench import bench_imbalance
     from multigpu.studies.memory_bench import bench_memory, bench_memory_steps, bench_model_load
@@ -207,7 +208,7 @@ def main(what: str, quick: bool = False) -> int:
     fns = {"balance": bench_balance, "scene": bench_scene, "render": bench_render, "frame": bench_frame,
            "growth": bench_growth, "present": bench_present, "memory": bench_memory,
            "memory-steps": bench_memory_steps, "model-load": bench_model_load, "passes": bench_passes,
-           "imbalance": bench_imbalance}
+           "imbalance": bench_imbalance, "exchange": bench_exchange}
     if what not in fns:
         raise InputError(f"bench: unknown benchmark '{what}' (known: {', '.join(fns)})")
     fns[what](quick)
