@@ -26,10 +26,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
 from multigpu.errors import InputError
-from multigpu.parallel.composite import _local, _pack, _unpack, composite
+from multigpu.parallel.composite import _pack, _unpack, composite
 from multigpu.parallel.exchange import allgather_text, wait_all
 
 #: the most bytes a host's window may hold (its ranks, both halves) before the job uses messages
@@ -67,8 +66,7 @@ class SharedPieces:
         self.win, self.segments, self.half, self.depth = win, segments, half, with_depth
         self.host = frozenset(segments)  # the job ranks on this rank's host, itself included
         self.near = self.host - {self.me}
-        self.alone = len(self.host) == comm.Get_size()  # no other host: no messages
-        self.name = "shared" if self.alone else "shared + messages"
+        self.name = "shared" if len(self.host) == comm.Get_size() else "shared + messages"
 
     @classmethod
     def make(cls, comm, size: tuple[int, int], with_depth: bool, timeout: float,
@@ -148,24 +146,17 @@ class SharedPieces:
         get from this rank (colour and depth, of which depth)."""
         self.win.Sync()  # the peers' stores, after the barrier
         with_depth = depth is not None
-        per_px = 7 if with_depth else 3
-        if self.alone:  # every rank on this host: one pass over the parts, no messages
-            sent = zbytes = 0
-            views = self._views(frame, me, plan, with_depth, color, depth, tile, rects, rendered)
-        else:
-            views = self._views(frame, me, plan, with_depth)
-            sent, zbytes = composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth,
-                                     self.near, lambda s, parts: views[s])
+        views = self._views(frame, me, plan, with_depth)
+        sent, zbytes = composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth, self.near,
+                                 lambda s, parts: views[s])
         near = self.near
         px = sum(p.pixels for p in plan if p.sender == me and p.receiver in near)  # read by this host's ranks
-        return sent + px * per_px, zbytes + (4 * px if with_depth else 0)
+        return sent + px * (7 if with_depth else 3), zbytes + (4 * px if with_depth else 0)
 
-    def _views(self, frame: int, me: int, plan: list[Piece], with_depth: bool, color=None, depth=None, tile=None,
-               rects=None, rendered=None) -> dict[int, list]:
+    def _views(self, frame: int, me: int, plan: list[Piece], with_depth: bool) -> dict[int, list]:
         """Views ``(part, rgb, z)`` of the parts this host's other ranks published for rank
         ``me``, by sender: a sender's segment holds its parts for its host's other ranks in
-        ``plan`` order. Given ``color``, each part (its own ones too) is merged into the tile as
-        it is found instead, in ``plan`` order: ascending sender, the depth tie rule."""
+        ``plan`` order."""
         host, near, per_px, base = self.host, self.near, 7 if with_depth else 3, self._base(frame)
         at: dict[int, int] = {}
         views: dict[int, list] = {}
@@ -175,11 +166,5 @@ class SharedPieces:
                 start = at.get(s, base)
                 at[s] = start + p.pixels * per_px
                 if r == me:
-                    got = _unpack(self.segments[s][start:], [p], with_depth)
-                    if color is None:
-                        views.setdefault(s, []).extend(got)
-                    else:
-                        merge_part(color, depth, tile[:2], p.rect, got[0][1], got[0][2])
-            elif color is not None and s == me and r == me:
-                merge_part(color, depth, tile[:2], p.rect, *_local(p, rects[me], rendered))
+                    views.setdefault(s, []).extend(_unpack(self.segments[s][start:], [p], with_depth))
         return views
