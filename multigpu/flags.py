@@ -118,9 +118,9 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
     w.add_argument("--partition", default=d["partition"],
                    help="who computes the partition: redundant (every rank) | broadcast (rank 0, then MPI_Bcast)")
     w.add_argument("--exchange", default=d["exchange"],
-                   help="frame exchange: auto (a shared-memory window when all ranks run on one machine and "
-                        "it has room, else messages) | shared (the same, but an error across hosts) | messages "
-                        "(point-to-point)")
+                   help="frame exchange: auto (a shared-memory window per machine where it has room, messages "
+                        "between machines) | shared (the same, but an error across machines) | messages "
+                        "(point-to-point only)")
     w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
     w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
     w.add_argument("--timeout", type=float, default=d["timeout"],
