@@ -192,7 +192,7 @@ def test_launch_script_runs_the_job(tmp_path):
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 0, stderr[-3000:]
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout: {stdout[-2000:]}\nstderr: {stderr[-3000:]}"
     s = json.loads((out / "summary.json").read_text())
     assert s["complete"] and s["frames"] == 3 and s["ranks"] == 2
 
