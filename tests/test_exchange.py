@@ -86,6 +86,9 @@ def test_every_tile_composes_from_own_and_published_parts(seed, with_depth):
         read += away
     assert read == sum(p.pixels for p in plan if p.sender != p.receiver)
     assert not segments[0][:per_half].any()  # frame 3 wrote the second half only
+    # one host sends no messages, so nothing here started MPI: an Open MPI singleton in the test
+    # process would put its environment into every job a later test launches (they then fail)
+    assert "mpi4py.MPI" not in sys.modules
 
 
 def test_room_sees_the_file_size_limit_and_free_space():

@@ -28,11 +28,12 @@ class PeerTimeout(RuntimeError):
 
 
 def wait_all(requests, timeout: float, what: str) -> None:
-    """Complete MPI requests, sleeping between tests; raise PeerTimeout after ``timeout`` s."""
-    from mpi4py import MPI
-
+    """Complete MPI requests, sleeping between tests; raise PeerTimeout after ``timeout`` s.
+    With none it returns before importing MPI (a process that never sent stays MPI-free)."""
     if not requests:
         return
+    from mpi4py import MPI
+
     start = time.monotonic()
     deadline, checks = start + timeout, start + CHECK_AFTER
     sleep = 1e-5
