@@ -19,7 +19,7 @@ SUMMARY_EVERY = 50
 SETUP_SECONDS = 1800.0
 #: where composed tiles go besides the outputs: nowhere, or a window on each rank's display
 PRESENTERS = ("headless", "window")
-#: frame exchange backends (``auto``: a shared window per host where it can be made, messages
+#: frame exchange backends (``auto``: a shared segment per host where it can be made, messages
 #: between hosts; else messages alone)
 EXCHANGES = ("auto", "messages", "shared")
 #: ``--path interactive``: the camera is flown by hand from rank 0's window
@@ -74,7 +74,7 @@ class WalkConfig:
     device: int | None = None
     subfrustum: str = "auto"
     partition: str = "redundant"
-    exchange: str = "auto"  # a shared MPI window per host (messages between hosts) where it has room
+    exchange: str = "auto"  # a shared-memory segment per host (messages between hosts) where it can be made
     decomposition: str = "screen"
     bin_size: int = 64
     bin_pattern: str = "diagonal"

@@ -118,7 +118,7 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
     w.add_argument("--partition", default=d["partition"],
                    help="who computes the partition: redundant (every rank) | broadcast (rank 0, then MPI_Bcast)")
     w.add_argument("--exchange", default=d["exchange"],
-                   help="frame exchange: auto (a shared-memory window per machine where it has room, messages "
+                   help="frame exchange: auto (a shared-memory segment per machine where it can be made, messages "
                         "between machines) | shared (the same, but an error across machines) | messages "
                         "(point-to-point only)")
     w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")

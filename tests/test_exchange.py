@@ -1,7 +1,9 @@
-"""The shared-window exchange in one process: K ranks' segments as plain arrays, so the layout
+"""The shared-segment exchange in one process: K ranks' slices as plain arrays, so the layout
 of published parts (only what peers need, in ``transfers`` order) and the compose that reads it
-are checked without MPI; and ``room``, the check made before allocating a window."""
+are checked without MPI; ``room``, the check made before making a segment; and ``reserve`` and
+``attach``, which make and map it."""
 
+import os
 import subprocess
 import sys
 
@@ -9,12 +11,7 @@ import numpy as np
 import pytest
 
 from multigpu.core.work import Work, transfers
-from multigpu.parallel.shared import SharedPieces, room
-
-
-class _Win:
-    def Sync(self):  # noqa: N802 -- mpi4py's names
-        pass
+from multigpu.parallel.shared import SharedPieces, attach, reserve, room
 
 
 class _Comm:
@@ -58,7 +55,7 @@ def test_every_tile_composes_from_own_and_published_parts(seed, with_depth):
                 for rs in rects]
     per_half = W * H * (7 if with_depth else 3)
     segments = [np.zeros(2 * per_half, np.uint8) for _ in range(K)]
-    ranks = [SharedPieces(_Comm(k, K), 1.0, _Win(), dict(enumerate(segments)), per_half, with_depth)
+    ranks = [SharedPieces(_Comm(k, K), 1.0, dict(enumerate(segments)), per_half, with_depth)
              for k in range(K)]
     frame = 3
     for k in range(K):
@@ -99,7 +96,27 @@ def test_room_sees_the_file_size_limit_and_free_space():
     code = ("import resource; resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000)); "
             "from multigpu.parallel.shared import room; print(room(30000)); print(room(10000))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout.split("\n")
-    assert "file-size limit (20000 bytes)" in out[0] and "30000-byte window" in out[0] and out[1] == "None"
+    assert "file-size limit (20000 bytes)" in out[0] and "30000-byte segment" in out[0] and out[1] == "None"
+
+
+def test_reserve_makes_a_file_two_mappings_share_and_fails_cleanly(tmp_path):
+    """``reserve`` makes the segment whole (its blocks allocated, not a sparse file), two
+    ``attach`` mappings see each other's stores after the name is gone, and a segment the
+    system refuses (a file-size limit, a missing directory) gives the reason and leaves no file."""
+    path, why = reserve(1 << 20, str(tmp_path))
+    assert why is None and os.path.getsize(path) == 1 << 20
+    assert os.stat(path).st_blocks * 512 >= 1 << 20  # reserved now: no SIGBUS at a page touched later
+    a, b = attach(path, 1 << 20), attach(path, 1 << 20)
+    os.unlink(path)
+    a[12345:12348] = (7, 8, 9)
+    assert b.flags.writeable and b[12345:12348].tolist() == [7, 8, 9]
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000)); "
+            "from multigpu.parallel.shared import reserve; print(reserve(30000, sys.argv[1])[1])")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == f"cannot reserve 30000 bytes in {tmp_path}: File too large", out.stderr
+    assert not list(tmp_path.iterdir())
+    path, why = reserve(4096, str(tmp_path / "missing"))
+    assert path == "" and why == f"cannot create a segment in {tmp_path / 'missing'}: No such file or directory"
 
 
 @pytest.mark.mpi

@@ -5,6 +5,7 @@ import json
 import os
 import signal
 import time
+from pathlib import Path
 
 import pytest
 from mpirun import SMALL, run_mpi, start_mpi
@@ -40,9 +41,27 @@ def _summary_matches_csv(out):
     return s
 
 
+def _segments() -> set[str]:
+    """The shared exchange's segment files in /dev/shm (``multigpu-PID-HEX``)."""
+    return {p.name for p in Path("/dev/shm").glob("multigpu-*")} if Path("/dev/shm").is_dir() else set()
+
+
+def _leaked(before: set[str], grace: float = 10.0) -> list[str]:
+    """Segment files made since ``before`` still there once their makers are gone (a rank can
+    outlive its ``mpiexec`` by a moment; one alive after ``grace`` seconds is another job's)."""
+    new = _segments() - before
+    end = time.monotonic() + grace
+    while time.monotonic() < end and any(Path(f"/proc/{n.split('-')[1]}").exists() for n in new):
+        time.sleep(0.1)
+    return sorted(n for n in new & _segments() if not Path(f"/proc/{n.split('-')[1]}").exists())
+
+
 @pytest.mark.parametrize("failing", [0, 1])
 def test_exception_on_one_rank_ends_job_and_keeps_frames(tmp_path, failing):
+    """The job ends fast with the failing rank's error, its frames kept; its shared segment was
+    unlinked at setup, so nothing is left in /dev/shm."""
     out = tmp_path / "o"
+    before = _segments()
     t = time.monotonic()
     res = run_mpi(3, ["walkthrough", *SMALL, "--grid", "1x3", "--frames", "40", "--mosaic-every", "0",
                       "--out", str(out)], timeout=60, env={"MULTIGPU_FAULT": f"{failing}:6"})
@@ -52,6 +71,7 @@ def test_exception_on_one_rank_ends_job_and_keeps_frames(tmp_path, failing):
     assert f"rank {failing}: RuntimeError: injected fault at frame 6" in res.stderr
     s = _summary_matches_csv(out)
     assert s["complete"] is False and s["frames"] == 6 and "injected fault" in s["stopped_by"]
+    assert s["config"]["exchange"] == "shared" and not _leaked(before)
 
 
 def test_failed_rerun_leaves_no_stale_summary_or_mosaics(tmp_path):
@@ -222,8 +242,7 @@ def test_second_job_on_the_same_out_is_refused(tmp_path):
 @pytest.mark.parametrize("mpi,exchange", [("default", "auto"), ("default", "shared"), ("openmpi", "auto")])
 def test_disk_full_keeps_whole_rows_and_no_temp_files(tmp_path, mpi, exchange):
     """RLIMIT_FSIZE makes writes past 20 kB fail (EFBIG, as a full disk gives ENOSPC). The
-    shared window finds no room under that limit, so the job uses messages and says why (Open
-    MPI does not return from a failed window allocation)."""
+    shared segment finds no room under that limit, so the job uses messages and says why."""
     import subprocess
 
     from mpirun import ROOT

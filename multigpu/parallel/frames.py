@@ -81,7 +81,7 @@ class Frames:
         self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
         self.done = 0
         self.learn = None  # (frame, times): observed at the start of the next frame
-        # the exchange backend: a node-shared window where asked for and possible, else messages
+        # the exchange backend: a node-shared segment where asked for and possible, else messages
         shared, why = None, None
         if cfg.exchange != "messages":
             shared, why = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout, cfg.exchange == "shared")
@@ -102,7 +102,7 @@ class Frames:
         doc = _config_doc(cfg, scene, load_info, self.n_frames, placement, renderer.method)
         doc["exchange"] = self.exchange.name
         if why:
-            doc["exchange_why"] = f"messages: no shared window ({why})"
+            doc["exchange_why"] = f"messages: no shared segment ({why})"
         self.config_doc = doc
         self.record = None
         if self.rank == 0:
@@ -126,7 +126,7 @@ class Frames:
 
     def compose(self, f: int, work: Work, rendered: list, plan: list) -> tuple[int, int]:
         """Frame exchange: the pieces travel to their tile owners, who copy or depth-merge them
-        (the exchange backend: messages, or the node-shared window). Returns (bytes sent, of
+        (the exchange backend: messages, or the node-shared segment). Returns (bytes sent, of
         which depth)."""
         if work.depth:
             self.back[:] = self.background
@@ -216,7 +216,7 @@ class Frames:
             work, (view, proj, light) = self.planner.plan(f, camera, self.relay)
         with t.phase("render"):
             rendered = self.render(work, view, proj, light)
-        with t.phase("exchange"):  # parts for peers into the shared window before the barrier (messages: nothing)
+        with t.phase("exchange"):  # parts for peers into the shared segment before the barrier (messages: nothing)
             plan = transfers(work, self.tiles)
             self.exchange.publish(f, self.rank, work.rects, rendered, plan)
         with t.phase("sync"):
@@ -240,9 +240,9 @@ class Frames:
         self.show(f, work)
 
     def release(self, collective: bool) -> None:
-        """Give the shared window back: freed with the peers after a run every rank finished,
-        only unlocked on a failure (the job ends anyway; a collective free would wait on ranks
-        that are gone or still in the frame loop)."""
+        """Let the shared segment and the live state go; ``collective``: every rank finished the
+        run and does so together (on a failure the job ends anyway, and a collective step would
+        wait on ranks that are gone or still in the frame loop)."""
         if self.exchange is not None:
             self.exchange.close(collective)
             self.exchange = None

@@ -1,28 +1,35 @@
 """Frame exchange through node-shared memory: the parts a host's ranks need from each other, in
-one MPI window per host; messages between hosts.
+one shared-memory segment per host; messages between hosts.
 
 A rank copies the parts of its rendered pieces that tiles of its own host's ranks need into its
-segment of the host's ``MPI_Win_allocate_shared`` window before the frame's barrier, and after
-it every tile owner copies (or depth-merges) them straight from the senders' segments: one copy
-per pixel instead of pack, two message copies and unpack. A rank's own tile's parts never leave
-its pieces; parts for ranks on other hosts go as messages (``composite``, which also merges
-every part in ascending sender order), as DESIGN.md has it: shared per node, messages between
-nodes. Each segment has two halves used by alternate frames: a rank writes frame f+2's parts
-only after the barrier of frame f+1, which every rank reaches after its reads of frame f, so a
-half is never overwritten while a peer still reads it. ``Win.Sync`` around the barrier orders
-the stores and loads (MPI's unified memory model).
+slice of the host's segment before the frame's barrier, and after it every tile owner copies (or
+depth-merges) them straight from the senders' slices: one copy per pixel instead of pack, two
+message copies and unpack. A rank's own tile's parts never leave its pieces; parts for ranks on
+other hosts go as messages (``composite``, which also merges every part in ascending sender
+order), as DESIGN.md has it: shared per node, messages between nodes. Each slice has two halves
+used by alternate frames: a rank writes frame f+2's parts only after the barrier of frame f+1,
+which every rank reaches after its reads of frame f, so a half is never overwritten while a peer
+still reads it. The barrier orders the stores and the loads: both MPIs synchronize a barrier
+between ranks of one host through shared-memory atomics with release and acquire fences.
 
-The default (``--exchange auto``). MPI backs the window with a file in ``/dev/shm``, and Open
-MPI 4.1 does not return from the allocation when making that file fails (measured: under
-RLIMIT_FSIZE its run never ended, where MPICH's fails and the job used messages). So before
-allocating, every rank checks that its file-size limit and the free space of ``/dev/shm`` hold
-its host's window (``room``), and all use messages where one does not.
+The segment is ours, not MPI's (``MPI_Win_allocate_shared``). The host's lowest rank creates a
+file in ``/dev/shm`` and reserves every byte of it up front (``posix_fallocate``), the host's
+ranks map it, and it is unlinked as soon as every rank has: a segment that cannot be made fails
+at once, with the system's reason, and the job uses messages; a full ``/dev/shm`` later can not
+kill a rank with SIGBUS at a page first touched mid-run; a killed job leaves no file behind. (Open
+MPI 4.1 does not return from a shared-window allocation that fails: under RLIMIT_FSIZE its run
+never ended.) Before making it, every rank still checks that its file-size limit and the free
+space of ``/dev/shm`` hold its host's segment (``room``), so the reason names the limit.
 
-Layout of a segment half: the rank's parts for its host's other ranks in ``transfers`` order,
-each its RGB bytes, then (sort-last) its float32 depth.
+Layout of a slice half: the rank's parts for its host's other ranks in ``transfers`` order, each
+its RGB bytes, then (sort-last) its float32 depth.
 """
 
 from __future__ import annotations
+
+import mmap
+import os
+import secrets
 
 import numpy as np
 
@@ -31,39 +38,70 @@ from multigpu.errors import InputError
 from multigpu.parallel.composite import _pack, _unpack, composite
 from multigpu.parallel.exchange import allgather_text, wait_all
 
-#: the most bytes a host's window may hold (its ranks, both halves) before the job uses messages
+#: the most bytes a host's segment may hold (its ranks, both halves) before the job uses messages
 MAX_SHARED_BYTES = 1 << 30
 
 
-def room(nbytes: int, shm: str = "/dev/shm") -> str | None:
-    """Why this process cannot back a shared window of ``nbytes`` (None: it can): its file-size
+#: where the host's segment file is made (tmpfs on Linux)
+SHM = "/dev/shm"
+
+
+def room(nbytes: int, shm: str = SHM) -> str | None:
+    """Why this process cannot back a shared segment of ``nbytes`` (None: it can): its file-size
     limit, or the free space of ``shm`` where that exists (a container's is often 64 MiB)."""
-    import os
     import resource
 
     soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
     if soft != resource.RLIM_INFINITY and soft < nbytes:
-        return f"the file-size limit ({soft} bytes) is below the {nbytes}-byte window"
+        return f"the file-size limit ({soft} bytes) is below the {nbytes}-byte segment"
     try:
         st = os.statvfs(shm)
     except OSError:
         return None
     free = st.f_bavail * st.f_frsize
     if free < nbytes:
-        return f"{shm} has {free} bytes free, below the {nbytes}-byte window"
+        return f"{shm} has {free} bytes free, below the {nbytes}-byte segment"
     return None
 
 
+def reserve(nbytes: int, shm: str = SHM) -> tuple[str, str | None]:
+    """A new file of ``nbytes`` in ``shm`` with every byte reserved now (``posix_fallocate``):
+    (its path, None), or ("", why not) with nothing left behind."""
+    path = os.path.join(shm, f"multigpu-{os.getpid()}-{secrets.token_hex(4)}")
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
+    except OSError as exc:
+        return "", f"cannot create a segment in {shm}: {exc.strerror}"
+    try:
+        os.posix_fallocate(fd, 0, nbytes)  # EFBIG past the file-size limit (Python ignores SIGXFSZ)
+    except OSError as exc:
+        os.unlink(path)
+        return "", f"cannot reserve {nbytes} bytes in {shm}: {exc.strerror}"
+    finally:
+        os.close(fd)
+    return path, None
+
+
+def attach(path: str, nbytes: int) -> np.ndarray:
+    """The file at ``path`` mapped shared, as ``nbytes`` writable bytes (the mapping outlives
+    the file's name)."""
+    fd = os.open(path, os.O_RDWR)
+    try:
+        return np.frombuffer(mmap.mmap(fd, nbytes), dtype=np.uint8)
+    finally:
+        os.close(fd)
+
+
 class SharedPieces:
-    """The node-shared exchange backend: the segments of this host's ranks in one shared window,
-    as numpy views; parts for ranks on other hosts go as messages (``composite``). ``make``
-    gives (None, why) when no two ranks share a host, the window would be too big, or a rank
+    """The node-shared exchange backend: this host's ranks' slices of its shared segment, as numpy
+    views; parts for ranks on other hosts go as messages (``composite``). ``make``
+    gives (None, why) when no two ranks share a host, the segment would be too big, or a rank
     finds no room; it refuses (one line) ranks on several hosts where the user asked for
     ``--exchange shared``."""
 
-    def __init__(self, comm, timeout: float, win, segments: dict[int, np.ndarray], half: int, with_depth: bool):
+    def __init__(self, comm, timeout: float, segments: dict[int, np.ndarray], half: int, with_depth: bool):
         self.comm, self.timeout, self.me = comm, timeout, comm.Get_rank()
-        self.win, self.segments, self.half, self.depth = win, segments, half, with_depth
+        self.segments, self.half, self.depth = segments, half, with_depth
         self.host = frozenset(segments)  # the job ranks on this rank's host, itself included
         self.near = self.host - {self.me}
         self.name = "shared" if len(self.host) == comm.Get_size() else "shared + messages"
@@ -79,43 +117,47 @@ class SharedPieces:
         K = comm.Get_size()
         node = comm.Split_type(MPI.COMM_TYPE_SHARED)
         try:
-            n = node.Get_size()
+            n, at = node.Get_size(), node.Get_rank()
             most = np.zeros(1, dtype=np.int64)
-            wait_all([comm.Iallreduce(np.array([n], dtype=np.int64), most, op=MPI.MAX)], timeout, "shared window")
+            wait_all([comm.Iallreduce(np.array([n], dtype=np.int64), most, op=MPI.MAX)], timeout, "shared segment")
             if n != K and asked:  # every rank sees it: all refuse alike
                 raise InputError.of("exchange", "shared needs every rank on one host, but the job spans "
                                     "several (use --exchange messages or auto)")
             if most[0] < 2:
                 return None, "no two ranks share a host"
-            total = 2 * per_half * n  # this host's window
-            why = (f"the window ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes" if total > MAX_SHARED_BYTES
-                   else room(total + n * 65536))  # + page rounding per segment
-            texts = allgather_text(comm, why or "", timeout, "shared window")
-            why = next((t for t in texts if t), None)
-            if why:  # before the allocation: Open MPI does not return from a failed one
+            total = 2 * per_half * n  # this host's segment
+            why = (f"the segment ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes" if total > MAX_SHARED_BYTES
+                   else room(total))
+            why = next((t for t in allgather_text(comm, why or "", timeout, "shared segment") if t), None)
+            if why:
                 return None, why
-            ok = np.ones(1, dtype=np.int32)
-            try:
-                win = MPI.Win.Allocate_shared(2 * per_half, 1, comm=node)
-            except MPI.Exception:
-                win, ok[0] = None, 0
-            allok = np.zeros(1, dtype=np.int32)
-            wait_all([comm.Iallreduce(ok, allok, op=MPI.MIN)], timeout, "shared window")
-            if not allok[0]:
-                if win is not None:
-                    win.Free()
-                return None, "MPI could not allocate the window"
+            path, why = reserve(total) if at == 0 else ("", None)  # the host's lowest rank makes it
+            path = allgather_text(node, path or f"!{why}", timeout, "shared segment")[0]
+            memory = None
+            if path.startswith("!"):
+                why = path[1:]
+            else:
+                try:
+                    memory = attach(path, total)
+                except OSError as exc:
+                    why = f"cannot map {path}: {exc.strerror}"
+            # every rank has mapped it, or failed to: the name goes, the memory stays while mapped
+            why = next((t for t in allgather_text(comm, why or "", timeout, "shared segment") if t), None)
+            if at == 0 and not path.startswith("!"):
+                os.unlink(path)
+            if why:
+                return None, why
             # every job rank's host (its host's lowest job rank) and node rank
             lead = np.zeros(1, dtype=np.int64)
             wait_all([node.Iallreduce(np.array([comm.Get_rank()], dtype=np.int64), lead, op=MPI.MIN)], timeout,
-                     "shared window")
-            mine = np.array([lead[0], node.Get_rank()], dtype=np.int64)
+                     "shared segment")
+            mine = np.array([lead[0], at], dtype=np.int64)
             every = np.zeros((K, 2), dtype=np.int64)
-            wait_all([comm.Iallgather(mine, every)], timeout, "shared window")
-            segments = {r: np.frombuffer(win.Shared_query(int(every[r, 1]))[0], dtype=np.uint8)[:2 * per_half]
+            wait_all([comm.Iallgather(mine, every)], timeout, "shared segment")
+            span = 2 * per_half
+            segments = {r: memory[every[r, 1] * span:(every[r, 1] + 1) * span]
                         for r in range(K) if every[r, 0] == lead[0]}
-            win.Lock_all(MPI.MODE_NOCHECK)
-            return cls(comm, timeout, win, segments, per_half, with_depth), None
+            return cls(comm, timeout, segments, per_half, with_depth), None
         finally:
             node.Free()
 
@@ -130,13 +172,10 @@ class SharedPieces:
         out = [p for p in plan if p.sender == me and p.receiver in near]  # parts, not objects
         if out:
             _pack(self.segments[me][self._base(frame):], out, rects[me], rendered, self.depth)
-        self.win.Sync()  # the stores, before the frame's barrier
 
     def close(self, collective: bool = True) -> None:
-        """End the access epoch; free the window too when every rank does so together."""
-        self.win.Unlock_all()
-        if collective:
-            self.win.Free()
+        """Let the mapping go (the memory is the system's again once every rank on the host has)."""
+        self.segments = {}
 
     def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
                 depth: np.ndarray | None = None) -> tuple[int, int]:
@@ -144,7 +183,6 @@ class SharedPieces:
         (after the barrier) and messages from other hosts: the same result as
         ``composite.composite`` alone, parts in ascending sender order. Returns the bytes others
         get from this rank (colour and depth, of which depth)."""
-        self.win.Sync()  # the peers' stores, after the barrier
         with_depth = depth is not None
         views = self._views(frame, me, plan, with_depth)
         sent, zbytes = composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth, self.near,

@@ -1,4 +1,4 @@
-"""``multigpu bench exchange``: the frame exchange by messages against the node-shared window.
+"""``multigpu bench exchange``: the frame exchange by messages against the node-shared segment.
 
 The plant walkthrough and the city drive on a 2x2 wall of 256x256 tiles, under ``cross`` (pieces
 travel between ranks) and ``none`` (each rank keeps its own tile: nothing travels), each run with
