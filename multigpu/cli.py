@@ -5,7 +5,7 @@
     multigpu path make KIND --out FILE         write a camera path file
     multigpu tree RxC                          print the GPU tree and each rank's ParInfo
     multigpu bench balance|frame|passes|exchange|...  benchmarks (speed and memory figures)
-    multigpu experiment NAME|all [--quick]     the paper's evaluation: CSV, plots, Markdown
+    multigpu experiment NAME|all [--quick] [--rounds N]  the paper's evaluation: CSV, plots, Markdown
     multigpu accuracy [--quick]                speed-for-accuracy trades: CSV + ACCURACY.md
 
 Bad input prints ``multigpu: error: ...`` (one line) and exits 2.
@@ -83,6 +83,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--quick", action="store_true", help="tiny sizes: the same code in a few minutes")
     e.add_argument("--out", default="out/experiments", help="output directory")
     e.add_argument("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)")
+    e.add_argument("--rounds", type=int, default=None,
+                   help="alternated rounds of payoff, speedup and partition "
+                        "(default 3, 3 and 2; 1 with --quick)")
     ac = sub.add_parser("accuracy", help="measure every speed-for-accuracy trade (tables for docs/ACCURACY.md)")
     ac.add_argument("--quick", action="store_true", help="tiny sizes: the same code in under a minute")
     ac.add_argument("--out", default="out/accuracy", help="directory for the CSV tables")
@@ -124,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "experiment":
             from multigpu.studies import experiments
 
-            return experiments.run(args.name, args.out, quick=args.quick, results=args.results)
+            return experiments.run(args.name, args.out, quick=args.quick, results=args.results,
+                                   rounds=args.rounds)
         if args.cmd == "accuracy":
             from multigpu.studies import accuracy
 

@@ -87,3 +87,15 @@ def test_payoff_splits_the_default_against_the_best_at_its_first_trial():
     assert first_trial(best, best) == dash  # no trial: the default does not choose
     assert first_trial(auto, []) == dash  # the default is the best
     assert first_trial([run([5.0] * 10, [{"frames": 10}])], best[:1]) == dash  # a trial as long as the run
+
+
+def test_rounds_override_each_experiments_own_and_are_checked():
+    """``--rounds``: the experiments that repeat runs take it over their own numbers (3, or 1 when
+    quick); below 1 it is refused at the door with the flag's name."""
+    from multigpu.errors import InputError
+    from multigpu.studies.runs import Settings
+
+    assert Settings.make(False).repeat(3) == 3 and Settings.make(True).repeat(3) == 1
+    assert Settings.make(False, 5).repeat(3) == 5 and Settings.make(True, 2).repeat(2) == 2
+    with pytest.raises(InputError, match="--rounds must be at least 1, got 0"):
+        Settings.make(False, 0)

@@ -144,7 +144,7 @@ def exp_speedup(s: Settings, out: Path) -> str:
     with objects as modelled and clustered (``--cluster 64``), repeated in alternating rounds
     (1 rank, then every 4-rank configuration, then again) so slow drifts of a shared machine
     hit all configurations alike; medians and ranges over rounds."""
-    rounds = 1 if s.quick else 3
+    rounds = s.repeat(3)
     displays = [(128, 128)] if s.quick else [(512, 512), (1024, 1024)]
     configs = [("strips", 0), ("adaptive", 0), ("time", 0), ("none", 0), ("strips", 64), ("adaptive", 64)]
     base_args = _scene_args(s) + ["--frames", str(s.frames), "--mosaic-every", "0"]
@@ -189,7 +189,7 @@ def exp_speedup(s: Settings, out: Path) -> str:
 def exp_partition(s: Settings, out: Path) -> str:
     """DESIGN.md's open choice: every rank computes the partition (redundant) or rank 0 computes
     and broadcasts it. Alternating rounds, 2x2 wall, the default plant and 4 plants."""
-    rounds = 1 if s.quick else 2
+    rounds = s.repeat(2)
     W, H = (128, 128) if s.quick else (512, 512)
     rows = []
     acc: dict = {}

@@ -31,11 +31,12 @@ EXPERIMENTS = {"gpus": exp_gpus, "resolution": exp_resolution, "balance": exp_ba
                "walls": exp_walls}
 
 
-def run(name: str, out: Path, quick: bool = False, results: Path | None = None) -> int:
-    """Run one experiment (or ``all``) into ``out``; ``all`` also writes the results page."""
+def run(name: str, out: Path, quick: bool = False, results: Path | None = None, rounds: int | None = None) -> int:
+    """Run one experiment (or ``all``) into ``out``; ``all`` also writes the results page.
+    ``rounds``: alternated rounds of the experiments that repeat runs (None: their own numbers)."""
     if name != "all" and name not in EXPERIMENTS:
         raise InputError(f"experiment: unknown experiment '{name}' (known: all, {', '.join(EXPERIMENTS)})")
-    s = Settings.make(quick)
+    s = Settings.make(quick, rounds)
     names = list(EXPERIMENTS) if name == "all" else [name]
     out = Path(out)
     sections = []

@@ -44,7 +44,7 @@ def scenes(s: Settings, out: Path) -> dict[str, list[str]]:
 
 def exp_payoff(s: Settings, out: Path) -> str:
     """Emulated frame of each strategy over ``none``, same scene and path, alternated rounds."""
-    rounds = 1 if s.quick else 3
+    rounds = s.repeat(3)
     strategies = tuple(REGISTRY)  # every registered strategy, `none` last
     runs: dict = {}
     floors: dict = {}

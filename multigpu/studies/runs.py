@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.errors import InputError
 from multigpu.parallel.mpirun import JobTimeout, run_multigpu
 from multigpu.parallel.report import COLUMNS, read_timings
 
@@ -50,12 +51,19 @@ class Settings:
     strip_frames: int = 120
     timeout: int = 900  # seconds per mpiexec job
     strategies: tuple[str, ...] = field(default_factory=tuple)
+    rounds: int | None = None  # alternated rounds of the experiments that repeat runs (None: each one's own)
+
+    def repeat(self, default: int) -> int:
+        """Alternated rounds for an experiment whose own number is ``default`` (1 when quick)."""
+        return self.rounds or (1 if self.quick else default)
 
     @classmethod
-    def make(cls, quick: bool) -> "Settings":
+    def make(cls, quick: bool, rounds: int | None = None) -> "Settings":
         from multigpu.strategies import REGISTRY
 
-        s = cls(quick=quick, strategies=tuple(REGISTRY))
+        if rounds is not None and rounds < 1:
+            raise InputError(f"--rounds must be at least 1, got {rounds}")
+        s = cls(quick=quick, strategies=tuple(REGISTRY), rounds=rounds)
         if quick:
             s.triangles, s.frames, s.copies = 20_000, 12, (1, 2)
             s.resolutions, s.res_frames, s.strip_frames, s.timeout = (128, 256), 6, 8, 240
