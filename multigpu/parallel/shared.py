@@ -67,6 +67,8 @@ def room(nbytes: int, shm: str = SHM) -> str | None:
 def reserve(nbytes: int, shm: str = SHM) -> tuple[str, str | None]:
     """A new file of ``nbytes`` in ``shm`` with every byte reserved now (``posix_fallocate``):
     (its path, None), or ("", why not) with nothing left behind."""
+    if not hasattr(os, "posix_fallocate"):  # not Linux
+        return "", "this system cannot reserve a file's blocks (no posix_fallocate)"
     path = os.path.join(shm, f"multigpu-{os.getpid()}-{secrets.token_hex(4)}")
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
