@@ -305,3 +305,22 @@ def test_open_mpi_runs_and_refuses_bad_input(tmp_path):
         assert (a == b).all()
     bad = run_mpi(4, [*args, "--seed", "-2", "--out", str(tmp_path / "x")], launcher=ompi, timeout=60)
     assert bad.returncode == 2 and bad.stderr.count("--seed must be >= 0") == 1, bad.stderr
+
+
+def test_shared_segment_where_asked_and_messages_where_it_cannot_be_made(tmp_path):
+    """``MULTIGPU_SHM_DIR`` names where the host's segment is made: a directory of our own holds
+    it during the run and nothing after; one that does not exist makes every rank use messages,
+    the job still completes, and summary.json says why in the system's words."""
+    seg = tmp_path / "seg"
+    seg.mkdir()
+    for where, exchange in ((seg, "shared"), (tmp_path / "missing", "messages")):
+        out = tmp_path / f"o_{exchange}"
+        res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "6", "--mosaic-every", "0",
+                          "--out", str(out)], timeout=90, env={"MULTIGPU_SHM_DIR": str(where)})
+        assert res.returncode == 0, res.stderr[-2000:]
+        s = json.loads((out / "summary.json").read_text())
+        assert s["complete"] is True and s["config"]["exchange"] == exchange
+        if exchange == "messages":
+            assert s["config"]["exchange_why"] == (f"messages: no shared segment (cannot create a segment in {where}: "
+                                                   "No such file or directory)")
+    assert not list(seg.iterdir())  # unlinked once both ranks had mapped it

@@ -42,7 +42,7 @@ from multigpu.parallel.exchange import allgather_text, wait_all
 MAX_SHARED_BYTES = 1 << 30
 
 
-#: where the host's segment file is made (tmpfs on Linux)
+#: where the host's segment file is made (tmpfs on Linux; ``MULTIGPU_SHM_DIR`` names another)
 SHM = "/dev/shm"
 
 
@@ -94,6 +94,30 @@ def attach(path: str, nbytes: int) -> np.ndarray:
         os.close(fd)
 
 
+def _map_segment(comm, node, nbytes: int, timeout: float, shm: str) -> tuple[np.ndarray | None, str | None]:
+    """This host's segment of ``nbytes``, made by its lowest rank (``node`` rank 0) and mapped by
+    every rank of ``node``, or (None, why) where any rank of the job (``comm``) could not: every
+    rank the same. The file's name goes once every rank has mapped it or failed to, and also
+    when a wait here fails, so no file outlives the setup."""
+    path, why = reserve(nbytes, shm) if node.Get_rank() == 0 else ("", None)
+    made = bool(path)
+    try:
+        path = allgather_text(node, path or f"!{why}", timeout, "shared segment")[0]
+        memory = None
+        if path.startswith("!"):
+            why = path[1:]
+        else:
+            try:
+                memory = attach(path, nbytes)
+            except OSError as exc:
+                why = f"cannot map {path}: {exc.strerror}"
+        why = next((t for t in allgather_text(comm, why or "", timeout, "shared segment") if t), None)
+        return (None, why) if why else (memory, None)
+    finally:
+        if made:
+            os.unlink(path)
+
+
 class SharedPieces:
     """The node-shared exchange backend: this host's ranks' slices of its shared segment, as numpy
     views; parts for ranks on other hosts go as messages (``composite``). ``make``
@@ -128,25 +152,13 @@ class SharedPieces:
             if most[0] < 2:
                 return None, "no two ranks share a host"
             total = 2 * per_half * n  # this host's segment
+            shm = os.environ.get("MULTIGPU_SHM_DIR", SHM)
             why = (f"the segment ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes" if total > MAX_SHARED_BYTES
-                   else room(total))
+                   else room(total, shm))
             why = next((t for t in allgather_text(comm, why or "", timeout, "shared segment") if t), None)
             if why:
                 return None, why
-            path, why = reserve(total) if at == 0 else ("", None)  # the host's lowest rank makes it
-            path = allgather_text(node, path or f"!{why}", timeout, "shared segment")[0]
-            memory = None
-            if path.startswith("!"):
-                why = path[1:]
-            else:
-                try:
-                    memory = attach(path, total)
-                except OSError as exc:
-                    why = f"cannot map {path}: {exc.strerror}"
-            # every rank has mapped it, or failed to: the name goes, the memory stays while mapped
-            why = next((t for t in allgather_text(comm, why or "", timeout, "shared segment") if t), None)
-            if at == 0 and not path.startswith("!"):
-                os.unlink(path)
+            memory, why = _map_segment(comm, node, total, timeout, shm)
             if why:
                 return None, why
             # every job rank's host (its host's lowest job rank) and node rank
