@@ -48,7 +48,8 @@ def run(name: str, out: Path, quick: bool = False, results: Path | None = None, 
         print(f"experiment {n} ...", flush=True)
         md = EXPERIMENTS[n](s, d)
         dt = time.perf_counter() - t
-        md = f"## {n}\n\n{md}\n\n_{dt:.0f} s wall for this experiment._\n"
+        how = f" (`--rounds {s.rounds}`)" if s.rounds else ""  # a rerun with other rounds says so
+        md = f"## {n}\n\n{md}\n\n_{dt:.0f} s wall for this experiment{how}._\n"
         (d / f"{n}.md").write_text(md)
         sections.append((n, md))
         print(f"experiment {n}: {dt:.0f} s, outputs in {d}/", flush=True)
