@@ -48,13 +48,14 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
             outgoing.setdefault(p.receiver, []).append(p)
         if p.receiver == me:
             incoming.setdefault(p.sender, []).append(p)
+    away = near | {me}  # parts that travel by no message
+    sends = {r: parts for r, parts in outgoing.items() if r not in away}
+    recvs = {s: parts for s, parts in incoming.items() if s not in away}
+    if sends or recvs:  # only then: a shared-memory exchange on one host stays MPI-free here
+        from mpi4py import MPI
     requests, keep = [], []
     sent = zbytes = 0
-    for r, parts in outgoing.items():
-        if r == me or r in near:
-            continue
-        from mpi4py import MPI  # here: a shared-memory exchange on one host sends nothing
-
+    for r, parts in sends.items():
         buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
         _pack(buf, parts, rects[me], rendered, with_depth)
         keep.append(buf)
@@ -62,11 +63,7 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
         sent += buf.nbytes
         zbytes += 4 * sum(p.pixels for p in parts) if with_depth else 0
     inbox = {}
-    for s, parts in incoming.items():
-        if s == me or s in near:
-            continue
-        from mpi4py import MPI
-
+    for s, parts in recvs.items():
         buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
         inbox[s] = buf
         requests.append(comm.Irecv([buf, MPI.BYTE], source=s, tag=TAG))

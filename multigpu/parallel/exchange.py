@@ -114,9 +114,10 @@ def allgather_text(comm, text: str, timeout: float, what: str, nbytes: int = ERR
     return [bytes(b).rstrip(b"\0").decode("utf-8", "replace") for b in allbuf]
 
 
-def agree(comm, error: str | None, timeout: float) -> str | None:
-    """Every rank's setup outcome; the first error (with its rank) or None, on all ranks."""
-    bad = [(r, e) for r, e in enumerate(allgather_text(comm, error or "", timeout, "setup")) if e]
+def agree(comm, error: str | None, timeout: float, what: str = "setup") -> str | None:
+    """Every rank's setup outcome; the first error (with its rank where ranks differ) or None,
+    on all ranks. ``what`` names the wait in a timeout."""
+    bad = [(r, e) for r, e in enumerate(allgather_text(comm, error or "", timeout, what)) if e]
     if not bad:
         return None
     r, e = bad[0]

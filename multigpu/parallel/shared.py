@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import mmap
 import os
+import resource
 import secrets
 
 import numpy as np
@@ -36,7 +37,7 @@ import numpy as np
 from multigpu.core.work import Piece
 from multigpu.errors import InputError
 from multigpu.parallel.composite import _pack, _unpack, composite
-from multigpu.parallel.exchange import allgather_text, wait_all
+from multigpu.parallel.exchange import agree, allgather_text, wait_all
 
 #: the most bytes a host's segment may hold (its ranks, both halves) before the job uses messages
 MAX_SHARED_BYTES = 1 << 30
@@ -49,8 +50,6 @@ SHM = "/dev/shm"
 def room(nbytes: int, shm: str = SHM) -> str | None:
     """Why this process cannot back a shared segment of ``nbytes`` (None: it can): its file-size
     limit, or the free space of ``shm`` where that exists (a container's is often 64 MiB)."""
-    import resource
-
     soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
     if soft != resource.RLIM_INFINITY and soft < nbytes:
         return f"the file-size limit ({soft} bytes) is below the {nbytes}-byte segment"
@@ -111,7 +110,7 @@ def _map_segment(comm, node, nbytes: int, timeout: float, shm: str) -> tuple[np.
                 memory = attach(path, nbytes)
             except OSError as exc:
                 why = f"cannot map {path}: {exc.strerror}"
-        why = next((t for t in allgather_text(comm, why or "", timeout, "shared segment") if t), None)
+        why = agree(comm, why, timeout, "shared segment")
         return (None, why) if why else (memory, None)
     finally:
         if made:
@@ -155,7 +154,7 @@ class SharedPieces:
             shm = os.environ.get("MULTIGPU_SHM_DIR", SHM)
             why = (f"the segment ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes" if total > MAX_SHARED_BYTES
                    else room(total, shm))
-            why = next((t for t in allgather_text(comm, why or "", timeout, "shared segment") if t), None)
+            why = agree(comm, why, timeout, "shared segment")
             if why:
                 return None, why
             memory, why = _map_segment(comm, node, total, timeout, shm)
