@@ -22,6 +22,9 @@ PRESENTERS = ("headless", "window")
 #: frame exchange backends (``auto``: a shared segment per host where it can be made, messages
 #: between hosts; else messages alone)
 EXCHANGES = ("auto", "messages", "shared")
+#: who projects the object bounds (``shared``: the host's ranks a slice each, into one shared
+#: array, where it can be made; ``each``: every rank all of them)
+PROJECTIONS = ("shared", "each")
 #: ``--path interactive``: the camera is flown by hand from rank 0's window
 INTERACTIVE = "interactive"
 #: ``--monitor`` without a place: right of the wall, on a screen that holds the wall's canvas
@@ -75,6 +78,7 @@ class WalkConfig:
     subfrustum: str = "auto"
     partition: str = "redundant"
     exchange: str = "auto"  # a shared-memory segment per host (messages between hosts) where it can be made
+    projection: str = "shared"  # the host's ranks project a slice of the bounds each, where they can
     decomposition: str = "screen"
     bin_size: int = 64
     bin_pattern: str = "diagonal"
@@ -110,6 +114,8 @@ class WalkConfig:
             raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{self.subfrustum}'")
         if self.exchange not in EXCHANGES:
             raise InputError(f"--exchange must be one of {', '.join(EXCHANGES)}, got '{self.exchange}'")
+        if self.projection not in PROJECTIONS:
+            raise InputError(f"--projection must be one of {', '.join(PROJECTIONS)}, got '{self.projection}'")
         if self.partition not in ("redundant", "broadcast"):
             raise InputError(f"--partition must be 'redundant' or 'broadcast', got '{self.partition}'")
         from multigpu.decompositions import PATTERNS, RANGES

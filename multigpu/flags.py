@@ -121,6 +121,10 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
                    help="frame exchange: auto (a shared-memory segment per machine where it can be made, messages "
                         "between machines) | shared (the same, but an error across machines) | messages "
                         "(point-to-point only)")
+    w.add_argument("--projection", default=d["projection"],
+                   help="who projects the object bounds each frame: shared (the ranks of a machine a slice each, "
+                        "into one shared-memory array, where it can be made; box bounds, strategies without "
+                        "coverage) | each (every rank every object) (default %(default)s)")
     w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
     w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
     w.add_argument("--timeout", type=float, default=d["timeout"],
@@ -151,8 +155,8 @@ def walk_config(a):
                       strips=a.strips,
                       balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
                       overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
-                      partition=a.partition, exchange=a.exchange, offset=parse_vec3(a.offset, "--offset"),
-                      timeout=a.timeout,
+                      partition=a.partition, exchange=a.exchange, projection=a.projection,
+                      offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
                       decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
                       db_ranges=a.db_ranges,
                       liveness=a.liveness, progress=not a.no_progress, record=a.record,

@@ -308,9 +308,10 @@ def test_open_mpi_runs_and_refuses_bad_input(tmp_path):
 
 
 def test_shared_segment_where_asked_and_messages_where_it_cannot_be_made(tmp_path):
-    """``MULTIGPU_SHM_DIR`` names where the host's segment is made: a directory of our own holds
-    it during the run and nothing after; one that does not exist makes every rank use messages,
-    the job still completes, and summary.json says why in the system's words."""
+    """``MULTIGPU_SHM_DIR`` names where the host's segments are made (the exchange's and the
+    shared projection's): a directory of our own holds them during the run and nothing after;
+    one that does not exist makes every rank use messages and project every object, the job
+    still completes, and summary.json says why in the system's words."""
     seg = tmp_path / "seg"
     seg.mkdir()
     for where, exchange in ((seg, "shared"), (tmp_path / "missing", "messages")):
@@ -323,4 +324,9 @@ def test_shared_segment_where_asked_and_messages_where_it_cannot_be_made(tmp_pat
         if exchange == "messages":
             assert s["config"]["exchange_why"] == (f"messages: no shared segment (cannot create a segment in {where}: "
                                                    "No such file or directory)")
-    assert not list(seg.iterdir())  # unlinked once both ranks had mapped it
+            # the bounds' projection has no segment either: every rank projects every object
+            assert s["config"]["projection"] == "each rank every object"
+            assert s["config"]["projection_why"] == f"cannot create a segment in {where}: No such file or directory"
+        else:
+            assert s["config"]["projection"] == "shared: a slice per rank of 2 on a host"
+    assert not list(seg.iterdir())  # both segments unlinked once both ranks had mapped them

@@ -21,6 +21,7 @@ from multigpu.parallel.composite import Messages
 from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
 from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
+from multigpu.parallel.projection import SharedProjection
 from multigpu.parallel.record import RunRecord
 from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
 from multigpu.parallel.shared import SharedPieces
@@ -86,6 +87,10 @@ class Frames:
         if cfg.exchange != "messages":
             shared, why = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout, cfg.exchange == "shared")
         self.exchange = shared or Messages(comm, cfg.timeout)
+        # the bounds' projection: a slice per rank of a host into one shared array, where it can be
+        self.projection, projection_why = None, None
+        if cfg.projection == "shared" and self.K > 1 and cfg.bounds == "box":
+            self.projection, projection_why = SharedProjection.make(comm, scene.n_objects, cfg.timeout)
         self.window = presenter.mode == "window"
         self.live = None
         if self.window:
@@ -103,6 +108,10 @@ class Frames:
         doc["exchange"] = self.exchange.name
         if why:
             doc["exchange_why"] = f"messages: no shared segment ({why})"
+        doc["projection"] = (f"shared: a slice per rank of {self.projection.ranks} on a host"
+                             if self.projection is not None else "each rank every object")
+        if projection_why:
+            doc["projection_why"] = projection_why
         self.config_doc = doc
         self.record = None
         if self.rank == 0:
@@ -213,7 +222,17 @@ class Frames:
             if self.learn is not None:  # the last frame's times, to what planned it: balancing CPU too
                 self.planner.observe(*self.learn)
                 self.learn = None
-            work, (view, proj, light) = self.planner.plan(f, camera, self.relay)
+            shared = self.projection is not None and self.planner.sliceable
+            if shared:  # this rank's slice of the boxes into the host's array
+                out = self.projection.out(f)
+                view, proj, light = self.planner.frame_slice(camera, self.projection.lo, self.projection.hi, out)
+            else:
+                work, (view, proj, light) = self.planner.plan(f, camera, self.relay)
+        if shared:
+            with t.phase("sync"):  # every slice of the host in
+                self.projection.wait()
+            with t.phase("balance"):
+                work = self.planner.work(f, self.planner.rects_of(out), self.relay)
         with t.phase("render"):
             rendered = self.render(work, view, proj, light)
         with t.phase("exchange"):  # parts for peers into the shared segment before the barrier (messages: nothing)
@@ -248,6 +267,9 @@ class Frames:
             self.exchange = None
         if self.live is not None:
             self.live.close(collective)
+        if self.projection is not None and collective:
+            self.projection.close()
+        self.projection = None
 
     def _what(self) -> str:
         cfg = self.cfg
