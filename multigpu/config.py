@@ -22,9 +22,10 @@ PRESENTERS = ("headless", "window")
 #: frame exchange backends (``auto``: a shared segment per host where it can be made, messages
 #: between hosts; else messages alone)
 EXCHANGES = ("auto", "messages", "shared")
-#: who projects the object bounds (``shared``: the host's ranks a slice each, into one shared
-#: array, where it can be made; ``each``: every rank all of them)
-PROJECTIONS = ("shared", "each")
+#: who projects the object bounds (``each``: every rank all of them; ``shared``: the host's ranks a
+#: slice each, into one shared array, where it can be made: it pays on scenes of 50k objects and
+#: more, docs/USAGE.md)
+PROJECTIONS = ("each", "shared")
 #: ``--path interactive``: the camera is flown by hand from rank 0's window
 INTERACTIVE = "interactive"
 #: ``--monitor`` without a place: right of the wall, on a screen that holds the wall's canvas
@@ -78,7 +79,7 @@ class WalkConfig:
     subfrustum: str = "auto"
     partition: str = "redundant"
     exchange: str = "auto"  # a shared-memory segment per host (messages between hosts) where it can be made
-    projection: str = "shared"  # the host's ranks project a slice of the bounds each, where they can
+    projection: str = "each"  # every rank projects every object's bounds (``shared``: a slice each per host)
     decomposition: str = "screen"
     bin_size: int = 64
     bin_pattern: str = "diagonal"

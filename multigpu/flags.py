@@ -122,9 +122,10 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
                         "between machines) | shared (the same, but an error across machines) | messages "
                         "(point-to-point only)")
     w.add_argument("--projection", default=d["projection"],
-                   help="who projects the object bounds each frame: shared (the ranks of a machine a slice each, "
-                        "into one shared-memory array, where it can be made; box bounds, strategies without "
-                        "coverage) | each (every rank every object) (default %(default)s)")
+                   help="who projects the object bounds each frame: each (every rank every object) | shared (the "
+                        "ranks of a machine a slice each, into one shared-memory array, where it can be made; box "
+                        "bounds, strategies without coverage; pays on scenes of 50k objects and more) "
+                        "(default %(default)s)")
     w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
     w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
     w.add_argument("--timeout", type=float, default=d["timeout"],

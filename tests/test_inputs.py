@@ -181,7 +181,7 @@ def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
     (["--subfrustum", "tiles"], "--subfrustum must be one of"),
     (["--partition", "gossip"], "--partition must be 'redundant' or 'broadcast'"),
     (["--exchange", "pigeon"], "--exchange must be one of auto, messages, shared"),
-    (["--projection", "pigeon"], "--projection must be one of shared, each"),
+    (["--projection", "pigeon"], "--projection must be one of each, shared"),
     (["--cluster", "-3"], "--cluster must be >= 0"),
     (["--cluster", "lots"], "--cluster must be 'auto' or a number"),
     (["--offset", "1e8,x"], "--offset must look like X,Y,Z"),

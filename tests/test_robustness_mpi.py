@@ -308,8 +308,8 @@ def test_open_mpi_runs_and_refuses_bad_input(tmp_path):
 
 
 def test_shared_segment_where_asked_and_messages_where_it_cannot_be_made(tmp_path):
-    """``MULTIGPU_SHM_DIR`` names where the host's segments are made (the exchange's and the
-    shared projection's): a directory of our own holds them during the run and nothing after;
+    """``MULTIGPU_SHM_DIR`` names where the host's segments are made (the exchange's and, with
+    ``--projection shared``, the projection's): a directory of our own holds them during the run and nothing after;
     one that does not exist makes every rank use messages and project every object, the job
     still completes, and summary.json says why in the system's words."""
     seg = tmp_path / "seg"
@@ -317,7 +317,8 @@ def test_shared_segment_where_asked_and_messages_where_it_cannot_be_made(tmp_pat
     for where, exchange in ((seg, "shared"), (tmp_path / "missing", "messages")):
         out = tmp_path / f"o_{exchange}"
         res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "6", "--mosaic-every", "0",
-                          "--out", str(out)], timeout=90, env={"MULTIGPU_SHM_DIR": str(where)})
+                          "--projection", "shared", "--out", str(out)], timeout=90,
+                         env={"MULTIGPU_SHM_DIR": str(where)})
         assert res.returncode == 0, res.stderr[-2000:]
         s = json.loads((out / "summary.json").read_text())
         assert s["complete"] is True and s["config"]["exchange"] == exchange
