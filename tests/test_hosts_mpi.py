@@ -80,16 +80,20 @@ def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_pat
     assert sorted(p.name for p in cache.rglob("*") if p.is_file()) == built  # read, never rebuilt
 
 
-@pytest.mark.parametrize("extra", [["--balance", "cross"], ["--decomposition", "db"]])
+@pytest.mark.parametrize("extra", [["--balance", "cross"], ["--decomposition", "db"],
+                                   ["--balance", "cross", "--projection", "shared"]])
 def test_each_host_shares_memory_and_messages_cross_hosts(tmp_path, hosts, launcher, extra):
     """The default exchange on two hosts: cross's colour pieces and db's depth pieces reach
     their tiles through each host's window and through messages between the hosts, and the
-    wall equals the one-rank render."""
+    wall equals the one-rank render; with ``--projection shared`` each host's two ranks project
+    half of the bounds each into their host's own array."""
     env = {**hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache")}
     res = run_mpi(4, args(tmp_path / "wall", extra=extra), env=env, launcher=launcher, hosts=HOSTS, timeout=180)
     assert res.returncode == 0, res.stderr[-3000:]
     s = json.loads((tmp_path / "wall" / "summary.json").read_text())
     assert s["config"]["exchange"] == "shared + messages" and s["bytes_sent_per_frame"] > 0
+    assert s["config"]["projection"] == ("shared: a slice per rank of 2 on a host" if "--projection" in extra
+                                         else "each rank every object")
     ref = run_mpi(1, [*args(tmp_path / "one"), "--grid", "1x1", "--tile", f"{W}x{H}"],
                   env={"MULTIGPU_CACHE": str(tmp_path / "cache")})
     assert ref.returncode == 0, ref.stderr[-3000:]
