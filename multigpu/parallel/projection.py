@@ -14,12 +14,10 @@ where the wait costs wall time (docs/USAGE.md, measured): not the default.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
-from multigpu.parallel.exchange import agree, barrier
-from multigpu.parallel.shared import MAX_SHARED_BYTES, SHM, _map_segment, room
+from multigpu.parallel.exchange import barrier
+from multigpu.parallel.shared import host_segment
 
 
 class SharedProjection:
@@ -39,14 +37,8 @@ class SharedProjection:
         try:
             n = node.Get_size()
             total = 2 * 4 * 8 * max(n_objects, 1)
-            shm = os.environ.get("MULTIGPU_SHM_DIR", SHM)
-            why = ("one rank per host" if n < 2 else
-                   f"the rects ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes" if total > MAX_SHARED_BYTES
-                   else room(total, shm))
-            why = agree(comm, why, timeout, "shared projection")
-            if why:
-                return None, why
-            memory, why = _map_segment(comm, node, total, timeout, shm)
+            memory, why = host_segment(comm, node, total, timeout, "shared projection",
+                                       "one rank per host" if n < 2 else None)
             if why:
                 return None, why
             at = node.Get_rank()

@@ -117,6 +117,22 @@ def _map_segment(comm, node, nbytes: int, timeout: float, shm: str) -> tuple[np.
             os.unlink(path)
 
 
+def host_segment(comm, node, total: int, timeout: float, what: str = "shared segment",
+                 why: str | None = None) -> tuple[np.ndarray | None, str | None]:
+    """A segment of ``total`` bytes on every host (``_map_segment``, in ``MULTIGPU_SHM_DIR`` or
+    /dev/shm), or (None, why not) where it would exceed ``MAX_SHARED_BYTES``, the directory
+    cannot hold it, or making or mapping it fails: every rank of the job (``comm``) the same.
+    ``why``: a reason this rank has already (every rank then goes without)."""
+    shm = os.environ.get("MULTIGPU_SHM_DIR", SHM)
+    if why is None:
+        why = (f"the segment ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes" if total > MAX_SHARED_BYTES
+               else room(total, shm))
+    why = agree(comm, why, timeout, what)
+    if why:
+        return None, why
+    return _map_segment(comm, node, total, timeout, shm)
+
+
 class SharedPieces:
     """The node-shared exchange backend: this host's ranks' slices of its shared segment, as numpy
     views; parts for ranks on other hosts go as messages (``composite``). ``make``
@@ -150,14 +166,7 @@ class SharedPieces:
                                     "several (use --exchange messages or auto)")
             if most[0] < 2:
                 return None, "no two ranks share a host"
-            total = 2 * per_half * n  # this host's segment
-            shm = os.environ.get("MULTIGPU_SHM_DIR", SHM)
-            why = (f"the segment ({total} bytes) would exceed {MAX_SHARED_BYTES} bytes" if total > MAX_SHARED_BYTES
-                   else room(total, shm))
-            why = agree(comm, why, timeout, "shared segment")
-            if why:
-                return None, why
-            memory, why = _map_segment(comm, node, total, timeout, shm)
+            memory, why = host_segment(comm, node, 2 * per_half * n, timeout)  # this host's segment
             if why:
                 return None, why
             # every job rank's host (its host's lowest job rank) and node rank
