@@ -249,6 +249,33 @@ def test_every_strategy_compiled_equals_the_reference(name, data, rows, cols, n,
         got.observe(f, b, times)
 
 
+@settings(max_examples=300, deadline=None)
+@given(data=st.data(), rows=st.integers(1, 4), cols=st.integers(1, 4), strips=st.sampled_from([2, 3, 7, 64, 2048]),
+       damping=st.sampled_from([0.0, 0.25, 0.5, 1.0]), damped=st.booleans())
+def test_compiled_time_chooser_equals_the_reference(data, rows, cols, strips, damping, damped):
+    """Time feedback's cuts (``splits.time_chooser``) in one compiled call equal the numpy
+    chooser's at every node (``balance.node_cuts``): last regions anywhere (outside the display,
+    empty, overlapping), times zero, tiny, huge or NaN, last cuts anywhere, damped or not."""
+    from multigpu.core.balance import node_cuts
+    from multigpu.core.splits import time_chooser
+    from multigpu.core.tree import gpu_tree
+
+    W, H = data.draw(st.integers(cols, 900)), data.draw(st.integers(rows, 900))
+    k = rows * cols
+    ends = st.integers(-50, 1000)
+    regions = np.sort(np.array(data.draw(st.lists(st.tuples(ends, ends, ends, ends), min_size=k, max_size=k)),
+                               dtype=np.int64).reshape(k, 2, 2), axis=1).reshape(k, 4)
+    values = st.sampled_from([0.0, 1e-300, 1e-9, 0.5, 1.0, 3.0, 40.0, 1e300, np.inf, np.nan])
+    times = np.array(data.draw(st.lists(values, min_size=k, max_size=k)))
+    prev = np.array(data.draw(st.lists(st.integers(-10, 1000), min_size=k - 1, max_size=k - 1)), dtype=np.int64)
+    tree = gpu_tree(rows, cols)
+    choose = time_chooser(regions, times, prev if damped else None, damping)
+    with np.errstate(invalid="ignore", over="ignore"):
+        ref = node_cuts(tree, (W, H), strips, choose)
+    got = choose.cuts(kernel.tree_nodes(tree), (W, H), strips)
+    assert got.dtype == ref.dtype and np.array_equal(got, ref), f"{got} vs {ref}"
+
+
 @pytest.mark.parametrize("grid", [(2, 2), (1, 3)])
 def test_compiled_cross_equals_the_reference_past_its_sample(grid):
     """Past ``SAMPLE`` objects on screen the time profiles weigh every k-th object for k: the

@@ -172,10 +172,14 @@ def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool 
     (``object_free``) has its cuts found first and the compiled walk take them (``compiled``
     as in ``partition``).
     """
-    rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, strips)
+    object_free = getattr(choose, "object_free", False) and kernel.use(compiled)
+    # the compiled walk makes the per-object checks in its own pass
+    rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, strips, rows=not object_free)
     strips = int(strips)
-    if getattr(choose, "object_free", False) and kernel.use(compiled):
-        cuts = node_cuts(tree, (W, H), strips, choose)
+    if object_free:
+        compiled_cuts = getattr(choose, "cuts", None)  # the chooser's own compiled twin, if it has one
+        cuts = (node_cuts(tree, (W, H), strips, choose) if compiled_cuts is None
+                else compiled_cuts(kernel.tree_nodes(tree), (W, H), strips))
         return Partition(*kernel.strip_partition(rects, tris, tree, (W, H), strips, cuts))
     spans, onscreen = pixel_spans(rects, (W, H))
     spans = np.ascontiguousarray(spans.T)  # (4, N), a no-op: pixel_spans is coordinate-major

@@ -4,8 +4,9 @@
 ``choose(task, spans) -> cut pixel`` at every internal node; strategies differ only in the
 chooser they pass. Here: the paper's strip chooser (Alg. 2: Start/End arrays over the strips,
 prefix and postfix sums, the candidate whose ratio best matches balRatio), its fill-cost
-extension (``fill_prefix``), and Equalizer's time chooser (cuts follow measured times). Pure
-numpy, no Python loop over objects or strips.
+extension (``fill_prefix``), and Equalizer's time chooser (cuts follow measured times; compiled
+in ``core/kernel/feedback.py``, whose cuts the walk then takes). Pure numpy, no Python loop over
+objects or strips.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from multigpu.core.kernel.feedback import _time_cuts
 
 _EXACT_FLOAT = 2**53
 
@@ -164,17 +167,19 @@ def time_chooser(regions: np.ndarray, times: np.ndarray, prev_cuts: np.ndarray |
     over its region (Equalizer's assumption); the cut balances the time on either side in
     the ratio of the ranks, then moves only ``damping`` of the way from the previous cut."""
     regions = np.asarray(regions, dtype=np.float64)
-    density = np.asarray(times, dtype=np.float64) / np.maximum(
-        (regions[:, 2] - regions[:, 0]) * (regions[:, 3] - regions[:, 1]), 1.0)
 
     def choose(t: SplitTask, spans: np.ndarray) -> int:
+        density = np.asarray(times, dtype=np.float64) / np.maximum(
+            (regions[:, 2] - regions[:, 0]) * (regions[:, 3] - regions[:, 1]), 1.0)
         ax, ot = t.axis, 1 - t.axis
         r0, r1 = regions[:, ax], regions[:, ax + 2]
         o = np.clip(np.minimum(regions[:, ot + 2], t.reg[ot + 2]) - np.maximum(regions[:, ot], t.reg[ot]), 0, None)
         w = density * o  # time per pixel along the axis, per old region
         c = t.cuts.astype(np.float64)[:, None]
-        below = np.clip(np.minimum(c, r1) - np.maximum(t.a, r0), 0, None) @ w
-        total = float(np.clip(np.minimum(t.b, r1) - np.maximum(t.a, r0), 0, None) @ w)
+        # sums over the ranks in rank order (cumsum; ``@`` leaves the order to BLAS), as the
+        # compiled chooser (core/kernel/feedback.py) adds them
+        below = np.cumsum(np.clip(np.minimum(c, r1) - np.maximum(t.a, r0), 0, None) * w, axis=1)[:, -1]
+        total = float(np.cumsum(np.clip(np.minimum(t.b, r1) - np.maximum(t.a, r0), 0, None) * w)[-1])
         if total <= 0:
             return t.target
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -188,5 +193,15 @@ def time_chooser(regions: np.ndarray, times: np.ndarray, prev_cuts: np.ndarray |
             cut = int(round(old + damping * (cut - old)))
         return cut
 
+    def cuts(nodes: np.ndarray, size, strips: int) -> np.ndarray:
+        """Every node's clamped cut in one compiled call (``tree_arrays``' ``nodes``)."""
+        prev = _NO_CUTS if prev_cuts is None else np.ascontiguousarray(prev_cuts, dtype=np.int64)
+        return _time_cuts(nodes, int(size[0]), int(size[1]), int(strips), np.ascontiguousarray(regions),
+                          np.ascontiguousarray(times, dtype=np.float64), prev, float(damping))
+
     choose.object_free = True  # the cuts follow times and regions alone: the compiled walk takes them
+    choose.cuts = cuts  # ... found by the compiled chooser (``balance.tree_partition``, where numba is)
     return choose
+
+
+_NO_CUTS = np.zeros(0, dtype=np.int64)

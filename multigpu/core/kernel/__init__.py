@@ -9,11 +9,13 @@ make hundreds of C-level calls.
 * ``pieces.py``: cross-segment balancing: segment profiles, shares and cuts, piece masks;
 * ``draws.py``: a rank's mask to run-merged draw commands;
 * ``parts.py``: a frame's transfers, every (piece, tile) overlap in message order;
+* ``feedback.py``: Equalizer's time chooser (time feedback's cuts, which the walk then takes);
 * ``seen.py``: the triangles of the objects in view (``auto``'s trial load);
 * ``fit.py``: the cost model's least-squares fit and term selection;
 * ``pixels.py``: the cost model's per-rank pixel feature.
 
-Time feedback and the static tiles run the walk with cuts found without objects. Not compiled
+Time feedback and the static tiles run the walk with cuts found without objects (time
+feedback's by ``feedback.py``). Not compiled
 (numpy): ``adaptive``'s per-object corrections, sphere bounds, and the ``db`` and ``bins``
 decompositions.
 
@@ -33,7 +35,7 @@ from multigpu.core.kernel.jit import entry, numba
 from multigpu.core.kernel.pieces import _cross
 from multigpu.core.kernel.project import _project
 from multigpu.core.kernel.seen import seen_triangles as _seen
-from multigpu.core.kernel.walk import strip_partition, tree_arrays
+from multigpu.core.kernel.walk import strip_partition, tree_arrays, tree_nodes
 
 
 def available() -> bool:
@@ -187,5 +189,5 @@ def warm() -> float:
     return time.perf_counter() - t0
 
 
-__all__ = ["available", "use", "cross_partition", "scratch_for", "warm", "strip_partition", "tree_arrays",
+__all__ = ["available", "use", "cross_partition", "scratch_for", "warm", "strip_partition", "tree_arrays", "tree_nodes",
            "project_boxes", "seen_triangles"]

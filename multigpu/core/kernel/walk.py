@@ -268,11 +268,7 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
     (-1: the strip chooser's); ``density`` (N,) float64, validated: the cost model's fill per
     covered pixel of each object. Integer loads are exact sums; float loads are summed again by
     numpy as the reference sums them (pairwise)."""
-    shape = (tree.rows, tree.cols)
-    if shape not in _TREES:  # with the chooser's cuts (-1) for every node: the kernel only reads them
-        nodes, leaves = tree_arrays(tree)
-        _TREES[shape] = (nodes, leaves, np.full(len(nodes), -1, dtype=np.int64))
-    nodes, leaves, free = _TREES[shape]
+    nodes, leaves, free = _tree(tree)
     if cuts is None:
         cuts = free
     rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
@@ -295,4 +291,19 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
 
 
 _TREES: dict = {}
+
+
+def _tree(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``tree_arrays`` of ``tree`` and the chooser's cuts (-1) for every node, made once per wall
+    shape (the kernels only read them)."""
+    shape = (tree.rows, tree.cols)
+    if shape not in _TREES:
+        nodes, leaves = tree_arrays(tree)
+        _TREES[shape] = (nodes, leaves, np.full(len(nodes), -1, dtype=np.int64))
+    return _TREES[shape]
+
+
+def tree_nodes(tree) -> np.ndarray:
+    """The internal nodes' rows of ``tree_arrays`` (breadth first), made once per wall shape."""
+    return _tree(tree)[0]
 _NO_FILL = np.empty(0)
