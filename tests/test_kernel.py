@@ -243,6 +243,10 @@ def test_every_strategy_compiled_equals_the_reference(name, data, rows, cols, n,
         assert np.array_equal(getattr(ref, "shares", 0), getattr(got, "shares", 0))
         if name == "cross" and f:  # the pieces' weights the next frame learns from
             assert np.array_equal(a.features["mass"], b.features["mass"])
+        if name in ("cost", "adaptive"):  # what they learn from: features, predictions, corrections
+            for key, value in a.features.items():
+                assert np.array_equal(value, b.features[key]), key
+            assert np.array_equal(getattr(ref, "corr", None), getattr(got, "corr", None))
         times = np.array(data.draw(st.lists(st.sampled_from([0.0, 1e-9, 0.5, 1.0, 3.0, 40.0]), min_size=k,
                                             max_size=k)))
         ref.observe(f, a, times)

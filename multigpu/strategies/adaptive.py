@@ -7,7 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from multigpu.core import kernel
 from multigpu.core.balance import Partition, partition
+from multigpu.core.kernel.corrections import _object_sums, _rank_sums
 from multigpu.strategies.base import coverage_of, rank_pixels
 from multigpu.strategies.cost import CostModel
 
@@ -35,6 +37,7 @@ class Adaptive(CostModel):
     def __post_init__(self):
         super().__post_init__()
         self.corr: np.ndarray | None = None
+        self._compiled = kernel.use(self.compiled)  # the sums over the masks compiled (once, not per frame)
 
     def plan(self, rects, tris, coverage: np.ndarray | None = None):
         tris = np.asarray(tris)
@@ -48,13 +51,33 @@ class Adaptive(CostModel):
         fill = cov * self.corr * (b / a if a > 0 else 1.0) if use_px else None
         p = partition(rects, weights, self.grid, self.size, self.strips, fill=fill, compiled=self.compiled)
         vis = p.visible
-        loads = vis @ tris.astype(np.int64)
+        loads, weighed = self._rank_sums(vis, tris.astype(np.int64), tris * self.corr)
         px, px_corr = rank_pixels(np.asarray(rects, np.float64), vis, p.regions, self.size,
                                   np.stack([cov, cov * self.corr]), p.spans, self.compiled).T
         # the fit sees raw features; the correction step, this partition's prediction
-        features = {"triangles": loads.astype(np.float64), "pixels": px,
-                    "predicted": a * (vis @ (tris * self.corr)) + b * px_corr + c}
+        features = {"triangles": loads.astype(np.float64), "pixels": px, "predicted": a * weighed + b * px_corr + c}
         return Partition(p.regions, loads, vis, p.splits, p.split_pixels, p.spans, features=features)
+
+    def _rank_sums(self, vis: np.ndarray, tris: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per rank: the triangles it draws (int64 ``tris``) and its objects' corrected
+        ``weights`` summed in object order (compiled: ``core/kernel/corrections.py``, the same sums)."""
+        k = len(vis)
+        if self._compiled:
+            loads, weighed = np.empty(k, dtype=np.int64), np.empty(k)
+            _rank_sums(np.ascontiguousarray(vis), tris, np.ascontiguousarray(weights, dtype=np.float64), loads,
+                       weighed)
+            return loads, weighed
+        weighed = np.cumsum(np.where(vis, weights, 0.0), axis=1)[:, -1] if vis.shape[1] else np.zeros(k)
+        return vis @ tris, weighed
+
+    def _object_sums(self, vis: np.ndarray, log_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per object: the log errors of the ranks that drew it summed in rank order, and how
+        many did (compiled: ``core/kernel/corrections.py``, the same sums)."""
+        if self._compiled:
+            sums, count = np.empty(vis.shape[1]), np.empty(vis.shape[1], dtype=np.int64)
+            _object_sums(np.ascontiguousarray(vis), log_s, sums, count)
+            return sums, count
+        return np.cumsum(np.where(vis, log_s[:, None], 0.0), axis=0)[-1], vis.sum(axis=0)
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         super().observe(frame, partition, times)
@@ -66,10 +89,9 @@ class Adaptive(CostModel):
             return
         log_s = np.log(t / pred)
         log_s -= log_s.mean()  # relative error only
-        vis = partition.visible
-        count = vis.sum(axis=0)
+        sums, count = self._object_sums(partition.visible, log_s)
         seen = count > 0
-        step = (log_s @ vis)[seen] / count[seen]  # mean log error over the ranks that drew it
+        step = sums[seen] / count[seen]  # mean log error over the ranks that drew it
         self.corr[seen] *= np.exp(self.rate * step)
         np.clip(self.corr, 1.0 / self.limit, self.limit, out=self.corr)
 
