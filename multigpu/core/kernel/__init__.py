@@ -12,12 +12,13 @@ make hundreds of C-level calls.
 * ``feedback.py``: Equalizer's time chooser (time feedback's cuts, which the walk then takes);
 * ``seen.py``: the triangles of the objects in view (``auto``'s trial load);
 * ``fit.py``: the cost model's least-squares fit and term selection;
-* ``pixels.py``: the cost model's per-rank pixel feature.
+* ``pixels.py``: the cost model's per-rank pixel feature;
+* ``corrections.py``: ``adaptive``'s sums over the T' masks (per rank, per object).
 
 Time feedback and the static tiles run the walk with cuts found without objects (time
-feedback's by ``feedback.py``). Not compiled
-(numpy): ``adaptive``'s per-object corrections, sphere bounds, and the ``db`` and ``bins``
-decompositions.
+feedback's by ``feedback.py``). Not compiled (numpy): ``adaptive``'s elementwise steps (its
+weights, the exponential of its corrections: numpy's ``exp`` need not round as libm's does),
+sphere bounds, and the ``db`` and ``bins`` decompositions.
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
