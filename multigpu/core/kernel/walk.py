@@ -306,4 +306,6 @@ def _tree(tree) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def tree_nodes(tree) -> np.ndarray:
     """The internal nodes' rows of ``tree_arrays`` (breadth first), made once per wall shape."""
     return _tree(tree)[0]
+
+
 _NO_FILL = np.empty(0)
