@@ -67,6 +67,29 @@ def test_payoff_says_what_a_choosing_default_planned_with():
     assert planned_by(rows, {"scene": "city", "best": "time"}, [{"cross": 240}])["by_best"] == "-"
 
 
+def test_payoff_splits_the_balancing_of_none_the_default_and_the_best():
+    """Per scene, ``none``, the default and the best strategy (each once where they coincide),
+    their balancing CPU in its phases, what it adds to ``none``'s, and the projection's share."""
+    from multigpu.studies.payoff import balancing_parts
+
+    def row(scene, balance, learn, project, plan, frame):
+        lb = learn + project + plan
+        return {"scene": scene, "balance": balance, "learn_ms": learn, "project_ms": project, "plan_ms": plan,
+                "lb_cpu_ms": lb, "lb_share": lb / frame, "emulated_ms": frame}
+
+    rows = [row("city", "none", 0.02, 0.14, 0.20, 8.0), row("city", "auto", 0.04, 0.14, 0.24, 7.0),
+            row("city", "cross", 0.04, 0.15, 0.23, 6.0), row("city", "strips", 0.0, 0.14, 0.3, 9.0),
+            row("plant", "none", 0.01, 0.1, 0.1, 10.0), row("plant", "auto", 0.02, 0.1, 0.12, 8.0)]
+    checks = [{"scene": "city", "default": "auto", "best": "cross"}, {"scene": "plant", "default": "auto",
+                                                                        "best": "auto"}]
+    got = balancing_parts(rows, checks)
+    assert [(r["scene"], r["balance"]) for r in got] == [("city", "none"), ("city", "auto"), ("city", "cross"),
+                                                          ("plant", "none"), ("plant", "auto")]
+    assert got[0]["above_none_ms"] == 0.0
+    assert got[1]["above_none_ms"] == pytest.approx(0.42 - 0.36)
+    assert got[2]["project_share"] == pytest.approx(0.15 / 6.0) and got[2]["lb_share"] == pytest.approx(0.42 / 6.0)
+
+
 def test_payoff_splits_the_default_against_the_best_at_its_first_trial():
     """The best's frame over the default's, paired by round, on the frames of the default's
     first trial and after it; '-' where there is no trial to split at."""

@@ -31,6 +31,10 @@ from multigpu.scene.models import axis_name
 #: the test-only fault to inject, read once: a lookup in ``os.environ`` (its miss is a KeyError
 #: caught inside) costs ~10 us of CPU per frame with the caches cold, 4 % of a city frame's balancing
 FAULT_SPEC = os.environ.get("MULTIGPU_FAULT")
+#: the phases a frame's balancing is timed in, in order (their sum is the Load Balancing
+#: column): learning from the last frame's measured times, projecting the object bounds,
+#: planning the partition (the strategy and the decomposition)
+BALANCE_PHASES = ("learn", "project", "plan")
 
 
 def fault(rank: int, where: int | str) -> None:
@@ -168,10 +172,12 @@ class Frames:
         box = work.bounds(self.rank)
         values = {"frame": f, "rank": self.rank, "triangles": work.loads[self.rank],
                   "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
-                  "load_balancing_ms": t.ms("balance"), "rendering_ms": t.ms("render"),
+                  "load_balancing_ms": t.ms(*BALANCE_PHASES), "rendering_ms": t.ms("render"),
                   "synchronization_ms": t.ms("sync"), "frame_exchange_ms": t.ms("exchange"),
                   "display_ms": t.ms("display", "swap_wait"), "frame_ms": t.total_ms,
-                  "load_balancing_cpu_ms": t.cpu_ms("balance"), "rendering_cpu_ms": t.cpu_ms("render"),
+                  "load_balancing_cpu_ms": t.cpu_ms(*BALANCE_PHASES), "rendering_cpu_ms": t.cpu_ms("render"),
+                  "learning_cpu_ms": t.cpu_ms("learn"), "projection_cpu_ms": t.cpu_ms("project"),
+                  "planning_cpu_ms": t.cpu_ms("plan"),
                   "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
                   "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
                   "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
@@ -216,23 +222,27 @@ class Frames:
     def frame(self, f: int) -> None:
         t = Timer()
         camera, control = self._camera(f, t)
-        with t.phase("balance"):
+        # balancing in three named phases (``BALANCE_PHASES``): learning from the last frame's times,
+        # projecting the bounds, planning the partition
+        with t.phase("learn"):
             if FAULT_SPEC:
                 fault(self.rank, f)
-            if self.learn is not None:  # the last frame's times, to what planned it: balancing CPU too
+            if self.learn is not None:  # the last frame's times, to what planned it
                 self.planner.observe(*self.learn)
                 self.learn = None
-            shared = self.projection is not None and self.planner.sliceable
-            if shared:  # this rank's slice of the boxes into the host's array
+        if self.projection is not None and self.planner.sliceable:
+            with t.phase("project"):  # this rank's slice of the boxes into the host's array
                 out = self.projection.out(f)
                 view, proj, light = self.planner.frame_slice(camera, self.projection.lo, self.projection.hi, out)
-            else:
-                work, (view, proj, light) = self.planner.plan(f, camera, self.relay)
-        if shared:
             with t.phase("sync"):  # every slice of the host in
                 self.projection.wait()
-            with t.phase("balance"):
+            with t.phase("plan"):
                 work = self.planner.work(f, self.planner.rects_of(out), self.relay)
+        else:
+            with t.phase("project"):
+                view, proj, light, rects = self.planner.frame(camera)
+            with t.phase("plan"):
+                work = self.planner.work(f, rects, self.relay)
         with t.phase("render"):
             rendered = self.render(work, view, proj, light)
         with t.phase("exchange"):  # parts for peers into the shared segment before the barrier (messages: nothing)

@@ -14,6 +14,10 @@ Figures and what they are:
 * ``input_ms``: the frame's input phase (rank 0 reads keys and mouse, the camera and commands
   reach every rank in one broadcast; 0 when headless); ``balance``: the strategy (screen) or
   decomposition that planned the frame, by name (it may change at a key press);
+* ``learning_cpu_ms``, ``projection_cpu_ms``, ``planning_cpu_ms``: the load balancing CPU time
+  in its three phases (they add up to ``load_balancing_cpu_ms``): the strategy learning from
+  the last frame's measured times, projecting the object bounds (``--projection shared``:
+  this rank's slice), planning the partition (``--partition broadcast``: with its broadcast);
 * ``heartbeat_cpu_ms``: CPU time of the rank's heartbeat thread since the last frame
   (``time.thread_time`` in the thread; already inside the phases' process CPU times where it
   ran during them, shown apart so its cost is known).
@@ -34,7 +38,10 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms", "frame_ms",
            "load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
            "bytes_sent", "objects", "pieces", "depth_bytes", "load_cv",
-           "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms", "input_ms", "heartbeat_cpu_ms", "balance"]
+           "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms", "input_ms", "heartbeat_cpu_ms",
+           "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "balance"]
+#: the load balancing CPU time's three phases (learn, project, plan), adding up to it
+BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
 #: what the ``balance`` column can name: a strategy of the screen decomposition, or another decomposition
 BALANCE_NAMES = (*STRATEGIES, *(d for d in DECOMPOSITIONS if d != "screen"))
@@ -123,7 +130,8 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "frame_ms": float(frame_ms.mean()),
         "fps": float(1000.0 / frame_ms.mean()),
         "cpu": {c: float(get(c).mean()) for c in ("load_balancing_cpu_ms", "rendering_cpu_ms",
-                                                  "frame_exchange_cpu_ms", "display_cpu_ms", "heartbeat_cpu_ms")},
+                                                  "frame_exchange_cpu_ms", "display_cpu_ms", "heartbeat_cpu_ms",
+                                                  *BALANCE_CPU)},
         "emulated_frame_ms": float(emulated.mean()),
         "emulated_fps": float(1000.0 / emulated.mean()),
         "emulated_frame_ms_median": float(np.median(emulated)),
@@ -161,7 +169,7 @@ def table(summary: dict, title: str = "") -> str:
     c = summary["cpu"]
     lines = [title] if title else []
     lines += [f"{summary['frames']} frames x {summary['ranks']} ranks. Wall-clock per-rank means (ms):", head, row,
-              f"Per-rank CPU time (ms): load balancing {c['load_balancing_cpu_ms']:.2f}, rendering "
+              f"Per-rank CPU time (ms): load balancing {c['load_balancing_cpu_ms']:.2f}{_parts(c)}, rendering "
               f"{c['rendering_cpu_ms']:.2f} (slowest rank {summary['render_cpu_max_ms']:.2f}), exchange "
               f"{c['frame_exchange_cpu_ms']:.2f}, display {c['display_cpu_ms']:.2f}; heartbeat thread "
               f"{c.get('heartbeat_cpu_ms', 0.0):.3f}",
@@ -171,6 +179,13 @@ def table(summary: dict, title: str = "") -> str:
               f"{_fmt(summary['imbalance_render_cpu'])}{_empty(summary)}; bytes exchanged per frame "
               f"{summary['bytes_sent_per_frame']:.0f}"]
     return "\n".join(lines)
+
+
+def _parts(cpu: dict) -> str:
+    """The load balancing CPU time's phases, where the summary has them."""
+    if not all(c in cpu for c in BALANCE_CPU):
+        return ""
+    return " (learn {:.2f}, project {:.2f}, plan {:.2f})".format(*(cpu[c] for c in BALANCE_CPU))
 
 
 def _fmt(v) -> str:

@@ -42,6 +42,25 @@ def scenes(s: Settings, out: Path) -> dict[str, list[str]]:
             "scan": ["--model", str(scan), "--split", "grid:8", "--path-kind", "orbit"]}
 
 
+#: the balancing CPU's phases in a payoff row, from each run's summary (``report.BALANCE_CPU``)
+PARTS = {"learn_ms": "learning_cpu_ms", "project_ms": "projection_cpu_ms", "plan_ms": "planning_cpu_ms"}
+
+
+def balancing_parts(rows: list[dict], checks: list[dict]) -> list[dict]:
+    """Per scene, where the balancing CPU of ``none``, the default and the best strategy goes
+    (learn, project, plan: medians over rounds) and its share of the frame; ``above none``:
+    the balancing CPU beyond what ``none``'s culling (projection and tile masks) costs."""
+    out = []
+    for c in checks:
+        mine = {r["balance"]: r for r in rows if r["scene"] == c["scene"]}
+        for name in dict.fromkeys(("none", c["default"], c["best"])):
+            r = mine[name]
+            out.append({"scene": c["scene"], "balance": name, **{k: r[k] for k in PARTS}, "lb_cpu_ms": r["lb_cpu_ms"],
+                        "above_none_ms": r["lb_cpu_ms"] - mine["none"]["lb_cpu_ms"], "lb_share": r["lb_share"],
+                        "project_share": r["project_ms"] / r["emulated_ms"]})
+    return out
+
+
 def exp_payoff(s: Settings, out: Path) -> str:
     """Emulated frame of each strategy over ``none``, same scene and path, alternated rounds."""
     rounds = s.repeat(3)
@@ -74,6 +93,7 @@ def exp_payoff(s: Settings, out: Path) -> str:
                          "imb_render": float(np.median([r.summary["imbalance_render_cpu"] for r in rs])),
                          "imb_tris": float(np.median([r.summary["imbalance_triangles"] for r in rs])),
                          "lb_cpu_ms": float(np.median(lb)), "lb_share": float(np.median(lb) / np.median(em)),
+                         **{k: float(np.median([r.summary["cpu"][c] for r in rs])) for k, c in PARTS.items()},
                          "render_max_ms": float(np.median([r.summary["render_cpu_max_ms"] for r in rs])),
                          "render_mean_ms": float(np.median([r.summary["cpu"]["rendering_cpu_ms"] for r in rs])),
                          "fixed_ms": float(np.median([_fixed_cpu(r.summary) for r in rs])),
@@ -93,10 +113,12 @@ def exp_payoff(s: Settings, out: Path) -> str:
         c.update(first_trial([r.summary for r in runs[(c["scene"], default)]],
                              [r.summary for r in runs[(c["scene"], c["best"])]] if c["best"] != default else []))
     write_csv(out / "payoff_default.csv", checks)
-    return _page(s, rows, bounds, ranking, verdict, checks, rounds)
+    parts = balancing_parts(rows, checks)
+    write_csv(out / "payoff_balancing.csv", parts)
+    return _page(s, rows, bounds, ranking, verdict, checks, rounds, parts)
 
 
-def _page(s: Settings, rows, bounds, ranking, verdict: str, checks, rounds: int) -> str:
+def _page(s: Settings, rows, bounds, ranking, verdict: str, checks, rounds: int, parts: list[dict]) -> str:
     """The payoff section of the results page from its tables."""
     SCENES = tuple(dict.fromkeys(r["scene"] for r in rows))
     return "\n".join([
@@ -162,7 +184,16 @@ def _page(s: Settings, rows, bounds, ranking, verdict: str, checks, rounds: int)
         "slowest rank's sum, frame by frame).", "",
         md_table(checks, [("scene", "Scene", ""), ("default", "Default", ""), ("gap_ms", "Frame - ideal ms", ".2f"),
                           ("overlap_ms", "Duplicated ms", ".2f"), ("imbalance_ms", "Imbalance left ms", ".2f"),
-                          ("fixed_extra_ms", "Fixed extra ms", ".2f")])])
+                          ("fixed_extra_ms", "Fixed extra ms", ".2f")]), "",
+        "Where the balancing CPU goes, per rank and frame (medians over rounds), for `none`, the default and the "
+        "best strategy: `Learn` = the strategy taking the last frame's measured times, `Project` = the object "
+        "bounds projected to screen rects, `Plan` = the partition, the ranks' masks and the work (for `none`: its "
+        "tiles' masks). `none` pays its projection and masks too (culling); `Above none` is what balancing adds "
+        "to them. `Project share` = projection CPU / emulated frame.", "",
+        md_table(parts, [("scene", "Scene", ""), ("balance", "Balance", ""), ("learn_ms", "Learn ms", ".3f"),
+                         ("project_ms", "Project ms", ".3f"), ("plan_ms", "Plan ms", ".3f"),
+                         ("lb_cpu_ms", "LB CPU ms", ".3f"), ("above_none_ms", "Above none ms", "+.3f"),
+                         ("lb_share", "LB share", ".1%"), ("project_share", "Project share", ".1%")])])
 
 
 def default_checks(rows: list[dict], bounds: list[dict], per_round: dict | None = None) -> list[dict]:
