@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.parallel.report import BALANCE_CPU
 from multigpu.strategies import REGISTRY
 from multigpu.studies.floor import run as floor_run
 from multigpu.studies.runs import Settings, _plt, walk
@@ -42,8 +43,8 @@ def scenes(s: Settings, out: Path) -> dict[str, list[str]]:
             "scan": ["--model", str(scan), "--split", "grid:8", "--path-kind", "orbit"]}
 
 
-#: the balancing CPU's phases in a payoff row, from each run's summary (``report.BALANCE_CPU``)
-PARTS = {"learn_ms": "learning_cpu_ms", "project_ms": "projection_cpu_ms", "plan_ms": "planning_cpu_ms"}
+#: the balancing CPU's phases in a payoff row, from each run's summary's columns of them
+PARTS = dict(zip(("learn_ms", "project_ms", "plan_ms"), BALANCE_CPU))
 
 
 def balancing_parts(rows: list[dict], checks: list[dict]) -> list[dict]:
