@@ -225,3 +225,19 @@ def test_compiled_components_equal_scipys():
     m = trimesh.util.concatenate([trimesh.creation.icosphere(1).apply_translation([3 * i, 0, 0]) for i in range(4)])
     got = component_labels(np.asarray(m.faces), np.asarray(m.vertices), compiled=True)
     assert len(np.unique(got)) == 4 and (np.diff(got) >= 0).all()  # four spheres, in file order
+
+
+def test_a_scene_s_objects_alone_keep_their_ranges_and_bounds_and_share_the_buffers():
+    """``Scene.objects(idx)``: those objects, in that order (``bench frame`` plans a few of a
+    scene's objects); a bad index is one clear error."""
+    scene = generate_plant(20_000, seed=3)
+    idx = np.array([5, 0, scene.n_objects - 1])
+    few = scene.objects(idx)
+    assert few.n_objects == 3
+    for k in ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors"):
+        assert np.array_equal(getattr(few, k), getattr(scene, k)[idx]), k
+    assert few.vertices is scene.vertices and few.indices is scene.indices
+    assert few.n_triangles == int(scene.tris[idx].sum())
+    for bad in ([scene.n_objects], [-1], [[0, 1]]):
+        with pytest.raises(InputError, match="object indices"):
+            scene.objects(bad)

@@ -87,6 +87,17 @@ class Scene:
         return Scene(**{**self._arrays(), **moved}, name=self.name,
                      meta={**self.meta, "offset": (np.asarray(self.meta.get("offset", 0.0)) + off).tolist()})
 
+    def objects(self, idx) -> "Scene":
+        """The scene's objects ``idx`` (indices, in that order) alone: their draw ranges, bounds
+        and colours; the vertex and index buffers are shared, unchanged (``bench frame`` plans a
+        few of a scene's objects to measure what a frame costs whatever its objects)."""
+        idx = np.asarray(idx, dtype=np.int64)
+        if idx.ndim != 1 or (idx.size and (idx.min() < 0 or idx.max() >= self.n_objects)):
+            raise InputError(f"object indices must be a 1-D array within [0, {self.n_objects}), got {idx.tolist()}")
+        picked = {k: getattr(self, k)[idx] for k in ("first_index", "index_count", "base_vertex", "bmin", "bmax",
+                                                      "centers", "radii", "colors")}
+        return Scene(**{**self._arrays(), **picked}, name=self.name, meta=self.meta)
+
     def without_geometry(self) -> "Scene":
         """The same objects without their vertex and index buffers (empty arrays), for the
         frame loop once the GL buffers hold them: bounds, draw ranges, colours and meta stay.

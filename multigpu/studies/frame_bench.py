@@ -22,16 +22,21 @@ import numpy as np
 PHASES = ("learn", "project", "plan", "drawlist", "transfers", "row")
 
 
+#: objects of a scene ``bench frame``'s ``fixed`` column plans (spread evenly through the scene):
+#: what a frame's balancing costs with the caches cold whatever the scene's objects
+FEW = 16
+
 #: bytes written between frames by ``frame_phases(cold=True)``: past this machine's caches, as a
 #: rank's rendering and its neighbours on the same cores are between two balance phases
 EVICT = 64 << 20
 
 
 def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), frames: int = 60,
-                 cold: bool = False) -> dict:
+                 cold: bool = False, path=None) -> dict:
     """Median CPU ms of each per-frame phase (and their total) for rank 0, planned by the frame
     loop's own ``Planner``; ``cold``: the caches are flushed before every frame (``EVICT``
-    bytes written, not timed), as in a run, where the renderer runs between two plans."""
+    bytes written, not timed), as in a run, where the renderer runs between two plans;
+    ``path``: the camera path (None: the scene's walkthrough of ``frames`` frames)."""
     from multigpu.config import WalkConfig
     from multigpu.core.drawlist import DrawList
     from multigpu.core.planner import Planner
@@ -40,7 +45,7 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
     from multigpu.scene.paths import generate
 
     cfg = WalkConfig(grid=tuple(grid), tile=tuple(tile), balance=strategy)
-    path = generate("walkthrough", scene, frames)
+    path = generate("walkthrough", scene, frames) if path is None else path
     planner = Planner(cfg, scene, rank=0)
     draws = DrawList(scene)
     tiles = cfg.canvas.tiles()
@@ -97,6 +102,7 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
 
 def bench_frame(quick: bool) -> list[dict]:
     from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import generate
 
     scenes = [("plant", SceneSpec(triangles=20_000 if quick else 100_000)),
               ("city", SceneSpec(scene="city", triangles=20_000 if quick else 100_000))]
@@ -106,18 +112,23 @@ def bench_frame(quick: bool) -> list[dict]:
     rows = []
     print("per-frame CPU ms of rank 0 on a 2x2 wall of 512x512 (process CPU time, median over frames)")
     print("'cold': the balancing with the caches flushed before every frame (64 MiB written, as the renderer and "
-          "the ranks sharing the cores do between two plans in a run)")
+          "the ranks sharing the cores do between two plans in a run); 'fixed': the same, cold, with "
+          f"{FEW} of the scene's objects (spread through it): what a frame costs whatever its objects")
     print(f"{'scene':>6} {'objects':>8} {'strategy':>9} " + " ".join(f"{p:>9}" for p in (*PHASES, "total"))
-          + f" {'balancing':>9} {'cold':>6} {'calls':>6}")
+          + f" {'balancing':>9} {'cold':>6} {'fixed':>6} {'calls':>6}")
     for name, spec in scenes:
         scene, _ = load_scene(spec)
+        few = scene.objects(np.linspace(0, scene.n_objects - 1, FEW).astype(np.int64))
+        path = generate("walkthrough", scene, frames)  # the whole scene's, for its few objects too
         for strategy in ("strips", "time", "cross", "cost", "adaptive", "none") if name != "plant4" else \
                 ("strips", "cross", "none"):
             med = frame_phases(scene, strategy, frames=frames)
             cold = frame_phases(scene, strategy, frames=frames, cold=True)["balancing"]
-            rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med, "cold": cold})
+            fixed = frame_phases(few, strategy, frames=frames, cold=True, path=path)["balancing"]
+            rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med, "cold": cold,
+                         "fixed": fixed})
             figures = " ".join(f"{med[p]:9.3f}" for p in (*PHASES, "total", "balancing"))
-            print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures} {cold:6.3f} {med['calls']:6d}")
+            print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures} {cold:6.3f} {fixed:6.3f} {med['calls']:6d}")
     return rows
 
 
