@@ -1,12 +1,27 @@
 """Shared test setup: a per-session scene cache, so MPI tests build each scene once."""
 
 import os
+import signal
 import tempfile
+import threading
 
 import pytest
 
 os.environ.setdefault("MULTIGPU_CACHE", tempfile.mkdtemp(prefix="multigpu-cache-"))
 os.environ.setdefault("LP_NUM_THREADS", "1")
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt(f"stopped by signal {signal.Signals(signum).name}")
+
+
+def pytest_configure(config):
+    """A SIGTERM (CI's ``timeout``, a user's ``kill``) ends the run as Ctrl-C does: the running
+    test's ``with`` blocks, ``finally`` clauses and fixtures tear down, so the mpiexec jobs, X
+    servers and namespaces it started are killed by id, not left running (Python's default
+    SIGTERM ends the process with no cleanup at all). A handler someone else set is kept."""
+    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _interrupt)
 
 
 def pytest_sessionstart(session):
