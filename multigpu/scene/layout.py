@@ -92,8 +92,10 @@ class Scene:
         and colours; the vertex and index buffers are shared, unchanged (``bench frame`` plans a
         few of a scene's objects to measure what a frame costs whatever its objects)."""
         idx = np.asarray(idx, dtype=np.int64)
-        if idx.ndim != 1 or (idx.size and (idx.min() < 0 or idx.max() >= self.n_objects)):
-            raise InputError(f"object indices must be a 1-D array within [0, {self.n_objects}), got {idx.tolist()}")
+        if idx.ndim != 1:
+            raise InputError(f"object indices must be a 1-D array, got shape {idx.shape}")
+        if idx.size and (idx.min() < 0 or idx.max() >= self.n_objects):
+            raise InputError(f"object indices must lie in [0, {self.n_objects}), got {idx.min()}..{idx.max()}")
         picked = {k: getattr(self, k)[idx] for k in ("first_index", "index_count", "base_vertex", "bmin", "bmax",
                                                       "centers", "radii", "colors")}
         return Scene(**{**self._arrays(), **picked}, name=self.name, meta=self.meta)

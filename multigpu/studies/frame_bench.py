@@ -10,6 +10,9 @@ the frame loop's balance phase. Each phase is timed with
 functions and methods, builtins) one frame makes, counted with ``sys.setprofile`` on every
 tenth frame (left out of the times).
 Rendering and MPI waits are not in it: this is the fixed CPU cost balancing adds to a frame.
+``cold`` flushes the caches before every frame, as rendering does in a run; ``fixed`` plans 16
+of the scene's objects that way, so it shows what a cold frame costs per step, whatever the
+scene holds.
 """
 
 from __future__ import annotations
