@@ -73,9 +73,11 @@ class Scene:
     def nbytes(self) -> int:
         return sum(a.nbytes for a in self._arrays().values())
 
+    #: the arrays with one row per object (``objects`` picks rows of these)
+    PER_OBJECT = ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors")
+
     def _arrays(self) -> dict[str, np.ndarray]:
-        return {k: getattr(self, k) for k in ("vertices", "indices", "first_index", "index_count", "base_vertex",
-                                              "bmin", "bmax", "centers", "radii", "colors", "origin")}
+        return {k: getattr(self, k) for k in ("vertices", "indices", *self.PER_OBJECT, "origin")}
 
     def translated(self, offset) -> "Scene":
         """The same scene moved by ``offset`` world units (float64 bounds and origin; the
@@ -96,8 +98,7 @@ class Scene:
             raise InputError(f"object indices must be a 1-D array, got shape {idx.shape}")
         if idx.size and (idx.min() < 0 or idx.max() >= self.n_objects):
             raise InputError(f"object indices must lie in [0, {self.n_objects}), got {idx.min()}..{idx.max()}")
-        picked = {k: getattr(self, k)[idx] for k in ("first_index", "index_count", "base_vertex", "bmin", "bmax",
-                                                      "centers", "radii", "colors")}
+        picked = {k: getattr(self, k)[idx] for k in self.PER_OBJECT}
         return Scene(**{**self._arrays(), **picked}, name=self.name, meta=self.meta)
 
     def without_geometry(self) -> "Scene":
