@@ -4,6 +4,7 @@ from them (``walk_config``): argparse in, dataclasses out, no MPI (testable in o
 from __future__ import annotations
 
 import argparse
+import re
 
 from multigpu.errors import InputError
 
@@ -139,7 +140,6 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
 def walk_config(a):
     """The walkthrough's flags as a validated configuration (no MPI: testable in one process)."""
     from multigpu.config import WalkConfig, parse_pair, parse_vec3
-    from multigpu.core.canvas import parse_mullion
     from multigpu.wall import Wall, check_ranks, load_wall
 
     wall = load_wall(a.wall) if a.wall else Wall("")
@@ -176,3 +176,11 @@ def _monitor(text: str | None) -> tuple[int, int] | None:
     if not (x.strip().isdigit() and y.strip().isdigit()):
         raise InputError(f"--monitor must look like X,Y (pixels from the display's top-left corner), got '{text}'")
     return int(x), int(y)
+
+
+def parse_mullion(text: str, flag: str = "--mullion") -> tuple[int, int]:
+    """'MXxMY' (non-negative pixels) or a clear error naming ``flag``."""
+    m = re.fullmatch(r"\s*(\d+)\s*x\s*(\d+)\s*", str(text))
+    if not m:
+        raise InputError(f"{flag} must look like MXxMY with pixels >= 0 (e.g. 40x40), got '{text}'")
+    return int(m.group(1)), int(m.group(2))

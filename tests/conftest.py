@@ -27,9 +27,9 @@ def pytest_configure(config):
 def pytest_sessionstart(session):
     """Compile the frame kernel once, here (numba caches it beside the module), so the MPI
     ranks of the tests load it instead of compiling it side by side inside their timeouts."""
-    from multigpu.core import kernel
+    from multigpu import kernels
 
-    kernel.warm()
+    kernels.warm()
 
 
 @pytest.fixture

@@ -7,7 +7,7 @@ from multigpu.core.balance import partition, partition_tiles
 from multigpu.core.bounds import BoxProjector
 from multigpu.core.camera import look_at, perspective
 from multigpu.core.spheres import SphereProjector
-from multigpu.studies.bench import synthetic_objects
+from multigpu.studies.synthetic import synthetic_objects
 
 BMIN, BMAX, CENTERS, RADII, TRIS = synthetic_objects(3000, seed=9)
 EYE, TARGET = np.array([-40.0, -60, 40]), np.array([100.0, 60, 0])

@@ -1,4 +1,4 @@
-"""The compiled balancer (core/kernel.py) against the numpy reference (core/balance.py): the same
+"""The compiled balancer (core/balance_kernel.py) against the numpy reference (core/balance.py): the same
 regions, loads, T' masks, splits and spans, bit for bit, on random and extreme inputs."""
 
 import numpy as np
@@ -6,11 +6,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from multigpu.core import kernel
+from multigpu.core import balance_kernel as kernel
+from multigpu.core import jit
 from multigpu.core.balance import partition
 from multigpu.strategies import REGISTRY
 
-pytestmark = pytest.mark.skipif(not kernel.available(), reason="numba is not installed (pip install numba)")
+pytestmark = pytest.mark.skipif(not jit.available(), reason="numba is not installed (pip install numba)")
 FIELDS = ("regions", "loads", "visible", "splits", "split_pixels", "spans")
 
 
@@ -61,7 +62,7 @@ def test_extremes_equal_the_reference():
     same(np.zeros((0, 4)), np.zeros(0, dtype=np.int64), (2, 3), (64, 64), 16)
 
 
-# -- the compiled box projection (core/kernel/project.py) against bounds.py's numpy reference
+# -- the compiled box projection (core/bounds_kernel.py) against bounds.py's numpy reference
 
 def same_rects(bmin, bmax, view, proj, dtype):
     from multigpu.core.bounds import BoxProjector
@@ -142,9 +143,9 @@ def test_compiled_clip_matrix_and_rects_under_dense_matrices(seed, n):
     """A camera's matrices are sparse (two terms per entry of proj @ view: any order adds them
     alike); under dense ones the kernel's proj @ view must still add its four products in the
     reference's order, so the rects stay equal bit for bit."""
+    from multigpu.core.bounds_kernel import _clip_matrix
     from multigpu.core.box_tables import clip_matrix
     from multigpu.core.camera import look_at, perspective
-    from multigpu.core.kernel.project import _clip_matrix
 
     rng = np.random.default_rng(seed)
     mix = np.eye(4) + rng.uniform(-0.3, 0.3, (4, 4))  # a dense clip-space map
@@ -196,7 +197,7 @@ def test_compiled_projection_culls_groups_exactly_at_the_planes():
             same_rects(c - h, c + h, view, proj, np.float32)
 
 
-# -- every strategy (cross-segment: core/kernel/pieces.py; time, none: fixed cuts) compiled and not
+# -- every strategy (cross-segment: strategies/cross_kernel.py; time, none: fixed cuts) compiled and not
 
 def same_partition(a, b):
     for name in FIELDS:
@@ -284,7 +285,7 @@ def test_compiled_time_chooser_equals_the_reference(data, rows, cols, strips, da
 def test_compiled_cross_equals_the_reference_past_its_sample(grid):
     """Past ``SAMPLE`` objects on screen the time profiles weigh every k-th object for k: the
     kernel and the reference still plan the same pieces, weights and shares, frame after frame."""
-    from multigpu.core.kernel.pieces import SAMPLE
+    from multigpu.strategies.cross_kernel import SAMPLE
 
     rng = np.random.default_rng(7)
     n = 3 * SAMPLE + 5
@@ -424,7 +425,7 @@ def test_compiled_fill_line_equals_fill_prefix(size):
     """The fill cost below every candidate cut of the root node, value for value, where the
     line is per pixel and where it is in cells of several pixels (displays past 2**16)."""
     from multigpu.core.balance import _task
-    from multigpu.core.kernel.walk import _fill_line
+    from multigpu.core.balance_kernel import _fill_line
     from multigpu.core.regions import pixel_spans
     from multigpu.core.splits import fill_prefix
     from multigpu.core.tree import gpu_tree
@@ -445,7 +446,7 @@ def test_compiled_fill_line_equals_fill_prefix(size):
     assert np.array_equal(got, want) and got_total == want_total
 
 
-# -- the cost model's least-squares fit (core/kernel/fit.py) against its numpy predecessor
+# -- the cost model's least-squares fit (cost_kernel.py) against its numpy predecessor
 
 @settings(max_examples=150, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), rows=st.integers(4, 120), pixels=st.booleans(), has_tris=st.booleans(),
@@ -501,10 +502,10 @@ _AFTER_WARM = """
 import importlib, json, pkgutil, sys
 import numpy as np
 from multigpu.config import WalkConfig
-from multigpu.core import kernel
+from multigpu import kernels
 from multigpu.core.drawlist import DrawList
-from multigpu.core.kernel.jit import numba
-from multigpu.core.planner import Planner
+from multigpu.core.jit import numba
+from multigpu.planner import Planner
 from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
 from multigpu.scene.models import SceneSpec, load_scene
 from multigpu.scene.paths import generate
@@ -512,14 +513,14 @@ from multigpu.strategies import REGISTRY
 
 def dispatchers():
     found = {}
-    for info in pkgutil.iter_modules(kernel.__path__):
-        module = importlib.import_module(f"{kernel.__name__}.{info.name}")
+    for module_name in kernels.MODULES:
+        module = importlib.import_module(module_name)
         for name, value in vars(module).items():
             if isinstance(value, numba.core.dispatcher.Dispatcher):
-                found[f"{info.name}.{name}"] = value
+                found[f"{module_name}.{name}"] = value
     return found
 
-kernel.warm()
+kernels.warm()
 before = {name: len(d.signatures) for name, d in dispatchers().items()}
 scene, _ = load_scene(SceneSpec(scene=sys.argv[1], triangles=20_000))
 path = generate("walkthrough", scene, 6)
@@ -543,7 +544,7 @@ print(json.dumps({name: [str(s) for s in d.signatures[before[name]:]] for name, 
 
 @pytest.mark.parametrize("scene_name", ["plant", "city"])
 def test_frames_after_warm_compile_nothing(scene_name):
-    """``kernel.warm()`` at setup covers every signature a run uses: in a fresh interpreter,
+    """``kernels.warm()`` at setup covers every signature a run uses: in a fresh interpreter,
     frames planned afterwards with every strategy and decomposition, for one rank and for all,
     add none (a signature missed costs its compile, or its load from numba's cache, inside the
     first frame: 26-40 ms of CPU for ``none``'s read-only tile cuts before warm() planned it)."""

@@ -75,3 +75,111 @@ def test_modules_and_functions_stay_small():
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 n = node.end_lineno - node.lineno + 1
                 assert n <= 80, f"{f.relative_to(PKG)}:{node.name} has {n} lines"
+
+
+# -- the floor plan: imports run downward only (shared/LAYOUT.md) ---------------------------------
+
+#: what each floor may import of the package besides itself; a unit not listed may import anything
+#: below it that keeps the graph free of circles (checked next)
+FLOORS = {
+    "core": set(),
+    "strategies": {"core"},
+    "scene": {"core", "errors"},
+    "decompositions": {"core", "strategies"},
+    "planner": {"core", "strategies", "decompositions"},
+    "kernels": {"core", "strategies", "scene"},
+}
+
+
+def _module(path: Path) -> str:
+    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _graph() -> dict[str, set[str]]:
+    """Module -> the package's modules it imports (top level or inside functions); ``from pkg
+    import name`` counts as importing the submodule ``pkg.name`` where one exists, else ``pkg``."""
+    files = {_module(f): f for f in _files()}
+    graph = {}
+    for name, f in files.items():
+        deps = set()
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Import):
+                deps |= {a.name for a in node.names if a.name in files}
+            elif isinstance(node, ast.ImportFrom) and node.module in files:
+                subs = {f"{node.module}.{a.name}" for a in node.names} & files.keys()
+                deps |= subs if len(subs) == len(node.names) else subs | {node.module}
+        graph[name] = deps - {name}
+    return graph
+
+
+def _unit(module: str) -> str:
+    """The floor a module stands on: its sub-package, or the top-level module's own name."""
+    return module.split(".")[1] if "." in module else module
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one node (Tarjan, iterative)."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter[0]
+        counter[0] += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = counter[0]
+                    counter[0] += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(graph.get(w, ())))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_each_floor_imports_only_the_floors_below():
+    for module, deps in _graph().items():
+        unit = _unit(module)
+        if unit in FLOORS:
+            bad = {d for d in deps if _unit(d) not in FLOORS[unit] | {unit}}
+            assert not bad, f"{module} ({unit}/) imports {sorted(bad)}: above its floor"
+
+
+def test_no_circles_between_packages():
+    units: dict[str, set[str]] = {}
+    for module, deps in _graph().items():
+        units.setdefault(_unit(module), set()).update(_unit(d) for d in deps)
+    for unit in units:
+        units[unit].discard(unit)
+    assert _cycles(units) == []
+
+
+def test_no_circles_between_modules():
+    """Not even through an import inside a function (a loop kept apart only by import order)."""
+    assert _cycles(_graph()) == []
+
+
+def test_the_cycle_finder_finds_one():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from multigpu.config import WalkConfig
-from multigpu.core.planner import Planner
+from multigpu.planner import Planner
 from multigpu.scene.models import SceneSpec, load_scene
 from multigpu.scene.paths import generate
 

@@ -8,8 +8,8 @@ import pytest
 import trimesh
 
 from multigpu.cli import main as cli
-from multigpu.core.bounds import make_projector
 from multigpu.core.camera import frame_matrices
+from multigpu.core.projectors import make_projector
 from multigpu.errors import InputError
 from multigpu.parallel.report import COLUMNS, summarize
 from multigpu.scene.models import SceneSpec, axis_name, load_scene

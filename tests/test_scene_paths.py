@@ -209,10 +209,10 @@ def test_models_and_clusters_built_a_block_of_faces_at_a_time_are_the_same(tmp_p
 def test_compiled_components_equal_scipys():
     """Union-find (compiled) and scipy's sparse graph give the same face labels: the same
     partition, numbered in the same order of lowest vertex (so scenes are identical)."""
-    from multigpu.core import kernel
+    from multigpu.core import jit
     from multigpu.scene.labels import component_labels
 
-    if not kernel.available():
+    if not jit.available():
         pytest.skip("numba is not installed: only scipy's reference runs")
     rng = np.random.default_rng(5)
     for n_verts, n_faces in ((3, 1), (50, 10), (400, 300), (5000, 2000), (2000, 6000)):

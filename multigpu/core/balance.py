@@ -18,8 +18,21 @@ from typing import NamedTuple
 
 import numpy as np
 
-from multigpu.core import kernel  # module-level: a function-level import costs a Python call per frame
-from multigpu.core.regions import MAX_PIXELS, MAX_TOTAL, overlaps, pixel_spans, tile_regions
+from multigpu.core import (  # module-level: a function-level import costs a Python call per frame
+    balance_kernel as kernel,
+)
+from multigpu.core import jit
+from multigpu.core.regions import (
+    INVERTED,
+    MAX_PIXELS,
+    MAX_TOTAL,
+    NEGATIVE,
+    NOT_FINITE,
+    TOO_MANY,
+    overlaps,
+    pixel_spans,
+    tile_regions,
+)
 from multigpu.core.splits import SplitTask, strip_chooser
 from multigpu.core.tree import VERTICAL, GpuTree, gpu_tree
 
@@ -66,10 +79,6 @@ class Partition(NamedTuple):
 
 
 #: the refusals of per-object inputs, made here or in the compiled walk's own pass
-NOT_FINITE = "tris (weights) must be finite"
-NEGATIVE = "tris must be non-negative (a negative triangle count was given)"
-TOO_MANY = "the triangle total exceeds 2**62 (sums could overflow int64)"
-INVERTED = "rects has inverted rows (xmin > xmax or ymin > ymax)"
 
 
 def validate_inputs(rects, tris, grid, size, strips, rows: bool = True
@@ -172,7 +181,7 @@ def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool 
     (``object_free``) has its cuts found first and the compiled walk take them (``compiled``
     as in ``partition``).
     """
-    object_free = getattr(choose, "object_free", False) and kernel.use(compiled)
+    object_free = getattr(choose, "object_free", False) and jit.use(compiled)
     # the compiled walk makes the per-object checks in its own pass
     rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, strips, rows=not object_free)
     strips = int(strips)
@@ -227,7 +236,7 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
     fill : optional (N,) non-negative float, or a scalar: cost per covered pixel of each
         object's rect (the cost model's fragment term). None balances ``tris`` alone, exactly
         the paper's Alg. 2.
-    compiled : Alg. 2 (with or without ``fill``) as one compiled call (``core/kernel``: the
+    compiled : Alg. 2 (with or without ``fill``) as one compiled call (``balance_kernel.py``: the
         same partition, bit for bit); None uses it where numba is installed, False runs this
         module's numpy reference.
     """
@@ -237,7 +246,7 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
         if density.size and (not np.isfinite(density).all() or density.min() < 0):
             raise ValueError("fill must be finite and non-negative")
         density = np.ascontiguousarray(density)
-    if kernel.use(compiled):
+    if jit.use(compiled):
         rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips, rows=False)
         return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips), density=density))
     return tree_partition(rects, tris, grid, size, strips, strip_chooser(density))
@@ -250,7 +259,7 @@ def partition_tiles(rects, tris, grid, size, compiled: bool | None = None) -> Pa
     are the tile boundaries in p-pos form. Compiled (``compiled`` as in ``partition``): the
     tree walk with the tile boundaries as its cuts, the same partition.
     """
-    compiled = kernel.use(compiled)  # compiled, the walk makes the per-object checks in its own pass
+    compiled = jit.use(compiled)  # compiled, the walk makes the per-object checks in its own pass
     rects, tris, tree, (W, H) = validate_inputs(rects, tris, grid, size, 2, rows=not compiled)
     rows, cols = tree.rows, tree.cols
     if W % cols or H % rows:

@@ -18,20 +18,19 @@ small per-corner offsets may be float32 (``dtype``) for speed.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from multigpu.core import bounds_kernel as kernel
+from multigpu.core import jit
+from multigpu.core.bounds_kernel import _project_camera, spatial_groups
 from multigpu.core.box_tables import EDGES as _EDGES
 from multigpu.core.box_tables import FACES as _FACES
 from multigpu.core.box_tables import NEXT as _NEXT
 from multigpu.core.box_tables import SIGNS as _SIGNS
 from multigpu.core.box_tables import clip_matrix
 from multigpu.core.camera import frame_matrices
-from multigpu.core.kernel.jit import entry
-
-if TYPE_CHECKING:
-    from multigpu.core.spheres import SphereProjector
+from multigpu.core.jit import entry
 
 
 def _check(view, proj) -> np.ndarray:
@@ -94,19 +93,15 @@ class BoxProjector:
         self.center = np.ascontiguousarray(((bmin + bmax) * 0.5).T)  # (3, N) float64
         self.half64 = np.ascontiguousarray(np.abs(bmax - bmin).T * 0.5)  # (3, N) float64
         self.half = self.half64.astype(self.dtype)  # per-corner offsets in ``dtype``
-        from multigpu.core import kernel
-
-        if compiled and not kernel.available():
+        if compiled and not jit.available():
             raise ValueError("compiled=True needs numba (pip install numba)")
-        # the compiled projection (core/kernel/project.py: the same rects, bit for bit) where
+        # the compiled projection (bounds_kernel.py: the same rects, bit for bit) where
         # numba is installed, unless compiled=False asks for this module's numpy reference
-        self.compiled = kernel.available() if compiled is None else bool(compiled)
+        self.compiled = jit.available() if compiled is None else bool(compiled)
         self.plain = int(plain)  # compiled: boxes in their own order where few are culled (-1), always (1), never (0)
         self.widen = float(np.finfo(self.dtype).eps) * 16  # rects widened by this (NDC) against rounding
         self.plain_boxes = (self.center, self.half64)
         if self.compiled:  # the kernel culls neighbours a group at a time: boxes in a spatial order
-            from multigpu.core.kernel.project import _project_camera, spatial_groups
-
             self.grouped = spatial_groups(self.center, self.half64)
             self._kernel = kernel.project_boxes
             order, center, half64, starts, gbox = self.grouped
@@ -371,14 +366,3 @@ def _near_distance(proj: np.ndarray) -> float:
     """Near-plane distance of a GL perspective matrix."""
     a, b = proj[2, 2], proj[2, 3]
     return float(b / (a - 1.0))
-
-
-def make_projector(scene, kind: str = "box", dtype=np.float32) -> "BoxProjector | SphereProjector":
-    """A scene's bounds prepared once for per-frame projection: ``box`` (8 corners) or ``sphere``."""
-    if kind == "sphere":
-        from multigpu.core.spheres import SphereProjector
-
-        return SphereProjector(scene.centers, scene.radii)
-    if kind == "box":
-        return BoxProjector(scene.bmin, scene.bmax, dtype)
-    raise ValueError(f"bounds must be 'box' or 'sphere', got '{kind}'")

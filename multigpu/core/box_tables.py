@@ -1,5 +1,5 @@
 """A box's corners, edges and faces as index tables: shared by the numpy box projection
-(``bounds``) and its compiled kernel (``kernel/project.py``), where they are compile-time
+(``bounds``) and its compiled kernel (``bounds_kernel.py``), where they are compile-time
 constants rather than arguments (every array argument costs a compiled call its unboxing)."""
 
 from __future__ import annotations

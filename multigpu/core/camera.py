@@ -41,7 +41,7 @@ def camera_into(ex, ey, ez, tx, ty, tz, ux, uy, uz, fov_deg, near, far, aspect, 
     direction (``out[2, 0, :3]``: view^T (0.3, 0.5, 0.8), normalized: towards the viewer,
     slightly above), written into ``out`` (3, 4, 4) float64, the other entries left as they
     are. Scalar arithmetic on Python floats, one routine for both paths: here for numpy, and
-    compiled unchanged into the projection kernel (``kernel/project.py``), which forms a frame's
+    compiled unchanged into the projection kernel (``bounds_kernel.py``), which forms a frame's
     matrices and rects in one call; IEEE double either way, so the two agree bit for bit.
     False (nothing written) where the position and target coincide or are not finite."""
     fx, fy, fz = tx - ex, ty - ey, tz - ez

@@ -142,15 +142,3 @@ def _squeeze(x: np.ndarray, n: int, t: int, m: int, low: bool):
         gap = (local >= t) & (c < n - 1)
         edge = (c + 1) * t - (0.0 if low else 0.5)
         return np.where(gap, edge, c * t + local), gap, c
-
-
-def parse_mullion(text: str, flag: str = "--mullion") -> tuple[int, int]:
-    """'MXxMY' (non-negative pixels) or a clear error naming ``flag``."""
-    import re
-
-    from multigpu.errors import InputError
-
-    m = re.fullmatch(r"\s*(\d+)\s*x\s*(\d+)\s*", str(text))
-    if not m:
-        raise InputError(f"{flag} must look like MXxMY with pixels >= 0 (e.g. 40x40), got '{text}'")
-    return int(m.group(1)), int(m.group(2))

@@ -122,14 +122,14 @@ class DrawList:
     def commands(self, mask: np.ndarray | None, compiled: bool | None = None) -> np.ndarray:
         """(R, 5) uint32 ``(count, 1, first, 0, 0)`` draw commands, one per run of visible
         objects in buffer order; ``mask`` (N,) bool in scene object order (None: all).
-        ``compiled``: the one-pass kernel (``core/kernel/draws.py``, the same commands) where
+        ``compiled``: the one-pass kernel (``drawlist_kernel.py``, the same commands) where
         numba is installed (None), or this numpy reference (False)."""
         if mask is None:
             mask = np.ones(self.order.size, dtype=bool)
-        from multigpu.core import kernel
+        from multigpu.core import jit
 
-        if kernel.use(compiled):
-            from multigpu.core.kernel.draws import _commands
+        if jit.use(compiled):
+            from multigpu.core.drawlist_kernel import _commands
 
             return _commands(np.ascontiguousarray(mask, dtype=np.bool_), self.order, self.offsets)
         m = np.asarray(mask, dtype=bool)[self.order].view(np.int8)

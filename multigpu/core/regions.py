@@ -17,6 +17,11 @@ SPAN_DTYPE = np.int32
 MAX_PIXELS = 2**30
 # integer weights (triangle counts) must sum below this, so every sum fits int64
 MAX_TOTAL = 2**62
+# the balancer's refusals of bad weights and rects (the reference and the compiled walk say the same)
+NOT_FINITE = "tris (weights) must be finite"
+NEGATIVE = "tris must be non-negative (a negative triangle count was given)"
+TOO_MANY = "the triangle total exceeds 2**62 (sums could overflow int64)"
+INVERTED = "rects has inverted rows (xmin > xmax or ymin > ymax)"
 
 
 def tile_regions(rows: int, cols: int, tw: int, th: int) -> np.ndarray:

@@ -5,7 +5,7 @@
 chooser they pass. Here: the paper's strip chooser (Alg. 2: Start/End arrays over the strips,
 prefix and postfix sums, the candidate whose ratio best matches balRatio), its fill-cost
 extension (``fill_prefix``), and Equalizer's time chooser (cuts follow measured times; compiled
-in ``core/kernel/feedback.py``, whose cuts the walk then takes). Pure numpy, no Python loop over
+in ``splits_kernel.py``, whose cuts the walk then takes). Pure numpy, no Python loop over
 objects or strips.
 """
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multigpu.core.kernel.feedback import _time_cuts
+from multigpu.core.splits_kernel import _time_cuts
 
 _EXACT_FLOAT = 2**53
 
@@ -177,7 +177,7 @@ def time_chooser(regions: np.ndarray, times: np.ndarray, prev_cuts: np.ndarray |
         w = density * o  # time per pixel along the axis, per old region
         c = t.cuts.astype(np.float64)[:, None]
         # sums over the ranks in rank order (cumsum; ``@`` leaves the order to BLAS), as the
-        # compiled chooser (core/kernel/feedback.py) adds them
+        # compiled chooser (splits_kernel.py) adds them
         below = np.cumsum(np.clip(np.minimum(c, r1) - np.maximum(t.a, r0), 0, None) * w, axis=1)[:, -1]
         total = float(np.cumsum(np.clip(np.minimum(t.b, r1) - np.maximum(t.a, r0), 0, None) * w)[-1])
         if total <= 0:

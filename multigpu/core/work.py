@@ -16,9 +16,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from multigpu.core import kernel
+from multigpu.core import jit
 from multigpu.core.balance import Partition
-from multigpu.core.kernel.parts import _parts
+from multigpu.core.work_kernel import _parts
 
 
 class Work(NamedTuple):
@@ -93,12 +93,12 @@ SMALL = 64
 def transfers(work: Work, tiles: np.ndarray, compiled: bool | None = None) -> list[Piece]:
     """Every non-empty (piece, tile) intersection, sorted by (sender, receiver, piece index):
     the order both ends pack and unpack one pair's message in. Past ``SMALL`` pairs the
-    compiled pass (``core/kernel/parts.py``, the same parts) where numba is installed
+    compiled pass (``work_kernel.py``, the same parts) where numba is installed
     (``compiled`` None) or asked for; ``compiled=False`` always loops."""
     pieces = [np.asarray(r, dtype=np.int64).reshape(-1, 4).tolist() for r in work.rects]  # ranks, not objects
     T = np.asarray(tiles, dtype=np.int64).tolist()
     counts = [len(p) for p in pieces]
-    if sum(counts) * len(T) > SMALL and kernel.use(compiled):
+    if sum(counts) * len(T) > SMALL and jit.use(compiled):
         R = np.array([rect for mine in pieces for rect in mine], dtype=np.int64).reshape(-1, 4)
         rows = _parts(R, np.array(counts, dtype=np.int64), np.array(T, dtype=np.int64).reshape(-1, 4))
         return [Piece(s, r, i, (x0, y0, x1, y1)) for s, r, i, x0, y0, x1, y1 in rows.tolist()]

@@ -24,9 +24,9 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
     from mpi4py import MPI
 
     from multigpu.config import WalkConfig
-    from multigpu.core.planner import Planner
     from multigpu.core.regions import overlaps, pixel_spans
     from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.planner import Planner
     from multigpu.scene.models import load_scene
     from multigpu.scene.paths import generate
 

@@ -13,9 +13,8 @@ import os
 import numpy as np
 
 from multigpu.config import INTERACTIVE, WalkConfig
-from multigpu.core import kernel
+from multigpu.core import jit
 from multigpu.core.camera import Camera
-from multigpu.core.planner import Planner
 from multigpu.core.work import Work, transfers
 from multigpu.parallel.composite import Messages
 from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
@@ -26,6 +25,7 @@ from multigpu.parallel.record import RunRecord
 from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
 from multigpu.parallel.shared import SharedPieces
 from multigpu.parallel.timer import Timer
+from multigpu.planner import Planner
 from multigpu.scene.models import axis_name
 
 #: the test-only fault to inject, read once: a lookup in ``os.environ`` (its miss is a KeyError
@@ -352,7 +352,7 @@ def _config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> 
             "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,
             "monitor": cfg.monitor is not None,
             "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
-            "kernel": {"compiled": kernel.available(),
+            "kernel": {"compiled": jit.available(),
                        "warm_seconds": round(load_info.get("kernel_seconds", 0.0), 3)}}
 
 

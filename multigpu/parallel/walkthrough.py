@@ -18,9 +18,10 @@ import socket
 import numpy as np
 
 from multigpu.config import INTERACTIVE, MONITOR_BESIDE, WalkConfig, setup_timeout
-from multigpu.core.bounds import BoxProjector, make_projector
+from multigpu.core.bounds import BoxProjector
 from multigpu.core.camera import frame_matrices
 from multigpu.core.memory import release_heap
+from multigpu.core.projectors import make_projector
 from multigpu.core.spheres import SphereProjector
 from multigpu.errors import InputError, as_flags
 from multigpu.gpu.buffers import ensure_buffers
@@ -153,9 +154,9 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 ctx, device = create_context(cfg.device, local_rank=local, host_ranks=host_ranks)
             renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum, shared)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
-            from multigpu.core import kernel
+            from multigpu import kernels
 
-            load_info = {**load_info, "kernel_seconds": kernel.warm()}  # compiled here, never in a frame
+            load_info = {**load_info, "kernel_seconds": kernels.warm()}  # compiled here, never in a frame
             release_heap()  # setup's freed temporaries leave the heap before the first frame
         except (InputError, RuntimeError) as exc:
             error = as_flags(exc)

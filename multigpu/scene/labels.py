@@ -31,13 +31,13 @@ def component_labels(faces: np.ndarray, verts: np.ndarray, compiled: bool | None
     split-normal OBJ duplicate them). Compiled union-find where numba is installed (``None``):
     a parent per vertex, nothing per edge; ``compiled=False``: scipy's sparse graph (the
     reference: its edge lists cost ~30 bytes a face)."""
-    from multigpu.core import kernel
+    from multigpu.core import jit
 
     _, canon = np.unique(verts, axis=0, return_inverse=True)
     canon = canon.ravel().astype(np.int32 if len(verts) < 2**31 else np.int64)
     n_verts = int(canon.max()) + 1
-    if kernel.use(compiled):
-        from multigpu.core.kernel.components import vertex_roots
+    if jit.use(compiled):
+        from multigpu.scene.labels_kernel import vertex_roots
 
         return vertex_roots(canon, np.ascontiguousarray(faces), n_verts)[canon[faces[:, 0]]]
     from scipy.sparse import coo_matrix

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multigpu.core import kernel
+from multigpu.core import jit
 from multigpu.core.balance import Partition, partition
-from multigpu.core.kernel.corrections import _object_sums, _rank_sums
+from multigpu.strategies.adaptive_kernel import _object_sums, _rank_sums
 from multigpu.strategies.base import coverage_of, rank_pixels
 from multigpu.strategies.cost import CostModel
 
@@ -37,7 +37,7 @@ class Adaptive(CostModel):
     def __post_init__(self):
         super().__post_init__()
         self.corr: np.ndarray | None = None
-        self._compiled = kernel.use(self.compiled)  # the sums over the masks compiled (once, not per frame)
+        self._compiled = jit.use(self.compiled)  # the sums over the masks compiled (once, not per frame)
 
     def plan(self, rects, tris, coverage: np.ndarray | None = None):
         tris = np.asarray(tris)
@@ -60,7 +60,7 @@ class Adaptive(CostModel):
 
     def _rank_sums(self, vis: np.ndarray, tris: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per rank: the triangles it draws (int64 ``tris``) and its objects' corrected
-        ``weights`` summed in object order (compiled: ``core/kernel/corrections.py``, the same sums)."""
+        ``weights`` summed in object order (compiled: ``adaptive_kernel.py``, the same sums)."""
         k = len(vis)
         if self._compiled:
             loads, weighed = np.empty(k, dtype=np.int64), np.empty(k)
@@ -72,7 +72,7 @@ class Adaptive(CostModel):
 
     def _object_sums(self, vis: np.ndarray, log_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per object: the log errors of the ranks that drew it summed in rank order, and how
-        many did (compiled: ``core/kernel/corrections.py``, the same sums)."""
+        many did (compiled: ``adaptive_kernel.py``, the same sums)."""
         if self._compiled:
             sums, count = np.empty(vis.shape[1]), np.empty(vis.shape[1], dtype=np.int64)
             _object_sums(np.ascontiguousarray(vis), log_s, sums, count)

@@ -31,8 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multigpu.core import kernel
+from multigpu.core import jit
 from multigpu.core.balance import Partition
+from multigpu.strategies import auto_kernel
 from multigpu.strategies.base import Configured
 from multigpu.strategies.cross import CrossSegment
 from multigpu.strategies.strips import Strips
@@ -71,7 +72,7 @@ class Auto(Configured):
         self._scores: list[tuple[int, float, float]] = []  # (candidate, load, slowest time) of scored frames
         self.trials: deque = deque(maxlen=REPORT_TRIALS)
         self.frames = [0] * len(self.candidates)  # frames each candidate planned
-        self._compiled = kernel.use(self.compiled)  # the trial's load in one compiled pass
+        self._compiled = jit.use(self.compiled)  # the trial's load in one compiled pass
 
     @property
     def round_frames(self) -> int:
@@ -112,7 +113,7 @@ class Auto(Configured):
         """A scored frame's load: the triangles in view (NaN rects are the unseen objects);
         compiled where it can be (numpy's masked sum: ~75 us for 6,690 objects, caches warm)."""
         if self._compiled:
-            return kernel.seen_triangles(rects, tris)
+            return auto_kernel.seen_triangles(rects, tris)
         return float(np.sum(tris, where=rects[:, 0] == rects[:, 0]))
 
     def effects(self) -> tuple[np.ndarray, np.ndarray, float | None]:

@@ -16,10 +16,10 @@ from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from multigpu.core import kernel
+from multigpu.core import jit
 from multigpu.core.balance import Partition
-from multigpu.core.kernel.pixels import rank_pixels as _compiled_pixels
 from multigpu.core.regions import pixel_spans
+from multigpu.strategies.base_kernel import rank_pixels as _compiled_pixels
 
 
 @runtime_checkable
@@ -76,10 +76,10 @@ def rank_pixels(rects: np.ndarray, visible: np.ndarray, regions: np.ndarray, siz
     in object order (overlapping objects count once each: depth complexity). A (M, N)
     ``coverage`` gives (K, M): several weightings of the same clipped areas in one pass.
     ``spans`` (the partition's) saves recomputing the pixel spans. ``compiled`` (None: where
-    numba is installed) runs ``core/kernel/pixels.py``, the same sums bit for bit."""
+    numba is installed) runs ``base_kernel.py``, the same sums bit for bit."""
     sp = pixel_spans(rects, size)[0].T if spans is None else spans  # (4, N) int32, once per frame
     cov = None if coverage is None else np.asarray(coverage, dtype=np.float64)
-    if kernel.use(compiled):
+    if jit.use(compiled):
         weights = np.ones((1, visible.shape[1])) if cov is None else np.atleast_2d(cov)
         out = np.empty((len(regions), weights.shape[0]))
         _compiled_pixels(np.ascontiguousarray(sp), visible, np.asarray(regions, dtype=np.int64),

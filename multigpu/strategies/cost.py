@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multigpu.core import kernel
+from multigpu.core import jit
 from multigpu.core.balance import Partition, partition
-from multigpu.core.kernel.fit import fit_terms
 from multigpu.strategies.base import Configured, coverage_of, rank_pixels
+from multigpu.strategies.cost_kernel import fit_terms
 
 TERMS = ("triangles", "pixels")  # the fitted terms, in the order of ``fit_terms``' output
 
@@ -71,9 +71,9 @@ class CostModel(Configured):
         self.history.append(tuple(self.kept))
 
     def _fit(self, data: np.ndarray) -> None:
-        """The fit of ``core/kernel/fit.py`` (compiled, or its plain-Python self: the same
+        """The fit of ``cost_kernel.py`` (compiled, or its plain-Python self: the same
         coefficients), blended into the current ones; numpy's where the system is singular."""
-        fit = fit_terms if kernel.use(self.compiled) else getattr(fit_terms, "py_func", fit_terms)
+        fit = fit_terms if jit.use(self.compiled) else getattr(fit_terms, "py_func", fit_terms)
         out = np.empty(10)
         if not fit(np.ascontiguousarray(data, dtype=np.float64), float(self.min_share), float(self.max_rel_se), out):
             return self._fit_numpy(data)

@@ -38,11 +38,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multigpu.core import kernel
+from multigpu.core import jit
 from multigpu.core.balance import Partition, partition
-from multigpu.core.kernel.pieces import SAMPLE
 from multigpu.core.regions import pixel_spans, tile_regions
+from multigpu.strategies import cross_kernel as kernel
 from multigpu.strategies.base import Configured
+from multigpu.strategies.cross_kernel import SAMPLE
 
 
 def _seqsum(x: np.ndarray) -> float:
@@ -174,7 +175,7 @@ class CrossSegment(Configured):
         self._mass: np.ndarray | None = None
         self.shares = np.ones(len(self.tiles))
         self._spare = np.empty(len(self.tiles))  # the compiled kernel's new shares go here (no array to box)
-        self._compiled = kernel.use(self.compiled)  # once, not per frame
+        self._compiled = jit.use(self.compiled)  # once, not per frame
         self._integer = None  # the integer weights array last seen (checked once, not per frame)
         self._bound: dict = {}  # the kernel's entry point for this strategy's own argument types
         self._arrays: tuple | None = None  # the compiled time model's per-object scratch (``_scratch``)

@@ -24,10 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.core.balance import partition
-from multigpu.core.bounds import BoxProjector, make_projector
+from multigpu.core.bounds import BoxProjector
+from multigpu.core.projectors import make_projector
 from multigpu.core.regions import overlaps, pixel_spans
 from multigpu.core.spheres import SphereProjector
-from multigpu.studies.bench import median_ms
+from multigpu.studies.synthetic import median_ms
 from multigpu.studies.tables import md_table, write_csv
 
 
@@ -169,7 +170,7 @@ def _views(n: int):
 
 
 def table_balance(s: Sizes, out: Path) -> str:
-    from multigpu.studies.bench import synthetic_objects
+    from multigpu.studies.synthetic import synthetic_objects
 
     grid, size = (2, 2), (2048, 2048)
     W = size[0]

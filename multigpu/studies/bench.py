@@ -10,33 +10,11 @@ import json
 import os
 import subprocess
 import sys
-import time
 
 import numpy as np
 
 from multigpu.errors import InputError
-
-
-def median_ms(fn, repeat: int) -> float:
-    fn()  # warm up (first-touch page faults, caches)
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times) * 1e3)
-
-
-def synthetic_objects(n: int, seed: int = 0):
-    """Clustered boxes in a 200 x 120 x 30 plant-sized volume, heavy-tailed triangle counts."""
-    rng = np.random.default_rng(seed)
-    halls = np.array([[45, 35, 8], [140, 80, 8], [40, 92, 8]])
-    dense = rng.random(n) < 0.8
-    c = np.where(dense[:, None], halls[rng.integers(0, 3, n)] + rng.normal(0, [12, 8, 5], (n, 3)),
-                 rng.random((n, 3)) * [200, 120, 30])
-    h = rng.exponential(0.6, (n, 3)) + 0.05
-    tris = (rng.pareto(1.1, n) * 20 + 12).astype(np.int64)
-    return c - h, c + h, c, np.linalg.norm(h, axis=1), tris
+from multigpu.studies.synthetic import median_ms, synthetic_objects
 
 
 def bench_balance(quick: bool) -> list[dict]:
@@ -53,9 +31,10 @@ def bench_balance(quick: bool) -> list[dict]:
     heap = keep_heap()
     print("per-frame wall time, median of 7; bounds prepared once per scene (not timed); "
           f"allocator: {'heap kept (memory.keep_heap)' if heap else 'glibc default (MULTIGPU_MALLOC=default)'}")
-    from multigpu.core import kernel
+    from multigpu import kernels
 
-    print(f"compiled kernel (numba): {'compiled/loaded in %.2f s' % kernel.warm() if kernel.available() else 'absent'}"
+    warmed = f"compiled/loaded in {kernels.warm():.2f} s" if kernels.available() else "absent"
+    print(f"compiled kernel (numba): {warmed}"
           "; 'numpy ms' is the reference partition, 'partition ms' the one runs use")
     print(f"{'objects':>9} {'grid':>5} {'bounds':>7} {'project ms':>11} {'numpy ms':>9} {'partition ms':>13} "
           f"{'total ms':>9} {'target ms':>10}")

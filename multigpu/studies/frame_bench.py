@@ -42,9 +42,9 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
     ``path``: the camera path (None: the scene's walkthrough of ``frames`` frames)."""
     from multigpu.config import WalkConfig
     from multigpu.core.drawlist import DrawList
-    from multigpu.core.planner import Planner
     from multigpu.core.work import transfers
     from multigpu.parallel.report import COLUMNS
+    from multigpu.planner import Planner
     from multigpu.scene.paths import generate
 
     cfg = WalkConfig(grid=tuple(grid), tile=tuple(tile), balance=strategy)
@@ -143,7 +143,7 @@ def bench_growth(quick: bool) -> list[dict]:
     from multigpu.core.balance import partition
     from multigpu.core.bounds import BoxProjector
     from multigpu.core.camera import look_at, perspective
-    from multigpu.studies.bench import median_ms, synthetic_objects
+    from multigpu.studies.synthetic import median_ms, synthetic_objects
 
     sizes = [1_000, 10_000, 100_000] if quick else [1_000, 10_000, 100_000, 1_000_000]
     grids = [(2, 2), (3, 3), (4, 4)]

@@ -188,7 +188,7 @@ def _steps(triangles: int, copies: int, shared: bool = False) -> None:
     buffers uploaded, or (``shared``) drawn from the host's buffers file as the walkthrough's are."""
     import numpy as np
 
-    from multigpu.core import kernel
+    from multigpu import kernels
     from multigpu.core.camera import frame_matrices
     from multigpu.gpu.buffers import ensure_buffers
     from multigpu.gpu.render import RegionRenderer, create_context
@@ -204,7 +204,7 @@ def _steps(triangles: int, copies: int, shared: bool = False) -> None:
     if shared and not r.storage.startswith("shared"):
         raise RuntimeError(f"the GL buffers were not shared: {r.storage}")
     print(f"{'GL buffers drawn from the shared file' if shared else 'GL upload'} {_anonymous_mib():.1f}")
-    kernel.warm()
+    kernels.warm()
     print(f"compiled kernel loaded {_anonymous_mib():.1f}")
     path = generate("walkthrough", scene, 10)
     for f in range(3):

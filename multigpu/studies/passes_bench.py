@@ -71,7 +71,7 @@ def bench_passes(quick: bool) -> list[dict]:
 
 def _frames(scene, frames: int, balance: str):
     from multigpu.config import WalkConfig
-    from multigpu.core.planner import Planner
+    from multigpu.planner import Planner
     from multigpu.scene.paths import generate
 
     cfg = WalkConfig(grid=GRID, tile=TILE, balance=balance)

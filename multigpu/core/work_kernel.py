@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.core.kernel.jit import compile_all
+from multigpu.core.jit import compile_all
 
 
 def _parts(R, counts, T):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.core.kernel.jit import compile_all
+from multigpu.core.jit import compile_all, entry
 
 #: the most objects on screen the time profiles weigh one by one (more: every k-th stands for k,
 #: in ``strategies.cross`` too); a profile places a few cuts, and each object costs ~15 ns
@@ -378,3 +378,73 @@ def _cross(allp, owner, times, tiles, order, shares, new, damping, min_share, mi
 
 compile_all(globals(), ("_model", "_mass", "_axes", "_profiles", "_reverse", "_side", "_join", "_helpers", "_pack",
                         "_seqsum", "_cut", "_masks", "_cross"))
+
+
+def scratch_for(n: int) -> tuple:
+    """``cross_partition``'s per-object scratch for ``n`` objects (the time model's spans, weights
+    and on-screen objects), kept by the caller between frames."""
+    return np.empty((n, 4), dtype=np.int64), np.empty(n), np.empty(n, dtype=np.int64)
+
+
+def cross_partition(pieces, mass, times, tiles, order, shares, damping: float, min_share: float, min_help: float,
+                    join: bool, pixel_weight: float, object_weight: float, cover_weight: float, uniform: bool,
+                    rects, tris, size,
+                    out: np.ndarray | None = None, bound: dict | None = None, scratch: tuple | None = None):
+    """``strategies.cross``: the new segment shares (into ``out`` where given, a (K,) float64
+    array other than ``shares``), and the partition's fields (regions, loads, T' masks, splits,
+    split pixels, no spans, pieces and their masks per rank, and the pieces flat for the next
+    frame: ``{"pieces": (Q, 4), "owner": (Q,), "mass": (Q,)}``, their weights in the time model)
+    from the last frame's pieces (that flat form, or per rank), their weights ``mass`` (None:
+    weighed now; ignored where the flat form carries them) and measured ``times``; ``order``:
+    the segments along the resource axis; ``join``: helpers cut from their own side and a rank's
+    pieces joined; ``pixel_weight``, ``object_weight``, ``cover_weight``, ``uniform``: the time
+    model's. One compiled call.
+    ``bound``: a dict the caller keeps between calls that passes the same types every call
+    (``times``, ``tiles``, ``order``, ``shares``, ``out``: C-contiguous float64, int64, int64,
+    float64, float64 arrays; ``damping``, ``min_share``, ``min_help`` and the model's weights floats;
+    ``join``, ``uniform`` bools; ``size`` ints): the kernel's entry point is kept there and
+    called directly where the pieces are flat (``jit.entry``). ``scratch``: the time model's
+    per-object arrays, ``scratch_for(len(tris))``, kept by the caller (None: made here)."""
+    k = len(tiles)
+    flat = isinstance(pieces, dict)
+    if flat:  # the last frame's flat pieces, as this function returned them
+        allp, owner, mass = pieces["pieces"], pieces["owner"], pieces["mass"]
+    else:
+        allp = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 4) for p in pieces])  # ranks, not objects
+        owner = np.repeat(np.arange(k), [len(p) for p in pieces])
+        mass = np.zeros(0) if mass is None else np.ascontiguousarray(mass, dtype=np.float64)
+    new = np.empty(k) if out is None else out
+    # (4, N) float64 rects (the projector's own array, transposed back: no copy) and int64 weights
+    args = (allp, owner, times, tiles, order, shares, new, damping, min_share, min_help, join,
+            np.ascontiguousarray(rects.T, dtype=np.float64),
+            np.ascontiguousarray(tris, dtype=np.int64), size[0], size[1], mass, pixel_weight, object_weight,
+            cover_weight, uniform,
+            *(scratch if scratch is not None else scratch_for(len(tris))))
+    call = _cross
+    if flat and bound is not None:  # the entry point, bound at the first flat call
+        call = bound.get("cross")
+        if call is None:
+            call = bound["cross"] = entry(_cross, args)
+    ints, both, weights = call(*args)
+    # views of the packed arrays (their layout: _cross) in few Python steps (each costs us, cold)
+    at = ints[:k + 1].tolist()
+    q = at[k]
+    prects = ints[6 * k + 1:6 * k + 1 + 4 * q].reshape(q, 4)
+    cuts = list(zip(at[:-1], at[1:]))
+    none, none_px = _no_splits(k)
+    return new, (ints[k + 1:5 * k + 1].reshape(k, 4), ints[5 * k + 1:6 * k + 1], both[q:], none, none_px, None,
+                 tuple([prects[a:b] for a, b in cuts]), tuple([both[a:b] for a, b in cuts]),
+                 {"pieces": prects, "owner": ints[6 * k + 1 + 4 * q:], "mass": weights})
+
+
+_NO_SPLITS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _no_splits(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Read-only (K-1,) zero splits and split pixels of a partition with no tree (one pair per K)."""
+    if k not in _NO_SPLITS:
+        pair = np.zeros(max(k - 1, 0)), np.zeros(max(k - 1, 0), dtype=np.int64)
+        for a in pair:
+            a.setflags(write=False)
+        _NO_SPLITS[k] = pair
+    return _NO_SPLITS[k]

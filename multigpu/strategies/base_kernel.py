@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.core.kernel.jit import compile_all
+from multigpu.core.jit import compile_all
 
 
 def rank_pixels(spans, visible, regions, cov, out):

@@ -16,7 +16,7 @@ import numpy as np
 
 from multigpu.core.box_tables import EDGES, FACES, NEXT, SIGNS
 from multigpu.core.camera import camera_into as _camera_into  # compiled here: the frame's matrices in the same call
-from multigpu.core.kernel.jit import compile_all
+from multigpu.core.jit import compile_all
 
 
 def _face(cx, cy, faces, nxt, f):
@@ -402,3 +402,19 @@ def _project_camera(center, half, half64, order, groups, gbox, pcenter, phalf64,
 compile_all(globals(), ("_finite", "_clip_matrix", "_clip_block", "_eight", "_grow", "_rows", "_corners",
                          "_box_corners", "_face", "_coverage", "_write", "_clipped", "_block", "_groups_out",
                          "_frame_rows", "_project", "_camera_into", "_project_camera"))
+
+
+def project_boxes(grouped, plain_boxes, half, view, proj, widen, far_tol, out, coverage=None, plain: int = -1) -> bool:
+    """``bounds.BoxProjector``'s rects (4, N) into ``out`` and, when given, silhouette coverage;
+    ``grouped``: ``project.spatial_groups`` of the boxes (culled a group at a time);
+    ``plain_boxes``: (centres, half extents) in object order, used where the groups cull
+    fewer than half the boxes (an eighth up to ``project.SCATTER_FREE`` boxes; ``plain`` -1;
+    1: always, 0: never; the same rects). False
+    (nothing written) when ``view`` or ``proj`` has an entry that is not finite."""
+    order, center, half64, starts, gbox = grouped
+    cov = _NO_COVERAGE if coverage is None else coverage
+    return _project(center, half, half64, order, starts, gbox, plain_boxes[0], plain_boxes[1], plain, view, proj,
+                    widen, far_tol, out, cov, coverage is not None)
+
+
+_NO_COVERAGE = np.empty(0)

@@ -40,3 +40,16 @@ def entry(kernel, args: tuple) -> Callable:
         dispatcher.compile(sig)
     got = getattr(dispatcher.overloads.get(sig), "entry_point", None)
     return got if callable(got) else kernel
+
+
+def available() -> bool:
+    """Whether numba is installed (the kernels run compiled)."""
+    return numba is not None
+
+
+def use(compiled: bool | None) -> bool:
+    """Whether to run a kernel: ``compiled`` None means where numba is installed; True insists."""
+    if compiled and not available():
+        raise ValueError("compiled=True needs numba (pip install numba)")
+    return available() if compiled is None else bool(compiled)
+

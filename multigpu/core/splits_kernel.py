@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.core.kernel.jit import compile_all
+from multigpu.core.jit import compile_all
 
 
 def _choose(regions, density, ax, reg, a, b, q, nl, nr, need_lo, need_hi, w, x):

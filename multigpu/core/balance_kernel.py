@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.core.kernel.jit import compile_all
-from multigpu.core.regions import MAX_TOTAL
+from multigpu.core.jit import compile_all
+from multigpu.core.regions import INVERTED, MAX_TOTAL, NEGATIVE, NOT_FINITE, TOO_MANY
 
 #: displays up to this many pixels along an axis look strips up in a table (as splits.py does)
 TABLE_MAX = 1 << 16
@@ -276,15 +276,13 @@ def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int
         rt, tris, int(size[0]), int(size[1]), int(strips), nodes, leaves, cuts,
         _NO_FILL if density is None else density)
     if not_finite or negative or inverted or (tris.dtype.kind == "i" and int(total) >= MAX_TOTAL):
-        from multigpu.core import balance  # the refusals' words (imported here: balance imports this module)
-
         if not_finite:  # the reference's order: weights, their total, then the rects
-            raise ValueError(balance.NOT_FINITE)
+            raise ValueError(NOT_FINITE)
         if negative:
-            raise ValueError(balance.NEGATIVE)
+            raise ValueError(NEGATIVE)
         if tris.dtype.kind == "i" and int(total) >= MAX_TOTAL:
-            raise ValueError(balance.TOO_MANY)
-        raise ValueError(balance.INVERTED)
+            raise ValueError(TOO_MANY)
+        raise ValueError(INVERTED)
     if tris.dtype.kind == "f":
         loads = np.array([tris[v].sum() for v in visible], dtype=tris.dtype)  # K ranks, not objects
     return regions, loads, visible, splits, split_pixels, spans

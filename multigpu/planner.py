@@ -17,7 +17,8 @@ from typing import Callable
 
 import numpy as np
 
-from multigpu.core.bounds import BoxProjector, make_projector
+from multigpu.core.bounds import BoxProjector
+from multigpu.core.projectors import make_projector
 from multigpu.core.work import Work
 from multigpu.decompositions import make_decomposition
 from multigpu.strategies import REGISTRY as STRATEGIES

@@ -7,7 +7,7 @@ corrections are the same bit for bit (tests/test_kernel.py)."""
 
 from __future__ import annotations
 
-from multigpu.core.kernel.jit import compile_all
+from multigpu.core.jit import compile_all
 
 
 def _rank_sums(vis, tris, weights, loads, weighed):

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from multigpu.core.kernel.jit import compile_all
+from multigpu.core.jit import compile_all
 
 
 def _solve(gram, rhs, use, m, inv, bs):
