@@ -59,4 +59,6 @@ def test_imbalance_bench_runs_both_scenes(egl):
     for r in rows:
         assert r["imbalance"] >= 1.0 and r["imbalance_of_two"] >= 1.0
         assert r["deviation_sd"] > 0 and r["noise_sd"] > 0
-        assert r["deviation_sd"] >= r["repeatable_sd"] >= 0
+        # the repeatable part is the two renders' covariance: it may exceed one render's own
+        # variance (when the second deviates more, the same way), so only its sign is fixed
+        assert r["repeatable_sd"] >= 0

@@ -183,3 +183,23 @@ def test_no_circles_between_modules():
 def test_the_cycle_finder_finds_one():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+#: blocking calls allowed, with why: the exit's one moment to leave at (every rank that gets there
+#: is leaving with an error; MPICH's launcher kills those still finalizing otherwise), and the
+#: heartbeat's receive of a message ``Iprobe`` has already found (it returns at once)
+BLOCKING_ALLOWED = {("parallel/job.py", "allreduce"), ("parallel/job.py", "Recv")}
+BLOCKING = ("Barrier", "Bcast", "bcast", "Gather", "gather", "Allgather", "allgather", "Allreduce", "allreduce",
+            "Reduce", "reduce", "Scatter", "scatter", "Alltoall", "alltoall", "Recv", "recv", "Wait", "Waitall")
+
+
+def test_every_wait_is_bounded():
+    """No blocking MPI call in the package: every wait goes through ``exchange.wait_all`` (a peer
+    that dies or hangs ends the job with a timeout, never freezes the wall)."""
+    for f in _files():
+        rel = f.relative_to(PKG).as_posix()
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in BLOCKING:
+                owner = ast.unparse(node.func.value)
+                if "comm" in owner.lower() or "node" in owner or "MPI" in owner:
+                    assert (rel, node.func.attr) in BLOCKING_ALLOWED, f"{rel}:{node.lineno} {owner}.{node.func.attr}()"

@@ -1,8 +1,8 @@
 """The MPI side of ``multigpu bench floor``: every rank renders exactly the same work.
 
 Same region, same objects, same camera along the scene's walkthrough (matrices and projected
-bounds from the frame loop's ``core.planner.Planner``), synchronized per frame as the frame
-loop is; the per-rank render CPU times are compared exactly as
+bounds from the frame loop's ``planner.Planner``), synchronized per frame by the frame loop's
+bounded barrier (every wait bounded: a rank that dies ends the job, never hangs it); the per-rank render CPU times are compared exactly as
 ``report.summarize`` compares them (per frame max/mean, averaged over frames). Whatever
 imbalance shows is this machine's measurement noise: the floor under every strategy's
 ``imbalance_render_cpu``. ``studies/floor.py`` starts it and prints the table.
@@ -16,6 +16,8 @@ import time
 import numpy as np
 
 MARK = "floor-json: "
+#: seconds any one wait may last (loading the scene and a frame's render included)
+TIMEOUT = 300.0
 
 
 def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
@@ -26,6 +28,7 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
     from multigpu.config import WalkConfig
     from multigpu.core.regions import overlaps, pixel_spans
     from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.parallel.exchange import barrier, wait_all
     from multigpu.planner import Planner
     from multigpu.scene.models import load_scene
     from multigpu.scene.paths import generate
@@ -34,7 +37,7 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
     rank = comm.Get_rank()
     if rank == 0:
         load_scene(spec)  # build the cache once
-    comm.Barrier()
+    barrier(comm, TIMEOUT)
     scene, _ = load_scene(spec)
     size = (2 * tile, 2 * tile)
     ctx, _ = create_context(local_rank=rank, host_ranks=comm.Get_size())  # one host
@@ -47,12 +50,12 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
         view, proj, light, rects = planner.frame(path.camera(f))
         spans, onscreen = pixel_spans(rects, size)
         mask = onscreen & overlaps(spans, region)  # the objects a rank rendering the region draws
-        comm.Barrier()
+        barrier(comm, TIMEOUT)
         t0 = time.process_time()
         renderer.render(view, proj, light, region, mask)
         times[f] = (time.process_time() - t0) * 1e3
-    allt = np.zeros((comm.Get_size(), frames)) if rank == 0 else None
-    comm.Gather(times, allt, root=0)
+    allt = np.zeros((comm.Get_size(), frames))  # every rank's buffer: Igather ignores it off the root
+    wait_all([comm.Igather(times, allt, root=0)], TIMEOUT, "floor times")
     renderer.release()
     if rank != 0:
         return None

@@ -16,11 +16,12 @@ from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core import jit
 from multigpu.core.camera import Camera
 from multigpu.core.work import Work, transfers
+from multigpu.parallel.backends import Exchange, Projection
 from multigpu.parallel.composite import Messages
 from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
 from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.projection import SharedProjection
+from multigpu.parallel.projection import make_projection
 from multigpu.parallel.record import RunRecord
 from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
 from multigpu.parallel.shared import SharedPieces
@@ -90,11 +91,10 @@ class Frames:
         shared, why = None, None
         if cfg.exchange != "messages":
             shared, why = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout, cfg.exchange == "shared")
-        self.exchange = shared or Messages(comm, cfg.timeout)
+        self.exchange: Exchange = shared or Messages(comm, cfg.timeout)
         # the bounds' projection: a slice per rank of a host into one shared array, where it can be
-        self.projection, projection_why = None, None
-        if cfg.projection == "shared" and self.K > 1 and cfg.bounds == "box":
-            self.projection, projection_why = SharedProjection.make(comm, scene.n_objects, cfg.timeout)
+        self.projection: Projection
+        self.projection, projection_why = make_projection(cfg, comm, self.planner, scene.n_objects)
         self.window = presenter.mode == "window"
         self.live = None
         if self.window:
@@ -112,8 +112,7 @@ class Frames:
         doc["exchange"] = self.exchange.name
         if why:
             doc["exchange_why"] = f"messages: no shared segment ({why})"
-        doc["projection"] = (f"shared: a slice per rank of {self.projection.ranks} on a host"
-                             if self.projection is not None else "each rank every object")
+        doc["projection"] = self.projection.name
         if projection_why:
             doc["projection_why"] = projection_why
         self.config_doc = doc
@@ -230,19 +229,9 @@ class Frames:
             if self.learn is not None:  # the last frame's times, to what planned it
                 self.planner.observe(*self.learn)
                 self.learn = None
-        if self.projection is not None and self.planner.sliceable:
-            with t.phase("project"):  # this rank's slice of the boxes into the host's array
-                out = self.projection.out(f)
-                view, proj, light = self.planner.frame_slice(camera, self.projection.lo, self.projection.hi, out)
-            with t.phase("sync"):  # every slice of the host in
-                self.projection.wait()
-            with t.phase("plan"):
-                work = self.planner.work(f, self.planner.rects_of(out), self.relay)
-        else:
-            with t.phase("project"):
-                view, proj, light, rects = self.planner.frame(camera)
-            with t.phase("plan"):
-                work = self.planner.work(f, rects, self.relay)
+        view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
+        with t.phase("plan"):
+            work = self.planner.work(f, rects, self.relay)
         with t.phase("render"):
             rendered = self.render(work, view, proj, light)
         with t.phase("exchange"):  # parts for peers into the shared segment before the barrier (messages: nothing)
@@ -277,9 +266,9 @@ class Frames:
             self.exchange = None
         if self.live is not None:
             self.live.close(collective)
-        if self.projection is not None and collective:
-            self.projection.close()
-        self.projection = None
+        if self.projection is not None:
+            self.projection.close(collective)
+            self.projection = None
 
     def _what(self) -> str:
         cfg = self.cfg

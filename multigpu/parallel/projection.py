@@ -20,15 +20,44 @@ from multigpu.parallel.exchange import barrier
 from multigpu.parallel.shared import host_segment
 
 
-class SharedProjection:
-    """This rank's slice [lo, hi) of the boxes and the host's shared (2, 4, N) rects."""
+class EachRank:
+    """Every rank projects every object (the default): one compiled call, no wait."""
 
-    def __init__(self, node, rects: np.ndarray, lo: int, hi: int, timeout: float):
-        self.node, self.rects, self.lo, self.hi, self.timeout = node, rects, lo, hi, timeout
+    name = "each rank every object"
+
+    def __init__(self, planner):
+        self.planner = planner
+
+    def project(self, frame: int, camera, timer):
+        with timer.phase("project"):
+            return self.planner.frame(camera)
+
+    def close(self, collective: bool = True) -> None:
+        """Nothing held."""
+
+
+def make_projection(cfg, comm, planner, n_objects: int) -> "tuple[EachRank | SharedProjection, str | None]":
+    """``--projection``'s backend for this job, and why not the shared one where it was asked for
+    and cannot be (None otherwise): every rank of the job the same."""
+    if cfg.projection == "shared" and comm.Get_size() > 1 and cfg.bounds == "box":
+        shared, why = SharedProjection.make(comm, planner, n_objects, cfg.timeout)
+        if shared is not None:
+            return shared, None
+        return EachRank(planner), why
+    return EachRank(planner), None
+
+
+class SharedProjection:
+    """This rank's slice [lo, hi) of the boxes and the host's shared (2, 4, N) rects; frames whose
+    planner cannot project a slice (a decomposition that wants coverage) project every object."""
+
+    def __init__(self, node, planner, rects: np.ndarray, lo: int, hi: int, timeout: float):
+        self.node, self.planner, self.rects, self.lo, self.hi, self.timeout = node, planner, rects, lo, hi, timeout
         self.ranks = node.Get_size()
+        self.name = f"shared: a slice per rank of {self.ranks} on a host"
 
     @classmethod
-    def make(cls, comm, n_objects: int, timeout: float) -> "tuple[SharedProjection | None, str | None]":
+    def make(cls, comm, planner, n_objects: int, timeout: float) -> "tuple[SharedProjection | None, str | None]":
         """The shared projection, or (None, why not): every rank of the job the same."""
         from mpi4py import MPI
 
@@ -44,7 +73,7 @@ class SharedProjection:
             at = node.Get_rank()
             rects = memory[:total].view(np.float64).reshape(2, 4, max(n_objects, 1))[:, :, :n_objects]
             keep = True
-            return cls(node, rects, at * n_objects // n, (at + 1) * n_objects // n, timeout), None
+            return cls(node, planner, rects, at * n_objects // n, (at + 1) * n_objects // n, timeout), None
         finally:
             if not keep:
                 node.Free()
@@ -57,8 +86,22 @@ class SharedProjection:
         """Until every rank of the host has written its slice (bounded by the job's timeout)."""
         barrier(self.node, self.timeout)
 
-    def close(self) -> None:
-        """Let the host's communicator go (the mapping goes with the arrays)."""
-        if self.node is not None:
+    def project(self, frame: int, camera, timer):
+        """This rank's slice into the host's array (``project``), every slice of the host in
+        (``sync``), then the whole array's visible rects."""
+        if not self.planner.sliceable:
+            with timer.phase("project"):
+                return self.planner.frame(camera)
+        with timer.phase("project"):
+            out = self.out(frame)
+            view, proj, light = self.planner.frame_slice(camera, self.lo, self.hi, out)
+        with timer.phase("sync"):
+            self.wait()
+        with timer.phase("project"):
+            return view, proj, light, self.planner.rects_of(out)
+
+    def close(self, collective: bool = True) -> None:
+        """Let the host's communicator go (the mapping goes with the arrays); only together."""
+        if self.node is not None and collective:
             self.node.Free()
             self.node = None

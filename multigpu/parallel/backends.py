@@ -1,0 +1,44 @@
+"""The frame loop's two swappable edges, declared (as IceT puts transport behind its
+communicator): how pieces travel to their tile owners (``Exchange``: direct messages in
+``composite.Messages``, a host-shared segment in ``shared.SharedPieces``) and how a frame's
+object bounds become screen rects (``Projection``: every rank all of them in ``projection.EachRank``,
+a host's ranks a slice each in ``projection.SharedProjection``). ``Frames`` holds one of each and
+knows nothing of which; a new transport or projection is one class that satisfies these."""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from multigpu.core.work import Piece
+
+
+@runtime_checkable
+class Exchange(Protocol):
+    """Pieces to their tile owners: ``publish`` before the frame's barrier (a shared segment
+    writes its parts there), ``compose`` after it (copy or depth-merge into ``color``/``depth``,
+    returns bytes sent and of which depth), ``close`` at the end (``collective``: every rank
+    together)."""
+
+    name: str
+
+    def publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None: ...
+
+    def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
+                depth: np.ndarray | None = None) -> tuple[int, int]: ...
+
+    def close(self, collective: bool = True) -> None: ...
+
+
+@runtime_checkable
+class Projection(Protocol):
+    """A frame's (view, proj, light, rects) for the planner, timed in the ``project`` phase (and
+    ``sync`` where ranks wait for each other's slices); ``close`` lets what it holds go
+    (``collective``: every rank together)."""
+
+    name: str
+
+    def project(self, frame: int, camera, timer) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def close(self, collective: bool = True) -> None: ...
