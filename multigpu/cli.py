@@ -17,7 +17,7 @@ import argparse
 import sys
 
 from multigpu.core.memory import keep_heap
-from multigpu.errors import InputError, as_flags
+from multigpu.errors import InputError, WriteFailed, as_flags
 from multigpu.flags import scene_args, spec, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
 
 
@@ -189,7 +189,7 @@ def _walkthrough(a) -> int:
 
         with job:
             run(cfg, comm, job)
-    except InputError as exc:  # agreed on every rank before any frame: one line, all exit 2
+    except (InputError, WriteFailed) as exc:  # agreed on every rank: one line, all exit 2
         job.close()
         if comm.Get_rank() == 0:
             print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr, flush=True)

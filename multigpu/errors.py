@@ -25,6 +25,16 @@ class InputError(ValueError):
         return f"{self.field} {self.message}" if self.field else self.message
 
 
+class WriteFailed(RuntimeError):
+    """An output could not be written (disk full, a path that takes no files): one line naming
+    the path, exit 2; what was written before it stays (rows whole, files whole or absent)."""
+
+    @classmethod
+    def of(cls, path, exc: OSError, kept: str = "") -> "WriteFailed":
+        """The failure of writing ``path`` with ``exc``; ``kept``: what of it stays."""
+        return cls(f"cannot write {path}: {exc.strerror or exc}" + (f"; {kept}" if kept else ""))
+
+
 def flag(field: str) -> str:
     """The command-line flag of a configuration field."""
     return "--" + field.replace("_", "-")

@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import pytest
 
-from multigpu.errors import InputError, as_flags, check_file
+from multigpu.errors import InputError, WriteFailed, as_flags, check_file
 from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, write_json
 from multigpu.scene.models import SceneSpec, load_scene
 from multigpu.scene.paths import load_path
@@ -141,7 +141,7 @@ def test_timing_rows_are_whole_after_a_failed_write(tmp_path, monkeypatch):
         return real(fd, data, offset)
 
     monkeypatch.setattr(os, "pwrite", half_then_full)
-    with pytest.raises(OSError, match="No space left on device: writing .*timings.csv"):
+    with pytest.raises(WriteFailed, match="cannot write .*timings.csv: No space left on device; kept .* bytes"):
         w.write(rows)
     monkeypatch.setattr(os, "pwrite", real)
     later = rows.copy()
@@ -163,13 +163,59 @@ def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(Path, "replace", full)
-    with pytest.raises(OSError):
+    with pytest.raises(WriteFailed, match=f"cannot write {tmp_path / 'summary.json'}: No space left"):
         write_json(tmp_path / "summary.json", {"a": 1})
     from multigpu.parallel.mosaic import save_png
 
-    with pytest.raises(OSError):
+    with pytest.raises(WriteFailed, match="f.png: No space left"):
         save_png(np.zeros((4, 4, 3), np.uint8), tmp_path / "f.png")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_recorded_path_that_cannot_be_written_is_the_runs_failure(tmp_path, monkeypatch):
+    """``--record``'s file failing at the end (disk full): the record names it (``failed``, which
+    ends the job with one line and exit 2), timings and summary are still written whole, and
+    the printout claims no recorded frames."""
+    import io
+    from contextlib import redirect_stdout
+
+    from multigpu.parallel.outdir import OutputDir
+    from multigpu.parallel.record import RunRecord
+    from multigpu.scene.paths import CameraPath
+
+    def full(self, path):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(CameraPath, "save", full)
+    record = RunRecord(OutputDir(tmp_path / "o"), 1, 2, {}, lambda: None, False, False, False,
+                       str(tmp_path / "rec.json"))
+    rows = np.ones((1, len(COLUMNS)))
+    for f in range(2):
+        record.camera(type("C", (), {"position": (0, 0, 1), "target": (0, 0, 0), "up": (0, 1, 0), "fov": 60.0,
+                                     "near": 0.1, "far": 10.0})())
+        rows[0, 0] = f
+        record.rows(f, rows)
+    summary = record.close(True, None)
+    assert str(record.failed) == f"cannot write {tmp_path / 'rec.json'}: No space left on device"
+    assert summary["frames"] == 2 and read_timings(tmp_path / "o" / "timings.csv").shape == (2, len(COLUMNS))
+    assert not (tmp_path / "rec.json").exists()
+    out = io.StringIO()
+    with redirect_stdout(out):
+        record.print_table(summary, "t")
+    assert "camera path" not in out.getvalue()
+
+
+def test_record_into_a_directory_that_takes_no_files_is_refused_at_the_door(tmp_path):
+    from multigpu.parallel.walkthrough import check_record
+
+    for path, needle in [("/proc/x.json", "--record /proc/x.json: cannot write in /proc"),
+                         (str(tmp_path / "no" / "x.json"), "does not exist"),
+                         (str(tmp_path), "is a directory")]:
+        with pytest.raises(InputError) as e:
+            check_record(path)
+        assert needle in as_flags(e.value)
+    check_record(str(tmp_path / "ok.json"))
+    assert list(tmp_path.iterdir()) == []  # the probe left nothing
 
 
 @pytest.mark.parametrize("flags,needle", [

@@ -2,10 +2,10 @@
 
 Same region, same objects, same camera along the scene's walkthrough (matrices and projected
 bounds from the frame loop's ``planner.Planner``), synchronized per frame by the frame loop's
-bounded barrier (every wait bounded: a rank that dies ends the job, never hangs it); the per-rank render CPU times are compared exactly as
-``report.summarize`` compares them (per frame max/mean, averaged over frames). Whatever
-imbalance shows is this machine's measurement noise: the floor under every strategy's
-``imbalance_render_cpu``. ``studies/floor.py`` starts it and prints the table.
+bounded barrier (a rank that dies ends the job, never hangs it); the per-rank render CPU times
+are compared exactly as ``report.summarize`` compares them (per frame max/mean, averaged over
+frames). Whatever imbalance shows is this machine's measurement noise: the floor under every
+strategy's ``imbalance_render_cpu``. ``studies/floor.py`` starts it and prints the table.
 """
 
 from __future__ import annotations

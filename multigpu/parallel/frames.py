@@ -16,9 +16,10 @@ from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core import jit
 from multigpu.core.camera import Camera
 from multigpu.core.work import Work, transfers
+from multigpu.errors import WriteFailed
 from multigpu.parallel.backends import Exchange, Projection
 from multigpu.parallel.composite import Messages
-from multigpu.parallel.exchange import barrier, broadcast_partition, wait_all
+from multigpu.parallel.exchange import agree, barrier, broadcast_partition, wait_all
 from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.projection import make_projection
@@ -55,7 +56,8 @@ def fault(rank: int, where: int | str) -> None:
 
 
 #: the stop flag of a frame's row: > 0 a signal number, < 0 a window event (STOPS)
-STOPS = {-1: "escape key", -2: "window closed", -3: "escape key (the monitor)", -4: "window closed (the monitor)"}
+STOPS = {-1: "escape key", -2: "window closed", -3: "escape key (the monitor)", -4: "window closed (the monitor)",
+         -5: "an output could not be written"}
 STOP_FLAG = {why: flag for flag, why in STOPS.items()}
 
 
@@ -186,7 +188,8 @@ class Frames:
         for c, v in values.items():
             self.row[self.col[c]] = v
         # a signal or a window event seen here stops every rank after this frame
-        self.row[-1] = float(self.job.signum or stop)
+        failed = self.record is not None and self.record.failed is not None
+        self.row[-1] = float(self.job.signum or stop or (STOP_FLAG[STOPS[-5]] if failed else 0))
         wait_all([self.comm.Iallgather(self.row, self.allrows)], self.cfg.timeout, "timing gather")
 
     def _heartbeat_cpu(self) -> float:
@@ -204,7 +207,18 @@ class Frames:
             return
         wait_all([self.comm.Igather(self.back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
         if self.rank == 0:
-            self.record.image(f, stitch(self.gathered, self.tiles, self.canvas.size), work.rects, mosaic_due)
+            self._write(self.record.image, f, stitch(self.gathered, self.tiles, self.canvas.size), work.rects,
+                        mosaic_due)
+
+    def _write(self, write, *args) -> None:
+        """Rank 0's outputs: the first write that fails is kept (``record.failed``) and stops every
+        rank after the next frame (its row's stop flag); nothing more is written after it, so
+        what is on disk stays whole and the summary matches the CSV."""
+        if self.record.failed is None:
+            try:
+                write(*args)
+            except WriteFailed as exc:
+                self.record.failed = exc
 
     def _camera(self, f: int, t: Timer):
         """The input phase of a window run (every rank the same camera and settings), then
@@ -253,7 +267,7 @@ class Frames:
             if self.cfg.record:  # the camera first: a rewritten path file never lags the rows
                 live = self.live.recorded() if self.live is not None and self.interactive else None
                 self.record.camera(live if live is not None else _unshifted(camera, self.cfg.offset))
-            self.record.rows(f, rows)
+            self._write(self.record.rows, f, rows)
         self.done = f + 1
         self.show(f, work)
 
@@ -287,6 +301,8 @@ class Frames:
         if (flags < 0).any():
             r = int(np.flatnonzero(flags < 0)[0])
             why = STOPS[int(flags[r])]
+            if why == STOPS[-5]:
+                return f"{why} (rank {r})"
             return why if why.endswith("(the monitor)") else f"{why} (rank {r}'s window)"
         return None
 
@@ -310,16 +326,25 @@ class Frames:
         finally:
             if self.rank == 0:
                 summary = self.record.close(complete, stopped_by)
+        # every rank learns whether rank 0's outputs were all written (a bounded agreement)
+        failed = agree(self.comm, str(self.record.failed) if self.rank == 0 and self.record.failed else None,
+                       self.cfg.timeout, "the end of the run")
+        if failed and self.rank == 0:
+            self.record.print_table(summary, self._title(complete, stopped_by))
+        if failed:
+            raise WriteFailed(failed)
         if self.rank != 0:
             return None
+        self.record.print_table(summary, self._title(complete, stopped_by))
+        return summary
+
+    def _title(self, complete: bool, stopped_by: str | None) -> str:
         cfg, scene = self.cfg, self.scene
         planned = "" if self.n_frames is None else f" of {self.n_frames}"
         state = "" if complete else f" (stopped after {self.done}{planned} frames: {stopped_by})"
         W, H = self.canvas.size
-        self.record.print_table(summary, f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in "
-                                         f"{scene.n_objects} objects, {cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, "
-                                         f"{self._what()}{state}")
-        return summary
+        return (f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in {scene.n_objects} objects, "
+                f"{cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, {self._what()}{state}")
 
 
 def _config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> dict:

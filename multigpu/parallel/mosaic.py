@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.errors import WriteFailed
+
 
 def stitch(tiles: np.ndarray, tile_rects: np.ndarray, size) -> np.ndarray:
     """(K, th, tw, 3) bottom-up tiles -> (H, W, 3) image, top row first (for PNG)."""
@@ -27,5 +29,7 @@ def save_png(img: np.ndarray, path: Path) -> None:
     try:
         Image.fromarray(img).save(tmp, format="PNG")
         tmp.replace(path)
+    except OSError as exc:
+        raise WriteFailed.of(path, exc) from None
     finally:
         tmp.unlink(missing_ok=True)

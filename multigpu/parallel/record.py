@@ -14,6 +14,7 @@ import numpy as np
 
 from multigpu.config import SUMMARY_EVERY
 from multigpu.display.hud import overlay
+from multigpu.errors import WriteFailed
 from multigpu.parallel.mosaic import save_png
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, summarize, table, write_json
@@ -31,6 +32,7 @@ class RunRecord:
         self.record_to = Path(record) if record else None
         self.cameras: list = []  # (F, 12): position, target, up, fov, near, far of each frame written
         self.recorded = 0  # frames in the path file on disk
+        self.failed: WriteFailed | None = None  # the first output that could not be written
         self.done = 0
         out.clear_previous()
         self.writer = TimingWriter(out.path / "timings.csv")
@@ -56,7 +58,11 @@ class RunRecord:
         from multigpu.scene.paths import CameraPath
 
         c = np.array(self.cameras[:self.done], dtype=np.float64)
-        CameraPath(c[:, 0:3], c[:, 3:6], c[:, 6:9], c[:, 9], c[:, 10], c[:, 11]).save(self.record_to)
+        try:
+            CameraPath(c[:, 0:3], c[:, 3:6], c[:, 6:9], c[:, 9], c[:, 10], c[:, 11]).save(self.record_to)
+        except OSError as exc:
+            kept = f"kept its first {self.recorded} frames" if self.recorded else ""
+            raise WriteFailed.of(self.record_to, exc, kept) from None
         self.recorded = self.done
 
     def rows(self, f: int, rows: np.ndarray) -> None:
@@ -93,22 +99,28 @@ class RunRecord:
         return summary
 
     def close(self, complete: bool, stopped_by: str | None) -> dict:
+        """Finish every file (each one whatever another's fate); the first write that failed, if
+        any, is ``failed`` afterwards (the run then ends with it: one line, exit 2)."""
         try:
             self._save_path()
-        except OSError as exc:  # the timings and summary are still written
-            print(f"multigpu: could not write the recorded path {self.record_to}: {exc}", flush=True)
+        except WriteFailed as exc:  # the timings and summary are still written
+            self.failed = self.failed or exc
         for thing in (self.bar, self.writer, self.video):
             if thing is not None:
                 try:
                     thing.close()
                 except Exception:  # closing must not hide the run's own error
                     pass
-        return self.summary(complete=complete, stopped_by=stopped_by)
+        try:
+            return self.summary(complete=complete, stopped_by=stopped_by)
+        except WriteFailed as exc:
+            self.failed = self.failed or exc
+            return summarize(np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS))), self.K)
 
     def print_table(self, summary: dict, title: str) -> None:
         print(table(summary, title), flush=True)
         print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
-        if self.record_to is not None:
+        if self.record_to is not None and self.recorded:
             print(f"camera path of the {self.recorded} frames written in {self.record_to} (replay: --path)", flush=True)
 
 

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
+from multigpu.errors import WriteFailed
 from multigpu.strategies import REGISTRY as STRATEGIES
 
 COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
@@ -76,8 +77,7 @@ class TimingWriter:
                 os.ftruncate(self.fd, self.size)
             except OSError:
                 pass
-            kept = f"kept {self.size} bytes of whole rows"
-            raise OSError(exc.errno, f"{exc.strerror}: writing {self.path} ({kept})") from None
+            raise WriteFailed.of(self.path, exc, f"kept {self.size} bytes of whole rows") from None
         self.size += len(data)
 
     def close(self) -> None:
@@ -204,5 +204,7 @@ def write_json(path: Path, doc: dict) -> None:
     try:
         tmp.write_text(json.dumps(doc, indent=1))
         tmp.replace(path)
+    except OSError as exc:
+        raise WriteFailed.of(path, exc, "the previous version kept") from None
     finally:
         tmp.unlink(missing_ok=True)

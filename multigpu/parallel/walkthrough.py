@@ -218,8 +218,12 @@ def check_record(record: str) -> None:
         raise InputError.of("record", f"{record}: is a directory, not a path file")
     if not where.parent.is_dir():
         raise InputError.of("record", f"{record}: the directory {where.parent} does not exist")
-    if not os.access(where.parent, os.W_OK):
-        raise InputError.of("record", f"{record}: cannot write in {where.parent} (permission denied)")
+    probe = where.parent / f".write-test-{os.getpid()}"
+    try:  # a file made and removed: access() says yes to root, and to /proc, where nothing can be made
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+        os.unlink(probe)
+    except OSError as exc:
+        raise InputError.of("record", f"{record}: cannot write in {where.parent} ({exc.strerror or exc})") from None
 
 
 def _close(renderer, presenter, monitor=None) -> None:

@@ -62,8 +62,11 @@ class CameraPath:
     def save(self, path: Path) -> None:
         path = Path(path)
         tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_json()))
-        tmp.replace(path)
+        try:
+            tmp.write_text(json.dumps(self.to_json()))
+            tmp.replace(path)
+        finally:
+            tmp.unlink(missing_ok=True)  # written whole or not at all
 
 
 def catmull_rom(points: np.ndarray, t: np.ndarray) -> np.ndarray:
