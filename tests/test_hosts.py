@@ -85,3 +85,33 @@ def test_llvmpipe_gets_a_raster_thread_only_where_a_core_is_spare(monkeypatch, h
     assert raster_threads(host_ranks) == want == os.environ["LP_NUM_THREADS"]
     monkeypatch.setenv("LP_NUM_THREADS", "3")  # the user's setting wins
     assert raster_threads(host_ranks) == "3"
+
+
+def test_a_remote_shell_that_fails_is_one_line_naming_host_and_shell(tmp_path, capsys, monkeypatch):
+    """``MULTIGPU_RSH=/bin/false ... --hosts a:2,b:2``: refused before any rank starts, exit 2,
+    one line naming the first host and the shell (not the MPI launcher's internal errors)."""
+    from multigpu.parallel import mpirun
+
+    monkeypatch.setenv("MULTIGPU_RSH", "/bin/false")
+    code = mpirun.main(["-n", "4", "--hosts", "a:2,b:2", "walkthrough", "--grid", "2x2", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith("multigpu: error: host a: the remote shell '/bin/false a true' failed (exit 1")
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_probe_passes_hosts_that_answer_and_skips_this_machine(tmp_path):
+    import socket
+
+    from multigpu.errors import InputError
+    from multigpu.parallel.hosts import is_this_machine, probe
+
+    said = tmp_path / "said"
+    shell = tmp_path / "rsh"
+    shell.write_text(f"#!/bin/sh\necho \"$@\" >> {said}\n[ \"$1\" != slow ] || sleep 5\n")
+    shell.chmod(0o755)
+    assert is_this_machine("localhost") and is_this_machine(socket.gethostname())
+    probe([("localhost", 2), ("far", 1)], str(shell))
+    assert said.read_text().split("\n")[:-1] == ["far true"]  # this machine: a local fork, not the shell
+    with pytest.raises(InputError, match=r"host slow: .* \(no answer within 0.5 s\)"):
+        probe([("slow", 1)], str(shell), timeout=0.5)

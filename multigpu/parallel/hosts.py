@@ -75,3 +75,64 @@ def placement(hosts: list[tuple[str, int]], ranks: int, where: str = "--hosts") 
 def spec(hosts: list[tuple[str, int]]) -> str:
     """``a:2,b:2``: the form both MPIs take on their command line."""
     return ",".join(f"{h}:{n}" for h, n in hosts)
+
+
+#: seconds a host may take to answer the remote shell's probe (ssh's own connect included)
+PROBE_TIMEOUT = 20.0
+
+
+def is_this_machine(host: str) -> bool:
+    """Whether ``host`` names this machine (its name, localhost, or one of its own addresses):
+    the launchers start ranks there by a local fork, not through the remote shell."""
+    import socket
+
+    if host in ("localhost", socket.gethostname(), socket.getfqdn()):
+        return True
+    try:
+        addr = socket.gethostbyname(host)
+    except OSError:
+        return False
+    if addr == "127.0.0.1":
+        return True
+    try:
+        mine = {a[4][0] for a in socket.getaddrinfo(socket.gethostname(), None)}
+    except OSError:
+        mine = set()
+    return addr in mine
+
+
+def probe(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = PROBE_TIMEOUT) -> None:
+    """Every host that is not this machine answers ``RSH HOST true`` (the remote shell the
+    launchers will use: ``rsh``, or ssh in batch mode), all asked at once; the first that does
+    not is one InputError naming the host, the shell and what it said, before any rank starts
+    (the MPI launchers' own reports name neither)."""
+    import shlex
+    import subprocess
+
+    shell = [rsh] if rsh else ["ssh", "-o", "BatchMode=yes", "-o", f"ConnectTimeout={int(timeout)}"]
+    remote = [h for h, _ in hosts if not is_this_machine(h)]
+    running = []
+    for h in remote:
+        try:
+            running.append((h, subprocess.Popen([*shell, h, "true"], stdin=subprocess.DEVNULL,
+                                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                                start_new_session=True)))
+        except OSError as exc:
+            raise InputError(f"remote shell {shlex.join(shell)}: cannot run it ({exc.strerror or exc})") from None
+    failed = None
+    for h, proc in running:  # hosts, not ranks
+        try:
+            _, err = proc.communicate(timeout=timeout)
+            code = proc.returncode
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _, err = proc.communicate()
+            code = None
+        if failed is None and code != 0:
+            said = (err or "").strip().splitlines()
+            what = f"no answer within {timeout:g} s" if code is None else f"exit {code}"
+            failed = (f"host {h}: the remote shell '{shlex.join(shell)} {h} true' failed ({what}"
+                      + (f": {said[-1]}" if said else "") + "); check that it reaches the host without a "
+                      "password (MULTIGPU_RSH names another shell)")
+    if failed:
+        raise InputError(failed)

@@ -182,6 +182,11 @@ def out_dir(argv: list[str]) -> Path | None:
     return Path(out)
 
 
+def help_only(argv: list[str]) -> bool:
+    """Whether a command line only asks for help (nothing is started on the hosts)."""
+    return any(a in ("-h", "--help") for a in argv)
+
+
 def _die_with_parent() -> None:
     """In the launcher's child: be sent SIGKILL if this wrapper dies (Linux), so a wrapper
     killed whole by its caller never leaves a job behind in the launcher's own session."""
@@ -258,6 +263,10 @@ def main(argv: list[str] | None = None) -> int:
             hosts, rest = hosts_from(rest[0], rest[1], ranks), rest[2:]
         launcher = find_launcher()
         cmd = launcher.command(ranks, rest, hosts=hosts)
+        if hosts and not help_only(rest):
+            from multigpu.parallel.hosts import probe
+
+            probe(hosts, shutil.which(os.environ["MULTIGPU_RSH"]) if os.environ.get("MULTIGPU_RSH") else None)
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2
