@@ -241,3 +241,34 @@ def test_a_scene_s_objects_alone_keep_their_ranges_and_bounds_and_share_the_buff
     for bad in ([scene.n_objects], [-1], [[0, 1]]):
         with pytest.raises(InputError, match="object indices"):
             scene.objects(bad)
+
+
+#: small valid models of the shapes that broke generated paths: tiny, flat, nearly a line, far
+#: from the origin, standing in a vertical plane, one triangle
+ODD_MODELS = {
+    "tiny": ([[0, 0, 0], [1e-6, 0, 0], [0, 1e-6, 0]], [[0, 1, 2]]),
+    "flat": ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 1, 2], [1, 3, 2]]),
+    "sliver": ([[0, 0, 0], [1, 0, 0], [2, 0, 1e-7]], [[0, 1, 2]]),
+    "far": ([[1e7, 1e7, 1e7], [1e7 + 1, 1e7, 1e7], [1e7, 1e7 + 1, 1e7]], [[0, 1, 2]]),
+    "vertical": ([[0, 0, 0], [0, 0, 1], [0, 1, 0]], [[0, 1, 2]]),
+    "two-apart": ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [50, 0, 0], [51, 0, 0], [50, 1, 0]], [[0, 1, 2], [3, 4, 5]]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(ODD_MODELS))
+def test_generated_paths_are_valid_for_every_model_that_loads(tmp_path, name):
+    """Every frame of every generated path, at short and long lengths, is a camera (its position
+    apart from its target, finite matrices) for small, flat and degenerate-size models."""
+    from multigpu.core.camera import frame_matrices
+    from multigpu.scene.paths import GENERATORS, generate
+
+    verts, faces = ODD_MODELS[name]
+    model = tmp_path / f"{name}.ply"
+    trimesh.Trimesh(np.array(verts, dtype=np.float64), faces, process=False).export(model)
+    scene, _ = load_scene(SceneSpec(model=str(model)))
+    for kind in GENERATORS:
+        for frames in (1, 2, 3, 4, 5, 7, 13, 40):
+            path = generate(kind, scene, frames)
+            for f in range(len(path)):  # frames, not objects
+                view, proj, light = frame_matrices(path.camera(f), (64, 64))
+                assert np.isfinite(view).all() and np.isfinite(proj).all(), (kind, frames, f)

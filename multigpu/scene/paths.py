@@ -223,6 +223,9 @@ def _frame_of(scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 REFERENCE_GROUND = 233.0
 #: a scene whose ground is less than this many times its height is compact (an engine, a statue)
 COMPACT = 2.0
+#: a wide scene's flight heights are fractions of its height, but at least this fraction of its
+#: ground: a flat scene would otherwise be flown through edge on, the eye in its plane
+FLAT = 0.02
 
 
 def walkthrough(scene, frames: int = 1200, fov: float = 60.0) -> CameraPath:
@@ -260,7 +263,7 @@ def walkthrough(scene, frames: int = 1200, fov: float = 60.0) -> CameraPath:
     order = np.argsort(-mass, kind="stable")
     dense = order[:3]
     sparse = [c for c in order[::-1] if mass[c] > 0][:3]
-    height = span[ax]
+    height = max(span[ax], FLAT * ground_span)  # a flat scene (a floor plan, a terrain) is flown above
     ground = lo[ax] if sign > 0 else hi[ax]  # the floor seen from the up side
     unit = ground_span / REFERENCE_GROUND  # one plant metre in scene units
 
@@ -318,6 +321,24 @@ def look_at_something(path: CameraPath, scene, aspect: float = 1.0) -> CameraPat
         ahead = d > path.near[f] * 2  # objects not already at the eye
         near = int(np.argmin(np.where(ahead, d, np.inf)) if ahead.any() else np.argmin(d))
         path.target[f] = scene.centers[near]
+    return _apart(path, scene)
+
+
+def _apart(path: CameraPath, scene) -> CameraPath:
+    """Every frame's target apart from its position (a stop whose eye sits on what it looks at:
+    a flat, tiny or one-object scene, a short path that lands on its keyframes): such a frame
+    looks at the scene's centre instead, or along a ground axis where the eye is there too."""
+    lo, hi, up, diag = _frame_of(scene)
+    scale = diag + np.abs(path.position).max(axis=1)
+    gap = np.linalg.norm(path.target - path.position, axis=1)
+    close = ~(gap > 1e-9 * scale)  # NaN too
+    if close.any():
+        centre = (lo + hi) / 2
+        ax = int(np.argmax(np.abs(up)))
+        along = np.eye(3)[(ax + 1) % 3] * max(diag, 1e-300)  # a ground axis, for an eye at the centre
+        to_centre = centre - path.position[close]
+        far_enough = np.linalg.norm(to_centre, axis=1) > 1e-9 * scale[close]
+        path.target[close] = np.where(far_enough[:, None], centre, path.position[close] + along)
     return path
 
 
