@@ -18,7 +18,7 @@ import sys
 
 from multigpu.core.memory import keep_heap
 from multigpu.errors import InputError, WriteFailed, as_flags
-from multigpu.flags import scene_args, spec, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
+from multigpu.flags import WALKTHROUGH, scene_args, spec, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
 
 
 class Parser(argparse.ArgumentParser):
@@ -36,7 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap = Parser(prog="multigpu", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
 
-    w = sub.add_parser("walkthrough", help="render a camera path on a display wall (run under mpiexec)")
+    w = sub.add_parser("walkthrough", help="render a camera path on a display wall (run under mpiexec)",
+                       **WALKTHROUGH)
     scene_args(w)
     walkthrough_args(w)
 

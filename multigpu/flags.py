@@ -21,22 +21,23 @@ def scene_args(p: argparse.ArgumentParser) -> None:
 
     d = defaults(SceneSpec)
     g = p.add_argument_group("scene")
-    g.add_argument("--scene", default=d["scene"], help=f"built-in scene: {' | '.join(BUILTIN)} (default: %(default)s)")
-    g.add_argument("--model", help="model file (OBJ, PLY, STL, OFF, glTF/GLB) instead of --scene")
-    g.add_argument("--split", default=d["split"],
-                   help="objects of a model: auto (scene-graph nodes, else connected components) | components | "
-                        "grid:N (applies to any file)")
-    g.add_argument("--merge-below", type=int, default=d["merge_below"],
-                   help="merge components under this many triangles (default %(default)s)")
-    g.add_argument("--triangles", type=int, default=d["triangles"],
-                   help="built-in scene size in triangles (default %(default)s)")
-    g.add_argument("--copies", type=int, default=d["copies"], help="plants side by side (the paper used 6..20)")
-    g.add_argument("--seed", type=int, default=d["seed"])
-    g.add_argument("--cluster", default="auto",
-                   help="cut objects above N triangles into spatial clusters of at most N: auto (when an object "
-                        "is too big to balance on the wall) | N | 0 (keep objects as modelled)")
-    g.add_argument("--up", default=d["up"], help="up axis of the model: x | y | z | -x | -y | -z "
-                                                 "(default: the format's convention, see scene info)")
+    g.add_argument("--scene", default=d["scene"], metavar="|".join(BUILTIN), help="a built-in scene")
+    g.add_argument("--model", metavar="FILE", help="model file (OBJ, PLY, STL, OFF, glTF/GLB) instead of --scene")
+    g.add_argument("--split", default=d["split"], metavar="auto|components|grid:N",
+                   help="objects of a model: scene-graph nodes (else connected components), connected components, "
+                        "or an N^3 grid of cells (any file)")
+    g.add_argument("--merge-below", type=int, default=d["merge_below"], metavar="N",
+                   help="merge components under this many triangles")
+    g.add_argument("--triangles", type=int, default=d["triangles"], metavar="N",
+                   help="built-in scene size in triangles")
+    g.add_argument("--copies", type=int, default=d["copies"], metavar="N",
+                   help="built-in scenes side by side (the paper used 6..20 plants)")
+    g.add_argument("--seed", type=int, default=d["seed"], metavar="N", help="built-in scenes: the random seed")
+    g.add_argument("--cluster", default="auto", metavar="auto|N|0",
+                   help="cut objects above N triangles into spatial clusters of at most N (auto: when an object is "
+                        "too big to balance on the wall; 0: keep objects as modelled)")
+    g.add_argument("--up", default=d["up"], metavar="x|y|z|-x|-y|-z",
+                   help="up axis of the model (default: the format's convention, see scene info)")
 
 
 def _cluster(text: str) -> int | None:
@@ -63,78 +64,134 @@ def spec(a, **override):
     return SceneSpec(**{**fields, **override})
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Help with every flag's default shown (where it has one and its text does not already say
+    it) and the epilog's examples kept as written."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        shown = "%(default)" in text or "default" in text.lower()
+        empty = action.default is None or action.default is False or action.default is argparse.SUPPRESS
+        if not shown and action.option_strings and not empty:
+            text += " (default: %(default)s)"
+        return text
+
+
+def _one_of(names) -> str:
+    """The values a flag takes, as its metavar (checked with the configuration, not by argparse:
+    a bad value is a one-line error naming the flag)."""
+    return "|".join(names)
+
+
+#: the walkthrough's examples, printed after its flags
+EXAMPLES = """examples:
+  launch/walkthrough                                 the plant on a 2x2 wall of 256x256 tiles, 4 ranks
+  launch/walkthrough --grid 3x3 --tile 512x512 --balance strips --out out/strips
+  launch/walkthrough --model models/pump.glb --split components --path-kind orbit
+  launch/walkthrough --wall wall.json --present window --path interactive --record flight.json
+  launch/walkthrough --path flight.json --out out/replay     replay a flight bit for bit
+  launch/walkthrough --hosts a:2,b:2                 4 ranks on two PCs (remote shell: ssh or $MULTIGPU_RSH)
+  mpiexec -n 4 python -m mpi4py -m multigpu walkthrough --grid 2x2   under your own mpiexec
+
+Outputs in --out: timings.csv (a row per frame and rank), summary.json, mosaic/ (docs/USAGE.md)."""
+
+
+#: the walkthrough parser's settings (the CLI's subcommand and docs/USAGE.md's synopsis alike)
+WALKTHROUGH = {"description": "Render a camera path on a display wall: one MPI rank per tile, the work\n"
+                              "balanced every frame, every rank composing and showing its own tile.",
+               "formatter_class": HelpFormatter, "epilog": EXAMPLES}
+
+
+def walkthrough_parser(prog: str = "multigpu walkthrough") -> argparse.ArgumentParser:
+    """The walkthrough's parser on its own: what ``multigpu walkthrough --help`` prints."""
+    p = argparse.ArgumentParser(prog=prog, **WALKTHROUGH)
+    scene_args(p)
+    walkthrough_args(p)
+    return p
+
+
 def walkthrough_args(w: argparse.ArgumentParser) -> None:
-    """The walkthrough's own flags; defaults from ``WalkConfig``, choices from the registries."""
+    """The walkthrough's own flags in groups; defaults from ``WalkConfig``, choices from the
+    registries (the scene's flags come from ``scene_args``)."""
     from multigpu.config import DEFAULT_FRAMES, WalkConfig
+    from multigpu.decompositions import PATTERNS, RANGES
+    from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
     from multigpu.gpu.render import METHODS
     from multigpu.strategies import REGISTRY, describe
 
     d = defaults(WalkConfig)
     pair = lambda v: f"{v[0]}x{v[1]}"
-    w.add_argument("--path", help="camera path JSON file (default: generated walkthrough), or 'interactive': fly "
-                                  "by hand from rank 0's window, starting where --path-kind starts (needs --present "
-                                  "window; keys in docs/USAGE.md, H prints them)")
-    w.add_argument("--record", metavar="FILE", help="write every frame's camera to FILE, in the format --path reads "
-                                                    "(replaying it renders the same images)")
-    w.add_argument("--monitor", nargs="?", const="beside", metavar="X,Y",
+    c = w.add_argument_group("camera path")
+    c.add_argument("--path", metavar="FILE", help="camera path JSON file, or 'interactive': fly by hand from rank 0's "
+                                                   "window, starting where --path-kind starts (needs --present window; "
+                                                   "H prints the keys) (default: a generated path)")
+    c.add_argument("--path-kind", default=d["path_kind"], metavar=_one_of(list(DEFAULT_FRAMES)),
+                   help="the generated path when no --path is given")
+    c.add_argument("--frames", type=int, metavar="N",
+                   help="frames to render (default: the whole path; generated: "
+                        + ", ".join(f"{k} {v}" for k, v in DEFAULT_FRAMES.items()) + ")")
+    c.add_argument("--offset", default="0,0,0", metavar="X,Y,Z",
+                   help="move scene and path by these world units (e.g. 1e8,0,0: far from the origin)")
+    g = w.add_argument_group("wall and display")
+    g.add_argument("--grid", metavar="ROWSxCOLS",
+                   help=f"display wall; ranks = rows*cols (default: {pair(WalkConfig.grid)})")
+    g.add_argument("--tile", metavar="WxH", help=f"pixels per display tile (default: {pair(WalkConfig.tile)})")
+    g.add_argument("--mullion", metavar="MXxMY",
+                   help="pixels hidden behind the bezels between tiles: the camera spans them, nobody renders "
+                        f"them (default: {pair(WalkConfig.mullion)})")
+    g.add_argument("--wall", metavar="FILE", help="wall file (JSON): grid, tile, mullions, each rank's X display and "
+                                                  "window position; flags override it (docs/USAGE.md: On a real wall)")
+    g.add_argument("--present", default=d["present"], metavar=_one_of(["headless", "window"]),
+                   help="window: every rank shows its composed tile in a borderless window on its X display, all "
+                        "tiles swapped in step")
+    g.add_argument("--monitor", nargs="?", const="beside", metavar="X,Y",
                    help="an operator view on rank 0's display: the whole wall shrunk, the partition over it, live "
-                        "(at X,Y; default: right of the wall)")
-    w.add_argument("--path-kind", default=d["path_kind"], help=f"generated path: {' | '.join(DEFAULT_FRAMES)}")
-    w.add_argument("--frames", type=int, help="frames to render (default: the whole path; generated: "
-                                              + ", ".join(f"{k} {v}" for k, v in DEFAULT_FRAMES.items()) + ")")
-    w.add_argument("--grid", help=f"display wall ROWSxCOLS (ranks = rows*cols; default {pair(WalkConfig.grid)})")
-    w.add_argument("--tile", help=f"pixels per display tile WxH (default {pair(WalkConfig.tile)})")
-    w.add_argument("--mullion", help="pixels hidden behind the bezels between tiles MXxMY: the camera spans them, "
-                                     f"nobody renders them (default {pair(WalkConfig.mullion)})")
-    w.add_argument("--wall", help="wall file (JSON): grid, tile, mullions, each rank's X display and window position; "
-                                  "flags override it (docs/USAGE.md: On a real wall)")
-    w.add_argument("--present", default=d["present"],
-                   help="headless (default) | window: every rank shows its composed tile in a borderless window "
-                        "on its X display, all tiles swapped in step")
-    w.add_argument("--strips", type=int, default=d["strips"], help="strips per split axis (>= 2)")
-    w.add_argument("--balance", default=d["balance"],
-                   help=f"balancing strategy, one of {' | '.join(REGISTRY)} (default %(default)s). {describe()}")
-    from multigpu.decompositions import PATTERNS, RANGES
-    from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
-
-    w.add_argument("--decomposition", default=d["decomposition"],
-                   help=f"how a frame is divided: {' | '.join(DECOMPOSITIONS)} (default %(default)s): screen = the "
-                        "paper's screen partition (balanced by --balance); db = sort-last database decomposition, "
-                        "depth-composited; bins = static bin patterns, no balancer")
-    w.add_argument("--bin-size", type=int, default=d["bin_size"],
-                   help="bins: pixels per bin side (default %(default)s)")
-    w.add_argument("--bin-pattern", default=d["bin_pattern"],
-                   help=f"bins: which rank owns a bin: {' | '.join(PATTERNS)} (default %(default)s)")
-    w.add_argument("--db-ranges", default=d["db_ranges"],
-                   help=f"db: {' | '.join(RANGES)}: object ranges rebalanced over the visible objects every frame, "
-                        "or fixed by all triangles (default %(default)s)")
-    w.add_argument("--bounds", default=d["bounds"], help="object bounds: box (8 corners) | sphere")
-    w.add_argument("--out", default=d["out"], help="output directory (README: Outputs)")
-    w.add_argument("--mosaic-every", type=int, default=d["mosaic_every"],
-                   help="write the full wall every N frames (0: never)")
-    w.add_argument("--no-overlay", action="store_true", help="do not write partition overlay images")
-    w.add_argument("--video", action="store_true", help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
-    w.add_argument("--subfrustum", default=d["subfrustum"],
-                   help=f"how a rank renders its region: {' | '.join(METHODS)} (docs/ACCURACY.md)")
-    w.add_argument("--partition", default=d["partition"],
-                   help="who computes the partition: redundant (every rank) | broadcast (rank 0, then MPI_Bcast)")
-    w.add_argument("--exchange", default=d["exchange"],
-                   help="frame exchange: auto (a shared-memory segment per machine where it can be made, messages "
-                        "between machines) | shared (the same, but an error across machines) | messages "
-                        "(point-to-point only)")
-    w.add_argument("--projection", default=d["projection"],
-                   help="who projects the object bounds each frame: each (every rank every object) | shared (the "
-                        "ranks of a machine a slice each, into one shared-memory array, where it can be made; box "
-                        "bounds, strategies without coverage; pays on scenes of 50k objects and more) "
-                        "(default %(default)s)")
-    w.add_argument("--offset", default="0,0,0", help="move scene and path by X,Y,Z world units (e.g. 1e8,0,0)")
-    w.add_argument("--device", type=int, help="EGL device index (default: local rank modulo device count)")
-    w.add_argument("--timeout", type=float, default=d["timeout"],
-                   help="seconds a rank waits for the others within a frame (default %(default)s)")
-    w.add_argument("--liveness", type=float, default=d["liveness"],
-                   help="seconds without a heartbeat before a rank counts as stopped and the job ends "
-                        "(default %(default)s; 0: off, timeouts only)")
-    w.add_argument("--no-progress", action="store_true")
+                        "(at X,Y; without a value: right of the wall)")
+    g.add_argument("--device", type=int, metavar="I",
+                   help="EGL device index (default: local rank modulo device count)")
+    g.add_argument("--subfrustum", default=d["subfrustum"], metavar=_one_of(list(METHODS)),
+                   help="how a rank renders its region (docs/ACCURACY.md)")
+    b = w.add_argument_group("balancing")
+    b.add_argument("--balance", default=d["balance"], metavar=_one_of(list(REGISTRY)),
+                   help=f"the balancing strategy. {describe()}")
+    b.add_argument("--decomposition", default=d["decomposition"], metavar=_one_of(list(DECOMPOSITIONS)),
+                   help="how a frame is divided: screen = the paper's screen partition (balanced by --balance); "
+                        "db = sort-last database decomposition, depth-composited; bins = static bin patterns, "
+                        "no balancer")
+    b.add_argument("--strips", type=int, default=d["strips"], metavar="N", help="strips per split axis (>= 2)")
+    b.add_argument("--bounds", default=d["bounds"], metavar=_one_of(["box", "sphere"]),
+                   help="object bounds: box (8 corners) or sphere")
+    b.add_argument("--bin-size", type=int, default=d["bin_size"], metavar="PX", help="bins: pixels per bin side")
+    b.add_argument("--bin-pattern", default=d["bin_pattern"], metavar=_one_of(list(PATTERNS)),
+                   help="bins: which rank owns a bin")
+    b.add_argument("--db-ranges", default=d["db_ranges"], metavar=_one_of(list(RANGES)),
+                   help="db: object ranges rebalanced over the visible objects every frame, or fixed by all triangles")
+    b.add_argument("--partition", default=d["partition"], metavar=_one_of(["redundant", "broadcast"]),
+                   help="who computes the partition: every rank, or rank 0 and a broadcast")
+    b.add_argument("--projection", default=d["projection"], metavar=_one_of(["each", "shared"]),
+                   help="who projects the object bounds: every rank every object, or the ranks of a machine a slice "
+                        "each into one shared array (pays from ~50k objects)")
+    b.add_argument("--exchange", default=d["exchange"], metavar=_one_of(["auto", "shared", "messages"]),
+                   help="frame exchange: auto = a shared-memory segment per machine where it can be made, messages "
+                        "between machines; shared = the same, an error where it cannot; messages = point to point")
+    o = w.add_argument_group("outputs")
+    o.add_argument("--out", default=d["out"], metavar="DIR",
+                   help="output directory: timings.csv, summary.json, mosaic/")
+    o.add_argument("--mosaic-every", type=int, default=d["mosaic_every"], metavar="N",
+                   help="write the full wall as a PNG every N frames (0: never)")
+    o.add_argument("--no-overlay", action="store_true", help="no partition overlay beside each mosaic")
+    o.add_argument("--video", action="store_true", help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
+    o.add_argument("--record", metavar="FILE", help="write every frame's camera to FILE, in the format --path reads "
+                                                    "(replaying it renders the same images)")
+    r = w.add_argument_group("run control")
+    r.add_argument("--timeout", type=float, default=d["timeout"], metavar="S",
+                   help="seconds a rank waits for the others within a frame")
+    r.add_argument("--liveness", type=float, default=d["liveness"], metavar="S",
+                   help="seconds without a heartbeat before a rank counts as stopped and the job ends (0: off)")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    h = w.add_argument_group("hosts (the launcher's: launch/walkthrough, python -m multigpu.parallel.mpirun)")
+    h.add_argument("--hosts", metavar="H:N,...", help="place the ranks on these hosts in order, N each (e.g. a:2,b:2)")
+    h.add_argument("--hostfile", metavar="FILE", help="hosts one per line: HOST, HOST:N or HOST slots=N")
 
 
 def walk_config(a):
@@ -142,6 +199,10 @@ def walk_config(a):
     from multigpu.config import WalkConfig, parse_pair, parse_vec3
     from multigpu.wall import Wall, check_ranks, load_wall
 
+    for name in ("hosts", "hostfile"):
+        if getattr(a, name, None) is not None:
+            raise InputError(f"--{name} places the ranks when the job starts: give it to launch/walkthrough or "
+                             "python -m multigpu.parallel.mpirun, or place them with your mpiexec's own flags")
     wall = load_wall(a.wall) if a.wall else Wall("")
     pick = lambda flag, text, parse, default: parse(text, flag) if text is not None else default
     grid = pick("--grid", a.grid, parse_pair, wall.grid or WalkConfig.grid)

@@ -20,8 +20,8 @@ REGISTRY: dict[str, type] = {cls.name: cls for cls in (Strips, CostModel, TimeFe
 
 
 def describe() -> str:
-    """One line per strategy (name: first docstring line), for --help."""
-    return "; ".join(f"{name}: {cls.__doc__.strip().splitlines()[0].rstrip('.')}" for name, cls in REGISTRY.items())
+    """Every strategy as ``name: summary`` (its one plain line), for --help."""
+    return "; ".join(f"{name}: {cls.summary}" for name, cls in REGISTRY.items())
 
 
 def make_strategy(name: str, grid, size, strips: int) -> Strategy:

@@ -32,6 +32,7 @@ class Adaptive(CostModel):
     limit: float = 8.0
 
     name = "adaptive"
+    summary = 'cost, its per-object costs corrected by what each rank measured'
     reproducible = False  # it follows measured times, which differ between runs
 
     def __post_init__(self):

@@ -54,6 +54,7 @@ class Auto(Configured):
     z: float = 2.5  # a trial ends after a round once the best leads by this many standard errors
 
     name = "auto"
+    summary = 'chooses cross or strips per scene from trial frames, and checks again now and then'
     reproducible = False  # it follows measured times
 
     def __post_init__(self):

@@ -27,6 +27,7 @@ class Strategy(Protocol):
     """What the frame loop needs of a balancing strategy."""
 
     name: ClassVar[str]
+    summary: ClassVar[str]  # one plain line (no markup) for --help and the docs
     needs_coverage: ClassVar[bool]  # whether ``plan`` wants per-object silhouette coverage
     reproducible: ClassVar[bool]  # same inputs, same partitions in every run
 

@@ -36,6 +36,7 @@ class CostModel(Configured):
     warmup: int = 3
 
     name = "cost"
+    summary = 'splits by a*triangles + b*pixels, the coefficients fitted online from measured times'
     needs_coverage = True
     reproducible = False  # its coefficients are fitted to measured times
 

@@ -151,6 +151,7 @@ class CrossSegment(Configured):
     model: str = "weighted"
 
     name = "cross"
+    summary = 'resources move between display segments by load, then each segment is split by time'
     reproducible = False  # it follows measured times
 
     def __post_init__(self):

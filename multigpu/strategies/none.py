@@ -12,6 +12,7 @@ class NoBalance(Configured):
     """The paper's baseline: each rank renders exactly its own display tile."""
 
     name = "none"
+    summary = "the paper's baseline: each rank renders exactly its own display tile"
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
         return partition_tiles(rects, tris, self.grid, self.size, self.compiled)

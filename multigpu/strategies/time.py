@@ -20,6 +20,7 @@ class TimeFeedback(Configured):
     damping: float = 0.5
 
     name = "time"
+    summary = "Equalizer's load equalizer: splits follow the last frame's render times, no scene knowledge"
     reproducible = False  # it follows measured times
 
     def __post_init__(self):
