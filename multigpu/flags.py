@@ -174,6 +174,11 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
     b.add_argument("--exchange", default=d["exchange"], metavar=_one_of(["auto", "shared", "messages"]),
                    help="frame exchange: auto = a shared-memory segment per machine where it can be made, messages "
                         "between machines; shared = the same, an error where it cannot; messages = point to point")
+    _output_args(w, d)
+
+
+def _output_args(w: argparse.ArgumentParser, d: dict) -> None:
+    """The walkthrough's outputs, run control and the launcher's hosts flags."""
     o = w.add_argument_group("outputs")
     o.add_argument("--out", default=d["out"], metavar="DIR",
                    help="output directory: timings.csv, summary.json, mosaic/")
