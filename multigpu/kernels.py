@@ -7,7 +7,8 @@ Each kernel sits beside the code it serves, as ``<module>_kernel.py``, with its 
 * ``core/balance_kernel.py``: the paper's balancer: pixel spans, the GPU-tree walk with the strip
   chooser (Start/End arrays, prefix/postfix sums, the split nearest balRatio), T' masks, loads;
 * ``core/splits_kernel.py``: Equalizer's time chooser (time feedback's cuts, which the walk takes);
-* ``core/drawlist_kernel.py``: a rank's mask to run-merged draw commands;
+* ``core/drawlist_kernel.py``: a rank's mask to run-merged draw commands (of objects, or of parts);
+* ``core/culling_kernel.py``: the parts of the objects a region needs that reach it;
 * ``core/work_kernel.py``: a frame's transfers, every (piece, tile) overlap in message order;
 * ``strategies/cross_kernel.py``: cross-segment balancing (profiles, shares, cuts, piece masks);
 * ``strategies/cost_kernel.py``: the cost model's least-squares fit and term selection;
@@ -32,7 +33,8 @@ import numpy as np
 from multigpu.core.balance_kernel import strip_partition
 from multigpu.core.bounds import BoxProjector
 from multigpu.core.camera import Camera, look_at, perspective
-from multigpu.core.drawlist_kernel import _commands
+from multigpu.core.culling_kernel import _seen
+from multigpu.core.drawlist_kernel import _commands, _part_commands
 from multigpu.core.jit import available
 from multigpu.core.tree import gpu_tree
 from multigpu.core.work_kernel import _parts
@@ -42,6 +44,7 @@ from multigpu.strategies.cost_kernel import fit_terms
 
 #: every kernel module, for the tests that check them all (compiled, cached, no Python objects)
 MODULES = ("multigpu.core.bounds_kernel", "multigpu.core.balance_kernel", "multigpu.core.splits_kernel",
+           "multigpu.core.culling_kernel",
            "multigpu.core.drawlist_kernel", "multigpu.core.work_kernel", "multigpu.strategies.cross_kernel",
            "multigpu.strategies.cost_kernel", "multigpu.strategies.base_kernel",
            "multigpu.strategies.adaptive_kernel", "multigpu.strategies.auto_kernel",
@@ -74,7 +77,10 @@ def warm() -> float:
                 np.ones((1, 2)), np.empty((1, 1)))
     fit_terms(np.array([[1.0, 2.0, 3.0], [2.0, 1.0, 4.0], [3.0, 3.0, 5.0], [4.0, 1.0, 7.0]]), 0.05, 0.5, np.empty(10))
     _commands(np.ones(2, dtype=np.bool_), np.arange(2, dtype=np.int64), np.array([0, 3, 6], dtype=np.int64))
+    _part_commands(np.ones(2, dtype=np.bool_), np.ones(3, dtype=np.bool_), np.array([0, 0, 1], dtype=np.int64),
+                   np.arange(3, dtype=np.int64), np.array([0, 3, 6, 9], dtype=np.int64))
     _parts(np.array([[0, 0, 4, 4]]), np.array([1]), np.array([[0, 0, 2, 2]]))
+    _seen(np.zeros((4, 1)), 64.0, 64.0, 0, 0, 64, 64, np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.bool_))
     return time.perf_counter() - t0
 
 

@@ -69,6 +69,16 @@ class DrawList:
         self.offsets = np.zeros(scene.n_objects + 1, dtype=np.int64)  # buffer offset of each object in order
         np.cumsum(lengths, out=self.offsets[1:])
         self._scene = scene  # until uploaded: the GL buffers are made from it a block at a time
+        start = getattr(scene, "part_start", None)
+        self.parts = start is not None and int(start[-1]) > scene.n_objects  # objects cut into parts
+        if self.parts:  # the parts in buffer order: each object's parts in its place, in their own order
+            n = start[self.order + 1] - start[self.order]
+            self.part_order = np.repeat(start[self.order] - np.concatenate([[0], np.cumsum(n)[:-1]]), n) + np.arange(
+                int(n.sum()))
+            self.part_obj = np.repeat(np.arange(scene.n_objects, dtype=np.int64), np.diff(start))
+            self.part_offsets = np.zeros(self.part_order.size + 1, dtype=np.int64)
+            np.cumsum(scene.part_count[self.part_order], out=self.part_offsets[1:])
+            self.part_count = scene.part_count
 
     @property
     def vertex_object(self) -> np.ndarray:
@@ -132,15 +142,38 @@ class DrawList:
             from multigpu.core.drawlist_kernel import _commands
 
             return _commands(np.ascontiguousarray(mask, dtype=np.bool_), self.order, self.offsets)
-        m = np.asarray(mask, dtype=bool)[self.order].view(np.int8)
-        edges = np.diff(m, prepend=np.int8(0), append=np.int8(0))
-        starts = np.flatnonzero(edges == 1)
-        ends = np.flatnonzero(edges == -1)
-        first = self.offsets[starts]
-        count = self.offsets[ends] - first
-        keep = count > 0  # runs of zero-triangle objects draw nothing
-        cmd = np.zeros((int(keep.sum()), 5), dtype=np.uint32)
-        cmd[:, 0] = count[keep]
-        cmd[:, 1] = 1
-        cmd[:, 2] = first[keep]
-        return cmd
+        return _runs(np.asarray(mask, dtype=bool), self.order, self.offsets)
+
+    def part_commands(self, mask: np.ndarray | None, seen: np.ndarray, compiled: bool | None = None) -> np.ndarray:
+        """``commands`` over parts (a scene whose objects are cut into parts): a part is drawn
+        where its object is in ``mask`` (N,) and it is ``seen`` (P,) bool in scene part order
+        (``core/culling.py``: its bounds reach the region). ``compiled`` as in ``commands``."""
+        if mask is None:
+            mask = np.ones(self.order.size, dtype=bool)
+        from multigpu.core import jit
+
+        if jit.use(compiled):
+            from multigpu.core.drawlist_kernel import _part_commands
+
+            return _part_commands(np.ascontiguousarray(mask, dtype=np.bool_),
+                                  np.ascontiguousarray(seen, dtype=np.bool_), self.part_obj, self.part_order,
+                                  self.part_offsets)
+        drawn = np.asarray(mask, dtype=bool)[self.part_obj] & np.asarray(seen, dtype=bool)
+        return _runs(drawn, self.part_order, self.part_offsets)
+
+
+def _runs(mask: np.ndarray, order: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """The numpy reference of the run merge: one command per run of ``mask``ed items (objects or
+    parts, ``mask`` in scene order) consecutive in buffer ``order``, ``offsets`` their buffer offsets."""
+    m = mask[order].view(np.int8)
+    edges = np.diff(m, prepend=np.int8(0), append=np.int8(0))
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1)
+    first = offsets[starts]
+    count = offsets[ends] - first
+    keep = count > 0  # runs of zero-triangle items draw nothing
+    cmd = np.zeros((int(keep.sum()), 5), dtype=np.uint32)
+    cmd[:, 0] = count[keep]
+    cmd[:, 1] = 1
+    cmd[:, 2] = first[keep]
+    return cmd

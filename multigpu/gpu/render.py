@@ -246,16 +246,20 @@ class RegionRenderer:
                 yield cx, cy, min(cx + c, x1), min(cy + c, y1)
 
     def render(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, region, mask: np.ndarray | None,
-               depth: bool = False):
+               depth: bool = False, seen: np.ndarray | None = None):
         """Render the objects in ``mask`` (all when None) into ``region``; return its pixels.
+        ``seen``: of a scene cut into parts, the parts that reach the region (``core/culling.py``;
+        None: every part of the objects in ``mask``).
 
         Returns ``(h, w, 3)`` uint8, row 0 at the BOTTOM of the region (GL order); with
-        ``depth`` also the ``(h, w)`` float32 window depth.
+        ``depth`` also the ``(h, w)`` float32 window depth. ``last_triangles`` is what it drew.
         """
         x0, y0, x1, y1 = (int(v) for v in region)
         w, h = x1 - x0, y1 - y0
-        cmds = self.draws.commands(mask)
+        cmds = self.draws.commands(mask) if seen is None or not self.draws.parts else self.draws.part_commands(mask,
+                                                                                                             seen)
         self.last_commands = len(cmds)
+        self.last_triangles = int(cmds[:, 0].sum()) // 3
         ctx = self.ctx
         mvp = np.asarray(proj, dtype=np.float64) @ model_view(view, self.origin)
         if len(cmds):

@@ -15,6 +15,7 @@ import numpy as np
 from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core import jit
 from multigpu.core.camera import Camera
+from multigpu.core.culling import PartCuller
 from multigpu.core.work import Work, transfers
 from multigpu.errors import WriteFailed
 from multigpu.parallel.backends import Exchange, Projection
@@ -74,6 +75,8 @@ class Frames:
         self.canvas = cfg.canvas
         self.tiles = self.canvas.tiles()
         self.planner = Planner(cfg, scene, self.rank)  # MPI-free: projection, strategy, decomposition
+        self.culler = PartCuller(scene) if renderer.draws.parts else None  # objects cut into parts
+        self.drawn = 0  # triangles this rank drew in the last frame
         self.balance_ids = [BALANCE_NAMES.index(b) for b in self.planner.balances]  # the CSV's balance column
         self.relay = self._relay if cfg.partition == "broadcast" and self.K > 1 else None  # screen only (door)
         depth = self.planner.decomposition.depth
@@ -130,11 +133,21 @@ class Frames:
 
     # -- phases of one frame
 
-    def render(self, work: Work, view, proj, light) -> list:
-        """Every piece this rank renders: (rgb, depth or None)."""
-        out = []
+    def render(self, t: Timer, work: Work, view, proj, light) -> list:
+        """Every piece this rank renders: (rgb, depth or None). Of a scene cut into parts, the
+        parts each piece needs are found first (the ``cull`` phase); ``drawn`` counts the
+        triangles the pieces drew."""
+        out, self.drawn, parts = [], 0, None
+        if self.culler is not None:
+            with t.phase("cull"):
+                self.culler.frame(view, proj, self.canvas.size)
         for rect, mask in zip(work.rects[self.rank], work.masks[self.rank]):  # pieces, not objects
-            got = self.renderer.render(view, proj, light, rect, mask, depth=work.depth)
+            if self.culler is not None:
+                with t.phase("cull"):
+                    parts = self.culler.seen(rect)
+            with t.phase("render"):
+                got = self.renderer.render(view, proj, light, rect, mask, depth=work.depth, seen=parts)
+            self.drawn += self.renderer.last_triangles
             out.append(got if work.depth else (got, None))
         return out
 
@@ -171,12 +184,13 @@ class Frames:
     def gather_row(self, f: int, work: Work, t: Timer, sent: tuple[int, int], swapped: float, stop: int) -> None:
         """This rank's row by column name, gathered so every rank sees every rank's row."""
         box = work.bounds(self.rank)
-        values = {"frame": f, "rank": self.rank, "triangles": work.loads[self.rank],
+        values = {"frame": f, "rank": self.rank, "triangles": self.drawn, "planned_triangles": work.loads[self.rank],
                   "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
-                  "load_balancing_ms": t.ms(*BALANCE_PHASES), "rendering_ms": t.ms("render"),
+                  "load_balancing_ms": t.ms(*BALANCE_PHASES), "rendering_ms": t.ms("cull", "render"),
                   "synchronization_ms": t.ms("sync"), "frame_exchange_ms": t.ms("exchange"),
                   "display_ms": t.ms("display", "swap_wait"), "frame_ms": t.total_ms,
-                  "load_balancing_cpu_ms": t.cpu_ms(*BALANCE_PHASES), "rendering_cpu_ms": t.cpu_ms("render"),
+                  "load_balancing_cpu_ms": t.cpu_ms(*BALANCE_PHASES), "rendering_cpu_ms": t.cpu_ms("cull", "render"),
+                  "culling_cpu_ms": t.cpu_ms("cull"),
                   "learning_cpu_ms": t.cpu_ms("learn"), "projection_cpu_ms": t.cpu_ms("project"),
                   "planning_cpu_ms": t.cpu_ms("plan"),
                   "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
@@ -246,8 +260,7 @@ class Frames:
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("plan"):
             work = self.planner.work(f, rects, self.relay)
-        with t.phase("render"):
-            rendered = self.render(work, view, proj, light)
+        rendered = self.render(t, work, view, proj, light)
         with t.phase("exchange"):  # parts for peers into the shared segment before the barrier (messages: nothing)
             plan = transfers(work, self.tiles)
             self.exchange.publish(f, self.rank, work.rects, rendered, plan)

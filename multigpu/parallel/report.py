@@ -18,6 +18,9 @@ Figures and what they are:
   in its three phases (they add up to ``load_balancing_cpu_ms``): the strategy learning from
   the last frame's measured times, projecting the object bounds (``--projection shared``:
   this rank's slice), planning the partition (``--partition broadcast``: with its broadcast);
+* ``triangles``: the triangles a rank drew (of a scene cut into parts, only the parts its
+  pieces needed); ``planned_triangles``: those of the whole objects the plan gave it (the
+  balancer's load); ``culling_cpu_ms``: the cull of those parts (inside ``rendering_cpu_ms``);
 * ``heartbeat_cpu_ms``: CPU time of the rank's heartbeat thread since the last frame
   (``time.thread_time`` in the thread; already inside the phases' process CPU times where it
   ran during them, shown apart so its cost is known).
@@ -40,13 +43,14 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
            "bytes_sent", "objects", "pieces", "depth_bytes", "load_cv",
            "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms", "input_ms", "heartbeat_cpu_ms",
-           "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "balance"]
+           "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms", "balance"]
 #: the load balancing CPU time's three phases (learn, project, plan), adding up to it
 BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
 #: what the ``balance`` column can name: a strategy of the screen decomposition, or another decomposition
 BALANCE_NAMES = (*STRATEGIES, *(d for d in DECOMPOSITIONS if d != "screen"))
-INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes"}
+INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes",
+               "planned_triangles"}
 
 
 class TimingWriter:

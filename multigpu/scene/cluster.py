@@ -64,6 +64,14 @@ def split_objects(scene: Scene, max_tris: int) -> Scene:
     tris = scene.tris
     if tris.size == 0 or tris.max() <= max_tris:
         return scene
+    return cut(scene, max_tris)[0]
+
+
+def cut(scene: Scene, max_tris: int) -> tuple[Scene, np.ndarray]:
+    """Every object above ``max_tris`` triangles cut into near-equal clusters along a Z-order
+    curve of its triangle centroids: the scene whose objects are the clusters, in (object,
+    cluster) order, and (N,) the cluster count of each original object (1 where kept whole)."""
+    tris = scene.tris
     tri, obj = triangle_objects(scene)  # (T, 3) absolute vertices, object of each triangle
     pos = scene.vertices[:, :3]
     centroid = lambda s, e: pos[tri[s:e]].astype(np.float64).mean(axis=1)
@@ -115,4 +123,4 @@ def split_objects(scene: Scene, max_tris: int) -> Scene:
     return Scene(vertices=scene.vertices, indices=local, first_index=starts * 3,
                  index_count=new_counts.astype(np.int64) * 3, base_vertex=base, bmin=bmin, bmax=bmax,
                  centers=centers, radii=radii, colors=scene.colors[parent], origin=scene.origin, name=scene.name,
-                 meta={**scene.meta, "cluster": int(max_tris), "modelled_objects": scene.n_objects})
+                 meta={**scene.meta, "cluster": int(max_tris), "modelled_objects": scene.n_objects}), n_clusters

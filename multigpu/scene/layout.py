@@ -19,7 +19,7 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-FORMAT_VERSION = 4  # 4: meta records objects/up decisions and scene routes
+FORMAT_VERSION = 5  # 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
 
 
 @dataclass
@@ -34,6 +34,11 @@ class Scene:
     colors : (N, 3) float32  per-object colour in [0, 1]
     origin : (3,) float64  world position of vertex coordinate (0, 0, 0)
     meta : free-form facts (generator options, landmarks for camera paths, warnings)
+    part_start : (N+1,) int64  object i's parts are rows part_start[i]:part_start[i+1] of:
+    part_count : (P,) int64  index count of each part (an object's parts follow each other in its
+        index range, from its ``first_index``)
+    part_bmin, part_bmax : (P, 3) float64  each part's bounding box (world space)
+    (None: no parts, each object one part; ``scene/parts.py`` makes them)
     """
 
     vertices: np.ndarray
@@ -49,6 +54,10 @@ class Scene:
     origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
     name: str = "scene"
     meta: dict = field(default_factory=dict)
+    part_start: np.ndarray | None = None
+    part_count: np.ndarray | None = None
+    part_bmin: np.ndarray | None = None
+    part_bmax: np.ndarray | None = None
 
     @property
     def n_objects(self) -> int:
@@ -76,8 +85,17 @@ class Scene:
     #: the arrays with one row per object (``objects`` picks rows of these)
     PER_OBJECT = ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors")
 
-    def _arrays(self) -> dict[str, np.ndarray]:
-        return {k: getattr(self, k) for k in ("vertices", "indices", *self.PER_OBJECT, "origin")}
+    #: the parts' arrays (``part_start`` indexes the others)
+    PARTS = ("part_start", "part_count", "part_bmin", "part_bmax")
+
+    @property
+    def n_parts(self) -> int:
+        """Parts in all (one per object where the scene has none)."""
+        return self.n_objects if self.part_start is None else int(self.part_start[-1])
+
+    def _arrays(self, parts: bool = True) -> dict[str, np.ndarray]:
+        names = ("vertices", "indices", *self.PER_OBJECT, "origin", *(self.PARTS if parts else ()))
+        return {k: getattr(self, k) for k in names if getattr(self, k) is not None}
 
     def translated(self, offset) -> "Scene":
         """The same scene moved by ``offset`` world units (float64 bounds and origin; the
@@ -85,7 +103,8 @@ class Scene:
         off = np.asarray(offset, dtype=np.float64).reshape(3)
         if not np.isfinite(off).all():
             raise InputError(f"scene offset must be finite, got {off.tolist()}")
-        moved = {k: getattr(self, k) + off for k in ("bmin", "bmax", "centers", "origin")}
+        moved = {k: getattr(self, k) + off for k in ("bmin", "bmax", "centers", "origin", "part_bmin", "part_bmax")
+                 if getattr(self, k) is not None}
         return Scene(**{**self._arrays(), **moved}, name=self.name,
                      meta={**self.meta, "offset": (np.asarray(self.meta.get("offset", 0.0)) + off).tolist()})
 
@@ -99,6 +118,12 @@ class Scene:
         if idx.size and (idx.min() < 0 or idx.max() >= self.n_objects):
             raise InputError(f"object indices must lie in [0, {self.n_objects}), got {idx.min()}..{idx.max()}")
         picked = {k: getattr(self, k)[idx] for k in self.PER_OBJECT}
+        if self.part_start is not None:  # the picked objects' parts, in the same order
+            n = self.part_start[idx + 1] - self.part_start[idx]
+            rows = np.repeat(self.part_start[idx] - np.concatenate([[0], np.cumsum(n)[:-1]]), n) + np.arange(n.sum())
+            picked |= {"part_start": np.concatenate([[0], np.cumsum(n)]).astype(np.int64),
+                       "part_count": self.part_count[rows], "part_bmin": self.part_bmin[rows],
+                       "part_bmax": self.part_bmax[rows]}
         return Scene(**{**self._arrays(), **picked}, name=self.name, meta=self.meta)
 
     def without_geometry(self) -> "Scene":

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError, check_file
+from multigpu.scene import parts as scene_parts
 from multigpu.scene.blocks import blocks, per_object
 from multigpu.scene.labels import face_labels
 from multigpu.scene.layout import FORMAT_VERSION, Scene
@@ -85,7 +86,8 @@ def cache_dir() -> Path:
 
 
 def _key(*parts) -> str:
-    return hashlib.sha1(repr((FORMAT_VERSION,) + parts).encode()).hexdigest()[:16]
+    """The cache key: the format, the part size (it shapes the cached layout) and the spec."""
+    return hashlib.sha1(repr((FORMAT_VERSION, scene_parts.PART_TRIS) + parts).encode()).hexdigest()[:16]
 
 
 def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
@@ -109,6 +111,7 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
 
     def build() -> Scene:
         from multigpu.scene.cluster import auto_cluster, split_objects
+        from multigpu.scene.parts import with_parts
 
         scene = make()
         modelled = scene.n_objects
@@ -121,7 +124,7 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
             scene = split_objects(scene, size)
         scene.meta["objects"] = {"split": scene.meta.get("split", spec.split), "modelled": modelled,
                                  "objects": scene.n_objects, "cluster": int(size), "why": why}
-        return scene
+        return with_parts(scene)  # objects of many triangles cut inside themselves, for culling
     path = cache_dir() / name
     scene, cached = None, False
     if use_cache and path.is_file():
