@@ -15,7 +15,8 @@ Each kernel sits beside the code it serves, as ``<module>_kernel.py``, with its 
 * ``strategies/base_kernel.py``: the cost model's per-rank pixel feature;
 * ``strategies/adaptive_kernel.py``: ``adaptive``'s sums over the T' masks;
 * ``strategies/auto_kernel.py``: the triangles of the objects in view (``auto``'s trial load);
-* ``scene/labels_kernel.py``: connected components of a mesh's vertices (load time).
+* ``scene/labels_kernel.py``: connected components of a mesh's vertices (load time);
+* ``scene/parts_kernel.py``: objects cut into parts, their triangles reordered (load time).
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
@@ -38,6 +39,8 @@ from multigpu.core.drawlist_kernel import _commands, _part_commands
 from multigpu.core.jit import available
 from multigpu.core.tree import gpu_tree
 from multigpu.core.work_kernel import _parts
+from multigpu.scene.parts import with_parts
+from multigpu.scene.plant import generate_plant
 from multigpu.strategies import REGISTRY
 from multigpu.strategies.base_kernel import rank_pixels
 from multigpu.strategies.cost_kernel import fit_terms
@@ -48,7 +51,7 @@ MODULES = ("multigpu.core.bounds_kernel", "multigpu.core.balance_kernel", "multi
            "multigpu.core.drawlist_kernel", "multigpu.core.work_kernel", "multigpu.strategies.cross_kernel",
            "multigpu.strategies.cost_kernel", "multigpu.strategies.base_kernel",
            "multigpu.strategies.adaptive_kernel", "multigpu.strategies.auto_kernel",
-           "multigpu.scene.labels_kernel")
+           "multigpu.scene.labels_kernel", "multigpu.scene.parts_kernel")
 
 
 def warm() -> float:
@@ -81,6 +84,7 @@ def warm() -> float:
                    np.arange(3, dtype=np.int64), np.array([0, 3, 6, 9], dtype=np.int64))
     _parts(np.array([[0, 0, 4, 4]]), np.array([1]), np.array([[0, 0, 2, 2]]))
     _seen(np.zeros((4, 1)), 64.0, 64.0, 0, 0, 64, 64, np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.bool_))
+    with_parts(generate_plant(2000, seed=0), 16)  # the parts kernels, as a scene's first load runs them
     return time.perf_counter() - t0
 
 

@@ -48,6 +48,19 @@ def test_parts_cover_every_object_and_bound_their_triangles(scene):
     assert (corners.max(axis=1) <= scene.part_bmax[part] + tol).all()
 
 
+def test_parts_compiled_equal_the_numpy_reference_whatever_the_block(monkeypatch):
+    import multigpu.scene.parts as parts
+
+    base = generate_plant(30_000, seed=4)
+    want = with_parts(base, 16, compiled=False)
+    for block in (parts.BLOCK_TRIS, 1000, 97):  # objects grouped into blocks, or one per block
+        monkeypatch.setattr(parts, "BLOCK_TRIS", block)
+        for compiled in (True, False):
+            got = with_parts(base, 16, compiled=compiled)
+            for k in ("indices", "part_start", "part_count", "part_bmin", "part_bmax"):
+                assert np.array_equal(getattr(got, k), getattr(want, k)), (block, compiled, k)
+
+
 def test_a_scene_s_objects_keep_their_parts(scene):
     idx = np.array([5, 0, 17, 3])
     sub = scene.objects(idx)
