@@ -135,7 +135,7 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "fps": float(1000.0 / frame_ms.mean()),
         "cpu": {c: float(get(c).mean()) for c in ("load_balancing_cpu_ms", "rendering_cpu_ms",
                                                   "frame_exchange_cpu_ms", "display_cpu_ms", "heartbeat_cpu_ms",
-                                                  *BALANCE_CPU)},
+                                                  "culling_cpu_ms", *BALANCE_CPU)},
         "emulated_frame_ms": float(emulated.mean()),
         "emulated_fps": float(1000.0 / emulated.mean()),
         "emulated_frame_ms_median": float(np.median(emulated)),
@@ -144,6 +144,7 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "imbalance_render_cpu": ratio(rend),
         "empty_frames": int((~drawn).sum()),
         "triangles_per_frame": float(tri.sum(axis=1).mean()),
+        "planned_triangles_per_frame": float(get("planned_triangles").sum(axis=1).mean()),
         "bytes_sent_per_frame": float(get("bytes_sent").sum(axis=1).mean()),
         "depth_bytes_per_frame": float(get("depth_bytes").sum(axis=1).mean()),
         "load_cv": float(get("load_cv")[:, 0].mean()),  # std/mean of per-rank triangles (Kerbl's c_v)
@@ -174,7 +175,7 @@ def table(summary: dict, title: str = "") -> str:
     lines = [title] if title else []
     lines += [f"{summary['frames']} frames x {summary['ranks']} ranks. Wall-clock per-rank means (ms):", head, row,
               f"Per-rank CPU time (ms): load balancing {c['load_balancing_cpu_ms']:.2f}{_parts(c)}, rendering "
-              f"{c['rendering_cpu_ms']:.2f} (slowest rank {summary['render_cpu_max_ms']:.2f}), exchange "
+              f"{c['rendering_cpu_ms']:.2f} (slowest rank {summary['render_cpu_max_ms']:.2f}{_cull(c)}), exchange "
               f"{c['frame_exchange_cpu_ms']:.2f}, display {c['display_cpu_ms']:.2f}; heartbeat thread "
               f"{c.get('heartbeat_cpu_ms', 0.0):.3f}",
               f"Emulated parallel frame (slowest rank's CPU time): {summary['emulated_frame_ms']:.2f} ms = "
@@ -190,6 +191,11 @@ def _parts(cpu: dict) -> str:
     if not all(c in cpu for c in BALANCE_CPU):
         return ""
     return " (learn {:.2f}, project {:.2f}, plan {:.2f})".format(*(cpu[c] for c in BALANCE_CPU))
+
+
+def _cull(cpu: dict) -> str:
+    """The culling of parts inside the rendering CPU time, where a run culled any."""
+    return f"; culling {cpu['culling_cpu_ms']:.2f}" if cpu.get("culling_cpu_ms") else ""
 
 
 def _fmt(v) -> str:

@@ -22,8 +22,9 @@ from multigpu.errors import InputError
 from multigpu.studies.beyond import exp_cost, exp_overlap, exp_partition, exp_speedup
 from multigpu.studies.compare import exp_compare
 from multigpu.studies.paper import exp_balance, exp_gpus, exp_orbit, exp_resolution, exp_strips
-from multigpu.studies.payoff import exp_payoff, exp_walls
+from multigpu.studies.payoff import exp_payoff
 from multigpu.studies.runs import PAPER, Settings
+from multigpu.studies.walls import exp_walls
 
 EXPERIMENTS = {"gpus": exp_gpus, "resolution": exp_resolution, "balance": exp_balance, "strips": exp_strips,
                "orbit": exp_orbit, "overlap": exp_overlap, "cost": exp_cost,

@@ -1,7 +1,6 @@
 """Does balancing pay? Frame time of every strategy against ``none`` on the plant, the city,
 the paper's plants on an orbit and a scanned-style model cut into ~100 parts, alternated in
-rounds with the noise floor and the ceiling it implies (``payoff``); overlap and render efficiency as walls grow, with
-objects kept whole or cut by the automatic cluster rule (``walls``)."""
+rounds with the noise floor and the ceiling it implies (``payoff``)."""
 
 from __future__ import annotations
 
@@ -12,7 +11,7 @@ import numpy as np
 from multigpu.parallel.report import BALANCE_CPU
 from multigpu.strategies import REGISTRY
 from multigpu.studies.floor import run as floor_run
-from multigpu.studies.runs import Settings, _plt, walk
+from multigpu.studies.runs import Settings, walk
 from multigpu.studies.tables import md_table, write_csv
 
 
@@ -332,62 +331,3 @@ def ceiling(scene: str, none_runs: list, floor: float, best: float) -> dict:
             "fixed_ms": fixed,
             "render_max_ms": med(lambda x: x["render_cpu_max_ms"]), "ideal_ms": ideal, "ceiling": none_ms / ideal,
             "best": best}
-
-
-def exp_walls(s: Settings, out: Path) -> str:
-    """Overlap and render efficiency on 2x2, 3x3 and 4x4 walls, objects whole or clustered."""
-    grids = ((2, 2), (3, 3)) if s.quick else ((2, 2), (3, 3), (4, 4))
-    frames = max(6, s.frames // 4)
-    tile = 128 if s.quick else 256
-    rows = []
-    for cluster in ("0", "auto"):
-        one = walk(out / f"one_{cluster}", (1, 1), (tile * 4, tile * 4), [
-            "--triangles", str(s.triangles), "--frames", str(frames), "--cluster", cluster, "--mosaic-every", "0"],
-            s.timeout)
-        for g in grids:
-            k = g[0] * g[1]
-            run = walk(out / f"{g[0]}x{g[1]}_{cluster}", g, (tile * 4 // g[1], tile * 4 // g[0]), [
-                "--triangles", str(s.triangles), "--frames", str(frames), "--cluster", cluster, "--balance", "time",
-                "--mosaic-every", "0"], s.timeout)
-            n = min(len(one.rows), len(run.rows))
-            tris_sum = run.col("triangles")[:n].sum(axis=1)
-            visible = one.col("triangles")[:n, 0]
-            ok = visible > 0
-            speed = one.render_max_cpu[:n].mean() / run.render_max_cpu[:n].mean()
-            rows.append({"grid": f"{g[0]}x{g[1]}", "ranks": k, "cluster": cluster,
-                         "objects": run.summary["config"]["scene"]["objects"],
-                         "overlap": float((tris_sum[ok] / visible[ok]).mean()),
-                         "render_speedup": float(speed), "render_efficiency": float(speed / k),
-                         "imb_render": run.summary["imbalance_render_cpu"],
-                         "emulated_ms": run.summary["emulated_frame_ms"]})
-    write_csv(out / "walls.csv", rows)
-    _plot_walls(rows, out / "walls.png")
-    return "\n".join([
-        f"The default plant, {frames} walkthrough frames, a {tile * 4}x{tile * 4} display as 1 rank and as "
-        "2x2 / 3x3 / 4x4 walls; objects as modelled (`--cluster 0`) or cut by the automatic rule for the wall "
-        "(`--cluster auto`, the default: on walls of 9+ ranks objects above 1/(64K) of the triangles are cut). "
-        "Overlap = triangles drawn summed over ranks / triangles of the 1-rank frame; render speedup = "
-        "1-rank render CPU / slowest rank's render CPU (emulated), efficiency = speedup / ranks. Balance: `time`.",
-        "",
-        md_table(rows, [("grid", "Wall", ""), ("cluster", "Cluster", ""), ("objects", "Objects", "d"),
-                        ("overlap", "Overlap", ".3f"), ("render_speedup", "Render speedup", ".2f"),
-                        ("render_efficiency", "Efficiency", ".1%"), ("imb_render", "Imb. render", ".3f"),
-                        ("emulated_ms", "Frame (emulated) ms", ".2f")]), "",
-        "![overlap and efficiency against wall size](walls.png)"])
-
-
-def _plot_walls(rows: list[dict], path: Path) -> None:
-    plt = _plt()
-    fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
-    for cluster in ("0", "auto"):
-        r = [x for x in rows if x["cluster"] == cluster]
-        ax[0].plot([x["ranks"] for x in r], [x["overlap"] for x in r], "o-", label=f"--cluster {cluster}")
-        ax[1].plot([x["ranks"] for x in r], [x["render_efficiency"] for x in r], "o-", label=f"--cluster {cluster}")
-    ax[0].set(xlabel="ranks", ylabel="overlap (triangles drawn / visible)", title="Duplicated triangle work")
-    ax[1].set(xlabel="ranks", ylabel="render efficiency (emulated)", title="Render efficiency")
-    for a in ax:
-        a.legend()
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
