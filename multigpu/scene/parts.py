@@ -84,6 +84,15 @@ def _cut_in_place(scene: Scene, big: np.ndarray, size: int, indices: np.ndarray,
     return n, counts, bmin, bmax
 
 
+def _within_parts(order: np.ndarray, tris: np.ndarray, starts: np.ndarray, per: np.ndarray) -> np.ndarray:
+    """``order`` (each object's triangles along the curve) with every part's triangles back in
+    their modelled order: the curve decides which triangles share a part, the modeller's order
+    how they are drawn (ordered along the curve, a one-rank render ran 16 % slower: vertex reuse)."""
+    obj = np.repeat(np.arange(tris.size, dtype=np.int64), tris)
+    part = obj * (int(tris.max()) + 1) + (np.arange(order.size, dtype=np.int64) - starts[obj]) // np.repeat(per, tris)
+    return order[np.lexsort((order, part))]
+
+
 def _block_args(scene: Scene, big: np.ndarray):
     tris = scene.tris[big]
     starts = np.zeros(big.size + 1, dtype=np.int64)  # each object's triangles, back to back
@@ -101,7 +110,7 @@ def _block(scene, big, per, part_first, indices, counts, bmin, bmax) -> None:
     pos = np.ascontiguousarray(scene.vertices[:, :3])
     key = np.empty(int(starts[-1]), dtype=np.uint64)
     _keys(src, first, base, tris, starts, pos, lo, span, key)
-    order = np.argsort(key, kind="stable")  # (object, code): each object's triangles stay in its range
+    order = _within_parts(np.argsort(key, kind="stable"), tris, starts, per)
     _apply(order, src, indices, first, base, starts, per, part_first, pos, np.asarray(scene.origin, np.float64),
            counts, bmin, bmax)
 
@@ -121,7 +130,7 @@ def _block_reference(scene, big, per, part_first, indices, counts, bmin, bmax) -
         for axis in range(3):
             key |= ((cells[:, axis] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + axis)
     key |= obj.astype(np.uint64) << np.uint64(30)
-    order = np.argsort(key, kind="stable")
+    order = _within_parts(np.argsort(key, kind="stable"), tris, starts, per)
     del key, cells
     indices[src] = tri[order].ravel().astype(np.uint32)
     corners = corners[order]
