@@ -98,6 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
     b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)
     b.add_argument("--path-kind", default="walkthrough", help=argparse.SUPPRESS)
+    b.add_argument("--ranks", default="4", help="floor: the rank counts to measure, e.g. 4,9,16 (default 4)")
     scene_args(b)  # bench floor's worker: the scene it renders
     return ap
 
@@ -146,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.what == "floor":
                 from multigpu.studies.floor import bench_floor
 
-                bench_floor(args.quick, args.frames)
+                bench_floor(args.quick, args.frames, _ranks_list(args.ranks))
                 return 0
             return bench.main(args.what, quick=args.quick)
     except InputError as exc:
@@ -174,6 +175,17 @@ def _depth(a) -> int:
           f"model o(d) = 1 + 1/2 + ... + 1/d: {s['model_o']:.2f}")
     print(f"images and depth.json in {a.out}/")
     return 0
+
+
+def _ranks_list(text: str) -> list[int]:
+    """``--ranks 4,9,16`` as numbers of at least 1, or a one-line error."""
+    try:
+        got = [int(v) for v in str(text).split(",")]
+    except ValueError:
+        got = []
+    if not got or min(got) < 1:
+        raise InputError(f"--ranks must be rank counts of at least 1, e.g. 4,9,16; got '{text}'")
+    return got
 
 
 def _walkthrough(a) -> int:

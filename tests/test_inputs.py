@@ -289,3 +289,12 @@ def test_decomposition_flags_are_validated_at_the_door(flags, needle):
     with pytest.raises(InputError) as e:
         walk_config(build_parser().parse_args(["walkthrough", *flags]))
     assert needle in as_flags(e.value)
+
+
+def test_bench_floor_ranks_are_counts_or_one_line():
+    from multigpu.cli import _ranks_list
+
+    assert _ranks_list("4,9,16") == [4, 9, 16] and _ranks_list("4") == [4]
+    for bad in ("x", "", "4,0", "4,,9"):
+        with pytest.raises(InputError, match="--ranks must be rank counts"):
+            _ranks_list(bad)

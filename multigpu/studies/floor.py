@@ -36,10 +36,10 @@ def run(scenes: dict[str, list[str]] | None = None, ranks: int = 4, frames: int 
     return rows
 
 
-def bench_floor(quick: bool, frames: int | None = None) -> list[dict]:
-    """Run the measurement on the plant and the city; print the table."""
+def bench_floor(quick: bool, frames: int | None = None, ranks: list[int] | tuple[int, ...] = (4,)) -> list[dict]:
+    """Run the measurement on the plant and the city with each of ``ranks`` ranks; print the table."""
     frames = frames or (20 if quick else 120)
-    rows = run(frames=frames)
+    rows = [r for k in ranks for r in run(ranks=k, frames=frames)]
     print("identical work on every rank (same region, objects and camera), process CPU time per rank:")
     print(f"{'scene':>6} {'ranks':>5} {'frames':>6} {'render ms':>9} {'imbalance floor':>15} {'noise c_v':>9}")
     for r in rows:
