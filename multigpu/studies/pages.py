@@ -75,10 +75,13 @@ TABLES = {
              "ceiling is what a perfect balancer reaches over this machine's noise floor."),
     "walls": Table(
         "docs/results/walls/walls.csv", "multigpu experiment walls",
-        (("grid", "wall", "{}"), ("cluster", "clusters", "{}"), ("overlap", "triangle overlap", "{:.2f}"),
-         ("imb_render", "render imbalance", "{:.2f}"), ("render_efficiency", "render efficiency", "{:.0%}")),
-        note="The plant, 60 walkthrough frames, a 1024x1024 display as one rank and as each wall; "
-             "efficiency = one rank's render CPU over K times the slowest rank's."),
+        (("scene", "scene", "{}"), ("grid", "wall", "{}"), ("balance", "balance", "`{}`"),
+         ("efficiency", "render efficiency", "{:.0%}"), ("time_overlap", "time overlap", "{:.2f}"),
+         ("imbalance", "imbalance", "{:.2f}"), ("triangle_overlap", "triangles drawn", "{:.2f}"),
+         ("planned_overlap", "whole objects", "{:.2f}")),
+        note="One display as one rank and as each wall; efficiency = one rank's render CPU over K times the "
+             "slowest rank's; triangle overlaps against one rank's: drawn (parts culled) and of the whole objects "
+             "the plan gave."),
     "compare": Table(
         "docs/results/compare/compare.csv", "multigpu experiment compare",
         (("config", "decomposition", "{}"), ("emulated_fps", "emulated FPS", "{:.1f}"),
