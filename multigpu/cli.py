@@ -68,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     wc = wsub.add_parser("check", help="validate a wall file and print its layout")
     wc.add_argument("file", help="wall file (JSON: grid, tile, mullion, displays)")
     wc.add_argument("--grid-only", action="store_true", help="print only ROWSxCOLS (for launch scripts)")
+    wc.add_argument("--hosts-only", action="store_true", help="print only the hosts as H:N,... (for launch scripts)")
     t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
     t.add_argument("grid")
 
@@ -327,7 +328,7 @@ def _path_make(a) -> int:
 def _wall_check(a) -> int:
     from multigpu.wall import check_command
 
-    print(check_command(a.file, a.grid_only))
+    print(check_command(a.file, a.grid_only, a.hosts_only))
     return 0
 
 

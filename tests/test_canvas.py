@@ -143,7 +143,7 @@ def test_wall_file_sets_the_wall_and_flags_override_it(tmp_path):
     from multigpu.cli import build_parser, walk_config
 
     path = _wall(tmp_path, {"grid": "1x2", "tile": [320, 200], "mullion": "12x0", "displays": [
-        {"rank": 1, "display": ":3.1", "position": [5, 6]}]})
+        {"rank": 0}, {"rank": 1, "display": ":3.1", "position": [5, 6]}]})
     cfg = walk_config(build_parser().parse_args(["walkthrough", "--wall", path]))
     assert cfg.grid == (1, 2) and cfg.tile == (320, 200) and cfg.mullion == (12, 0)
     assert cfg.displays == (None, ":3.1") and cfg.positions == (None, (5, 6)) and cfg.canvas.size == (652, 200)
@@ -152,6 +152,8 @@ def test_wall_file_sets_the_wall_and_flags_override_it(tmp_path):
     assert cfg.tile == (64, 48) and cfg.mullion == (0, 0) and cfg.grid == (1, 2)
     with pytest.raises(InputError, match="displays entry for rank 1, but the wall has ranks 0..0"):
         walk_config(build_parser().parse_args(["walkthrough", "--wall", path, "--grid", "1x1"]))
+    with pytest.raises(InputError, match="no displays entry for rank 2, 3 of the 4-rank wall"):
+        walk_config(build_parser().parse_args(["walkthrough", "--wall", path, "--grid", "2x2"]))
 
 
 def test_wall_check_prints_the_layout(tmp_path, capsys):
@@ -161,7 +163,8 @@ def test_wall_check_prints_the_layout(tmp_path, capsys):
     assert main(["wall", "check", path]) == 0
     out = capsys.readouterr().out
     assert "canvas 3880x2200 pixels (3840x2160 visible)" in out
-    assert "   3   1   1  $DISPLAY   1960,1120" in out
+    assert "   3   1   1  -            $DISPLAY   1960,1120" in out
+    assert "|    rank 0    |    rank 2    |" in out and "ranks count down each column" in out
     assert main(["wall", "check", path, "--grid-only"]) == 0
     assert capsys.readouterr().out.strip() == "2x2"
     assert main(["wall", "check", str(tmp_path / "none.json")]) == 2

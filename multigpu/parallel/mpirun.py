@@ -82,7 +82,7 @@ class Launcher:
             if not rsh:
                 raise InputError(f"MULTIGPU_RSH={env['MULTIGPU_RSH']}: not an executable")
         if self.flavor == "openmpi":
-            names = {*self.env, *(k for k in env if k.startswith(("MULTIGPU_", "LP_NUM_THREADS")))}
+            names = {*self.env, *(k for k in env if k.startswith(("MULTIGPU_", "LP_NUM_THREADS")) or k == "XAUTHORITY")}
             forward = [a for k in sorted(names) for a in ("-x", k)]
             return ["--host", spec(hosts), *(("--mca", "plm_rsh_agent", rsh) if rsh else ()), *forward]
         return ["-hosts", spec(hosts), *(("-launcher", "ssh", "-launcher-exec", rsh) if rsh else ())]
@@ -182,6 +182,38 @@ def out_dir(argv: list[str]) -> Path | None:
     return Path(out)
 
 
+def wall_hosts(argv: list[str], ranks: int, hosts: list[tuple[str, int]] | None) -> list[tuple[str, int]] | None:
+    """The hosts a walkthrough's ``--wall FILE`` names, where it names any (the one description
+    of the installation: no other flag needed); with ``--hosts`` too, they must agree."""
+    from multigpu.wall import check_ranks, hosts_of, load_wall
+
+    path = _flag_value(argv, "--wall") if argv and argv[0] == "walkthrough" else None
+    if path is None:
+        return hosts
+    wall = load_wall(path)
+    check_ranks(wall, ranks)
+    named = hosts_of(wall, ranks)
+    if not named:
+        return hosts
+    if hosts is not None and hosts != named:
+        from multigpu.parallel.hosts import spec
+
+        raise InputError(f"--wall {path} places the ranks on {spec(named)}, but --hosts/--hostfile says "
+                         f"{spec(hosts)}: give one of them")
+    return named
+
+
+def _flag_value(argv: list[str], flag: str) -> str | None:
+    """The value of ``flag`` in a command line (``--flag V`` or ``--flag=V``; the last wins)."""
+    value = None
+    for i, a in enumerate(argv):
+        if a == flag and i + 1 < len(argv):
+            value = argv[i + 1]
+        elif a.startswith(flag + "="):
+            value = a.split("=", 1)[1]
+    return value
+
+
 def help_only(argv: list[str]) -> bool:
     """Whether a command line only asks for help (nothing is started on the hosts)."""
     return any(a in ("-h", "--help") for a in argv)
@@ -261,6 +293,7 @@ def main(argv: list[str] | None = None) -> int:
             if len(rest) < 2:
                 raise InputError(f"{rest[0]} needs a value")
             hosts, rest = hosts_from(rest[0], rest[1], ranks), rest[2:]
+        hosts = wall_hosts(rest, ranks, hosts)
         launcher = find_launcher()
         cmd = launcher.command(ranks, rest, hosts=hosts)
         if hosts and not help_only(rest):

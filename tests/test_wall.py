@@ -1,0 +1,102 @@
+"""A wall file that describes the installation: hosts, displays and positions per rank, what
+``wall check`` catches, and the launcher placing the ranks from the file (no MPI started)."""
+
+import json
+import re
+
+import pytest
+
+from multigpu.errors import InputError
+from multigpu.wall import hosts_of, load_wall, picture, problems
+
+TWO_PCS = {"grid": "2x2", "tile": "1920x1080", "mullion": "40x40", "displays": [
+    {"rank": 0, "host": "pc1", "display": ":0", "position": [0, 0]},
+    {"rank": 1, "host": "pc1", "display": ":0", "position": [0, 1080]},
+    {"rank": 2, "host": "pc2", "display": ":0", "position": [0, 0]},
+    {"rank": 3, "host": "pc2", "display": ":0", "position": [0, 1080]}]}
+
+
+def _wall(tmp_path, doc) -> str:
+    path = tmp_path / "wall.json"
+    path.write_text(json.dumps(doc))
+    return str(path)
+
+
+def test_the_file_places_the_ranks_on_its_hosts(tmp_path):
+    wall = load_wall(_wall(tmp_path, TWO_PCS))
+    assert hosts_of(wall, 4) == [("pc1", 2), ("pc2", 2)]
+    assert hosts_of(load_wall(_wall(tmp_path, {"grid": "1x2"})), 2) == []
+    lines = picture(wall, (2, 2))
+    assert lines[1] == "|    rank 0    |    rank 2    |" and lines[2] == "|     pc1      |     pc2      |"
+
+
+@pytest.mark.parametrize("change,needle", [
+    (lambda d: (d["displays"][1].update(host="pc2"), d["displays"][2].update(host="pc1")),
+     "host pc1's ranks are not consecutive (rank 2)"),
+    (lambda d: d["displays"][3].pop("host"), "rank 3 names no host, but others do"),
+    (lambda d: d["displays"][0].update(host="a b"), "displays[0]: host must be a host name"),
+])
+def test_hosts_that_cannot_be_placed_are_one_line(tmp_path, change, needle):
+    doc = json.loads(json.dumps(TWO_PCS))
+    change(doc)
+    with pytest.raises(InputError, match=re.escape(needle)):
+        hosts_of(load_wall(_wall(tmp_path, doc)), 4)
+
+
+def test_check_finds_overlaps_screens_names_and_missing_displays(tmp_path):
+    ok = load_wall(_wall(tmp_path, TWO_PCS))
+    screens = lambda host, display: (1920, 2160)
+    resolve = lambda host: "127.0.0.1"
+    assert problems(ok, (2, 2), (1920, 1080), (40, 40), screens, resolve) == []
+    doc = json.loads(json.dumps(TWO_PCS))
+    doc["displays"][1]["position"] = [100, 500]  # on top of rank 0
+    doc["displays"][3].pop("display")  # a remote rank without a display
+    found = problems(load_wall(_wall(tmp_path, doc)), (2, 2), (1920, 1080), (40, 40), screens, resolve)
+    assert any(f.startswith("ranks 0 and 1: their windows overlap on :0 of pc1") for f in found), found
+    assert any(f.startswith("rank 3 on host pc2 has no display") for f in found), found
+    small = lambda host, display: (1920, 1080)
+    found = problems(ok, (2, 2), (1920, 1080), (40, 40), small, resolve)
+    assert found == [f"rank {k}: its window 1920x1080 at 0,1080 is off the 1920x1080 screen :0 of pc{k // 2 + 1}"
+                     for k in (1, 3)]
+
+    def unknown(host):
+        raise OSError("no such host")
+
+    assert problems(ok, (2, 2), (1920, 1080), (40, 40), None, unknown) == [
+        "host pc1: its name does not resolve (check it, or give its address)",
+        "host pc2: its name does not resolve (check it, or give its address)"]
+    one_screen = load_wall(_wall(tmp_path, {"grid": "1x2", "tile": "1920x1080", "displays": [
+        {"rank": 0, "display": ":0.0"}, {"rank": 1, "display": ":0.1"}]}))
+    found = problems(one_screen, (1, 2), (1920, 1080), (0, 0), lambda h, d: (1920, 1080), resolve)
+    assert found == ["rank 1: its window 1920x1080 at 1920,0 is off the 1920x1080 screen :0.1 of this machine (no "
+                     "position: it went to the tile's place on the canvas; give \"position\": [0, 0] for a screen "
+                     "of its own)"]
+
+
+def test_wall_check_refuses_in_one_line_and_prints_hosts_for_the_launcher(tmp_path, capsys, monkeypatch):
+    from multigpu.cli import main
+
+    monkeypatch.setattr("socket.gethostbyname", lambda host: "127.0.0.9")
+    path = _wall(tmp_path, TWO_PCS)
+    assert main(["wall", "check", path, "--hosts-only"]) == 0
+    assert capsys.readouterr().out.strip() == "pc1:2,pc2:2"
+    doc = json.loads(json.dumps(TWO_PCS))
+    doc["displays"][1]["position"] = [0, 0]
+    assert main(["wall", "check", _wall(tmp_path, doc)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ranks 0 and 1: their windows overlap" in err[0]
+
+
+def test_the_launcher_takes_the_hosts_from_the_wall_file(tmp_path, capsys, monkeypatch):
+    from multigpu.parallel import mpirun
+
+    path = _wall(tmp_path, TWO_PCS)
+    assert mpirun.wall_hosts(["walkthrough", "--wall", path], 4, None) == [("pc1", 2), ("pc2", 2)]
+    assert mpirun.wall_hosts(["walkthrough", f"--wall={path}"], 4, [("pc1", 2), ("pc2", 2)]) == [("pc1", 2),
+                                                                                                  ("pc2", 2)]
+    with pytest.raises(InputError, match="places the ranks on pc1:2,pc2:2, but --hosts/--hostfile says a:4"):
+        mpirun.wall_hosts(["walkthrough", "--wall", path], 4, [("a", 4)])
+    monkeypatch.setenv("MULTIGPU_RSH", "/bin/false")  # the placement is probed like --hosts
+    assert mpirun.main(["-n", "4", "walkthrough", "--wall", path, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("multigpu: error: host pc1: the remote shell '/bin/false pc1 true'")
