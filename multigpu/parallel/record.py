@@ -91,6 +91,9 @@ class RunRecord:
     def summary(self, complete: bool, stopped_by: str | None = None) -> dict:
         rows = np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS)))
         summary = summarize(rows, self.K)
+        hosts = [r.get("host") for r in self.config.get("ranks", [])]
+        if summary.get("frames") and len(set(hosts)) > 1 and self.config.get("present") == "window":
+            summary["present"]["swap_skew_ms_by_host"] = skew_by_host(rows, self.K, hosts)
         doc = {"complete": complete, "frames_written": self.done, "config": self.config,
                "decomposition": self.report(), **summary}
         if stopped_by:
@@ -122,6 +125,21 @@ class RunRecord:
         print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
         if self.record_to is not None and self.recorded:
             print(f"camera path of the {self.recorded} frames written in {self.record_to} (replay: --path)", flush=True)
+
+
+def skew_by_host(rows: np.ndarray, ranks: int, hosts: list) -> dict:
+    """Per host, the median over frames of its own ranks' swap skew (latest minus earliest swap
+    return among them, each host on its own clock): whether each PC's monitors swap together."""
+    col = {c: i for i, c in enumerate(COLUMNS)}
+    frames = rows.shape[0] // ranks
+    per = rows[:frames * ranks][np.lexsort((rows[:frames * ranks, col["rank"]], rows[:frames * ranks, col["frame"]]))]
+    swap = per.reshape(frames, ranks, len(COLUMNS))[:, :, col["swap_ms"]]
+    out = {}
+    for h in dict.fromkeys(hosts):  # hosts, a few
+        mine = [k for k, x in enumerate(hosts) if x == h]
+        s = swap[:, mine]
+        out[str(h)] = float(np.median(s.max(axis=1) - s.min(axis=1)))
+    return out
 
 
 def salvage(out: Path, reason: str) -> int | None:

@@ -195,7 +195,7 @@ def _presenter(cfg: WalkConfig, rank: int):
     place = (x0, cfg.canvas.size[1] - y1)  # top-left of the tile on a screen holding the canvas
     pos = cfg.positions[rank] if cfg.positions and cfg.positions[rank] is not None else place
     display = cfg.displays[rank] if cfg.displays else None
-    where = f"wall file {cfg.wall}, rank {rank}" if cfg.wall and display else "$DISPLAY"
+    where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"
     return make_presenter(cfg.present, rank, cfg.tile, pos, display, where)
 
 

@@ -1,0 +1,128 @@
+"""A wall of several PCs, end to end: two simulated hosts (namespaces, simhosts.py), each with
+its own X server started inside it, one wall file naming each rank's host, display and window
+position, started by the launcher users run (``python -m multigpu.parallel.mpirun`` with no
+placement flag) under MPICH and Open MPI. Each host's screenshot equals its tile of the mosaic
+bit for bit; a host whose X server is missing is one line naming the host and the display, exit
+2, and nothing left running. Every job, X server and namespace under a hard timeout, killed by id."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import pytest
+from mpirun import ROOT, SMALL, read_png
+from simhosts import SimHosts
+from xserver import need_tools, screenshot, wait_for, windows, wm_close
+
+from multigpu.display.xvfb import start_xvfb, stop_xvfb
+from multigpu.parallel.mpirun import find_launcher, openmpi_on_path
+
+pytestmark = pytest.mark.mpi
+TILE = (60, 96)
+
+
+@pytest.fixture(params=["mpich", "openmpi"])
+def mpiexec_env(request):
+    if request.param == "mpich":
+        got = find_launcher()
+        if got.flavor != "mpich":
+            pytest.skip(f"the default mpiexec is {got.flavor}, not MPICH")
+        return {"MULTIGPU_MPIEXEC": got.path}
+    path = openmpi_on_path()
+    if path is None:
+        pytest.skip("no Open MPI mpiexec here (Debian: apt install openmpi-bin)")
+    return {"MULTIGPU_MPIEXEC": path}
+
+
+@pytest.fixture
+def two_pcs(tmp_path):
+    """Hosts a and b, each running its own Xvfb (started inside the host)."""
+    need_tools()
+    with SimHosts(["a", "b"], tmp_path / "hosts") as hosts:
+        servers = []
+        try:
+            for name, size in (("a", TILE), ("b", (80, 100))):
+                enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
+                try:
+                    servers.append(start_xvfb(size, prefix=enter))
+                except RuntimeError as exc:
+                    pytest.skip(str(exc))
+            yield hosts, [name for _, name in servers]
+        finally:
+            for proc, _ in servers:
+                stop_xvfb(proc)
+
+
+def _still(tmp_path):
+    """A path of identical cameras: any screenshot equals any mosaic."""
+    p = tmp_path / "walk.json"
+    subprocess.run([sys.executable, "-m", "multigpu", "path", "make", "walkthrough", *SMALL[:2], "--frames", "60",
+                    "--out", str(p)], cwd=ROOT, check=True, capture_output=True, timeout=120)
+    doc = json.loads(p.read_text())
+    doc["cameras"] = [doc["cameras"][40]] * 600
+    (tmp_path / "still.json").write_text(json.dumps(doc))
+    return tmp_path / "still.json"
+
+
+def _launch(tmp_path, hosts, env, wall, out):
+    args = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", "walkthrough", *SMALL, "--path",
+            str(_still(tmp_path)), "--wall", str(wall), "--present", "window", "--mosaic-every", "100", "--no-overlay",
+            "--out", str(out)]
+    return subprocess.Popen(args, cwd=ROOT, env={**os.environ, **hosts.env, **env}, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def _end(proc, timeout=120):
+    try:
+        return proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+
+
+def test_each_host_shows_its_tile_of_the_mosaic(tmp_path, two_pcs, mpiexec_env):
+    hosts, (xa, xb) = two_pcs
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
+        {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
+        {"rank": 1, "host": "b", "display": xb, "position": [20, 4]}]}))
+    out = tmp_path / "wall"
+    proc = _launch(tmp_path, hosts, mpiexec_env, wall, out)
+    try:
+        shown = lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > 21
+        wait_for(lambda: shown() and windows(xa) and windows(xb), timeout=120)
+        shots = screenshot(xa), screenshot(xb)
+        wm_close(xb, windows(xb)[0])  # the person at host b closes its window
+        _, err = _end(proc)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert [r["host"] for r in s["config"]["ranks"]] == ["a", "b"]
+    assert set(s["present"]["swap_skew_ms_by_host"]) == {"a", "b"}  # each PC's own skew (one rank each: 0)
+    mosaic = read_png(out / "mosaic" / "frame_00000.png")
+    assert (shots[0] == mosaic[:, :TILE[0]]).all()
+    assert (shots[1][4:4 + TILE[1], 20:20 + TILE[0]] == mosaic[:, TILE[0]:]).all()
+    assert s["stopped_by"] == "window closed (rank 1's window)"
+    assert not hosts.processes("a") and not hosts.processes("b") or all(
+        "Xvfb" in open(f"/proc/{p}/cmdline").read() for n in "ab" for p in hosts.processes(n))
+
+
+def test_a_host_without_its_x_server_is_one_line_and_exit_2(tmp_path, two_pcs, mpiexec_env):
+    hosts, (xa, _) = two_pcs
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
+        {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
+        {"rank": 1, "host": "b", "display": ":987", "position": [0, 0]}]}))
+    proc = _launch(tmp_path, hosts, mpiexec_env, wall, tmp_path / "nox")
+    _, err = _end(proc)
+    assert proc.returncode == 2, err[-2000:]
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and ":987" in lines[0] and "host b" in lines[0], err
+    assert not windows(xa)  # no window left open on host a
+    left = [p for n in "ab" for p in hosts.processes(n) if "Xvfb" not in open(f"/proc/{p}/cmdline").read()]
+    assert not left, left
