@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
     wc.add_argument("file", help="wall file (JSON: grid, tile, mullion, displays)")
     wc.add_argument("--grid-only", action="store_true", help="print only ROWSxCOLS (for launch scripts)")
     wc.add_argument("--hosts-only", action="store_true", help="print only the hosts as H:N,... (for launch scripts)")
+    wt = wsub.add_parser("test", help="show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)")
+    wt.add_argument("file", help="wall file (JSON)")
+    wt.add_argument("--frames", type=int, default=None, help="stop after N frames (default: at Escape)")
     t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
     t.add_argument("grid")
 
@@ -121,6 +124,10 @@ def main(argv: list[str] | None = None) -> int:
             return _scene_scan(args) if args.scmd == "scan" else _scene_info(args)
         if args.cmd == "path":
             return _path_make(args)
+        if args.cmd == "wall" and args.wall_cmd == "test":
+            from multigpu.parallel.walltest import main as wall_test
+
+            return wall_test(args.file, args.frames)
         if args.cmd == "wall":
             return _wall_check(args)
         if args.cmd == "tree":

@@ -1,0 +1,127 @@
+"""``multigpu wall test WALL.json``: the calibration pattern on the wall, one rank per tile,
+launched like the walkthrough (``launch/wall-test``, or the launcher with ``-n K``).
+
+Every rank opens its window where the wall file says and shows its part of one pattern across
+the canvas (``display/pattern.py``): lines that run straight across the bezels when the mullion
+values are right, each tile's rank, host, display and size, and a moving bar and a frame counter
+that show the swap lock. Rank 0's window takes the arrow keys: Left/Right take one pixel from or
+add one to the mullion between columns, Down/Up between rows, every rank redraws with the new
+value at the same frame, and rank 0 prints the line to put in the wall file. Escape or a closed
+window on any rank ends it (or ``--frames N``). Every wait is bounded, as in the frame loop.
+"""
+
+from __future__ import annotations
+
+import itertools
+import socket
+import sys
+
+import numpy as np
+
+from multigpu.errors import InputError, as_flags
+from multigpu.parallel.exchange import agree, barrier, wait_all
+
+ARROWS = {"left", "right", "up", "down"}
+
+
+class Nudges:
+    """Rank 0's arrow keys, collected between frames (the window's controls interface)."""
+
+    def __init__(self, glfw):
+        self.keys = {glfw.KEY_LEFT: "left", glfw.KEY_RIGHT: "right", glfw.KEY_UP: "up", glfw.KEY_DOWN: "down"}
+        self.press = glfw.PRESS
+        self.queue: list[str] = []
+
+    def on_key(self, window, key, scancode, action, mods) -> None:
+        if action == self.press and key in self.keys:
+            self.queue.append(self.keys[key])
+
+    def attach_mouse(self, window) -> None:
+        """No mouse here."""
+
+    def take(self) -> list[str]:
+        got, self.queue = self.queue, []
+        return got
+
+
+def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tuple[int, int] | None:
+    """Show the pattern until Escape, a closed window or ``frames``; rank 0 returns the mullion
+    values it ended with."""
+    from mpi4py import MPI
+
+    from multigpu.config import WalkConfig
+    from multigpu.core.canvas import Canvas
+    from multigpu.display import make_presenter
+    from multigpu.display.pattern import nudge, tile_pattern
+    from multigpu.wall import check_ranks, load_wall
+
+    rank, k = comm.Get_rank(), comm.Get_size()
+    wall = load_wall(path)
+    grid, tile, mullion = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile, wall.mullion or (0, 0)
+    if k != grid[0] * grid[1]:
+        raise InputError(f"--wall {path}: a {grid[0]}x{grid[1]} wall needs {grid[0] * grid[1]} ranks but the job has "
+                         f"{k} (launch/wall-test {path} starts the right number)")
+    check_ranks(wall, k)
+    host = socket.gethostname()
+    presenter, error = None, None
+    try:
+        x0, _, _, y1 = (int(v) for v in Canvas(grid, tile, mullion).tiles()[rank])
+        place = wall.positions.get(rank, (x0, Canvas(grid, tile, mullion).size[1] - y1))
+        where = f"wall file {path}, rank {rank} on host {host}"
+        presenter = make_presenter("window", rank, tile, place, wall.displays.get(rank), where)
+    except InputError as exc:
+        error = as_flags(exc)
+    error = agree(comm, error, timeout, "setup")
+    if error:
+        if presenter is not None:
+            presenter.close()
+        raise InputError(error)
+    nudges = None
+    if rank == 0:
+        import glfw
+
+        nudges = Nudges(glfw)
+        presenter.take_input(nudges)
+    label = [f"rank {rank}", f"host {host}", presenter.display, f"{tile[0]}x{tile[1]}"]
+    state = np.array([*mullion, 0], dtype=np.int64)  # rank 0's mullions and stop flag, for everyone
+    stop = np.zeros(1, dtype=np.int64)
+    try:
+        for f in itertools.count() if frames is None else range(frames):  # frames, not objects
+            if nudges is not None:
+                for key in nudges.take():
+                    state[:2] = nudge((int(state[0]), int(state[1])), key)
+                    print(f"mullion {state[0]}x{state[1]}: put \"mullion\": \"{state[0]}x{state[1]}\" in {path}",
+                          flush=True)
+            wait_all([comm.Ibcast(state, root=0)], timeout, "wall test")
+            c = Canvas(grid, tile, (int(state[0]), int(state[1])))
+            x0, _, _, y1 = (int(v) for v in c.tiles()[rank])
+            img = tile_pattern(c.size, (x0, c.size[1] - y1), tile, f, label)
+            presenter.show(img[::-1])  # bottom row first
+            barrier(comm, timeout)  # every tile drawn before any swaps: the swap lock
+            presenter.swap()
+            mine = np.array([1 if presenter.poll() else 0], dtype=np.int64)
+            wait_all([comm.Iallreduce(mine, stop, op=MPI.MAX)], timeout, "wall test")
+            if stop[0]:
+                break
+    finally:
+        presenter.close()
+    return (int(state[0]), int(state[1])) if rank == 0 else None
+
+
+def main(path: str, frames: int | None) -> int:
+    """The CLI's ``wall test`` under MPI: one line and exit 2 for bad input on every rank."""
+    from mpi4py import MPI
+
+    from multigpu.parallel.job import collective_exit
+
+    comm = MPI.COMM_WORLD
+    try:
+        got = run(path, comm, frames)
+    except InputError as exc:
+        if comm.Get_rank() == 0:
+            print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr, flush=True)
+        collective_exit(2)
+        return 2
+    if got is not None:
+        print(f"wall test ended with mullion {got[0]}x{got[1]}", flush=True)
+    return 0

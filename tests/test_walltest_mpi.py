@@ -1,0 +1,107 @@
+"""``multigpu wall test`` on Xvfb (2 ranks, every job and server under a hard timeout): the
+windows show the canvas pattern bit for bit, every tile the same frame (the swap lock), the
+arrow keys move the mullions and print the value for the wall file, Escape ends it with 0; no X
+server is one line and exit 2."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from mpirun import ROOT
+from xserver import Xvfb, escape, need_tools, screenshot, wait_for, windows
+
+from multigpu.core.canvas import Canvas
+from multigpu.display.pattern import BAR, tile_pattern
+
+pytestmark = pytest.mark.mpi
+GRID, TILE, MULLION = (1, 2), (64, 48), (6, 0)
+
+
+def _start(wall, env):
+    args = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", "wall", "test", str(wall)]
+    return subprocess.Popen(args, cwd=ROOT, env={**os.environ, **env}, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+
+
+def _end(proc, timeout=60):
+    try:
+        return proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+
+
+def _expected(frame, mullion, host):
+    """The screen: each window where it opened (the tile's place with the file's mullions), showing
+    its part of the pattern of the canvas with ``mullion``."""
+    shown, placed = Canvas(GRID, TILE, mullion), Canvas(GRID, TILE, MULLION)
+    W, H = shown.size
+    img = np.zeros((placed.size[1], placed.size[0], 3), np.uint8)
+    for k, ((x0, _, _, y1), (px, _, _, py1)) in enumerate(zip(shown.tiles(), placed.tiles())):  # two tiles
+        top, ptop = H - int(y1), placed.size[1] - int(py1)
+        img[ptop:ptop + TILE[1], px:px + TILE[0]] = tile_pattern(
+            (W, H), (int(x0), top), TILE, frame, [f"rank {k}", f"host {host}", os.environ["DISPLAY"],
+                                                  f"{TILE[0]}x{TILE[1]}"])
+    return img
+
+
+def _frame_shown(shot, mullion, host):
+    """The frame whose pattern the screenshot is, or None (caught between two swaps)."""
+    W = Canvas(GRID, TILE, mullion).size[0]
+    red = np.flatnonzero((shot == BAR).all(axis=2).any(axis=0))
+    if red.size == 0:
+        return None
+    for f in range(0, 4000):  # frames that put the bar where it shows
+        x = (8 * f) % W
+        if any(abs(x - r) < 40 for r in red[:1]) and (shot == _expected(f, mullion, host)).all():
+            return f
+    return None
+
+
+def test_the_pattern_is_the_canvas_in_step_and_keys_move_the_mullions(tmp_path):
+    import socket
+
+    need_tools()
+    c = Canvas(GRID, TILE, MULLION)
+    with Xvfb(c.size) as x:
+        wall = tmp_path / "wall.json"
+        wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "mullion": "6x0"}))
+        os.environ["DISPLAY"] = x.name  # the label a rank without a display entry shows
+        proc = _start(wall, {"DISPLAY": x.name})
+        try:
+            wait_for(lambda: len(windows(x.name)) == 2, timeout=60)
+            shown = wait_for(lambda: _frame_shown(screenshot(x.name), MULLION, socket.gethostname()) is not None,
+                             timeout=30, every=0.05)
+            assert shown
+            first = windows(x.name, "multigpu tile 0")[0]  # rank 0's window takes the keys
+            xenv = {**os.environ, "DISPLAY": x.name}
+            subprocess.run(["xdotool", "mousemove", "--window", first, "5", "5"], env=xenv, timeout=10, check=True)
+            for _ in range(2):  # the pointer over rank 0's window gives it the keyboard (no window manager)
+                subprocess.run(["xdotool", "key", "--window", first, "Right"], env=xenv, timeout=10, check=True)
+            wait_for(lambda: _frame_shown(screenshot(x.name), (8, 0), socket.gethostname()) is not None,
+                     timeout=30, every=0.05)  # every tile redrawn with the new mullion
+            escape(x.name, first)
+            out, err = _end(proc)
+        finally:
+            os.environ.pop("DISPLAY", None)
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-2000:]
+    assert f'mullion 7x0: put "mullion": "7x0" in {wall}' in out and "wall test ended with mullion 8x0" in out, out
+
+
+def test_no_x_server_is_one_line_and_exit_2(tmp_path):
+    need_tools()
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": "64x48", "displays": [{"rank": 0, "display": ":987"},
+                                                                              {"rank": 1, "display": ":987"}]}))
+    proc = _start(wall, {})
+    _, err = _end(proc)
+    assert proc.returncode == 2, err[-2000:]
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and ":987" in lines[0], err
