@@ -102,3 +102,14 @@ def take_input(*windows):
     for w in windows:
         w.take_input(controls)
     return controls
+
+
+def take_arrows(window):
+    """The arrow keys of ``window`` (rank 0's tile in ``wall test``), collected between frames."""
+    import glfw
+
+    from multigpu.display.controls import Arrows
+
+    arrows = Arrows(glfw)
+    window.take_input(arrows)
+    return arrows

@@ -114,3 +114,23 @@ class Controls:
         got = Taken(nav, c["partition"], c["stats"], c["balance"], c["help"] > 0)
         self._clear()
         return got
+
+
+class Arrows:
+    """The arrow keys of a window, collected between frames (``wall test``'s mullion nudges)."""
+
+    def __init__(self, glfw):
+        self.keys = {glfw.KEY_LEFT: "left", glfw.KEY_RIGHT: "right", glfw.KEY_UP: "up", glfw.KEY_DOWN: "down"}
+        self.press = glfw.PRESS
+        self.queue: list[str] = []
+
+    def on_key(self, window, key, scancode, action, mods) -> None:
+        if action == self.press and key in self.keys:
+            self.queue.append(self.keys[key])
+
+    def attach_mouse(self, window) -> None:
+        """No mouse here."""
+
+    def take(self) -> list[str]:
+        got, self.queue = self.queue, []
+        return got

@@ -21,28 +21,6 @@ import numpy as np
 from multigpu.errors import InputError, as_flags
 from multigpu.parallel.exchange import agree, barrier, wait_all
 
-ARROWS = {"left", "right", "up", "down"}
-
-
-class Nudges:
-    """Rank 0's arrow keys, collected between frames (the window's controls interface)."""
-
-    def __init__(self, glfw):
-        self.keys = {glfw.KEY_LEFT: "left", glfw.KEY_RIGHT: "right", glfw.KEY_UP: "up", glfw.KEY_DOWN: "down"}
-        self.press = glfw.PRESS
-        self.queue: list[str] = []
-
-    def on_key(self, window, key, scancode, action, mods) -> None:
-        if action == self.press and key in self.keys:
-            self.queue.append(self.keys[key])
-
-    def attach_mouse(self, window) -> None:
-        """No mouse here."""
-
-    def take(self) -> list[str]:
-        got, self.queue = self.queue, []
-        return got
-
 
 def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tuple[int, int] | None:
     """Show the pattern until Escape, a closed window or ``frames``; rank 0 returns the mullion
@@ -78,10 +56,9 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
         raise InputError(error)
     nudges = None
     if rank == 0:
-        import glfw
+        from multigpu.display import take_arrows
 
-        nudges = Nudges(glfw)
-        presenter.take_input(nudges)
+        nudges = take_arrows(presenter)
     label = [f"rank {rank}", f"host {host}", presenter.display, f"{tile[0]}x{tile[1]}"]
     state = np.array([*mullion, 0], dtype=np.int64)  # rank 0's mullions and stop flag, for everyone
     stop = np.zeros(1, dtype=np.int64)
