@@ -86,7 +86,7 @@ def _end(proc, timeout=120):
 def test_each_host_shows_its_tile_of_the_mosaic(tmp_path, two_pcs, mpiexec_env):
     hosts, (xa, xb) = two_pcs
     wall = tmp_path / "wall.json"
-    wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
+    wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "mullion": "9x0", "displays": [
         {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
         {"rank": 1, "host": "b", "display": xb, "position": [20, 4]}]}))
     out = tmp_path / "wall"
@@ -105,8 +105,9 @@ def test_each_host_shows_its_tile_of_the_mosaic(tmp_path, two_pcs, mpiexec_env):
     assert [r["host"] for r in s["config"]["ranks"]] == ["a", "b"]
     assert set(s["present"]["swap_skew_ms_by_host"]) == {"a", "b"}  # each PC's own skew (one rank each: 0)
     mosaic = read_png(out / "mosaic" / "frame_00000.png")
+    assert mosaic.shape[1] == 2 * TILE[0] + 9 and mosaic[:, TILE[0]:TILE[0] + 9].max() == 0  # the mullion
     assert (shots[0] == mosaic[:, :TILE[0]]).all()
-    assert (shots[1][4:4 + TILE[1], 20:20 + TILE[0]] == mosaic[:, TILE[0]:]).all()
+    assert (shots[1][4:4 + TILE[1], 20:20 + TILE[0]] == mosaic[:, TILE[0] + 9:]).all()
     assert s["stopped_by"] == "window closed (rank 1's window)"
     assert not hosts.processes("a") and not hosts.processes("b") or all(
         "Xvfb" in open(f"/proc/{p}/cmdline").read() for n in "ab" for p in hosts.processes(n))
