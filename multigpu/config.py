@@ -93,6 +93,7 @@ class WalkConfig:
     wall: str | None = None  # the wall file the grid/tile/mullion/displays came from
     displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place
+    fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     record: str | None = None  # write every frame's camera here, in the format --path reads
     monitor: tuple[int, int] | None = None  # rank 0's operator view at this place (MONITOR_BESIDE: beside the wall)
 

@@ -219,6 +219,7 @@ def walk_config(a):
                       present=a.present, wall=a.wall,
                       displays=tuple(wall.displays.get(r) for r in ranks) if wall.displays else (),
                       positions=tuple(wall.positions.get(r) for r in ranks) if wall.positions else (),
+                      fullscreen=tuple(r in wall.fullscreen for r in ranks) if wall.fullscreen else (),
                       strips=a.strips,
                       balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
                       overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,

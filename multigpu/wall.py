@@ -26,7 +26,7 @@ from pathlib import Path
 from multigpu.errors import InputError
 
 KEYS = {"grid", "tile", "mullion", "displays", "comment"}
-DISPLAY_KEYS = {"rank", "host", "display", "position"}
+DISPLAY_KEYS = {"rank", "host", "display", "position", "fullscreen"}
 #: a host name as both MPI launchers take it
 HOST = re.compile(r"^[A-Za-z0-9_.\-\[\]]+$")
 
@@ -42,6 +42,7 @@ class Wall:
     displays: dict[int, str | None] = field(default_factory=dict)
     positions: dict[int, tuple[int, int]] = field(default_factory=dict)
     hosts: dict[int, str] = field(default_factory=dict)
+    fullscreen: frozenset = frozenset()  # ranks whose window fills its display's monitor
 
 
 def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
@@ -80,7 +81,7 @@ def load_wall(path: str) -> Wall:
         mullion = _pair(doc["mullion"], "mullion", zero=True) if "mullion" in doc else None
     except ValueError as exc:
         raise InputError(f"{where}: {exc}") from None
-    displays, positions, hosts = {}, {}, {}
+    displays, positions, hosts, full = {}, {}, {}, set()
     entries = doc.get("displays", [])
     if not isinstance(entries, list):
         raise InputError(f"{where}: displays must be a list of {{rank, display, position}} entries")
@@ -90,7 +91,7 @@ def load_wall(path: str) -> Wall:
             raise InputError(f"{at}: needs \"rank\": a rank label >= 0")
         bad = sorted(set(e) - DISPLAY_KEYS)
         if bad:
-            raise InputError(f"{at}: unknown key '{bad[0]}' (known: rank, host, display, position)")
+            raise InputError(f"{at}: unknown key '{bad[0]}' (known: rank, host, display, position, fullscreen)")
         r = e["rank"]
         if r in displays:
             raise InputError(f"{at}: rank {r} appears twice")
@@ -98,6 +99,11 @@ def load_wall(path: str) -> Wall:
         if d is not None and (not isinstance(d, str) or not re.fullmatch(r"[\w.\-]*:\d+(\.\d+)?", d)):
             raise InputError(f"{at}: display must be an X display name like ':0' or ':0.1', got {json.dumps(d)}")
         displays[r] = d
+        if "fullscreen" in e:
+            if not isinstance(e["fullscreen"], bool):
+                raise InputError(f"{at}: fullscreen must be true or false, got {json.dumps(e['fullscreen'])}")
+            if e["fullscreen"]:
+                full.add(r)
         if "host" in e:
             h = e["host"]
             if not isinstance(h, str) or not HOST.match(h):
@@ -108,7 +114,7 @@ def load_wall(path: str) -> Wall:
             if not (isinstance(p, list) and len(p) == 2 and all(type(v) is int for v in p)):
                 raise InputError(f"{at}: position must be [x, y] in pixels, got {json.dumps(p)}")
             positions[r] = (p[0], p[1])
-    return Wall(path, grid, tile, mullion, displays, positions, hosts)
+    return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full))
 
 
 def check_ranks(wall: Wall, ranks: int) -> None:
@@ -156,7 +162,7 @@ def windows(wall: Wall, grid, tile, mullion) -> list[tuple[str, str, int, int, i
     H = c.size[1]
     out = []
     for k, (x0, _, _, y1) in enumerate(c.tiles()):  # K tiles
-        x, y = wall.positions.get(k, (int(x0), int(H - y1)))
+        x, y = (0, 0) if k in wall.fullscreen else wall.positions.get(k, (int(x0), int(H - y1)))
         out.append((wall.hosts.get(k, "this machine"), wall.displays.get(k) or "$DISPLAY", x, y, tile[0], tile[1]))
     return out
 
@@ -188,7 +194,10 @@ def problems(wall: Wall, grid, tile, mullion, screens=None, resolve=None) -> lis
             found.append(f"rank {k} on host {host} has no display: name it (\"display\": \":0\"); a rank started on "
                          "another host gets no $DISPLAY")
         size = screens(host, disp) if screens is not None else None
-        if size is not None and (x < 0 or y < 0 or x + w > size[0] or y + h > size[1]):
+        if size is not None and k in wall.fullscreen and size != (w, h):
+            found.append(f"rank {k}: full screen on the {size[0]}x{size[1]} screen {disp} of {host}, but the tile is "
+                         f"{w}x{h}: make the tile the monitor's size")
+        elif size is not None and (x < 0 or y < 0 or x + w > size[0] or y + h > size[1]):
             found.append(f"rank {k}: its window {w}x{h} at {x},{y} is off the {size[0]}x{size[1]} screen {disp} of "
                          f"{host}" + ("" if k in wall.positions else " (no position: it went to the tile's place on "
                                       "the canvas; give \"position\": [0, 0] for a screen of its own)"))

@@ -100,3 +100,17 @@ def test_the_launcher_takes_the_hosts_from_the_wall_file(tmp_path, capsys, monke
     assert mpirun.main(["-n", "4", "walkthrough", "--wall", path, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("multigpu: error: host pc1: the remote shell '/bin/false pc1 true'")
+
+
+def test_fullscreen_ranks_fill_their_screens_and_the_tile_must_match(tmp_path):
+    doc = {"grid": "1x2", "tile": "1920x1080", "displays": [{"rank": 0, "display": ":0.0", "fullscreen": True},
+                                                            {"rank": 1, "display": ":0.1", "fullscreen": True}]}
+    wall = load_wall(_wall(tmp_path, doc))
+    assert wall.fullscreen == {0, 1}
+    assert problems(wall, (1, 2), (1920, 1080), (0, 0), lambda h, d: (1920, 1080), lambda h: "1.2.3.4") == []
+    assert problems(wall, (1, 2), (1920, 1080), (0, 0), lambda h, d: (2560, 1440), lambda h: "1.2.3.4")[0] == (
+        "rank 0: full screen on the 2560x1440 screen :0.0 of this machine, but the tile is 1920x1080: make the "
+        "tile the monitor's size")
+    doc["displays"][1]["fullscreen"] = "yes"
+    with pytest.raises(InputError, match="fullscreen must be true or false"):
+        load_wall(_wall(tmp_path, doc))

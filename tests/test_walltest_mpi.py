@@ -15,7 +15,7 @@ from mpirun import ROOT
 from xserver import Xvfb, escape, need_tools, screenshot, wait_for, windows
 
 from multigpu.core.canvas import Canvas
-from multigpu.display.pattern import BAR, tile_pattern
+from multigpu.display.pattern import BACKGROUND, BAR, tile_pattern
 
 pytestmark = pytest.mark.mpi
 GRID, TILE, MULLION = (1, 2), (64, 48), (6, 0)
@@ -105,3 +105,27 @@ def test_no_x_server_is_one_line_and_exit_2(tmp_path):
     assert proc.returncode == 2, err[-2000:]
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and ":987" in lines[0], err
+
+
+def test_fullscreen_windows_fill_their_screens(tmp_path):
+    need_tools()
+    with Xvfb(TILE) as a, Xvfb(TILE) as b:
+        wall = tmp_path / "wall.json"
+        wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
+            {"rank": 0, "display": a.screen(0), "fullscreen": True},
+            {"rank": 1, "display": b.screen(0), "fullscreen": True}]}))
+        proc = _start(wall, {})
+        try:
+            wait_for(lambda: windows(a.name) and windows(b.name), timeout=60)
+            for x in (a, b):
+                geo = subprocess.run(["xdotool", "getwindowgeometry", windows(x.name)[0]], capture_output=True,
+                                     text=True, timeout=10, env={**os.environ, "DISPLAY": x.name}).stdout
+                assert "Position: 0,0" in geo and f"Geometry: {TILE[0]}x{TILE[1]}" in geo, geo
+                drawn = lambda: bool((screenshot(x.name) == BACKGROUND).all(axis=2).mean() > 0.05)  # the pattern
+                wait_for(drawn, timeout=20)
+            escape(a.name, windows(a.name, "multigpu tile 0")[0])
+            _, err = _end(proc)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-2000:]

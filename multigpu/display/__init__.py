@@ -54,14 +54,15 @@ class Headless:
 
 
 def make_presenter(mode: str, rank: int, tile_size: tuple[int, int], position: tuple[int, int],
-                   display: str | None, where: str) -> Presenter:
+                   display: str | None, where: str, fullscreen: bool = False) -> Presenter:
     """The presenter of ``mode`` for rank label ``rank``; ``where`` names the wall-file entry
-    or flag behind ``display`` for error messages."""
+    or flag behind ``display`` for error messages; ``fullscreen``: the window covers its
+    screen from the top-left corner, above the other windows (the tile is the screen's size)."""
     if mode == "headless":
         return Headless()
     from multigpu.display.window import Window
 
-    return Window(rank, tile_size, position, display, where)
+    return Window(rank, tile_size, position, display, where, fullscreen=fullscreen)
 
 
 class Monitor:

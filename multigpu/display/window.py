@@ -35,7 +35,7 @@ class Window:
     mode = "window"
 
     def __init__(self, rank: int, tile_size: tuple[int, int], position: tuple[int, int], display: str | None,
-                 where: str, title: str | None = None, vsync: bool = True):
+                 where: str, title: str | None = None, vsync: bool = True, fullscreen: bool = False):
         try:
             import glfw
         except Exception as exc:  # the wheel bundles libglfw; a source install may lack it
@@ -67,12 +67,16 @@ class Window:
                                 (glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)):
                 glfw.window_hint(hint, value)
             tw, th = tile_size
+            # full screen as a borderless window over the whole screen, above the others: no video
+            # mode change, so a mode the tile does not match is caught by ``wall check`` instead
+            glfw.window_hint(glfw.FLOATING, bool(fullscreen))
             self.window = glfw.create_window(tw, th, title or f"multigpu tile {rank}", None, None)
             if not self.window:
                 why = errors[-1] if errors else "no window"
                 raise InputError(f"--present window: rank {rank} cannot open a {tw}x{th} GL 4.3 window on "
                                  f"'{name}' ({where}): {why}; {X_HELP}")
-            glfw.set_window_pos(self.window, int(position[0]), int(position[1]))
+            at = (0, 0) if fullscreen else position
+            glfw.set_window_pos(self.window, int(at[0]), int(at[1]))
             glfw.show_window(self.window)
             glfw.make_context_current(self.window)
             glfw.swap_interval(1 if vsync else 0)

@@ -196,7 +196,8 @@ def _presenter(cfg: WalkConfig, rank: int):
     pos = cfg.positions[rank] if cfg.positions and cfg.positions[rank] is not None else place
     display = cfg.displays[rank] if cfg.displays else None
     where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"
-    return make_presenter(cfg.present, rank, cfg.tile, pos, display, where)
+    full = bool(cfg.fullscreen and cfg.fullscreen[rank])
+    return make_presenter(cfg.present, rank, cfg.tile, pos, display, where, full)
 
 
 def _monitor(cfg: WalkConfig, presenter):

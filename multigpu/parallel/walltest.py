@@ -46,7 +46,8 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
         x0, _, _, y1 = (int(v) for v in Canvas(grid, tile, mullion).tiles()[rank])
         place = wall.positions.get(rank, (x0, Canvas(grid, tile, mullion).size[1] - y1))
         where = f"wall file {path}, rank {rank} on host {host}"
-        presenter = make_presenter("window", rank, tile, place, wall.displays.get(rank), where)
+        presenter = make_presenter("window", rank, tile, place, wall.displays.get(rank), where,
+                                   rank in wall.fullscreen)
     except InputError as exc:
         error = as_flags(exc)
     error = agree(comm, error, timeout, "setup")
