@@ -84,7 +84,7 @@ def exp_walls(s: Settings, out: Path) -> str:
 
     grids = QUICK_GRIDS if s.quick else GRIDS
     size = 192 if s.quick else 768  # one display, divided by every wall (768 = 6 x 128)
-    frames = 6 if s.quick else 60
+    frames = 6 if s.quick else 160  # long enough that the default's first trial is a small part of a run
     default = WalkConfig().balance
     rows = []
     for scene, (flags, (spec, kind)) in _scenes(s, out).items():
