@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +37,24 @@ def run_mpi(n: int, args: list[str], timeout: float = 120, env: dict | None = No
                             launcher=launcher, hosts=hosts)
     except JobTimeout as exc:
         raise AssertionError(f"{exc}\n{exc.stderr[-2000:]}") from None
+
+
+def start_launcher(args: list[str], env: dict) -> subprocess.Popen:
+    """``python -m multigpu.parallel.mpirun ARGS`` as a user starts it (its own process group,
+    output captured), ``env`` over this process's environment."""
+    return subprocess.Popen([sys.executable, "-m", "multigpu.parallel.mpirun", *args], cwd=ROOT,
+                            env={**os.environ, **env}, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+
+
+def end_launcher(proc: subprocess.Popen, timeout: float = 120) -> tuple[str, str]:
+    """Its output once it ends; its whole process group killed if it outlives ``timeout``."""
+    try:
+        return proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
 
 
 def read_png(path: Path) -> np.ndarray:

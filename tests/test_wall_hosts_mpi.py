@@ -12,7 +12,7 @@ import subprocess
 import sys
 
 import pytest
-from mpirun import ROOT, SMALL, read_png
+from mpirun import ROOT, SMALL, end_launcher, read_png, start_launcher
 from simhosts import SimHosts
 from xserver import need_tools, screenshot, wait_for, windows, wm_close
 
@@ -67,20 +67,9 @@ def _still(tmp_path):
 
 
 def _launch(tmp_path, hosts, env, wall, out):
-    args = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", "walkthrough", *SMALL, "--path",
-            str(_still(tmp_path)), "--wall", str(wall), "--present", "window", "--mosaic-every", "100", "--no-overlay",
-            "--out", str(out)]
-    return subprocess.Popen(args, cwd=ROOT, env={**os.environ, **hosts.env, **env}, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
-
-
-def _end(proc, timeout=120):
-    try:
-        return proc.communicate(timeout=timeout)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
+    return start_launcher(["-n", "2", "walkthrough", *SMALL, "--path", str(_still(tmp_path)), "--wall", str(wall),
+                           "--present", "window", "--mosaic-every", "100", "--no-overlay", "--out", str(out)],
+                          {**hosts.env, **env})
 
 
 def test_each_host_shows_its_tile_of_the_mosaic(tmp_path, two_pcs, mpiexec_env):
@@ -96,7 +85,7 @@ def test_each_host_shows_its_tile_of_the_mosaic(tmp_path, two_pcs, mpiexec_env):
         wait_for(lambda: shown() and windows(xa) and windows(xb), timeout=120)
         shots = screenshot(xa), screenshot(xb)
         wm_close(xb, windows(xb)[0])  # the person at host b closes its window
-        _, err = _end(proc)
+        _, err = end_launcher(proc)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -120,7 +109,7 @@ def test_a_host_without_its_x_server_is_one_line_and_exit_2(tmp_path, two_pcs, m
         {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
         {"rank": 1, "host": "b", "display": ":987", "position": [0, 0]}]}))
     proc = _launch(tmp_path, hosts, mpiexec_env, wall, tmp_path / "nox")
-    _, err = _end(proc)
+    _, err = end_launcher(proc)
     assert proc.returncode == 2, err[-2000:]
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and ":987" in lines[0] and "host b" in lines[0], err

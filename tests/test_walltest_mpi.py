@@ -7,11 +7,10 @@ import json
 import os
 import signal
 import subprocess
-import sys
 
 import numpy as np
 import pytest
-from mpirun import ROOT
+from mpirun import end_launcher, start_launcher
 from xserver import Xvfb, escape, need_tools, screenshot, wait_for, windows
 
 from multigpu.core.canvas import Canvas
@@ -22,18 +21,7 @@ GRID, TILE, MULLION = (1, 2), (64, 48), (6, 0)
 
 
 def _start(wall, env):
-    args = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", "wall", "test", str(wall)]
-    return subprocess.Popen(args, cwd=ROOT, env={**os.environ, **env}, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
-
-
-def _end(proc, timeout=60):
-    try:
-        return proc.communicate(timeout=timeout)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
+    return start_launcher(["-n", "2", "wall", "test", str(wall)], env)
 
 
 def _expected(frame, mullion, host):
@@ -86,7 +74,7 @@ def test_the_pattern_is_the_canvas_in_step_and_keys_move_the_mullions(tmp_path):
             wait_for(lambda: _frame_shown(screenshot(x.name), (8, 0), socket.gethostname()) is not None,
                      timeout=30, every=0.05)  # every tile redrawn with the new mullion
             escape(x.name, first)
-            out, err = _end(proc)
+            out, err = end_launcher(proc)
         finally:
             os.environ.pop("DISPLAY", None)
             if proc.poll() is None:
@@ -101,7 +89,7 @@ def test_no_x_server_is_one_line_and_exit_2(tmp_path):
     wall.write_text(json.dumps({"grid": "1x2", "tile": "64x48", "displays": [{"rank": 0, "display": ":987"},
                                                                               {"rank": 1, "display": ":987"}]}))
     proc = _start(wall, {})
-    _, err = _end(proc)
+    _, err = end_launcher(proc)
     assert proc.returncode == 2, err[-2000:]
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and ":987" in lines[0], err
@@ -124,7 +112,7 @@ def test_fullscreen_windows_fill_their_screens(tmp_path):
                 drawn = lambda: bool((screenshot(x.name) == BACKGROUND).all(axis=2).mean() > 0.05)  # the pattern
                 wait_for(drawn, timeout=20)
             escape(a.name, windows(a.name, "multigpu tile 0")[0])
-            _, err = _end(proc)
+            _, err = end_launcher(proc)
         finally:
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGKILL)
