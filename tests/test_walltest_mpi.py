@@ -7,6 +7,7 @@ import json
 import os
 import signal
 import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from xserver import Xvfb, escape, need_tools, screenshot, wait_for, windows
 
 from multigpu.core.canvas import Canvas
 from multigpu.display.pattern import BACKGROUND, BAR, tile_pattern
+from multigpu.parallel.walltest import PACE
 
 pytestmark = pytest.mark.mpi
 GRID, TILE, MULLION = (1, 2), (64, 48), (6, 0)
@@ -38,13 +40,14 @@ def _expected(frame, mullion, host):
     return img
 
 
-def _frame_shown(shot, mullion, host):
-    """The frame whose pattern the screenshot is, or None (caught between two swaps)."""
+def _frame_shown(shot, mullion, host, since):
+    """The frame whose pattern the screenshot is, or None (caught between two swaps); the job
+    started at ``since`` (time.monotonic) and shows at most PACE frames a second."""
     W = Canvas(GRID, TILE, mullion).size[0]
     red = np.flatnonzero((shot == BAR).all(axis=2).any(axis=0))
     if red.size == 0:
         return None
-    for f in range(0, 4000):  # frames that put the bar where it shows
+    for f in range(0, int((time.monotonic() - since + 1) * PACE) + 10):  # frames that put the bar where it shows
         x = (8 * f) % W
         if any(abs(x - r) < 40 for r in red[:1]) and (shot == _expected(f, mullion, host)).all():
             return f
@@ -60,10 +63,11 @@ def test_the_pattern_is_the_canvas_in_step_and_keys_move_the_mullions(tmp_path):
         wall = tmp_path / "wall.json"
         wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "mullion": "6x0"}))
         os.environ["DISPLAY"] = x.name  # the label a rank without a display entry shows
+        since = time.monotonic()
         proc = _start(wall, {"DISPLAY": x.name})
         try:
             wait_for(lambda: len(windows(x.name)) == 2, timeout=60)
-            shown = wait_for(lambda: _frame_shown(screenshot(x.name), MULLION, socket.gethostname()) is not None,
+            shown = wait_for(lambda: _frame_shown(screenshot(x.name), MULLION, socket.gethostname(), since) is not None,
                              timeout=30, every=0.05)
             assert shown
             first = windows(x.name, "multigpu tile 0")[0]  # rank 0's window takes the keys
@@ -71,7 +75,7 @@ def test_the_pattern_is_the_canvas_in_step_and_keys_move_the_mullions(tmp_path):
             subprocess.run(["xdotool", "mousemove", "--window", first, "5", "5"], env=xenv, timeout=10, check=True)
             for _ in range(2):  # the pointer over rank 0's window gives it the keyboard (no window manager)
                 subprocess.run(["xdotool", "key", "--window", first, "Right"], env=xenv, timeout=10, check=True)
-            wait_for(lambda: _frame_shown(screenshot(x.name), (8, 0), socket.gethostname()) is not None,
+            wait_for(lambda: _frame_shown(screenshot(x.name), (8, 0), socket.gethostname(), since) is not None,
                      timeout=30, every=0.05)  # every tile redrawn with the new mullion
             escape(x.name, first)
             out, err = end_launcher(proc)

@@ -4,7 +4,7 @@ launched like the walkthrough (``launch/wall-test``, or the launcher with ``-n K
 Every rank opens its window where the wall file says and shows its part of one pattern across
 the canvas (``display/pattern.py``): lines that run straight across the bezels when the mullion
 values are right, each tile's rank, host, display and size, and a moving bar and a frame counter
-that show the swap lock. Rank 0's window takes the arrow keys: Left/Right take one pixel from or
+that show the swap lock (at most ``PACE`` frames a second). Rank 0's window takes the arrow keys: Left/Right take one pixel from or
 add one to the mullion between columns, Down/Up between rows, every rank redraws with the new
 value at the same frame, and rank 0 prints the line to put in the wall file. Escape or a closed
 window on any rank ends it (or ``--frames N``). Every wait is bounded, as in the frame loop.
@@ -15,11 +15,15 @@ from __future__ import annotations
 import itertools
 import socket
 import sys
+import time
 
 import numpy as np
 
 from multigpu.errors import InputError, as_flags
 from multigpu.parallel.exchange import agree, barrier, wait_all
+
+
+PACE = 60.0  # frames a second at most: the bar moves at one speed a person can follow on any machine
 
 
 def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tuple[int, int] | None:
@@ -63,8 +67,11 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
     label = [f"rank {rank}", f"host {host}", presenter.display, f"{tile[0]}x{tile[1]}"]
     state = np.array([*mullion, 0], dtype=np.int64)  # rank 0's mullions and stop flag, for everyone
     stop = np.zeros(1, dtype=np.int64)
+    start = time.monotonic()
     try:
         for f in itertools.count() if frames is None else range(frames):  # frames, not objects
+            if rank == 0:  # the pace (the broadcast below holds every rank to it)
+                time.sleep(max(0.0, start + f / PACE - time.monotonic()))
             if nudges is not None:
                 for key in nudges.take():
                     state[:2] = nudge((int(state[0]), int(state[1])), key)
