@@ -96,6 +96,7 @@ class WalkConfig:
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     record: str | None = None  # write every frame's camera here, in the format --path reads
     monitor: tuple[int, int] | None = None  # rank 0's operator view at this place (MONITOR_BESIDE: beside the wall)
+    latency: int = 0  # frames in flight (core/inflight.py): 0 the strict order
 
     def __post_init__(self):
         if self.frames is not None and self.frames < 1:
@@ -136,6 +137,10 @@ class WalkConfig:
                              f"got --decomposition {self.decomposition}")
         if len(self.offset) != 3 or not all(math.isfinite(v) and abs(v) <= 1e15 for v in self.offset):
             raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
+        from multigpu.core.inflight import MOST
+
+        if not 0 <= self.latency <= MOST:
+            raise InputError(f"--latency must be 0..{MOST} frames, got {self.latency}")
         if self.device is not None and self.device < 0:
             raise InputError(f"--device must be >= 0, got {self.device}")
         if not (self.timeout > 0 and math.isfinite(self.timeout)):

@@ -171,6 +171,9 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
     b.add_argument("--projection", default=d["projection"], metavar=_one_of(["each", "shared"]),
                    help="who projects the object bounds: every rank every object, or the ranks of a machine a slice "
                         "each into one shared array (pays from ~50k objects)")
+    b.add_argument("--latency", type=int, default=d["latency"], metavar="N",
+                   help="frames in flight: a rank plans and draws the next frames while a frame's pixels travel and "
+                        "show (0: each frame shown before the next starts; input reaches the screen N frames later)")
     b.add_argument("--exchange", default=d["exchange"], metavar=_one_of(["auto", "shared", "messages"]),
                    help="frame exchange: auto = a shared-memory segment per machine where it can be made, messages "
                         "between machines; shared = the same, an error where it cannot; messages = point to point")
@@ -223,7 +226,7 @@ def walk_config(a):
                       strips=a.strips,
                       balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
                       overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,
-                      partition=a.partition, exchange=a.exchange, projection=a.projection,
+                      partition=a.partition, exchange=a.exchange, latency=a.latency, projection=a.projection,
                       offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
                       decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
                       db_ranges=a.db_ranges,

@@ -54,6 +54,22 @@ def test_walls_equal_one_rank_render(tmp_path, references, name, grid, tile):
         assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"
 
 
+@pytest.mark.parametrize("latency", ["1", "2"])
+@pytest.mark.parametrize("name", ["screen", "db", "bins-vdc", "cross", "db-shared-projection", "messages",
+                                  "db-messages"])
+def test_frames_in_flight_compose_what_the_strict_order_does(tmp_path, references, name, latency):
+    """--latency: frames planned and drawn while earlier ones travel; every composite the same
+    bit for bit (a shared segment and messages alike, depth too)."""
+    extra = {**DECOMPOSITIONS, "screen": [], "messages": ["--exchange", "messages"],
+             "db-messages": ["--decomposition", "db", "--exchange", "messages"]}[name]
+    out = walk(tmp_path, name, (2, 2), (60, 48), [*extra, "--latency", latency])
+    for f, (got, want) in enumerate(zip(frames_of(out), references[(120, 96)])):
+        assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"
+    s = json.loads((out / "summary.json").read_text())
+    assert s["config"]["latency"] == int(latency) and s["frames_written"] == FRAMES
+    assert s["input_to_photon_ms"] > 0 and s["input_to_photon_frames"] > 0
+
+
 def test_outputs_of_each_decomposition(tmp_path):
     rows = {}
     for name in ("db", "bins-vdc"):

@@ -239,6 +239,8 @@ def test_record_into_a_directory_that_takes_no_files_is_refused_at_the_door(tmp_
     (["--timeout", "0"], "--timeout must be > 0"),
     (["--device", "-2"], "--device must be >= 0"),
     (["--mosaic-every", "-1"], "--mosaic-every must be >= 0"),
+    (["--latency", "-1"], "--latency must be 0..3 frames, got -1"),
+    (["--latency", "4"], "--latency must be 0..3 frames, got 4"),
     (["--path-kind", "spiral"], "--path-kind must be one of walkthrough, orbit"),
     (["--scene", "moon"], "--scene must be one of plant, fill"),
 ])

@@ -49,10 +49,11 @@ def window_args(out, path, extra=()):
             "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out), *extra]
 
 
-def test_screen_shows_the_composite_and_escape_ends_the_run(tmp_path, still_path):
+@pytest.mark.parametrize("latency", ["0", "2"])
+def test_screen_shows_the_composite_and_escape_ends_the_run(tmp_path, still_path, latency):
     with Xvfb(CANVAS) as x:
         out = tmp_path / "win"
-        proc, kill = start_mpi(4, window_args(out, still_path), env={"DISPLAY": x.name})
+        proc, kill = start_mpi(4, window_args(out, still_path, ["--latency", latency]), env={"DISPLAY": x.name})
         try:
             wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4)
             shot = screenshot(x.name)

@@ -184,6 +184,8 @@ class RegionRenderer:
         self.last_commands = 0  # draw commands of the last frame (runs of visible objects)
         self.fbo = None
         self.fbo_size = (0, 0)
+        self._ring = None  # the scissor method's two framebuffers once a frame is submitted ahead (``submit``)
+        self._tris = 0
         # the largest framebuffer side a region chunk may use
         self.chunk = self.limits["renderbuffer"]
         if self.method == "scissor":
@@ -232,10 +234,12 @@ class RegionRenderer:
             for att in (*self.fbo.color_attachments, self.fbo.depth_attachment):
                 att.release()
             self.fbo.release()
-        ctx = self.ctx
-        self.fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer(need, 4)],
-                                   depth_attachment=ctx.depth_renderbuffer(need))
+        self.fbo = self._new_framebuffer(need)
         self.fbo_size = need
+
+    def _new_framebuffer(self, size: tuple[int, int]):
+        ctx = self.ctx
+        return ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4)], depth_attachment=ctx.depth_renderbuffer(size))
 
     def _chunks(self, region):
         """The region cut into pieces no larger than the framebuffer limit (usually one)."""
@@ -244,6 +248,32 @@ class RegionRenderer:
         for cy in range(y0, y1, c):
             for cx in range(x0, x1, c):
                 yield cx, cy, min(cx + c, x1), min(cy + c, y1)
+
+    def _commands(self, mask, seen) -> np.ndarray:
+        """The draw commands of the objects in ``mask`` (of their ``seen`` parts); ``_tris``:
+        their triangles."""
+        cmds = self.draws.commands(mask) if seen is None or not self.draws.parts else self.draws.part_commands(mask,
+                                                                                                             seen)
+        self.last_commands = len(cmds)
+        self._tris = int(cmds[:, 0].sum()) // 3
+        return cmds
+
+    def _draw(self, cmds: np.ndarray, view, proj, light, scissor) -> None:
+        """``cmds`` into the full-display framebuffer, scissored (the scissor method)."""
+        mvp = np.asarray(proj, dtype=np.float64) @ model_view(view, self.origin)
+        self.fbo.use()
+        self.fbo.viewport = (0, 0, *self.size)
+        self.fbo.scissor = scissor
+        self.ctx.enable(self.depth_test)
+        self.fbo.clear(*BACKGROUND, 1.0, depth=1.0)
+        if len(cmds):
+            if cmds.nbytes > self.indirect.size:
+                self.indirect.orphan(cmds.nbytes)
+            self.indirect.write(cmds)
+            self.prog["light"].value = tuple(float(v) for v in light)
+            self.cbo.bind_to_storage_buffer(0)
+            self.prog["mvp"].write(np.ascontiguousarray(mvp.T, dtype=np.float32))
+            self.vao.render_indirect(self.indirect, count=len(cmds))
 
     def render(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, region, mask: np.ndarray | None,
                depth: bool = False, seen: np.ndarray | None = None):
@@ -256,10 +286,8 @@ class RegionRenderer:
         """
         x0, y0, x1, y1 = (int(v) for v in region)
         w, h = x1 - x0, y1 - y0
-        cmds = self.draws.commands(mask) if seen is None or not self.draws.parts else self.draws.part_commands(mask,
-                                                                                                             seen)
-        self.last_commands = len(cmds)
-        self.last_triangles = int(cmds[:, 0].sum()) // 3
+        cmds = self._commands(mask, seen)
+        self.last_triangles = self._tris = int(cmds[:, 0].sum()) // 3
         ctx = self.ctx
         mvp = np.asarray(proj, dtype=np.float64) @ model_view(view, self.origin)
         if len(cmds):
@@ -304,16 +332,82 @@ class RegionRenderer:
                 zout[rows, cols] = np.frombuffer(data, dtype=np.float32).reshape(ch, cw)
         return (out, zout) if depth else out
 
+    def submit(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, pieces: list, depth: bool = False,
+               ahead: bool = False) -> "Pending":
+        """Draw a frame's ``pieces`` ``(region, mask, seen)`` now and read their pixels later
+        (``Pending.read``: the same pixels ``render`` gives, piece by piece). ``ahead``: the
+        caller submits the next frame before it reads this one (``--latency`` 2 and more), so the
+        pieces go into the next framebuffer of a ring of two: the GL draws this frame while the
+        rank's thread composes the last (llvmpipe rasterizes one framebuffer's scene while the
+        next one's triangles are binned; a GPU draws while the CPU plans). Only the scissor
+        method with disjoint pieces in one chunk each can wait; others are read at once."""
+        if self._ring is not None:  # the other framebuffer than the last frame's (it may be unread yet)
+            self._ring.reverse()
+            self.fbo = self._ring[0]
+        if not (ahead and self.method == "scissor" and _disjoint([r for r, _, _ in pieces])):
+            got, total = [], 0
+            for r, m, s in pieces:  # pieces, not objects
+                got.append(self.render(view, proj, light, r, m, depth=depth, seen=s))
+                total += self._tris
+            self.last_triangles = total
+            return Pending([g if depth else (g, None) for g in got])
+        if self._ring is None:
+            self._ring = [self._new_framebuffer(self.size), self.fbo]
+            self.fbo = self._ring[0]
+        drawn, total = [], 0
+        for region, mask, seen in pieces:  # pieces, not objects
+            x0, y0, x1, y1 = (int(v) for v in region)
+            self._draw(self._commands(mask, seen), view, proj, light, (x0, y0, x1 - x0, y1 - y0))
+            total += self._tris
+            drawn.append((x0, y0, x1 - x0, y1 - y0))
+        self.last_triangles = total
+        return Pending(None, self.fbo, drawn, depth)
+
     @property
     def framebuffer_bytes(self) -> int:
         """Colour + depth bytes of the framebuffer this renderer holds now."""
         return self.fbo_size[0] * self.fbo_size[1] * 8
 
     def release(self) -> None:
-        if self.fbo is not None:
-            for att in (*self.fbo.color_attachments, self.fbo.depth_attachment):
-                att.release()
-            self.fbo.release()
+        for fbo in self._ring or [self.fbo]:
+            if fbo is not None:
+                for att in (*fbo.color_attachments, fbo.depth_attachment):
+                    att.release()
+                fbo.release()
         for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.vbo, self.prog):
             obj.release()
         self._maps = None  # the file's maps outlive the GL buffers drawing from them
+
+
+class Pending:
+    """A submitted frame's pieces: already read (``done``), or drawn into ``fbo`` at ``drawn``
+    (x, y, w, h) and read on ``read`` (waiting for the GL to finish drawing them)."""
+
+    def __init__(self, done: list | None, fbo=None, drawn: list | None = None, depth: bool = False):
+        self.done, self.fbo, self.drawn, self.depth = done, fbo, drawn, depth
+
+    def read(self) -> list:
+        """Every piece as ``(rgb, depth or None)``, row 0 at the bottom (as ``render``)."""
+        if self.done is None:
+            out = []
+            for x, y, w, h in self.drawn:  # pieces, not objects
+                rgb = np.empty((h, w, 3), dtype=np.uint8)
+                self.fbo.read_into(rgb, viewport=(x, y, w, h), components=3, alignment=1)
+                z = None
+                if self.depth:
+                    z = np.empty((h, w), dtype=np.float32)
+                    self.fbo.read_into(z, viewport=(x, y, w, h), components=1, attachment=-1, dtype="f4", alignment=1)
+                out.append((rgb, z))
+            self.done, self.fbo = out, None
+        return self.done
+
+
+def _disjoint(rects: list) -> bool:
+    """Whether no two of the ``[x0, y0, x1, y1)`` rects overlap (pieces, a handful a rank)."""
+    r = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
+    if len(r) < 2:
+        return True
+    apart = ((r[:, None, 2] <= r[None, :, 0]) | (r[None, :, 2] <= r[:, None, 0]) |
+             (r[:, None, 3] <= r[None, :, 1]) | (r[None, :, 3] <= r[:, None, 1]))
+    np.fill_diagonal(apart, True)
+    return bool(apart.all())

@@ -19,7 +19,9 @@ class Exchange(Protocol):
     """Pieces to their tile owners: ``publish`` before the frame's barrier (a shared segment
     writes its parts there), ``compose`` after it (copy or depth-merge into ``color``/``depth``,
     returns bytes sent and of which depth), ``close`` at the end (``collective``: every rank
-    together)."""
+    together). Frames in flight (``--latency``) use the split form instead of the barrier:
+    ``start`` as soon as the frame's pixels are read (parts out), ``wait`` until every peer's
+    parts are there, ``finish`` to compose, frames later."""
 
     name: str
 
@@ -27,6 +29,12 @@ class Exchange(Protocol):
 
     def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
                 depth: np.ndarray | None = None) -> tuple[int, int]: ...
+
+    def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool): ...
+
+    def wait(self, started) -> None: ...
+
+    def finish(self, started, tile, color: np.ndarray, depth: np.ndarray | None = None) -> tuple[int, int]: ...
 
     def close(self, collective: bool = True) -> None: ...
 

@@ -38,8 +38,45 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
     the tile must hold the background at depth 1.0 on entry. ``near``: ranks whose parts this
     rank reads from shared memory instead of messages, ``read(sender, parts)`` giving their
     views (``shared.py``; its own host's ranks). Returns (bytes sent as messages, of which
-    depth bytes)."""
-    with_depth = depth is not None
+    depth bytes). ``post`` and ``Posted.complete`` are its two halves, for frames in flight."""
+    return post(comm, me, rects, rendered, plan, depth is not None, near).complete(tile, timeout, color, depth, read)
+
+
+class Posted:
+    """A frame's messages on their way: the sends and receives ``post`` started; ``complete``
+    waits for them and composes the tile."""
+
+    def __init__(self, me, rects, rendered, incoming, requests, keep, inbox, sent, zbytes, with_depth, near):
+        self.me, self.rects, self.rendered, self.incoming = me, rects, rendered, incoming
+        self.requests, self.keep, self.inbox = requests, keep, inbox
+        self.sent, self.zbytes, self.with_depth, self.near = sent, zbytes, with_depth, near
+
+    def complete(self, tile, timeout: float, color: np.ndarray, depth: np.ndarray | None = None,
+                 read=None) -> tuple[int, int]:
+        me, rects, rendered, incoming = self.me, self.rects, self.rendered, self.incoming
+        # colour parts tile the display, so their order is free: this rank's own go in while the
+        # messages travel (fewer polls of the wait); depth parts merge in ascending sender order
+        early = me in incoming and not self.with_depth
+        if early:
+            _merge(color, depth, tile, [(p, *_local(p, rects[me], rendered)) for p in incoming[me]])
+        wait_all(self.requests, timeout, "frame exchange")
+        self.keep = None
+        for s in sorted(incoming):  # ascending sender: the depth tie rule
+            if s == me and early:
+                continue
+            parts = incoming[s]
+            if s == me:
+                views = [(p, *_local(p, rects[me], rendered)) for p in parts]
+            else:
+                views = read(s, parts) if s in self.near else _unpack(self.inbox[s], parts, self.with_depth)
+            _merge(color, depth, tile, views)
+        return self.sent, self.zbytes
+
+
+def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool,
+         near: frozenset = frozenset()) -> Posted:
+    """Start a frame's exchange: this rank's parts for other ranks' tiles packed and sent, its
+    receives posted (nothing for ``near`` ranks, read from shared memory)."""
     per_px = 7 if with_depth else 3
     outgoing: dict[int, list[Piece]] = {}
     incoming: dict[int, list[Piece]] = {}
@@ -67,22 +104,7 @@ def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, tim
         buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
         inbox[s] = buf
         requests.append(comm.Irecv([buf, MPI.BYTE], source=s, tag=TAG))
-    # colour parts tile the display, so their order is free: this rank's own go in while the
-    # messages travel (fewer polls of the wait); depth parts merge in ascending sender order
-    early = me in incoming and not with_depth
-    if early:
-        _merge(color, depth, tile, [(p, *_local(p, rects[me], rendered)) for p in incoming[me]])
-    wait_all(requests, timeout, "frame exchange")
-    for s in sorted(incoming):  # ascending sender: the depth tie rule
-        if s == me and early:
-            continue
-        parts = incoming[s]
-        if s == me:
-            views = [(p, *_local(p, rects[me], rendered)) for p in parts]
-        else:
-            views = read(s, parts) if s in near else _unpack(inbox[s], parts, with_depth)
-        _merge(color, depth, tile, views)
-    return sent, zbytes
+    return Posted(me, rects, rendered, incoming, requests, keep, inbox, sent, zbytes, with_depth, near)
 
 
 def _merge(color, depth, tile, views) -> None:
@@ -105,6 +127,17 @@ class Messages:
     def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
                 depth: np.ndarray | None = None) -> tuple[int, int]:
         return composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth)
+
+    def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool) -> Posted:
+        """Frames in flight: the frame's messages leave as soon as its pixels are read."""
+        return post(self.comm, me, rects, rendered, plan, with_depth)
+
+    def wait(self, started: Posted) -> None:
+        """Frames in flight: nothing to wait for before ``finish`` (the messages are)."""
+
+    def finish(self, started: Posted, tile, color: np.ndarray, depth: np.ndarray | None = None) -> tuple[int, int]:
+        """Frames in flight: wait for the frame's messages and compose its tile."""
+        return started.complete(tile, self.timeout, color, depth)
 
     def close(self, collective: bool = True) -> None:
         """Nothing held."""

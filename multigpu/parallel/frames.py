@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import itertools
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
 from multigpu.config import INTERACTIVE, WalkConfig
-from multigpu.core import jit
 from multigpu.core.camera import Camera
 from multigpu.core.culling import PartCuller
+from multigpu.core.inflight import read_lag, step
 from multigpu.core.work import Work, transfers
 from multigpu.errors import WriteFailed
 from multigpu.parallel.backends import Exchange, Projection
@@ -24,12 +25,12 @@ from multigpu.parallel.exchange import agree, barrier, broadcast_partition, wait
 from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.projection import make_projection
-from multigpu.parallel.record import RunRecord
+from multigpu.parallel.record import RunRecord, config_doc
 from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
+from multigpu.parallel.rows import Rows
 from multigpu.parallel.shared import SharedPieces
 from multigpu.parallel.timer import Timer
 from multigpu.planner import Planner
-from multigpu.scene.models import axis_name
 
 #: the test-only fault to inject, read once: a lookup in ``os.environ`` (its miss is a KeyError
 #: caught inside) costs ~10 us of CPU per frame with the caches cold, 4 % of a city frame's balancing
@@ -38,6 +39,26 @@ FAULT_SPEC = os.environ.get("MULTIGPU_FAULT")
 #: column): learning from the last frame's measured times, projecting the object bounds,
 #: planning the partition (the strategy and the decomposition)
 BALANCE_PHASES = ("learn", "project", "plan")
+#: the phases of the Rendering column: the parts culled, the draw calls, the pixels read back
+RENDER_PHASES = ("cull", "render", "readback")
+
+
+@dataclass(slots=True)
+class InFlight:
+    """A frame between its stages (``core/inflight.py``): what each later stage needs of it."""
+
+    f: int
+    t: Timer
+    control: object
+    work: Work
+    plan: list
+    pending: object  # gpu.render.Pending: the pixels, once read
+    drawn: int  # triangles this rank drew
+    objects: int  # distinct objects it drew
+    balance: int  # the CSV's balance column
+    recorded: object  # rank 0 with --record: the camera, in path-file coordinates
+    rendered: list | None = None
+    started: object = None
 
 
 def fault(rank: int, where: int | str) -> None:
@@ -84,18 +105,21 @@ class Frames:
         self.zback = np.ones((th, tw), dtype=np.float32) if depth else None
         self.background = renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
                                           np.zeros(scene.n_objects, dtype=bool))[0, 0]  # the clear colour
-        self.col = {c: i for i, c in enumerate(COLUMNS)}
-        self.row = np.zeros(len(COLUMNS) + 1)  # + stop flag
-        self.allrows = np.zeros((self.K, len(COLUMNS) + 1))
+        self.latency, self.ahead = cfg.latency, read_lag(cfg.latency) > 0
+        self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0)
+        self.col = self.rows.col
+        self.shown_at = None  # when this rank's last frame was shown (perf_counter): the frame period
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
         self.interactive = cfg.path == INTERACTIVE
         self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
         self.done = 0
-        self.learn = None  # (frame, times): observed at the start of the next frame
+        self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
+        self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
         # the exchange backend: a node-shared segment where asked for and possible, else messages
         shared, why = None, None
         if cfg.exchange != "messages":
-            shared, why = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout, cfg.exchange == "shared")
+            shared, why = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout, cfg.exchange == "shared",
+                                            slots=3 if cfg.latency else 2)
         self.exchange: Exchange = shared or Messages(comm, cfg.timeout)
         # the bounds' projection: a slice per rank of a host into one shared array, where it can be
         self.projection: Projection
@@ -113,7 +137,7 @@ class Frames:
                 if self.interactive:
                     start = _unshifted(path.camera(0), cfg.offset)
             self.live = Live(cfg, comm, scene, self.planner.balances, self.planner.using, controls, monitor, start)
-        doc = _config_doc(cfg, scene, load_info, self.n_frames, placement, renderer.method)
+        doc = config_doc(cfg, scene, load_info, self.n_frames, placement, renderer.method)
         doc["exchange"] = self.exchange.name
         if why:
             doc["exchange_why"] = f"messages: no shared segment ({why})"
@@ -133,41 +157,31 @@ class Frames:
 
     # -- phases of one frame
 
-    def render(self, t: Timer, work: Work, view, proj, light) -> list:
-        """Every piece this rank renders: (rgb, depth or None). Of a scene cut into parts, the
-        parts each piece needs are found first (the ``cull`` phase); ``drawn`` counts the
-        triangles the pieces drew."""
-        out, self.drawn, parts = [], 0, None
+    def render(self, t: Timer, work: Work, view, proj, light):
+        """Every piece this rank renders, drawn (read later: ``Pending.read``). Of a scene cut
+        into parts, the parts each piece needs are found first (the ``cull`` phase); ``drawn``
+        counts the triangles the pieces drew."""
+        mine = list(zip(work.rects[self.rank], work.masks[self.rank]))
         if self.culler is not None:
             with t.phase("cull"):
                 self.culler.frame(view, proj, self.canvas.size)
-        for rect, mask in zip(work.rects[self.rank], work.masks[self.rank]):  # pieces, not objects
-            if self.culler is not None:
-                with t.phase("cull"):
-                    parts = self.culler.seen(rect)
-            with t.phase("render"):
-                got = self.renderer.render(view, proj, light, rect, mask, depth=work.depth, seen=parts)
-            self.drawn += self.renderer.last_triangles
-            out.append(got if work.depth else (got, None))
-        return out
+                # ``seen`` rewrites one array: a copy each where there are several pieces
+                pieces = [(rect, mask, self.culler.seen(rect) if len(mine) == 1 else self.culler.seen(rect).copy())
+                          for rect, mask in mine]  # pieces, not objects
+        else:
+            pieces = [(rect, mask, None) for rect, mask in mine]
+        with t.phase("render"):
+            pending = self.renderer.submit(view, proj, light, pieces, depth=work.depth, ahead=self.ahead)
+        self.drawn = self.renderer.last_triangles
+        return pending
 
-    def compose(self, f: int, work: Work, rendered: list, plan: list) -> tuple[int, int]:
-        """Frame exchange: the pieces travel to their tile owners, who copy or depth-merge them
-        (the exchange backend: messages, or the node-shared segment). Returns (bytes sent, of
-        which depth)."""
-        if work.depth:
-            self.back[:] = self.background
-            self.zback[:] = 1.0
-        return self.exchange.compose(f, self.rank, work.rects, rendered, plan, self.tiles[self.rank], self.back,
-                                     self.zback if work.depth else None)
-
-    def present(self, t: Timer, work: Work, control) -> tuple[float, int]:
+    def present(self, t: Timer, work: Work, control, rows) -> tuple[float, int]:
         """Display: the composed tile (and the overlays that are on) into the back buffer, the
         swap barrier (every tile composed before any swaps), the swap; then window events and
         the operator's monitor. Returns when the swap returned and the stop flag of a window
         event (0: none)."""
         with t.phase("display"):
-            shown = self.back if self.live is None else self.live.tile(self.back, work, control, self.allrows)
+            shown = self.back if self.live is None else self.live.tile(self.back, work, control, rows)
             self.presenter.show(shown)
         if self.window:
             with t.phase("swap_wait"):
@@ -176,35 +190,37 @@ class Frames:
             swapped = self.presenter.swap()
             why = self.presenter.poll()
             if self.live is not None:
-                seen = self.live.show_monitor(self.back, work, control, self.allrows)
+                seen = self.live.show_monitor(self.back, work, control, rows)
                 if seen and not why:
                     return swapped, STOP_FLAG[f"{seen} (the monitor)"]
         return swapped, STOP_FLAG.get(why, 0)
 
-    def gather_row(self, f: int, work: Work, t: Timer, sent: tuple[int, int], swapped: float, stop: int) -> None:
-        """This rank's row by column name, gathered so every rank sees every rank's row."""
+    def row_values(self, x: "InFlight", sent: tuple[int, int], swapped: float) -> dict:
+        """This rank's row of frame ``x`` by column name."""
+        t, work = x.t, x.work
         box = work.bounds(self.rank)
-        values = {"frame": f, "rank": self.rank, "triangles": self.drawn, "planned_triangles": work.loads[self.rank],
-                  "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
-                  "load_balancing_ms": t.ms(*BALANCE_PHASES), "rendering_ms": t.ms("cull", "render"),
-                  "synchronization_ms": t.ms("sync"), "frame_exchange_ms": t.ms("exchange"),
-                  "display_ms": t.ms("display", "swap_wait"), "frame_ms": t.total_ms,
-                  "load_balancing_cpu_ms": t.cpu_ms(*BALANCE_PHASES), "rendering_cpu_ms": t.cpu_ms("cull", "render"),
-                  "culling_cpu_ms": t.cpu_ms("cull"),
-                  "learning_cpu_ms": t.cpu_ms("learn"), "projection_cpu_ms": t.cpu_ms("project"),
-                  "planning_cpu_ms": t.cpu_ms("plan"),
-                  "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
-                  "bytes_sent": sent[0], "objects": work.objects(self.rank), "pieces": len(work.rects[self.rank]),
-                  "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
-                  "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
-                  "input_ms": t.ms("input"), "heartbeat_cpu_ms": self._heartbeat_cpu(),
-                  "balance": self.balance_ids[self.planner.using]}
-        for c, v in values.items():
-            self.row[self.col[c]] = v
-        # a signal or a window event seen here stops every rank after this frame
-        failed = self.record is not None and self.record.failed is not None
-        self.row[-1] = float(self.job.signum or stop or (STOP_FLAG[STOPS[-5]] if failed else 0))
-        wait_all([self.comm.Iallgather(self.row, self.allrows)], self.cfg.timeout, "timing gather")
+        now = t.end
+        period = t.total_ms if self.shown_at is None else (now - self.shown_at) * 1e3
+        self.shown_at = now
+        return {"frame": x.f, "rank": self.rank, "triangles": x.drawn, "planned_triangles": work.loads[self.rank],
+                "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
+                "load_balancing_ms": t.ms(*BALANCE_PHASES), "rendering_ms": t.ms(*RENDER_PHASES),
+                "synchronization_ms": t.ms("sync"), "frame_exchange_ms": t.ms("exchange"),
+                "display_ms": t.ms("display", "swap_wait"), "frame_ms": period, "latency_ms": t.total_ms,
+                "load_balancing_cpu_ms": t.cpu_ms(*BALANCE_PHASES), "rendering_cpu_ms": t.cpu_ms(*RENDER_PHASES),
+                "culling_cpu_ms": t.cpu_ms("cull"),
+                "learning_cpu_ms": t.cpu_ms("learn"), "projection_cpu_ms": t.cpu_ms("project"),
+                "planning_cpu_ms": t.cpu_ms("plan"),
+                "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
+                "bytes_sent": sent[0], "objects": x.objects, "pieces": len(work.rects[self.rank]),
+                "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
+                "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
+                "input_ms": t.ms("input"), "heartbeat_cpu_ms": self._heartbeat_cpu(),
+                "balance": x.balance,
+                "load_balancing_waited_ms": t.waited_ms(*BALANCE_PHASES, "input"),
+                "rendering_waited_ms": t.waited_ms(*RENDER_PHASES), "synchronization_waited_ms": t.waited_ms("sync"),
+                "frame_exchange_waited_ms": t.waited_ms("exchange"),
+                "display_waited_ms": t.waited_ms("display", "swap_wait")}
 
     def _heartbeat_cpu(self) -> float:
         """CPU ms of this rank's heartbeat thread since the last frame's row."""
@@ -246,43 +262,87 @@ class Frames:
         camera = control.camera if control is not None and control.camera is not None else self.path.camera(f)
         return camera, control
 
-    def frame(self, f: int) -> None:
+    def submit(self, f: int) -> "InFlight":
+        """A frame's first stage: input, balancing in three named phases (``BALANCE_PHASES``:
+        learning from the landed rows' times, projecting the bounds, planning the partition) and
+        the draw calls (``core/inflight.py``)."""
         t = Timer()
         camera, control = self._camera(f, t)
-        # balancing in three named phases (``BALANCE_PHASES``): learning from the last frame's times,
-        # projecting the bounds, planning the partition
         with t.phase("learn"):
             if FAULT_SPEC:
                 fault(self.rank, f)
-            if self.learn is not None:  # the last frame's times, to what planned it
-                self.planner.observe(*self.learn)
-                self.learn = None
+            for landed in self.learn:  # the times of frames that landed, to what planned them
+                self.planner.observe(*landed)
+            self.learn.clear()
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("plan"):
             work = self.planner.work(f, rects, self.relay)
-        rendered = self.render(t, work, view, proj, light)
-        with t.phase("exchange"):  # parts for peers into the shared segment before the barrier (messages: nothing)
-            plan = transfers(work, self.tiles)
-            self.exchange.publish(f, self.rank, work.rects, rendered, plan)
-        with t.phase("sync"):
-            barrier(self.comm, self.cfg.timeout)
+            if self.latency:  # the planner's arrays may be its own again by the time the frame is shown
+                work = work._replace(rects=tuple(r.copy() for r in work.rects))
+        pending = self.render(t, work, view, proj, light)
         with t.phase("exchange"):
-            sent = self.compose(f, work, rendered, plan)
-        swapped, stop = self.present(t, work, control)
-        self.gather_row(f, work, t, sent, swapped, stop)
-        self.learn = (f, self.allrows[:, self.col["rendering_cpu_ms"]].copy())
+            plan = transfers(work, self.tiles)
+        recorded = None
+        if self.cfg.record and self.rank == 0:  # the camera the frame was made with, in path-file coordinates
+            live = self.live.recorded() if self.live is not None and self.interactive else None
+            recorded = live if live is not None else _unshifted(camera, self.cfg.offset)
+        return InFlight(f, t, control, work, plan, pending, self.drawn, work.objects(self.rank),
+                        self.balance_ids[self.planner.using], recorded)
+
+    def send(self, x: "InFlight") -> None:
+        """A frame's second stage: its pixels read back (``readback``: waiting for the GL) and,
+        with frames in flight, its parts on their way to their tiles' ranks."""
+        with x.t.phase("readback"):
+            x.rendered = x.pending.read()
+            x.pending = None
+        with x.t.phase("exchange"):  # parts for peers into the shared segment before the barrier (messages: nothing)
+            if self.latency:
+                x.started = self.exchange.start(x.f, self.rank, x.work.rects, x.rendered, x.plan, x.work.depth)
+            else:
+                self.exchange.publish(x.f, self.rank, x.work.rects, x.rendered, x.plan)
+
+    def deliver(self, x: "InFlight") -> None:
+        """A frame's last stage: the peers' parts (the ``sync`` wait), the tile composed and
+        presented, the row posted (landing now, or a step later with frames in flight)."""
+        t, work, depth = x.t, x.work, x.work.depth
+        with t.phase("sync"):
+            if self.latency:
+                self.exchange.wait(x.started)
+            else:
+                barrier(self.comm, self.cfg.timeout)
+        with t.phase("exchange"):
+            if depth:
+                self.back[:] = self.background
+                self.zback[:] = 1.0
+            tile, zback = self.tiles[self.rank], self.zback if depth else None
+            if self.latency:
+                sent = self.exchange.finish(x.started, tile, self.back, zback)
+            else:
+                sent = self.exchange.compose(x.f, self.rank, work.rects, x.rendered, x.plan, tile, self.back, zback)
+        x.rendered = x.started = None
+        swapped, stop = self.present(t, work, x.control, self.rows.allrows)
+        # a signal, a window event or a failed write seen here stops every rank after the same frame
+        failed = self.record is not None and self.record.failed is not None
+        flag = float(self.job.signum or stop or (STOP_FLAG[STOPS[-5]] if failed else 0))
+        for landed in self.rows.post(x.f, self.row_values(x, sent, swapped), flag, x.recorded):
+            self.landed(*landed)
+        self.show(x.f, work)
+
+    def landed(self, f: int, every: np.ndarray, recorded) -> None:
+        """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
+        self.learn.append((f, every[:, self.col["rendering_cpu_ms"]].copy()))
         if self.rank == 0:  # rows first: the summary always matches the CSV
-            rows = self.allrows[:, :len(COLUMNS)].copy()
+            rows = every[:, :len(COLUMNS)].copy()
             if self.window:  # swap moments after the frame's first swap; the skew on every row
                 at = rows[:, self.col["swap_ms"]].copy()
                 rows[:, self.col["swap_ms"]] = (at - at.min()) * 1e3
                 rows[:, self.col["swap_skew_ms"]] = (at.max() - at.min()) * 1e3
-            if self.cfg.record:  # the camera first: a rewritten path file never lags the rows
-                live = self.live.recorded() if self.live is not None and self.interactive else None
-                self.record.camera(live if live is not None else _unshifted(camera, self.cfg.offset))
+            if recorded is not None:  # the camera first: a rewritten path file never lags the rows
+                self.record.camera(recorded)
             self._write(self.record.rows, f, rows)
         self.done = f + 1
-        self.show(f, work)
+        if every[:, -1].any():
+            self.stopping = True
 
     def release(self, collective: bool) -> None:
         """Let the shared segment and the live state go; ``collective``: every rank finished the
@@ -306,7 +366,7 @@ class Frames:
         return f"db ({cfg.db_ranges} ranges)"
 
     def _stopped_by(self) -> str | None:
-        flags = self.allrows[:, -1]
+        flags = self.stop_flags if self.stop_flags is not None else np.zeros(self.K)
         if self.job.signum:
             import signal
 
@@ -319,18 +379,37 @@ class Frames:
             return why if why.endswith("(the monitor)") else f"{why} (rank {r}'s window)"
         return None
 
+    def loop(self) -> None:
+        """Every frame through its three stages (``core/inflight.py``). A stop flag in a landed
+        row (a rank interrupted, a window closed, a write failed) ends the run on every rank
+        after the same frame: the last one submitted, once it is shown."""
+        flight: dict[int, InFlight] = {}
+        last = None if self.n_frames is None else self.n_frames - 1
+        for k in itertools.count():
+            stages = step(k, last, self.latency)
+            if stages is None:
+                return
+            submit, send, deliver = stages
+            if submit is not None:
+                flight[submit] = self.submit(submit)
+            if send is not None:
+                self.send(flight[send])
+            if deliver is not None:
+                self.deliver(flight.pop(deliver))
+            if self.stopping and self.stop_flags is None:
+                self.stop_flags = flags = self.rows.allrows[:, -1].copy()
+                if (flags > 0).any():
+                    self.job.signum = self.job.signum or int(flags.max())
+                last = k if last is None else min(last, k)
+
     def run(self) -> dict | None:
         complete, stopped_by = False, None
         self.job.in_frames = True
         try:
-            for f in itertools.count() if self.n_frames is None else range(self.n_frames):
-                self.frame(f)
-                flags = self.allrows[:, -1]
-                if flags.any():  # a rank was interrupted or its window closed: all stop after this frame
-                    if (flags > 0).any():
-                        self.job.signum = self.job.signum or int(flags.max())
-                    break
-            complete = self.done == self.n_frames
+            self.loop()
+            for landed in self.rows.land():  # frames in flight: the last frame's row
+                self.landed(*landed)
+            complete = self.done == self.n_frames and self.stop_flags is None
             if not complete:
                 stopped_by = self._stopped_by()
         except BaseException as exc:
@@ -358,29 +437,6 @@ class Frames:
         W, H = self.canvas.size
         return (f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in {scene.n_objects} objects, "
                 f"{cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, {self._what()}{state}")
-
-
-def _config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> dict:
-    """The run's configuration for summary.json; ``placement``: every rank's host, index on
-    its host (``node_rank``) and EGL device."""
-    return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
-            "decomposition": cfg.decomposition, "balance": cfg.balance if cfg.decomposition == "screen" else None,
-            "bin_size": cfg.bin_size if cfg.decomposition == "bins" else None,
-            "bin_pattern": cfg.bin_pattern if cfg.decomposition == "bins" else None,
-            "db_ranges": cfg.db_ranges if cfg.decomposition == "db" else None, "bounds": cfg.bounds,
-            "frames_planned": n_frames,
-            "subfrustum": renderer_method, "offset": list(cfg.offset), "partition": cfg.partition,
-            "scene": {"name": scene.name, "objects": scene.n_objects, "triangles": scene.n_triangles,
-                      "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
-                      "warnings": scene.meta.get("warnings", []), "objects_from": scene.meta.get("objects"),
-                      "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source")},
-            "path": cfg.path or cfg.path_kind, "egl_device": placement[0]["egl_device"], "present": cfg.present,
-            "ranks": placement, "hosts": len({p["host"] for p in placement}),
-            "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,
-            "monitor": cfg.monitor is not None,
-            "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
-            "kernel": {"compiled": jit.available(),
-                       "warm_seconds": round(load_info.get("kernel_seconds", 0.0), 3)}}
 
 
 def _unshifted(camera: Camera, offset) -> Camera:

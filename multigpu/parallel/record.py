@@ -8,11 +8,14 @@ the camera of every frame written. No MPI here: the frame loop hands over the ga
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 from multigpu.config import SUMMARY_EVERY
+from multigpu.core import jit
+from multigpu.scene.models import axis_name
 from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
 from multigpu.parallel.mosaic import save_png
@@ -162,3 +165,26 @@ def salvage(out: Path, reason: str) -> int | None:
     write_json(path, {"complete": False, "frames_written": summary["frames"], "config": doc["config"],
                       "decomposition": doc.get("decomposition"), **summary, "stopped_by": reason})
     return summary["frames"]
+
+
+def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> dict:
+    """The run's configuration for summary.json; ``placement``: every rank's host, index on
+    its host (``node_rank``) and EGL device."""
+    return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
+            "decomposition": cfg.decomposition, "latency": cfg.latency, "balance": cfg.balance if cfg.decomposition == "screen" else None,
+            "bin_size": cfg.bin_size if cfg.decomposition == "bins" else None,
+            "bin_pattern": cfg.bin_pattern if cfg.decomposition == "bins" else None,
+            "db_ranges": cfg.db_ranges if cfg.decomposition == "db" else None, "bounds": cfg.bounds,
+            "frames_planned": n_frames,
+            "subfrustum": renderer_method, "offset": list(cfg.offset), "partition": cfg.partition,
+            "scene": {"name": scene.name, "objects": scene.n_objects, "triangles": scene.n_triangles,
+                      "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
+                      "warnings": scene.meta.get("warnings", []), "objects_from": scene.meta.get("objects"),
+                      "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source")},
+            "path": cfg.path or cfg.path_kind, "egl_device": placement[0]["egl_device"], "present": cfg.present,
+            "ranks": placement, "hosts": len({p["host"] for p in placement}),
+            "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,
+            "monitor": cfg.monitor is not None,
+            "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
+            "kernel": {"compiled": jit.available(),
+                       "warm_seconds": round(load_info.get("kernel_seconds", 0.0), 3)}}

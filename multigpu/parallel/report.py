@@ -21,6 +21,11 @@ Figures and what they are:
 * ``triangles``: the triangles a rank drew (of a scene cut into parts, only the parts its
   pieces needed); ``planned_triangles``: those of the whole objects the plan gave it (the
   balancer's load); ``culling_cpu_ms``: the cull of those parts (inside ``rendering_cpu_ms``);
+* ``frame_ms``: the frame period, from this rank's last frame shown to this one (the run's frame
+  rate; the phases add up to less: the timing rows' gather, records and mosaics lie between);
+  ``latency_ms``: from the frame's input phase to its presentation (input to photon; with
+  ``--latency N`` about N + 1 periods); ``*_waited_ms``: the part of each component's wall time
+  the rank's own thread did not run (``time.thread_time``): waiting for peers, the GL or a core;
 * ``heartbeat_cpu_ms``: CPU time of the rank's heartbeat thread since the last frame
   (``time.thread_time`` in the thread; already inside the phases' process CPU times where it
   ran during them, shown apart so its cost is known).
@@ -43,10 +48,14 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
            "bytes_sent", "objects", "pieces", "depth_bytes", "load_cv",
            "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms", "input_ms", "heartbeat_cpu_ms",
-           "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms", "balance"]
+           "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms",
+           "latency_ms", "load_balancing_waited_ms", "rendering_waited_ms", "synchronization_waited_ms",
+           "frame_exchange_waited_ms", "display_waited_ms", "balance"]
 #: the load balancing CPU time's three phases (learn, project, plan), adding up to it
 BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
+#: the part of each component's wall time the rank's thread did not run (waited), by component
+WAITED = {c: c.replace("_ms", "_waited_ms") for c in COMPONENTS}
 #: what the ``balance`` column can name: a strategy of the screen decomposition, or another decomposition
 BALANCE_NAMES = (*STRATEGIES, *(d for d in DECOMPOSITIONS if d != "screen"))
 INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes",
@@ -117,7 +126,10 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
     rows = rows[np.lexsort((rows[:, col["rank"]], rows[:, col["frame"]]))]
     per = rows.reshape(frames.size, ranks, len(COLUMNS))  # (F, K, C)
     get = lambda c: per[:, :, col[c]]
-    frame_ms = get("frame_ms").max(axis=1)
+    # the frame period, each rank's time from its last frame shown to this one, averaged over the ranks:
+    # the run's frames per second (with frames in flight a rank's periods jitter around the common rate,
+    # and their maximum would overstate it)
+    frame_ms = get("frame_ms").mean(axis=1)
     cpu = get("load_balancing_cpu_ms") + get("rendering_cpu_ms") + get("frame_exchange_cpu_ms") + get("display_cpu_ms")
     emulated = cpu.max(axis=1)
     tri = get("triangles")
@@ -156,6 +168,10 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "balance_frames": {BALANCE_NAMES[int(i)]: int(n) for i, n in zip(*np.unique(get("balance")[:, 0],
                                                                                    return_counts=True))},
         "input_ms_median": float(np.median(get("input_ms"))),
+        "wall_waited": {c: float(get(w).mean()) for c, w in WAITED.items()},
+        "outside_phases_ms": float(np.maximum(get("frame_ms") - sum(get(c) for c in COMPONENTS), 0.0).mean()),
+        "input_to_photon_ms": float(get("latency_ms").max(axis=1).mean()),
+        "input_to_photon_frames": float(get("latency_ms").max(axis=1).mean() / frame_ms.mean()),
         "per_frame_emulated_ms": emulated.round(3).tolist(),
         "per_frame_wall_ms": frame_ms.round(3).tolist(),
     }
@@ -178,12 +194,25 @@ def table(summary: dict, title: str = "") -> str:
               f"{c['rendering_cpu_ms']:.2f} (slowest rank {summary['render_cpu_max_ms']:.2f}{_cull(c)}), exchange "
               f"{c['frame_exchange_cpu_ms']:.2f}, display {c['display_cpu_ms']:.2f}; heartbeat thread "
               f"{c.get('heartbeat_cpu_ms', 0.0):.3f}",
+              _waits(summary),
               f"Emulated parallel frame (slowest rank's CPU time): {summary['emulated_frame_ms']:.2f} ms = "
               f"{summary['emulated_fps']:.2f} FPS (median {summary['emulated_frame_ms_median']:.2f} ms)",
               f"Imbalance max/mean: triangles {_fmt(summary['imbalance_triangles'])}, render CPU time "
               f"{_fmt(summary['imbalance_render_cpu'])}{_empty(summary)}; bytes exchanged per frame "
               f"{summary['bytes_sent_per_frame']:.0f}"]
     return "\n".join(lines)
+
+
+def _waits(summary: dict) -> str:
+    """Where the wall time went: each component's wait (its thread not running: peers, the GL's
+    pixels, a core), and how long input took to reach the screen."""
+    w, waited = summary["wall"], summary.get("wall_waited", {})
+    names = {"load_balancing_ms": "load balancing", "rendering_ms": "rendering", "synchronization_ms": "sync",
+             "frame_exchange_ms": "exchange", "display_ms": "display"}
+    parts = ", ".join(f"{names[c]} {waited.get(c, 0.0):.2f} of {w[c]:.2f}" for c in COMPONENTS)
+    return (f"Waited per frame (ms, the rank's thread not running): {parts}; outside the phases "
+            f"{summary.get('outside_phases_ms', 0.0):.2f} (timing rows, records, mosaics); input to photon "
+            f"{summary.get('input_to_photon_ms', 0.0):.2f} ms = {summary.get('input_to_photon_frames', 0.0):.2f} frames")
 
 
 def _parts(cpu: dict) -> str:

@@ -36,7 +36,7 @@ import numpy as np
 
 from multigpu.core.work import Piece
 from multigpu.errors import InputError
-from multigpu.parallel.composite import _pack, _unpack, composite
+from multigpu.parallel.composite import _pack, _unpack, composite, post
 from multigpu.parallel.exchange import agree, allgather_text, wait_all
 
 #: the most bytes a host's segment may hold (its ranks, both halves) before the job uses messages
@@ -140,18 +140,20 @@ class SharedPieces:
     finds no room; it refuses (one line) ranks on several hosts where the user asked for
     ``--exchange shared``."""
 
-    def __init__(self, comm, timeout: float, segments: dict[int, np.ndarray], half: int, with_depth: bool):
+    def __init__(self, comm, timeout: float, segments: dict[int, np.ndarray], half: int, with_depth: bool,
+                 slots: int = 2):
         self.comm, self.timeout, self.me = comm, timeout, comm.Get_rank()
-        self.segments, self.half, self.depth = segments, half, with_depth
+        self.segments, self.half, self.depth, self.slots = segments, half, with_depth, slots
         self.host = frozenset(segments)  # the job ranks on this rank's host, itself included
         self.near = self.host - {self.me}
         self.name = "shared" if len(self.host) == comm.Get_size() else "shared + messages"
 
     @classmethod
     def make(cls, comm, size: tuple[int, int], with_depth: bool, timeout: float,
-             asked: bool = True) -> "tuple[SharedPieces | None, str | None]":
+             asked: bool = True, slots: int = 2) -> "tuple[SharedPieces | None, str | None]":
         """The backend, or None and why not (every rank the same). ``asked``: the user chose
-        ``--exchange shared``, so ranks on several hosts are an error, not a reason."""
+        ``--exchange shared``, so ranks on several hosts are an error, not a reason. ``slots``:
+        frames a rank's segment holds at once (2; 3 with frames in flight, ``frames.slots``)."""
         from mpi4py import MPI
 
         per_half = size[0] * size[1] * (7 if with_depth else 3)  # a rank's parts never exceed the display
@@ -166,7 +168,7 @@ class SharedPieces:
                                     "several (use --exchange messages or auto)")
             if most[0] < 2:
                 return None, "no two ranks share a host"
-            memory, why = host_segment(comm, node, 2 * per_half * n, timeout)  # this host's segment
+            memory, why = host_segment(comm, node, slots * per_half * n, timeout)  # this host's segment
             if why:
                 return None, why
             # every job rank's host (its host's lowest job rank) and node rank
@@ -176,15 +178,15 @@ class SharedPieces:
             mine = np.array([lead[0], at], dtype=np.int64)
             every = np.zeros((K, 2), dtype=np.int64)
             wait_all([comm.Iallgather(mine, every)], timeout, "shared segment")
-            span = 2 * per_half
+            span = slots * per_half
             segments = {r: memory[every[r, 1] * span:(every[r, 1] + 1) * span]
                         for r in range(K) if every[r, 0] == lead[0]}
-            return cls(comm, timeout, segments, per_half, with_depth), None
+            return cls(comm, timeout, segments, per_half, with_depth, slots), None
         finally:
             node.Free()
 
     def _base(self, frame: int) -> int:
-        return (frame % 2) * self.half
+        return (frame % self.slots) * self.half
 
     def publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
         """Copy the parts of this rank's rendered pieces ``(rgb, z or None)`` that tiles of this
@@ -194,6 +196,24 @@ class SharedPieces:
         out = [p for p in plan if p.sender == me and p.receiver in near]  # parts, not objects
         if out:
             _pack(self.segments[me][self._base(frame):], out, rects[me], rendered, self.depth)
+
+    def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool):
+        """Frames in flight: publish the frame's parts, post its messages to other hosts and a
+        barrier that completes once every rank has published it (``wait``)."""
+        self.publish(frame, me, rects, rendered, plan)
+        posted = post(self.comm, me, rects, rendered, plan, with_depth, self.near)
+        return frame, plan, posted, self.comm.Ibarrier()
+
+    def wait(self, started) -> None:
+        """Until every rank has published the frame (bounded)."""
+        wait_all([started[3]], self.timeout, "synchronization")
+
+    def finish(self, started, tile, color: np.ndarray, depth: np.ndarray | None = None) -> tuple[int, int]:
+        """Compose the tile of a started frame (after ``wait``): as ``compose``."""
+        frame, plan, posted, _ = started
+        views = self._views(frame, self.me, plan, depth is not None)
+        sent, zbytes = posted.complete(tile, self.timeout, color, depth, lambda s, parts: views[s])
+        return self._counted(plan, sent, zbytes, depth is not None)
 
     def close(self, collective: bool = True) -> None:
         """Let the mapping go (the memory is the system's again once every rank on the host has)."""
@@ -209,7 +229,11 @@ class SharedPieces:
         views = self._views(frame, me, plan, with_depth)
         sent, zbytes = composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth, self.near,
                                  lambda s, parts: views[s])
-        near = self.near
+        return self._counted(plan, sent, zbytes, with_depth)
+
+    def _counted(self, plan: list[Piece], sent: int, zbytes: int, with_depth: bool) -> tuple[int, int]:
+        """Bytes others get from this rank: by message, and read from its segment."""
+        me, near = self.me, self.near
         px = sum(p.pixels for p in plan if p.sender == me and p.receiver in near)  # read by this host's ranks
         return sent + px * (7 if with_depth else 3), zbytes + (4 * px if with_depth else 0)
 

@@ -1,4 +1,6 @@
-"""A frame's phases by name: wall clock (``perf_counter``) and process CPU time of each.
+"""A frame's phases by name: wall clock (``perf_counter``), process CPU time and the rank's own
+thread's CPU time of each (wall minus thread time: how long the rank waited in the phase, for
+peers, the GL or a core).
 
 ``with timer.phase("render"): ...``; a phase entered twice in one frame adds up (the exchange
 is split around the synchronization barrier). ``ms(name)`` and ``cpu_ms(name)`` read them;
@@ -12,13 +14,13 @@ resumption ran inside the window: with the caches cold after rendering, microsec
 
 from __future__ import annotations
 
-from time import perf_counter, process_time
+from time import perf_counter, process_time, thread_time
 
 
 class _Phase:
     """One entry into a named phase (entered once)."""
 
-    __slots__ = ("timer", "name", "w0", "c0")
+    __slots__ = ("timer", "name", "w0", "c0", "t0")
 
     def __init__(self, timer: "Timer", name: str):
         self.timer, self.name = timer, name
@@ -27,15 +29,18 @@ class _Phase:
         self.w0 = w0 = perf_counter()
         if self.timer.start is None:
             self.timer.start = w0
+        self.t0 = thread_time()
         self.c0 = process_time()
 
     def __exit__(self, *exc) -> None:
         c1 = process_time()
+        t1 = thread_time()
         t = self.timer
         t.end = end = perf_counter()
         name = self.name
         t.wall[name] = t.wall.get(name, 0.0) + (end - self.w0) * 1e3
         t.cpu[name] = t.cpu.get(name, 0.0) + (c1 - self.c0) * 1e3
+        t.ran[name] = t.ran.get(name, 0.0) + (t1 - self.t0) * 1e3
 
 
 class Timer:
@@ -44,6 +49,7 @@ class Timer:
     def __init__(self):
         self.wall: dict[str, float] = {}
         self.cpu: dict[str, float] = {}
+        self.ran: dict[str, float] = {}  # the rank's own thread's CPU time
         self.start: float | None = None
         self.end = 0.0
 
@@ -58,6 +64,11 @@ class Timer:
     def cpu_ms(self, *names: str) -> float:
         """Process CPU milliseconds spent in these phases."""
         return sum(self.cpu.get(n, 0.0) for n in names)
+
+    def waited_ms(self, *names: str) -> float:
+        """Wall milliseconds of these phases the rank's thread did not run: waits for peers,
+        for the GL's pixels, or for a core."""
+        return sum(max(self.wall.get(n, 0.0) - self.ran.get(n, 0.0), 0.0) for n in names)
 
     @property
     def total_ms(self) -> float:
