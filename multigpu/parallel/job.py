@@ -44,7 +44,7 @@ FAILURE_GRACE = 10.0
 #: pause before MPI_Abort, so the launcher forwards the last lines a rank printed
 ABORT_PAUSE = 0.3
 #: a job ending with a non-zero code: every rank leaves this long after the last reached the exit
-EXIT_PAUSE = 0.6  # MPI_Finalize itself took over 0.2 s on a loaded machine: a rank still in it was killed (exit 9)
+EXIT_PAUSE = 1.0  # MPI_Finalize itself took over 0.6 s on a loaded machine: a rank still in it was killed (exit 9)
 #: a peer silent this long is not beating now (shorter than ``liveness``: used once a run failed)
 SILENT = 3.0
 
