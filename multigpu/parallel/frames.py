@@ -305,6 +305,8 @@ class Frames:
         """A frame's last stage: the peers' parts (the ``sync`` wait), the tile composed and
         presented, the row posted (landing now, or a step later with frames in flight)."""
         t, work, depth = x.t, x.work, x.work.depth
+        for landed in self.rows.land():  # the last frame's row first: kept even if a peer fails in this one
+            self.landed(*landed)
         with t.phase("sync"):
             if self.latency:
                 self.exchange.wait(x.started)
