@@ -96,10 +96,9 @@ class WalkConfig:
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     record: str | None = None  # write every frame's camera here, in the format --path reads
     monitor: tuple[int, int] | None = None  # rank 0's operator view at this place (MONITOR_BESIDE: beside the wall)
-    # frames in flight (core/inflight.py; 0: the strict order, still the default while the failure semantics'
-    # tests are written for it): 1 cut the wall time per frame of the plant walk and the city drive at 4 ranks
-    # by over a third on 2 cores (docs/USAGE.md, "Frames in flight")
-    latency: int = 0
+    # frames in flight (core/inflight.py; 0: the strict order): 1 cut the wall time per frame of the plant walk
+    # and the city drive at 4 ranks by over a third on 2 cores (docs/USAGE.md, "Frames in flight")
+    latency: int = 1
 
     def __post_init__(self):
         if self.frames is not None and self.frames < 1:

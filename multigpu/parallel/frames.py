@@ -404,6 +404,15 @@ class Frames:
                     self.job.signum = self.job.signum or int(flags.max())
                 last = k if last is None else min(last, k)
 
+    def _keep_shown(self) -> None:
+        """On a failure with frames in flight: the row of the last frame every rank showed, where
+        every rank posted it (a moment at most; a peer that never did leaves it out)."""
+        try:
+            for landed in self.rows.land(min(self.cfg.timeout, 2.0)):
+                self.landed(*landed)
+        except Exception:  # the failure itself is what the run reports
+            self.rows.posted = None
+
     def run(self) -> dict | None:
         complete, stopped_by = False, None
         self.job.in_frames = True
@@ -416,6 +425,7 @@ class Frames:
                 stopped_by = self._stopped_by()
         except BaseException as exc:
             stopped_by = f"{exc.__class__.__name__}: {exc}"
+            self._keep_shown()
             raise
         finally:
             if self.rank == 0:

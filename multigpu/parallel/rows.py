@@ -32,12 +32,13 @@ class Rows:
         self.posted = (frame, row, every, self.comm.Iallgather(row, every), extra)
         return landed if self.later else self.land()
 
-    def land(self) -> list:
-        """The posted row, once every rank's has arrived (bounded)."""
+    def land(self, timeout: float | None = None) -> list:
+        """The posted row, once every rank's has arrived (bounded: the job's timeout, or
+        ``timeout``)."""
         if self.posted is None:
             return []
         frame, _, every, request, extra = self.posted
-        wait_all([request], self.timeout, "timing gather")
+        wait_all([request], self.timeout if timeout is None else timeout, "timing gather")
         self.posted = None
         self.allrows = every
         return [(frame, every, extra)]
