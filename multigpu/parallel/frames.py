@@ -8,7 +8,6 @@ Built by ``walkthrough.run`` once setup has been agreed on every rank; every wai
 from __future__ import annotations
 
 import itertools
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +21,7 @@ from multigpu.errors import WriteFailed
 from multigpu.parallel.backends import Exchange, Projection
 from multigpu.parallel.composite import Messages
 from multigpu.parallel.exchange import agree, barrier, broadcast_partition, wait_all
+from multigpu.parallel.fault import FAULT_SPEC, fault
 from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.projection import make_projection
@@ -32,9 +32,6 @@ from multigpu.parallel.shared import SharedPieces
 from multigpu.parallel.timer import Timer
 from multigpu.planner import Planner
 
-#: the test-only fault to inject, read once: a lookup in ``os.environ`` (its miss is a KeyError
-#: caught inside) costs ~10 us of CPU per frame with the caches cold, 4 % of a city frame's balancing
-FAULT_SPEC = os.environ.get("MULTIGPU_FAULT")
 #: the phases a frame's balancing is timed in, in order (their sum is the Load Balancing
 #: column): learning from the last frame's measured times, projecting the object bounds,
 #: planning the partition (the strategy and the decomposition)
@@ -59,22 +56,6 @@ class InFlight:
     recorded: object  # rank 0 with --record: the camera, in path-file coordinates
     rendered: list | None = None
     started: object = None
-
-
-def fault(rank: int, where: int | str) -> None:
-    """Test-only fault injection: MULTIGPU_FAULT='RANK:WHERE[:stop]' (in the job's environment
-    at start) with WHERE a frame number or 'setup' raises there, or with ':stop' stops the rank
-    (SIGSTOP: a frozen rank; if something continues it, it carries on as if nothing happened)."""
-    spec = FAULT_SPEC
-    if spec:
-        r, w, *action = spec.split(":")
-        if int(r) == rank and w == str(where):
-            if action == ["stop"]:
-                import signal
-
-                os.kill(os.getpid(), signal.SIGSTOP)
-                return
-            raise RuntimeError(f"injected fault at {'frame ' if isinstance(where, int) else ''}{where}")
 
 
 #: the stop flag of a frame's row: > 0 a signal number, < 0 a window event (STOPS)

@@ -26,7 +26,8 @@ from multigpu.core.spheres import SphereProjector
 from multigpu.errors import InputError, as_flags
 from multigpu.gpu.buffers import ensure_buffers
 from multigpu.parallel.exchange import agree, allgather_text
-from multigpu.parallel.frames import Frames, fault
+from multigpu.parallel.fault import fault
+from multigpu.parallel.frames import Frames
 from multigpu.parallel.outdir import OutputDir
 from multigpu.scene.models import load_scene
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
