@@ -97,12 +97,16 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
     b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | passes | imbalance | "
-                                "exchange | memory | memory-steps | model-load")
+                                "exchange | memory | memory-steps | model-load | peer (beside ParaView + IceT: "
+                                "--model FILE --ranks 1,4)")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
     b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)
     b.add_argument("--path-kind", default="walkthrough", help=argparse.SUPPRESS)
-    b.add_argument("--ranks", default="4", help="floor: the rank counts to measure, e.g. 4,9,16 (default 4)")
+    b.add_argument("--ranks", default="4", help="floor, peer: the rank counts to measure, e.g. 4,9,16 or 1,4 "
+                                                "(default 4)")
+    b.add_argument("--rounds", type=int, default=2, help="peer: alternated rounds (default 2)")
+    b.add_argument("--out", default="out/peer", help="peer: where the runs and peer.json go (default out/peer)")
     scene_args(b)  # bench floor's worker: the scene it renders
     return ap
 
@@ -151,6 +155,14 @@ def main(argv: list[str] | None = None) -> int:
                 from multigpu.parallel import floor
 
                 floor.main(spec(args), args.path_kind, args.frames or 120)
+                return 0
+            if args.what == "peer":
+                from multigpu.studies.peer import bench_peer
+
+                if not args.model:
+                    raise InputError("bench peer: --model FILE is needed (the model both renderers draw)")
+                bench_peer(args.model, args.split, tuple(_ranks_list(args.ranks)), args.frames or 150,
+                           rounds=args.rounds, out=args.out)
                 return 0
             if args.what == "floor":
                 from multigpu.studies.floor import bench_floor

@@ -239,7 +239,8 @@ class RegionRenderer:
 
     def _new_framebuffer(self, size: tuple[int, int]):
         ctx = self.ctx
-        return ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4)], depth_attachment=ctx.depth_renderbuffer(size))
+        return ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4)],
+                               depth_attachment=ctx.depth_renderbuffer(size))
 
     def _chunks(self, region):
         """The region cut into pieces no larger than the framebuffer limit (usually one)."""

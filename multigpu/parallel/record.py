@@ -15,12 +15,12 @@ import numpy as np
 
 from multigpu.config import SUMMARY_EVERY
 from multigpu.core import jit
-from multigpu.scene.models import axis_name
 from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
 from multigpu.parallel.mosaic import save_png
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, summarize, table, write_json
+from multigpu.scene.models import axis_name
 
 
 class RunRecord:
@@ -171,7 +171,8 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
     """The run's configuration for summary.json; ``placement``: every rank's host, index on
     its host (``node_rank``) and EGL device."""
     return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
-            "decomposition": cfg.decomposition, "latency": cfg.latency, "balance": cfg.balance if cfg.decomposition == "screen" else None,
+            "decomposition": cfg.decomposition, "latency": cfg.latency,
+            "balance": cfg.balance if cfg.decomposition == "screen" else None,
             "bin_size": cfg.bin_size if cfg.decomposition == "bins" else None,
             "bin_pattern": cfg.bin_pattern if cfg.decomposition == "bins" else None,
             "db_ranges": cfg.db_ranges if cfg.decomposition == "db" else None, "bounds": cfg.bounds,

@@ -212,7 +212,8 @@ def _waits(summary: dict) -> str:
     parts = ", ".join(f"{names[c]} {waited.get(c, 0.0):.2f} of {w[c]:.2f}" for c in COMPONENTS)
     return (f"Waited per frame (ms, the rank's thread not running): {parts}; outside the phases "
             f"{summary.get('outside_phases_ms', 0.0):.2f} (timing rows, records, mosaics); input to photon "
-            f"{summary.get('input_to_photon_ms', 0.0):.2f} ms = {summary.get('input_to_photon_frames', 0.0):.2f} frames")
+            f"{summary.get('input_to_photon_ms', 0.0):.2f} ms = "
+            f"{summary.get('input_to_photon_frames', 0.0):.2f} frames")
 
 
 def _parts(cpu: dict) -> str:

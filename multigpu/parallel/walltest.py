@@ -4,10 +4,11 @@ launched like the walkthrough (``launch/wall-test``, or the launcher with ``-n K
 Every rank opens its window where the wall file says and shows its part of one pattern across
 the canvas (``display/pattern.py``): lines that run straight across the bezels when the mullion
 values are right, each tile's rank, host, display and size, and a moving bar and a frame counter
-that show the swap lock (at most ``PACE`` frames a second). Rank 0's window takes the arrow keys: Left/Right take one pixel from or
-add one to the mullion between columns, Down/Up between rows, every rank redraws with the new
-value at the same frame, and rank 0 prints the line to put in the wall file. Escape or a closed
-window on any rank ends it (or ``--frames N``). Every wait is bounded, as in the frame loop.
+that show the swap lock (at most ``PACE`` frames a second). Rank 0's window takes the arrow
+keys: Left/Right take one pixel from or add one to the mullion between columns, Down/Up
+between rows, every rank redraws with the new value at the same frame, and rank 0 prints the
+line to put in the wall file. Escape or a closed window on any rank ends it (or
+``--frames N``). Every wait is bounded, as in the frame loop.
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ import numpy as np
 
 from multigpu.errors import InputError, as_flags
 from multigpu.parallel.exchange import agree, barrier, wait_all
-
 
 PACE = 60.0  # frames a second at most: the bar moves at one speed a person can follow on any machine
 
