@@ -97,8 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
     b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | passes | imbalance | "
-                                "exchange | memory | memory-steps | model-load | peer (beside ParaView + IceT: "
-                                "--model FILE --ranks 1,4)")
+                                "exchange | memory | memory-steps | model-load | timeline (every rank's phases at "
+                                "--latency 0 and 1, plotted) | peer (beside ParaView + IceT: --model FILE --ranks 1,4)")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
     b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)
@@ -155,6 +155,11 @@ def main(argv: list[str] | None = None) -> int:
                 from multigpu.parallel import floor
 
                 floor.main(spec(args), args.path_kind, args.frames or 120)
+                return 0
+            if args.what == "timeline":
+                from multigpu.studies.timeline import bench_timeline
+
+                bench_timeline(args.quick)
                 return 0
             if args.what == "peer":
                 from multigpu.studies.peer import bench_peer

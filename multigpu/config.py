@@ -99,6 +99,7 @@ class WalkConfig:
     # frames in flight (core/inflight.py; 0: the strict order): 1 cut the wall time per frame of the plant walk
     # and the city drive at 4 ranks by over a third on 2 cores (docs/USAGE.md, "Frames in flight")
     latency: int = 1
+    timeline: bool = False  # timeline.json: every rank's phases over the run's last TIMELINE_FRAMES frames
 
     def __post_init__(self):
         if self.frames is not None and self.frames < 1:

@@ -189,6 +189,9 @@ def _output_args(w: argparse.ArgumentParser, d: dict) -> None:
                    help="write the full wall as a PNG every N frames (0: never)")
     o.add_argument("--no-overlay", action="store_true", help="no partition overlay beside each mosaic")
     o.add_argument("--video", action="store_true", help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
+    o.add_argument("--timeline", action="store_true",
+                   help="write timeline.json: every rank's phases, start to end, over the run's last frames "
+                        "(multigpu bench timeline plots it)")
     o.add_argument("--record", metavar="FILE", help="write every frame's camera to FILE, in the format --path reads "
                                                     "(replaying it renders the same images)")
     r = w.add_argument_group("run control")
@@ -230,7 +233,7 @@ def walk_config(a):
                       offset=parse_vec3(a.offset, "--offset"), timeout=a.timeout,
                       decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
                       db_ranges=a.db_ranges,
-                      liveness=a.liveness, progress=not a.no_progress, record=a.record,
+                      liveness=a.liveness, progress=not a.no_progress, record=a.record, timeline=a.timeline,
                       monitor=_monitor(a.monitor))
 
 

@@ -62,12 +62,24 @@ def test_frames_in_flight_compose_what_the_strict_order_does(tmp_path, reference
     bit for bit (a shared segment and messages alike, depth too)."""
     extra = {**DECOMPOSITIONS, "screen": [], "messages": ["--exchange", "messages"],
              "db-messages": ["--decomposition", "db", "--exchange", "messages"]}[name]
-    out = walk(tmp_path, name, (2, 2), (60, 48), [*extra, "--latency", latency])
+    out = walk(tmp_path, name, (2, 2), (60, 48), [*extra, "--latency", latency, "--timeline"])
     for f, (got, want) in enumerate(zip(frames_of(out), references[(120, 96)])):
         assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"
     s = json.loads((out / "summary.json").read_text())
     assert s["config"]["latency"] == int(latency) and s["frames_written"] == FRAMES
     assert s["input_to_photon_ms"] > 0 and s["input_to_photon_frames"] > 0
+    # --timeline: every rank's phases of the last frames, in the order each rank ran them
+    from multigpu.studies.timeline import COMPONENT
+
+    doc = json.loads((out / "timeline.json").read_text())
+    assert doc["latency"] == int(latency) and len(doc["ranks"]) == 4
+    for frames in doc["ranks"]:
+        assert [fr["frame"] for fr in frames] == list(range(FRAMES))
+        for fr in frames:
+            names = [n for n, _, _ in fr["phases"]]
+            assert {"plan", "render", "readback", "exchange", "display"} <= set(names) <= set(COMPONENT)
+            assert all(0 <= a <= b for _, a, b in fr["phases"])
+            assert names.index("readback") < names.index("display")
 
 
 def test_outputs_of_each_decomposition(tmp_path):

@@ -8,6 +8,8 @@ Built by ``walkthrough.run`` once setup has been agreed on every rank; every wai
 from __future__ import annotations
 
 import itertools
+import json
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,12 +22,12 @@ from multigpu.core.work import Work, transfers
 from multigpu.errors import WriteFailed
 from multigpu.parallel.backends import Exchange, Projection
 from multigpu.parallel.composite import Messages
-from multigpu.parallel.exchange import agree, barrier, broadcast_partition, wait_all
+from multigpu.parallel.exchange import agree, allgather_text, barrier, broadcast_partition, wait_all
 from multigpu.parallel.fault import FAULT_SPEC, fault
 from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.projection import make_projection
-from multigpu.parallel.record import RunRecord, config_doc
+from multigpu.parallel.record import RunRecord, config_doc, run_title
 from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
 from multigpu.parallel.rows import Rows
 from multigpu.parallel.shared import SharedPieces
@@ -38,6 +40,8 @@ from multigpu.planner import Planner
 BALANCE_PHASES = ("learn", "project", "plan")
 #: the phases of the Rendering column: the parts culled, the draw calls, the pixels read back
 RENDER_PHASES = ("cull", "render", "readback")
+#: the frames ``--timeline`` keeps: the run's last ones
+TIMELINE_FRAMES = 8
 
 
 @dataclass(slots=True)
@@ -96,6 +100,7 @@ class Frames:
         self.done = 0
         self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
         self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
+        self.timeline = deque(maxlen=TIMELINE_FRAMES) if cfg.timeline else None  # (frame, phase spans)
         # the exchange backend: a node-shared segment where asked for and possible, else messages
         shared, why = None, None
         if cfg.exchange != "messages":
@@ -310,6 +315,8 @@ class Frames:
         for landed in self.rows.post(x.f, self.row_values(x, sent, swapped), flag, x.recorded):
             self.landed(*landed)
         self.show(x.f, work)
+        if self.timeline is not None:
+            self.timeline.append((x.f, t.spans))
 
     def landed(self, f: int, every: np.ndarray, recorded) -> None:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
@@ -339,14 +346,6 @@ class Frames:
         if self.projection is not None:
             self.projection.close(collective)
             self.projection = None
-
-    def _what(self) -> str:
-        cfg = self.cfg
-        if cfg.decomposition == "screen":
-            return f"balance={cfg.balance}"
-        if cfg.decomposition == "bins":
-            return f"bins {cfg.bin_pattern} {cfg.bin_size}px"
-        return f"db ({cfg.db_ranges} ranges)"
 
     def _stopped_by(self) -> str | None:
         flags = self.stop_flags if self.stop_flags is not None else np.zeros(self.K)
@@ -385,6 +384,13 @@ class Frames:
                     self.job.signum = self.job.signum or int(flags.max())
                 last = k if last is None else min(last, k)
 
+    def _write_timeline(self) -> None:
+        """``timeline.json`` (``--timeline``): every rank's phase spans of the last frames."""
+        mine = json.dumps([[f, [[n, a, b] for n, a, b in spans]] for f, spans in self.timeline])
+        every = allgather_text(self.comm, mine, self.cfg.timeout, "timeline", nbytes=1 << 18)
+        if self.rank == 0:
+            self._write(self.record.timeline, [json.loads(e) if e else [] for e in every], self.latency)
+
     def _keep_shown(self) -> None:
         """On a failure with frames in flight: the row of the last frame every rank showed, where
         every rank posted it (a moment at most; a peer that never did leaves it out)."""
@@ -418,18 +424,17 @@ class Frames:
             self.record.print_table(summary, self._title(complete, stopped_by))
         if failed:
             raise WriteFailed(failed)
+        if self.timeline is not None:
+            self._write_timeline()
         if self.rank != 0:
             return None
         self.record.print_table(summary, self._title(complete, stopped_by))
         return summary
 
     def _title(self, complete: bool, stopped_by: str | None) -> str:
-        cfg, scene = self.cfg, self.scene
         planned = "" if self.n_frames is None else f" of {self.n_frames}"
         state = "" if complete else f" (stopped after {self.done}{planned} frames: {stopped_by})"
-        W, H = self.canvas.size
-        return (f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in {scene.n_objects} objects, "
-                f"{cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, {self._what()}{state}")
+        return run_title(self.cfg, self.scene) + state
 
 
 def _unshifted(camera: Camera, offset) -> Camera:

@@ -123,6 +123,15 @@ class RunRecord:
             self.failed = self.failed or exc
             return summarize(np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS))), self.K)
 
+    def timeline(self, ranks: list, latency: int) -> None:
+        """``timeline.json``: per rank, the last frames' phases as [name, start, end] in ms from
+        the earliest start (one clock per host: ranks on several hosts are each on their own)."""
+        t0 = min((a for r in ranks for _, spans in r for _, a, _ in spans), default=0.0)
+        doc = {"latency": latency,
+               "ranks": [[{"frame": f, "phases": [[n, round((a - t0) * 1e3, 4), round((b - t0) * 1e3, 4)]
+                                                  for n, a, b in spans]} for f, spans in r] for r in ranks]}
+        write_json(self.out.path / "timeline.json", doc)
+
     def print_table(self, summary: dict, title: str) -> None:
         print(table(summary, title), flush=True)
         print(f"outputs in {self.out.path}/ (timings.csv, summary.json, mosaic/)", flush=True)
@@ -189,3 +198,16 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
             "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
             "kernel": {"compiled": jit.available(),
                        "warm_seconds": round(load_info.get("kernel_seconds", 0.0), 3)}}
+
+
+def run_title(cfg, scene) -> str:
+    """The printout's first line: the scene, the wall and how frames are divided."""
+    if cfg.decomposition == "screen":
+        what = f"balance={cfg.balance}"
+    elif cfg.decomposition == "bins":
+        what = f"bins {cfg.bin_pattern} {cfg.bin_size}px"
+    else:
+        what = f"db ({cfg.db_ranges} ranges)"
+    W, H = cfg.canvas.size
+    return (f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in {scene.n_objects} objects, "
+            f"{cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, {what}")

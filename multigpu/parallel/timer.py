@@ -41,6 +41,7 @@ class _Phase:
         t.wall[name] = t.wall.get(name, 0.0) + (end - self.w0) * 1e3
         t.cpu[name] = t.cpu.get(name, 0.0) + (c1 - self.c0) * 1e3
         t.ran[name] = t.ran.get(name, 0.0) + (t1 - self.t0) * 1e3
+        t.spans.append((name, self.w0, end))
 
 
 class Timer:
@@ -50,6 +51,7 @@ class Timer:
         self.wall: dict[str, float] = {}
         self.cpu: dict[str, float] = {}
         self.ran: dict[str, float] = {}  # the rank's own thread's CPU time
+        self.spans: list[tuple[str, float, float]] = []  # (phase, start, end) in perf_counter seconds: the timeline
         self.start: float | None = None
         self.end = 0.0
 
