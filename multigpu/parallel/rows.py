@@ -29,8 +29,12 @@ class Rows:
             row[col[c]] = v
         row[-1] = flag
         every = np.zeros((self.comm.Get_size(), len(COLUMNS) + 1))
-        self.posted = (frame, row, every, self.comm.Iallgather(row, every), extra)
-        return landed if self.later else self.land()
+        request = self.comm.Iallgather(row, every)
+        self.posted = (frame, row, every, request, extra)
+        if self.later:  # one push now: without a progress thread (Open MPI) the row leaves on the next MPI call,
+            request.Test()  # which a rank that then fails or freezes never makes: the frame it showed would be lost
+            return landed
+        return self.land()
 
     def land(self, timeout: float | None = None) -> list:
         """The posted row, once every rank's has arrived (bounded: the job's timeout, or
