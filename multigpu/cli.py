@@ -97,7 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
     b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
     b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | passes | imbalance | "
-                                "exchange | memory | memory-steps | model-load | timeline (every rank's phases at "
+                                "exchange | memory | memory-steps | model-load | latency (frames in flight: wall time, "
+                                "input to photon) | timeline (every rank's phases at "
                                 "--latency 0 and 1, plotted) | peer (beside ParaView + IceT: --model FILE --ranks 1,4)")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
@@ -105,8 +106,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--path-kind", default="walkthrough", help=argparse.SUPPRESS)
     b.add_argument("--ranks", default="4", help="floor, peer: the rank counts to measure, e.g. 4,9,16 or 1,4 "
                                                 "(default 4)")
-    b.add_argument("--rounds", type=int, default=2, help="peer: alternated rounds (default 2)")
-    b.add_argument("--out", default="out/peer", help="peer: where the runs and peer.json go (default out/peer)")
+    b.add_argument("--rounds", type=int, default=2, help="peer, latency: alternated rounds (default 2)")
+    b.add_argument("--out", default="out/peer", help="peer, latency: where the runs and the results CSV go "
+                                                     "(default out/peer, out/latency)")
     scene_args(b)  # bench floor's worker: the scene it renders
     return ap
 
@@ -155,6 +157,12 @@ def main(argv: list[str] | None = None) -> int:
                 from multigpu.parallel import floor
 
                 floor.main(spec(args), args.path_kind, args.frames or 120)
+                return 0
+            if args.what == "latency":
+                from multigpu.studies.latency import bench_latency
+
+                bench_latency(args.quick, out=args.out if args.out != "out/peer" else "out/latency",
+                              rounds=args.rounds)
                 return 0
             if args.what == "timeline":
                 from multigpu.studies.timeline import bench_timeline

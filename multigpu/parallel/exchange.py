@@ -27,9 +27,10 @@ class PeerTimeout(RuntimeError):
     """A wait on other ranks exceeded its bound."""
 
 
-def wait_all(requests, timeout: float, what: str) -> None:
-    """Complete MPI requests, sleeping between tests; raise PeerTimeout after ``timeout`` s.
-    With none it returns before importing MPI (a process that never sent stays MPI-free)."""
+def wait_all(requests, timeout: float, what: str, most: float = 2e-3) -> None:
+    """Complete MPI requests, sleeping between tests (growing to ``most`` s); raise PeerTimeout
+    after ``timeout`` s. With none it returns before importing MPI (a process that never sent
+    stays MPI-free)."""
     if not requests:
         return
     from mpi4py import MPI
@@ -45,12 +46,13 @@ def wait_all(requests, timeout: float, what: str) -> None:
             for check in WATCH:
                 check()
         time.sleep(sleep)
-        sleep = min(sleep * 2, 2e-3)
+        sleep = min(sleep * 2, most)
 
 
-def barrier(comm, timeout: float) -> None:
-    """A bounded, non-spinning barrier (the paper's GPU-GPU synchronization)."""
-    wait_all([comm.Ibarrier()], timeout, "synchronization")
+def barrier(comm, timeout: float, most: float = 2e-3) -> None:
+    """A bounded, non-spinning barrier (the paper's GPU-GPU synchronization); ``most``: the
+    longest sleep between tests (the swap lock's is short: every rank leaves it within as much)."""
+    wait_all([comm.Ibarrier()], timeout, "synchronization", most)
 
 
 def broadcast_partition(comm, part, k: int, n: int, timeout: float):

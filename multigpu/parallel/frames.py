@@ -40,6 +40,9 @@ from multigpu.planner import Planner
 BALANCE_PHASES = ("learn", "project", "plan")
 #: the phases of the Rendering column: the parts culled, the draw calls, the pixels read back
 RENDER_PHASES = ("cull", "render", "readback")
+#: the longest sleep between tests of the swap barrier (s): every rank swaps within about as much of the last
+#: one's arrival (the default 2 ms let the swap skew grow with frames in flight)
+SWAP_POLL = 1e-4
 #: the frames ``--timeline`` keeps: the run's last ones
 TIMELINE_FRAMES = 8
 
@@ -171,7 +174,7 @@ class Frames:
             self.presenter.show(shown)
         if self.window:
             with t.phase("swap_wait"):
-                barrier(self.comm, self.cfg.timeout)
+                barrier(self.comm, self.cfg.timeout, SWAP_POLL)
         with t.phase("display"):
             swapped = self.presenter.swap()
             why = self.presenter.poll()

@@ -8,7 +8,8 @@ default lights in a W x H view; each frame sets the camera of the path file and 
 on every render in parallel). multigpu runs the walkthrough over the same path file: one rank a
 1x1 wall of W x H, four ranks a 2x2 wall of W/2 x H/2 tiles (the same canvas). Figures per
 frame: wall time (ParaView: rank 0's loop; multigpu: the frame period) and the slowest rank's
-CPU time (ParaView: process time of its loop; multigpu: the emulated frame). Needs ParaView's
+CPU time (ParaView: process time of its loop; multigpu: the emulated frame). Both run unbound
+(``--bind-to none``: llvmpipe's rasterizer thread gets a core of its own). Needs ParaView's
 ``pvbatch`` and Open MPI's ``mpiexec`` (Debian: ``apt install paraview openmpi-bin``); never a
 dependency of the project.
 """
@@ -20,6 +21,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -77,7 +79,8 @@ def paraview(pvbatch: str, mpiexec: str, ranks: int, cams: Path, model: str, siz
     script = out / "pvbatch_peer.py"
     script.write_text(PVBATCH_SCRIPT)
     stem = out / f"paraview-{ranks}-{time.monotonic_ns()}"
-    cmd = [mpiexec, "--oversubscribe", *(["--allow-run-as-root"] if os.geteuid() == 0 else []), "-n", str(ranks),
+    cmd = [mpiexec, "--oversubscribe", "--bind-to", "none", *(["--allow-run-as-root"] if os.geteuid() == 0 else []),
+           "-n", str(ranks),
            pvbatch, "--symmetric", "--force-offscreen-rendering", str(script), str(cams), model, str(size[0]),
            str(size[1]), str(stem)]
     clean = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
@@ -127,11 +130,14 @@ def bench_peer(model: str, split: str = "grid:8", ranks: tuple[int, ...] = (1, 4
 
     xvfb, display = start_xvfb((size[0] + 16, size[1] + 16))  # Debian's ParaView draws through GLX only
     try:
-        rows = _rounds(pvbatch, mpiexec, ranks, rounds, cams, scene, model, size, dest, env, display, timeout, extra)
+        with tempfile.TemporaryDirectory(prefix="multigpu-peer-") as tmp:  # the runs' own outputs: not kept
+            rows = _rounds(pvbatch, mpiexec, ranks, rounds, cams, scene, model, size, Path(tmp), env, display, timeout,
+                           extra)
     finally:
         stop_xvfb(xvfb)
     (dest / "peer.json").write_text(json.dumps({"model": model, "split": split, "frames": frames, "size": size,
                                                 "extra": list(extra), "rows": rows}, indent=1))
+    _csv(dest / "peer.csv", rows, Path(model).name, frames, size)
     _print(rows, model, frames, size, rounds)
     return rows
 
@@ -151,6 +157,21 @@ def _rounds(pvbatch, mpiexec, ranks, rounds, cams, scene, model, size, dest, env
         rows.append({"ranks": k, **med, "wall_lead": med["paraview"]["wall_ms"] / med["multigpu"]["wall_ms"],
                      "cpu_lead": med["paraview"]["cpu_ms"] / med["multigpu"]["cpu_ms"], "rounds": rounds})
     return rows
+
+
+def _csv(path: Path, rows: list, model: str, frames: int, size) -> None:
+    """The medians as a results CSV (docs/results/peer/peer.csv for the docs' figures)."""
+    import csv
+
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["model", "frames", "size", "ranks", "paraview_wall_ms", "multigpu_wall_ms", "wall_lead",
+                    "paraview_cpu_ms", "multigpu_cpu_ms", "cpu_lead", "rounds"])
+        for r in rows:
+            p, m = r["paraview"], r["multigpu"]
+            w.writerow([model, frames, f"{size[0]}x{size[1]}", r["ranks"], f"{p['wall_ms']:.2f}", f"{m['wall_ms']:.2f}",
+                        f"{r['wall_lead']:.3f}", f"{p['cpu_ms']:.2f}", f"{m['cpu_ms']:.2f}", f"{r['cpu_lead']:.3f}",
+                        r["rounds"]])
 
 
 def _print(rows: list, model: str, frames: int, size, rounds: int) -> None:
