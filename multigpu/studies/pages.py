@@ -88,6 +88,22 @@ TABLES = {
          ("imb_render", "render imbalance", "{:.2f}"), ("bytes_per_frame", "bytes sent per frame", "{:.0f}")),
         note="Four plants on an orbit keeping the whole scene in view (the paper's Section 7 setup), "
              "2x2 wall of 256x256 tiles."),
+    "latency": Table(
+        "docs/results/latency/latency.csv", "multigpu bench latency",
+        (("scene", "scene", "{}"), ("latency", "`--latency`", "{}"), ("wall_ms", "wall ms per frame", "{:.1f}"),
+         ("wall_cut", "cut against 0", "{:.0%}"), ("emulated_ms", "emulated frame ms", "{:.2f}"),
+         ("input_to_photon_ms", "input to photon ms", "{:.1f}")),
+        note="4 ranks on a 2x2 wall, 2 cores: wall time per frame = the frame period averaged over the ranks; "
+             "emulated = the slowest rank's CPU time (the work); medians of rotated rounds."),
+    "peer": Table(
+        "docs/results/peer/peer.csv", "multigpu bench peer --model dragon_vrip.ply --split grid:8 --ranks 1,4 --out docs/results/peer",
+        (("ranks", "ranks", "{}"), ("paraview_wall_ms", "ParaView + IceT wall ms", "{:.1f}"),
+         ("multigpu_wall_ms", "multigpu wall ms", "{:.1f}"), ("wall_lead", "wall lead", "{:.2f}x"),
+         ("paraview_cpu_ms", "ParaView CPU ms", "{:.1f}"), ("multigpu_cpu_ms", "multigpu CPU ms", "{:.1f}"),
+         ("cpu_lead", "CPU lead", "{:.2f}x")),
+        note="The Stanford dragon (871k triangles), 150 orbit cameras, 1024x1024 (4 ranks: multigpu a 2x2 wall of "
+             "512x512), llvmpipe with one rasterizer thread per process, Open MPI unbound for both, 2 alternated "
+             "rounds, medians per frame; CPU = the slowest rank's."),
 }
 
 
