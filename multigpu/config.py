@@ -96,9 +96,10 @@ class WalkConfig:
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     record: str | None = None  # write every frame's camera here, in the format --path reads
     monitor: tuple[int, int] | None = None  # rank 0's operator view at this place (MONITOR_BESIDE: beside the wall)
-    # frames in flight (core/inflight.py; 0: the strict order): 1 cut the wall time per frame of the plant walk
-    # and the city drive at 4 ranks by over a third on 2 cores (docs/USAGE.md, "Frames in flight")
-    latency: int = 1
+    # frames in flight (core/inflight.py; 0: the strict order). None: by measurement (docs/USAGE.md, "Frames in
+    # flight"): 1 headless (the plant walk and the city drive at 4 ranks over a third faster in wall time), 0 with
+    # windows (the swap lock keeps the ranks in step each frame: no faster here, and input would come a frame later)
+    latency: int | None = None
     timeline: bool = False  # timeline.json: every rank's phases over the run's last TIMELINE_FRAMES frames
 
     def __post_init__(self):
@@ -142,6 +143,8 @@ class WalkConfig:
             raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
         from multigpu.core.inflight import MOST
 
+        if self.latency is None:
+            object.__setattr__(self, "latency", 0 if self.present == "window" else 1)
         if not 0 <= self.latency <= MOST:
             raise InputError(f"--latency must be 0..{MOST} frames, got {self.latency}")
         if self.device is not None and self.device < 0:

@@ -173,7 +173,8 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
                         "each into one shared array (pays from ~50k objects)")
     b.add_argument("--latency", type=int, default=d["latency"], metavar="N",
                    help="frames in flight: a rank plans and draws the next frames while a frame's pixels travel and "
-                        "show (0: each frame shown before the next starts; input reaches the screen N frames later)")
+                        "show (0: each frame shown before the next starts; input reaches the screen N frames later; "
+                        "default: 1 headless, 0 with --present window)")
     b.add_argument("--exchange", default=d["exchange"], metavar=_one_of(["auto", "shared", "messages"]),
                    help="frame exchange: auto = a shared-memory segment per machine where it can be made, messages "
                         "between machines; shared = the same, an error where it cannot; messages = point to point")

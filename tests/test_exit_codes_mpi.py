@@ -80,7 +80,8 @@ def test_exit_code(tmp_path, launcher, entry, event):
     assert s["complete"] is False and s["frames"] == s["frames_written"] > 0
     if event == "failing rank":
         # the frames every rank showed before rank 1 failed starting frame 8 (with frames in flight, fewer)
-        assert s["frames"] == 8 - WalkConfig.latency and "injected fault at frame 8" in s["stopped_by"], s["stopped_by"]
+        shown = 8 - WalkConfig().latency
+        assert s["frames"] == shown and "injected fault at frame 8" in s["stopped_by"], s["stopped_by"]
         assert err.count("injected fault at frame 8") == 1, err[-2000:]
     else:
         seen = "SIGTERM" if launcher.flavor == "openmpi" else event  # Open MPI forwards Ctrl-C as SIGTERM

@@ -94,7 +94,8 @@ class Frames:
         self.background = renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
                                           np.zeros(scene.n_objects, dtype=bool))[0, 0]  # the clear colour
         self.latency, self.ahead = cfg.latency, read_lag(cfg.latency) > 0
-        self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0)
+        # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
+        self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col
         self.shown_at = None  # when this rank's last frame was shown (perf_counter): the frame period
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
@@ -213,8 +214,7 @@ class Frames:
 
     def _heartbeat_cpu(self) -> float:
         """CPU ms of this rank's heartbeat thread since the last frame's row."""
-        now = self.job.thread_cpu
-        spent, self._beat_cpu = (now - self._beat_cpu) * 1e3, now
+        spent, self._beat_cpu = (self.job.thread_cpu - self._beat_cpu) * 1e3, self.job.thread_cpu
         return spent
 
     def show(self, f: int, work: Work) -> None:
@@ -256,6 +256,7 @@ class Frames:
         learning from the landed rows' times, projecting the bounds, planning the partition) and
         the draw calls (``core/inflight.py``)."""
         t = Timer()
+        self.rows.push()
         camera, control = self._camera(f, t)
         with t.phase("learn"):
             if FAULT_SPEC:

@@ -31,10 +31,16 @@ class Rows:
         every = np.zeros((self.comm.Get_size(), len(COLUMNS) + 1))
         request = self.comm.Iallgather(row, every)
         self.posted = (frame, row, every, request, extra)
-        if self.later:  # one push now: without a progress thread (Open MPI) the row leaves on the next MPI call,
-            request.Test()  # which a rank that then fails or freezes never makes: the frame it showed would be lost
+        if self.later:  # pushed now and at the next frame's start (``push``): a rank that then fails or freezes
+            request.Test()  # would otherwise keep its part, and the frame every rank showed would be lost
             return landed
         return self.land()
+
+    def push(self) -> None:
+        """Drive the posted row's gather on (a test): without a progress thread (Open MPI) it moves
+        only inside MPI calls, and a rank about to freeze or fail should have sent its part."""
+        if self.posted is not None:
+            self.posted[3].Test()
 
     def land(self, timeout: float | None = None) -> list:
         """The posted row, once every rank's has arrived (bounded: the job's timeout, or

@@ -96,7 +96,8 @@ TABLES = {
         note="4 ranks on a 2x2 wall, 2 cores: wall time per frame = the frame period averaged over the ranks; "
              "emulated = the slowest rank's CPU time (the work); medians of rotated rounds."),
     "peer": Table(
-        "docs/results/peer/peer.csv", "multigpu bench peer --model dragon_vrip.ply --split grid:8 --ranks 1,4 --out docs/results/peer",
+        "docs/results/peer/peer.csv",
+        "multigpu bench peer --model dragon_vrip.ply --split grid:8 --ranks 1,4 --out docs/results/peer",
         (("ranks", "ranks", "{}"), ("paraview_wall_ms", "ParaView + IceT wall ms", "{:.1f}"),
          ("multigpu_wall_ms", "multigpu wall ms", "{:.1f}"), ("wall_lead", "wall lead", "{:.2f}x"),
          ("paraview_cpu_ms", "ParaView CPU ms", "{:.1f}"), ("multigpu_cpu_ms", "multigpu CPU ms", "{:.1f}"),
