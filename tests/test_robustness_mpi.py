@@ -163,7 +163,17 @@ def test_rank_stalled_mid_run_ends_job_within_default_liveness(tmp_path):
     assert res.returncode != 0 and took < 45, (took, res.stderr)
     assert "rank 1 stopped responding (no heartbeat for 30 s)" in res.stderr
     s = _summary_matches_csv(out)
-    assert s["complete"] is False and s["frames"] == 4 - LATENCY
+    assert s["complete"] is False and s["frames"] in _kept(4)
+
+
+def _kept(f: int) -> set:
+    """The frames a rank frozen as it starts frame ``f`` leaves: every frame all ranks showed; with
+    frames in flight under Open MPI (messages move only inside MPI calls) the frozen rank may keep
+    its last row, and that frame with it."""
+    from multigpu.parallel.mpirun import find_launcher
+
+    shown = f - LATENCY
+    return {shown, shown - 1} if LATENCY and find_launcher().flavor == "openmpi" else {shown}
 
 
 def _wait_for_frames(path, n, limit=120):
@@ -211,7 +221,7 @@ def test_signal_stops_cleanly_with_complete_outputs_and_nonzero_exit(tmp_path, s
 def test_ctrl_c_ends_a_job_waiting_on_a_frozen_rank(tmp_path):
     proc, kill = _start(["--liveness", "0"], tmp_path, env={"MULTIGPU_FAULT": "1:5:stop"})
     try:
-        _wait_for_frames(tmp_path / "o" / "timings.csv", 2 * (5 - LATENCY))
+        _wait_for_frames(tmp_path / "o" / "timings.csv", 2 * min(_kept(5)))
         time.sleep(1.0)
         t = time.monotonic()
         os.killpg(proc.pid, signal.SIGINT)
@@ -225,7 +235,7 @@ def test_ctrl_c_ends_a_job_waiting_on_a_frozen_rank(tmp_path):
     assert err.count("interrupted by SIG") == (1 if code == 130 else err.count("interrupted by SIG")) <= 1
     frames = _summary_matches_csv(tmp_path / "o")["frames"]
     # Open MPI's daemon continues a SIGSTOPped rank, so there the rank is not frozen for long
-    assert frames == 5 - LATENCY if code == 130 else frames >= 5 - LATENCY
+    assert frames in _kept(5) if code == 130 else frames >= min(_kept(5))
 
 
 def test_second_job_on_the_same_out_is_refused(tmp_path):
