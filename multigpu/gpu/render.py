@@ -268,13 +268,17 @@ class RegionRenderer:
         self.ctx.enable(self.depth_test)
         self.fbo.clear(*BACKGROUND, 1.0, depth=1.0)
         if len(cmds):
-            if cmds.nbytes > self.indirect.size:
-                self.indirect.orphan(cmds.nbytes)
-            self.indirect.write(cmds)
-            self.prog["light"].value = tuple(float(v) for v in light)
-            self.cbo.bind_to_storage_buffer(0)
+            self._upload(cmds, light)
             self.prog["mvp"].write(np.ascontiguousarray(mvp.T, dtype=np.float32))
             self.vao.render_indirect(self.indirect, count=len(cmds))
+
+    def _upload(self, cmds: np.ndarray, light) -> None:
+        """A frame's draw commands into the indirect buffer, the light and the colours bound."""
+        if cmds.nbytes > self.indirect.size:
+            self.indirect.orphan(cmds.nbytes)
+        self.indirect.write(cmds)
+        self.prog["light"].value = tuple(float(v) for v in light)
+        self.cbo.bind_to_storage_buffer(0)
 
     def render(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, region, mask: np.ndarray | None,
                depth: bool = False, seen: np.ndarray | None = None):
@@ -288,15 +292,11 @@ class RegionRenderer:
         x0, y0, x1, y1 = (int(v) for v in region)
         w, h = x1 - x0, y1 - y0
         cmds = self._commands(mask, seen)
-        self.last_triangles = self._tris = int(cmds[:, 0].sum()) // 3
+        self.last_triangles = self._tris
         ctx = self.ctx
         mvp = np.asarray(proj, dtype=np.float64) @ model_view(view, self.origin)
         if len(cmds):
-            if cmds.nbytes > self.indirect.size:
-                self.indirect.orphan(cmds.nbytes)
-            self.indirect.write(cmds)
-            self.prog["light"].value = tuple(float(v) for v in light)
-            self.cbo.bind_to_storage_buffer(0)
+            self._upload(cmds, light)
         out = np.empty((h, w, 3), dtype=np.uint8)
         zout = np.empty((h, w), dtype=np.float32) if depth else None
         W, H = self.size
