@@ -25,6 +25,10 @@ class Parser(argparse.ArgumentParser):
     """argparse that speaks once per MPI job: only launcher rank 0 prints usage, help and
     errors (every rank parses the same argv and exits the same way)."""
 
+    def error(self, message):
+        """A bad flag in one line (``prog: error: ...``), exit 2: not the whole usage above it."""
+        self.exit(2, f"{self.prog}: error: {message} (--help lists the flags)\n")
+
     def _print_message(self, message, file=None):
         from multigpu.parallel.job import launcher_rank
 

@@ -100,6 +100,10 @@ class WalkConfig:
     # flight"): 1 headless (the plant walk and the city drive at 4 ranks over a third faster in wall time), 0 with
     # windows (the swap lock keeps the ranks in step each frame: no faster here, and input would come a frame later)
     latency: int | None = None
+    # speed for accuracy (core/quality.py): a frame rate held while the camera moves; full quality's scale and bound
+    target_fps: float | None = None
+    render_scale: float = 1.0  # share of each side's pixels drawn (nearest-neighbour upscaled)
+    lod_error: float = 0.0  # level-of-detail bound in wall pixels (0: every object as modelled)
     timeline: bool = False  # timeline.json: every rank's phases over the run's last TIMELINE_FRAMES frames
 
     def __post_init__(self):
@@ -147,6 +151,7 @@ class WalkConfig:
             object.__setattr__(self, "latency", 0 if self.present == "window" else 1)
         if not 0 <= self.latency <= MOST:
             raise InputError(f"--latency must be 0..{MOST} frames, got {self.latency}")
+        self._check_quality()
         if self.device is not None and self.device < 0:
             raise InputError(f"--device must be >= 0, got {self.device}")
         if not (self.timeout > 0 and math.isfinite(self.timeout)):
@@ -176,6 +181,17 @@ class WalkConfig:
             if bins > 65536:
                 raise InputError(f"--bin-size {self.bin_size}: {bins} bins on a {self.size[0]}x{self.size[1]} wall "
                                  "(at most 65536: every bin is a draw per frame)")
+
+    def _check_quality(self) -> None:
+        """Speed for accuracy's flags: a frame rate above 0, a scale the renderer makes, a bound >= 0."""
+        if self.target_fps is not None and not (self.target_fps > 0 and math.isfinite(self.target_fps)):
+            raise InputError(f"--target-fps must be a frame rate above 0, got {self.target_fps}")
+        from multigpu.core.resample import MIN_SCALE
+
+        if not MIN_SCALE <= self.render_scale <= 1.0:
+            raise InputError(f"--render-scale must be {MIN_SCALE}..1, got {self.render_scale}")
+        if not (self.lod_error >= 0 and math.isfinite(self.lod_error)):
+            raise InputError(f"--lod-error must be >= 0 pixels, got {self.lod_error}")
 
     @property
     def ranks(self) -> int:

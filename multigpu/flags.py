@@ -178,6 +178,16 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
     b.add_argument("--exchange", default=d["exchange"], metavar=_one_of(["auto", "shared", "messages"]),
                    help="frame exchange: auto = a shared-memory segment per machine where it can be made, messages "
                         "between machines; shared = the same, an error where it cannot; messages = point to point")
+    q = w.add_argument_group("speed for accuracy")
+    q.add_argument("--target-fps", type=float, default=d["target_fps"], metavar="F",
+                   help="hold this frame rate while the camera moves: each frame a render scale and a level-of-detail "
+                        "bound from the last frames' times; a frame whose camera stopped is full quality "
+                        "(default: none, every frame full quality)")
+    q.add_argument("--render-scale", type=float, default=d["render_scale"], metavar="S",
+                   help="full quality's share of each side's pixels, 0.25..1 (nearest-neighbour upscaled to the tiles)")
+    q.add_argument("--lod-error", type=float, default=d["lod_error"], metavar="PX",
+                   help="full quality's level-of-detail bound: each object at its coarsest level whose error stays "
+                        "within PX pixels on the wall (0: as modelled)")
     _output_args(w, d)
 
 
@@ -235,7 +245,8 @@ def walk_config(a):
                       decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
                       db_ranges=a.db_ranges,
                       liveness=a.liveness, progress=not a.no_progress, record=a.record, timeline=a.timeline,
-                      monitor=_monitor(a.monitor))
+                      monitor=_monitor(a.monitor), target_fps=a.target_fps, render_scale=a.render_scale,
+                      lod_error=a.lod_error)
 
 
 def _monitor(text: str | None) -> tuple[int, int] | None:

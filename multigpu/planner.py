@@ -100,11 +100,13 @@ class Planner:
         """The (N, 4) visible rects of a (4, N) array of canvas rects (``frame_slice``'s)."""
         return self.canvas.to_visible(out.T) if self._bezels else out.T
 
-    def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None) -> Work:
+    def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None,
+             tris: np.ndarray | None = None) -> Work:
         """Frame ``frame``'s work on the canvas from its visible ``rects``. ``relay`` (screen
         only): called with a thunk that computes the partition, it returns the partition to use
-        (``--partition broadcast``: rank 0 computes it, every rank receives it)."""
-        d, tris = self._d or self.decomposition, self.tris
+        (``--partition broadcast``: rank 0 computes it, every rank receives it). ``tris``: the
+        triangles each object draws this frame (its level of detail; None: as modelled)."""
+        d, tris = self._d or self.decomposition, self.tris if tris is None else tris
         if relay is not None:
             cov = self.coverage if d.needs_coverage else None
             work = d.from_partition(relay(lambda: d.partition(rects, tris, cov)), tris)

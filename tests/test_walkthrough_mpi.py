@@ -112,13 +112,13 @@ def test_none_and_strips_give_same_images_and_schema(tmp_path, reference):
     assert s["complete"] is True and s["frames"] == FRAMES and s["ranks"] == 4
     for key in ("load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"):
         assert s["wall"][key] >= 0
-    for r in rows:  # the balancing CPU is its three phases, each timed (learn, project, plan)
-        parts = [float(r[c]) for c in ("learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms")]
+    for r in rows:  # the balancing CPU is its four phases, each timed (learn, project, choose, plan)
+        parts = [float(r[c]) for c in ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")]
         assert min(parts) >= 0 and float(r["projection_cpu_ms"]) > 0 and float(r["planning_cpu_ms"]) > 0
         assert sum(parts) == pytest.approx(float(r["load_balancing_cpu_ms"]), abs=2e-4)  # 4 decimals each
     cpu = s["cpu"]
-    assert cpu["learning_cpu_ms"] + cpu["projection_cpu_ms"] + cpu["planning_cpu_ms"] == pytest.approx(
-        cpu["load_balancing_cpu_ms"], rel=1e-3)
+    phases = ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
+    assert sum(cpu[c] for c in phases) == pytest.approx(cpu["load_balancing_cpu_ms"], rel=1e-3)
     assert s["fps"] > 0 and s["emulated_frame_ms"] > 0 and s["imbalance_triangles"] >= 1
 
 

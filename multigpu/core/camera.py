@@ -122,3 +122,12 @@ def frame_matrices(camera, size) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     W, H = size
     out = _frame(camera.position, camera.target, camera.up, camera.fov, camera.near, camera.far, W / H)
     return out[0], out[1], out[2, 0, :3]
+
+
+def unshifted(camera: Camera, offset) -> Camera:
+    """``camera`` in path-file coordinates (before ``--offset``)."""
+    off = np.asarray(offset, dtype=np.float64)
+    if not off.any():
+        return camera
+    return Camera(tuple(np.asarray(camera.position) - off), tuple(np.asarray(camera.target) - off), camera.up,
+                  camera.fov, camera.near, camera.far)

@@ -79,6 +79,19 @@ class DrawList:
             self.part_offsets = np.zeros(self.part_order.size + 1, dtype=np.int64)
             np.cumsum(scene.part_count[self.part_order], out=self.part_offsets[1:])
             self.part_count = scene.part_count
+        # coarser levels of detail (``scene/lod.py``): each level's block after the last, objects in the same order
+        lod_count = getattr(scene, "lod_count", None)
+        self.levels = 1 if lod_count is None else int(lod_count.shape[1])
+        self.lod_offsets = []  # per level from 1: (N+1,) absolute buffer offsets of the objects in order
+        at = int(self.offsets[-1])
+        for lv in range(1, self.levels):  # levels, not objects
+            off = np.full(scene.n_objects + 1, at, dtype=np.int64)
+            np.cumsum(lod_count[self.order, lv], out=off[1:])
+            off[1:] += at
+            self.lod_offsets.append(off)
+            at = int(off[-1])
+        #: indices in the whole buffer, every level
+        self.total = at
 
     @property
     def vertex_object(self) -> np.ndarray:
@@ -108,18 +121,21 @@ class DrawList:
         absolute vertex indices)``, objects in ``order``. The renderer writes each block into
         its GL buffer, so no full-size copy of the buffer is ever made on the host."""
         scene = self._scene
-        first = scene.first_index.astype(np.int64)[self.order]
         base = scene.base_vertex.astype(np.int64)[self.order]
-        for s in range(0, int(self.offsets[-1]), CHUNK):
-            e = min(s + CHUNK, int(self.offsets[-1]))
-            k = owners(self.offsets, s, e)  # which object in buffer order
-            src = first[k] + np.arange(s, e, dtype=np.int64) - self.offsets[k]
-            yield s, (scene.indices[src].astype(np.int64) + base[k]).astype(np.uint32)
+        levels = [(scene.first_index.astype(np.int64)[self.order], self.offsets)]
+        levels += [(scene.lod_first[self.order, lv].astype(np.int64), off)
+                   for lv, off in enumerate(self.lod_offsets, 1)]
+        for first, offsets in levels:  # levels of detail, not objects
+            for s in range(int(offsets[0]), int(offsets[-1]), CHUNK):
+                e = min(s + CHUNK, int(offsets[-1]))
+                k = owners(offsets - offsets[0], s - offsets[0], e - offsets[0])  # which object in buffer order
+                src = first[k] + np.arange(s, e, dtype=np.int64) - offsets[k]
+                yield s, (scene.indices[src].astype(np.int64) + base[k]).astype(np.uint32)
 
     @property
     def indices(self) -> np.ndarray:
         """(3T,) uint32 the whole index buffer (tests and tools; the renderer streams it)."""
-        out = np.empty(int(self.offsets[-1]), dtype=np.uint32)
+        out = np.empty(self.total, dtype=np.uint32)
         for s, block in self.index_blocks():
             out[s:s + block.size] = block
         return out
@@ -129,20 +145,40 @@ class DrawList:
         ``offsets``): a rank keeps one copy, the GL one."""
         self._scene = None
 
-    def commands(self, mask: np.ndarray | None, compiled: bool | None = None) -> np.ndarray:
+    def leveled(self, mask: np.ndarray | None, levels: np.ndarray | None, seen: np.ndarray | None = None,
+                compiled: bool | None = None) -> np.ndarray:
+        """The draw commands of the objects in ``mask`` at their ``levels`` of detail ((N,) int,
+        0: as modelled; None: all at 0): ``commands`` (``part_commands`` where ``seen`` parts are
+        given) for level 0, then one command per run of each coarser level's objects in its block
+        (a coarse level is drawn whole: it has few triangles)."""
+        if levels is None or not self.lod_offsets:
+            return self.commands(mask, compiled) if seen is None or not self.parts else self.part_commands(
+                mask, seen, compiled)
+        mask = np.ones(self.order.size, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        full = mask & (levels == 0)
+        out = [self.commands(full, compiled) if seen is None or not self.parts else
+               self.part_commands(full, seen, compiled)]
+        for lv, off in enumerate(self.lod_offsets, 1):  # levels, not objects
+            out.append(self.commands(mask & (levels == lv), compiled, off))
+        return np.concatenate(out)
+
+    def commands(self, mask: np.ndarray | None, compiled: bool | None = None,
+                 offsets: np.ndarray | None = None) -> np.ndarray:
         """(R, 5) uint32 ``(count, 1, first, 0, 0)`` draw commands, one per run of visible
         objects in buffer order; ``mask`` (N,) bool in scene object order (None: all).
         ``compiled``: the one-pass kernel (``drawlist_kernel.py``, the same commands) where
-        numba is installed (None), or this numpy reference (False)."""
+        numba is installed (None), or this numpy reference (False). ``offsets``: a coarser
+        level's block (``lod_offsets``; None: the objects as modelled)."""
         if mask is None:
             mask = np.ones(self.order.size, dtype=bool)
+        offsets = self.offsets if offsets is None else offsets
         from multigpu.core import jit
 
         if jit.use(compiled):
             from multigpu.core.drawlist_kernel import _commands
 
-            return _commands(np.ascontiguousarray(mask, dtype=np.bool_), self.order, self.offsets)
-        return _runs(np.asarray(mask, dtype=bool), self.order, self.offsets)
+            return _commands(np.ascontiguousarray(mask, dtype=np.bool_), self.order, offsets)
+        return _runs(np.asarray(mask, dtype=bool), self.order, offsets)
 
     def part_commands(self, mask: np.ndarray | None, seen: np.ndarray, compiled: bool | None = None) -> np.ndarray:
         """``commands`` over parts (a scene whose objects are cut into parts): a part is drawn

@@ -28,7 +28,8 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-VERSION = 1  # the file's layout and the packing it holds; a change makes a new name
+#: the file's layout and the packing it holds (2: levels of detail in the index buffer); a change makes a new name
+VERSION = 2
 MAGIC = b"MULTIGPU-GL-BUFFERS\n"
 PAGE = mmap.PAGESIZE
 #: bytes per block when a buffer is uploaded or written
@@ -125,7 +126,7 @@ def write_buffers(path: Path, scene, draws) -> None:
     """Write ``scene``'s GL buffers (``draws``' order) to ``path``, atomically: a temporary
     file beside it, then a rename, so a reader never sees it half-written and two writers
     (ranks of two hosts sharing the directory) leave one whole file."""
-    nv, ni = scene.vertices.shape[0], int(draws.offsets[-1])
+    nv, ni = scene.vertices.shape[0], draws.total
     lay = _layout(nv, ni)
     head = json.dumps({"version": VERSION, "vertices": nv, "indices": ni, "objects": scene.n_objects,
                        "order": _order_digest(draws)}).encode()
@@ -154,7 +155,7 @@ def map_buffers(path: Path, scene, draws) -> dict[str, np.ndarray] | None:
     """Read-only maps of the buffers file at ``path`` for ``scene`` drawn in ``draws``' order:
     ``vertices`` (V, 4) uint32, ``indices`` (I,) uint32, ``objects`` (V,) uint32; None when
     the file is missing or was written for another scene, order or version."""
-    nv, ni = scene.vertices.shape[0], int(draws.offsets[-1])
+    nv, ni = scene.vertices.shape[0], draws.total
     lay = _layout(nv, ni)
     try:
         with open(path, "rb") as fh:

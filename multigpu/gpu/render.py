@@ -186,6 +186,8 @@ class RegionRenderer:
         self.fbo_size = (0, 0)
         self._ring = None  # the scissor method's two framebuffers once a frame is submitted ahead (``submit``)
         self._tris = 0
+        self.levels = None  # (N,) each object's level of detail in the next frames (None: all as modelled)
+        self.scale = 1.0  # the render scale of the next frames (``core/resample.py``; 1: every pixel)
         # the largest framebuffer side a region chunk may use
         self.chunk = self.limits["renderbuffer"]
         if self.method == "scissor":
@@ -217,7 +219,7 @@ class RegionRenderer:
             ibo = upload(ctx, maps["indices"], 4)
             return vbo, ibo, upload(ctx, maps["objects"], 4)
         vbo = upload(ctx, scene.vertices, 16, pack_vertices)
-        ibo = ctx.buffer(reserve=max(4, 4 * int(draws.offsets[-1])))
+        ibo = ctx.buffer(reserve=max(4, 4 * draws.total))
         for at, block in draws.index_blocks():
             ibo.write(block, offset=4 * at)
         return vbo, ibo, ctx.buffer(draws.vertex_object)
@@ -251,10 +253,9 @@ class RegionRenderer:
                 yield cx, cy, min(cx + c, x1), min(cy + c, y1)
 
     def _commands(self, mask, seen) -> np.ndarray:
-        """The draw commands of the objects in ``mask`` (of their ``seen`` parts); ``_tris``:
-        their triangles."""
-        cmds = self.draws.commands(mask) if seen is None or not self.draws.parts else self.draws.part_commands(mask,
-                                                                                                             seen)
+        """The draw commands of the objects in ``mask`` (of their ``seen`` parts) at their ``levels``
+        of detail; ``_tris``: their triangles."""
+        cmds = self.draws.leveled(mask, self.levels, seen)
         self.last_commands = len(cmds)
         self._tris = int(cmds[:, 0].sum()) // 3
         return cmds
@@ -288,7 +289,11 @@ class RegionRenderer:
 
         Returns ``(h, w, 3)`` uint8, row 0 at the BOTTOM of the region (GL order); with
         ``depth`` also the ``(h, w)`` float32 window depth. ``last_triangles`` is what it drew.
+        At a ``scale`` below 1 the region's footprint is drawn on the scaled canvas and brought
+        back to the region's pixels (``core/resample.py``).
         """
+        if self.scale != 1.0:
+            return self._scaled(view, proj, light, region, mask, depth, seen)
         x0, y0, x1, y1 = (int(v) for v in region)
         w, h = x1 - x0, y1 - y0
         cmds = self._commands(mask, seen)
@@ -333,6 +338,22 @@ class RegionRenderer:
                 zout[rows, cols] = np.frombuffer(data, dtype=np.float32).reshape(ch, cw)
         return (out, zout) if depth else out
 
+    def _scaled(self, view, proj, light, region, mask, depth, seen):
+        """``render`` at ``scale``: the region's scaled pixels drawn as a full render of the scaled
+        canvas would draw them, then each canvas pixel takes the one it shows."""
+        from multigpu.core.resample import footprint, scaled_size, upscale
+
+        size, scale = self.size, self.scale
+        small_size = scaled_size(size, scale)
+        self.size, self.scale = small_size, 1.0
+        try:
+            got = self.render(view, proj, light, footprint(region, size, small_size), mask, depth, seen)
+        finally:
+            self.size, self.scale = size, scale
+        if depth:
+            return tuple(upscale(g, region, size, small_size) for g in got)
+        return upscale(got, region, size, small_size)
+
     def submit(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, pieces: list, depth: bool = False,
                ahead: bool = False) -> "Pending":
         """Draw a frame's ``pieces`` ``(region, mask, seen)`` now and read their pixels later
@@ -345,7 +366,7 @@ class RegionRenderer:
         if self._ring is not None:  # the other framebuffer than the last frame's (it may be unread yet)
             self._ring.reverse()
             self.fbo = self._ring[0]
-        if not (ahead and self.method == "scissor" and _disjoint([r for r, _, _ in pieces])):
+        if not (ahead and self.method == "scissor" and self.scale == 1.0 and _disjoint([r for r, _, _ in pieces])):
             got, total = [], 0
             for r, m, s in pieces:  # pieces, not objects
                 got.append(self.render(view, proj, light, r, m, depth=depth, seen=s))

@@ -15,9 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from multigpu.config import INTERACTIVE, WalkConfig
-from multigpu.core.camera import Camera
+from multigpu.core.camera import unshifted
 from multigpu.core.culling import PartCuller
 from multigpu.core.inflight import read_lag, step
+from multigpu.core.quality import Fidelity, Quality
+from multigpu.core.resample import Widen, covered, scaled_size
 from multigpu.core.work import Work, transfers
 from multigpu.errors import WriteFailed
 from multigpu.parallel.backends import Exchange, Projection
@@ -31,13 +33,14 @@ from multigpu.parallel.record import RunRecord, config_doc, run_title
 from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
 from multigpu.parallel.rows import Rows
 from multigpu.parallel.shared import SharedPieces
+from multigpu.parallel.stops import STOP_FLAG, STOPS, stopped_by_flags
 from multigpu.parallel.timer import Timer
 from multigpu.planner import Planner
 
 #: the phases a frame's balancing is timed in, in order (their sum is the Load Balancing
 #: column): learning from the last frame's measured times, projecting the object bounds,
-#: planning the partition (the strategy and the decomposition)
-BALANCE_PHASES = ("learn", "project", "plan")
+#: choosing the frame's quality (render scale, levels of detail), planning the partition
+BALANCE_PHASES = ("learn", "project", "choose", "plan")
 #: the phases of the Rendering column: the parts culled, the draw calls, the pixels read back
 RENDER_PHASES = ("cull", "render", "readback")
 #: the longest sleep between tests of the swap barrier (s): every rank swaps within about as much of the last
@@ -61,14 +64,9 @@ class InFlight:
     objects: int  # distinct objects it drew
     balance: int  # the CSV's balance column
     recorded: object  # rank 0 with --record: the camera, in path-file coordinates
+    quality: Quality  # the frame's render scale and level-of-detail bound
     rendered: list | None = None
     started: object = None
-
-
-#: the stop flag of a frame's row: > 0 a signal number, < 0 a window event (STOPS)
-STOPS = {-1: "escape key", -2: "window closed", -3: "escape key (the monitor)", -4: "window closed (the monitor)",
-         -5: "an output could not be written"}
-STOP_FLAG = {why: flag for flag, why in STOPS.items()}
 
 
 class Frames:
@@ -85,6 +83,9 @@ class Frames:
         self.tiles = self.canvas.tiles()
         self.planner = Planner(cfg, scene, self.rank)  # MPI-free: projection, strategy, decomposition
         self.culler = PartCuller(scene) if renderer.draws.parts else None  # objects cut into parts
+        # speed for accuracy: each frame's render scale and levels of detail (core/quality.py)
+        self.fidelity = Fidelity(scene, self.canvas.size[1], cfg.target_fps, cfg.render_scale, cfg.lod_error)
+        self.widen = Widen(self.canvas)
         self.drawn = 0  # triangles this rank drew in the last frame
         self.balance_ids = [BALANCE_NAMES.index(b) for b in self.planner.balances]  # the CSV's balance column
         self.relay = self._relay if cfg.partition == "broadcast" and self.K > 1 else None  # screen only (door)
@@ -125,7 +126,7 @@ class Frames:
 
                 controls = take_input(presenter, *([monitor.window] if monitor is not None else []))
                 if self.interactive:
-                    start = _unshifted(path.camera(0), cfg.offset)
+                    start = unshifted(path.camera(0), cfg.offset)
             self.live = Live(cfg, comm, scene, self.planner.balances, self.planner.using, controls, monitor, start)
         doc = config_doc(cfg, scene, load_info, self.n_frames, placement, renderer.method)
         doc["exchange"] = self.exchange.name
@@ -147,19 +148,27 @@ class Frames:
 
     # -- phases of one frame
 
-    def render(self, t: Timer, work: Work, view, proj, light):
+    def render(self, t: Timer, work: Work, view, proj, light, rects, scale: float):
         """Every piece this rank renders, drawn (read later: ``Pending.read``). Of a scene cut
         into parts, the parts each piece needs are found first (the ``cull`` phase); ``drawn``
-        counts the triangles the pieces drew."""
-        mine = list(zip(work.rects[self.rank], work.masks[self.rank]))
+        counts the triangles the pieces drew. Below ``scale`` 1 a piece draws what reaches the
+        canvas its scaled pixels cover (``core/resample.py``; ``rects``: the objects' visible rects)."""
+        masks, reach = work.masks[self.rank], work.rects[self.rank]
+        if scale != 1.0:
+            size = self.canvas.size
+            small = scaled_size(size, scale)
+            reach = [covered(r, size, small) for r in reach]  # pieces, not objects
+            if not work.depth:  # sort-last masks are the rank's objects wherever they fall
+                masks = self.widen.masks(work.rects[self.rank], masks, rects, scale)
+        mine = list(zip(work.rects[self.rank], masks, reach))
         if self.culler is not None:
             with t.phase("cull"):
                 self.culler.frame(view, proj, self.canvas.size)
                 # ``seen`` rewrites one array: a copy each where there are several pieces
-                pieces = [(rect, mask, self.culler.seen(rect) if len(mine) == 1 else self.culler.seen(rect).copy())
-                          for rect, mask in mine]  # pieces, not objects
+                pieces = [(rect, mask, self.culler.seen(at) if len(mine) == 1 else self.culler.seen(at).copy())
+                          for rect, mask, at in mine]  # pieces, not objects
         else:
-            pieces = [(rect, mask, None) for rect, mask in mine]
+            pieces = [(rect, mask, None) for rect, mask, _ in mine]
         with t.phase("render"):
             pending = self.renderer.submit(view, proj, light, pieces, depth=work.depth, ahead=self.ahead)
         self.drawn = self.renderer.last_triangles
@@ -206,7 +215,8 @@ class Frames:
                 "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
                 "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
                 "input_ms": t.ms("input"), "heartbeat_cpu_ms": self._heartbeat_cpu(),
-                "balance": x.balance,
+                "render_scale": x.quality.scale, "lod_error_px": x.quality.lod_px,
+                "choosing_cpu_ms": t.cpu_ms("choose"), "balance": x.balance,
                 "load_balancing_waited_ms": t.waited_ms(*BALANCE_PHASES, "input"),
                 "rendering_waited_ms": t.waited_ms(*RENDER_PHASES), "synchronization_waited_ms": t.waited_ms("sync"),
                 "frame_exchange_waited_ms": t.waited_ms("exchange"),
@@ -265,19 +275,22 @@ class Frames:
                 self.planner.observe(*landed)
             self.learn.clear()
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
+        with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
+            quality, levels, tris = self.fidelity.frame(f, camera)
+            self.renderer.scale, self.renderer.levels = quality.scale, levels
         with t.phase("plan"):
-            work = self.planner.work(f, rects, self.relay)
+            work = self.planner.work(f, rects, self.relay, None if levels is None else tris.copy())
             if self.latency:  # the planner's arrays may be its own again by the time the frame is shown
                 work = work._replace(rects=tuple(r.copy() for r in work.rects))
-        pending = self.render(t, work, view, proj, light)
+        pending = self.render(t, work, view, proj, light, rects, quality.scale)
         with t.phase("exchange"):
             plan = transfers(work, self.tiles)
         recorded = None
         if self.cfg.record and self.rank == 0:  # the camera the frame was made with, in path-file coordinates
             live = self.live.recorded() if self.live is not None and self.interactive else None
-            recorded = live if live is not None else _unshifted(camera, self.cfg.offset)
+            recorded = live if live is not None else unshifted(camera, self.cfg.offset)
         return InFlight(f, t, control, work, plan, pending, self.drawn, work.objects(self.rank),
-                        self.balance_ids[self.planner.using], recorded)
+                        self.balance_ids[self.planner.using], recorded, quality)
 
     def send(self, x: "InFlight") -> None:
         """A frame's second stage: its pixels read back (``readback``: waiting for the GL) and,
@@ -325,6 +338,7 @@ class Frames:
     def landed(self, f: int, every: np.ndarray, recorded) -> None:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
         self.learn.append((f, every[:, self.col["rendering_cpu_ms"]].copy()))
+        self.fidelity.landed(f, float(every[:, self.col["frame_ms"]].mean()))  # a frame-rate target learns
         if self.rank == 0:  # rows first: the summary always matches the CSV
             rows = every[:, :len(COLUMNS)].copy()
             if self.window:  # swap moments after the frame's first swap; the skew on every row
@@ -350,20 +364,6 @@ class Frames:
         if self.projection is not None:
             self.projection.close(collective)
             self.projection = None
-
-    def _stopped_by(self) -> str | None:
-        flags = self.stop_flags if self.stop_flags is not None else np.zeros(self.K)
-        if self.job.signum:
-            import signal
-
-            return f"signal {signal.Signals(self.job.signum).name}"
-        if (flags < 0).any():
-            r = int(np.flatnonzero(flags < 0)[0])
-            why = STOPS[int(flags[r])]
-            if why == STOPS[-5]:
-                return f"{why} (rank {r})"
-            return why if why.endswith("(the monitor)") else f"{why} (rank {r}'s window)"
-        return None
 
     def loop(self) -> None:
         """Every frame through its three stages (``core/inflight.py``). A stop flag in a landed
@@ -413,7 +413,7 @@ class Frames:
                 self.landed(*landed)
             complete = self.done == self.n_frames and self.stop_flags is None
             if not complete:
-                stopped_by = self._stopped_by()
+                stopped_by = stopped_by_flags(self.job.signum, self.stop_flags, self.K)
         except BaseException as exc:
             stopped_by = f"{exc.__class__.__name__}: {exc}"
             self._keep_shown()
@@ -439,12 +439,3 @@ class Frames:
         planned = "" if self.n_frames is None else f" of {self.n_frames}"
         state = "" if complete else f" (stopped after {self.done}{planned} frames: {stopped_by})"
         return run_title(self.cfg, self.scene) + state
-
-
-def _unshifted(camera: Camera, offset) -> Camera:
-    """``camera`` in path-file coordinates (before ``--offset``)."""
-    off = np.asarray(offset, dtype=np.float64)
-    if not off.any():
-        return camera
-    return Camera(tuple(np.asarray(camera.position) - off), tuple(np.asarray(camera.target) - off), camera.up,
-                  camera.fov, camera.near, camera.far)

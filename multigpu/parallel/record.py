@@ -19,7 +19,7 @@ from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
 from multigpu.parallel.mosaic import save_png
 from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, summarize, table, write_json
+from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, summarize, table, target_stats, write_json
 from multigpu.scene.models import axis_name
 
 
@@ -97,6 +97,9 @@ class RunRecord:
         hosts = [r.get("host") for r in self.config.get("ranks", [])]
         if summary.get("frames") and len(set(hosts)) > 1 and self.config.get("present") == "window":
             summary["present"]["swap_skew_ms_by_host"] = skew_by_host(rows, self.K, hosts)
+        if summary.get("frames") and self.config.get("target_fps"):
+            summary["target"] = target_stats(rows, self.K, self.config["target_fps"], self.config["render_scale"],
+                                             self.config["lod_error"])
         doc = {"complete": complete, "frames_written": self.done, "config": self.config,
                "decomposition": self.report(), **summary}
         if stopped_by:
@@ -180,7 +183,8 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
     """The run's configuration for summary.json; ``placement``: every rank's host, index on
     its host (``node_rank``) and EGL device."""
     return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
-            "decomposition": cfg.decomposition, "latency": cfg.latency,
+            "decomposition": cfg.decomposition, "latency": cfg.latency, "target_fps": cfg.target_fps,
+            "render_scale": cfg.render_scale, "lod_error": cfg.lod_error,
             "balance": cfg.balance if cfg.decomposition == "screen" else None,
             "bin_size": cfg.bin_size if cfg.decomposition == "bins" else None,
             "bin_pattern": cfg.bin_pattern if cfg.decomposition == "bins" else None,
@@ -190,7 +194,8 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
             "scene": {"name": scene.name, "objects": scene.n_objects, "triangles": scene.n_triangles,
                       "load_seconds": round(load_info["seconds"], 3), "cached": load_info["cached"],
                       "warnings": scene.meta.get("warnings", []), "objects_from": scene.meta.get("objects"),
-                      "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source")},
+                      "up": axis_name(scene.meta.get("up", [0, 0, 1])), "up_source": scene.meta.get("up_source"),
+                      "lods": scene.meta.get("lods")},
             "path": cfg.path or cfg.path_kind, "egl_device": placement[0]["egl_device"], "present": cfg.present,
             "ranks": placement, "hosts": len({p["host"] for p in placement}),
             "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,

@@ -14,10 +14,13 @@ Figures and what they are:
 * ``input_ms``: the frame's input phase (rank 0 reads keys and mouse, the camera and commands
   reach every rank in one broadcast; 0 when headless); ``balance``: the strategy (screen) or
   decomposition that planned the frame, by name (it may change at a key press);
-* ``learning_cpu_ms``, ``projection_cpu_ms``, ``planning_cpu_ms``: the load balancing CPU time
-  in its three phases (they add up to ``load_balancing_cpu_ms``): the strategy learning from
-  the last frame's measured times, projecting the object bounds (``--projection shared``:
-  this rank's slice), planning the partition (``--partition broadcast``: with its broadcast);
+* ``learning_cpu_ms``, ``projection_cpu_ms``, ``choosing_cpu_ms``, ``planning_cpu_ms``: the load
+  balancing CPU time in its four phases (they add up to ``load_balancing_cpu_ms``): the strategy
+  learning from the last frame's measured times, projecting the object bounds (``--projection
+  shared``: this rank's slice), choosing the frame's quality (render scale, levels of detail),
+  planning the partition (``--partition broadcast``: with its broadcast);
+* ``render_scale``, ``lod_error_px``: the frame's quality (``--target-fps``, ``--render-scale``,
+  ``--lod-error``; 1 and 0: every pixel, every object as modelled);
 * ``triangles``: the triangles a rank drew (of a scene cut into parts, only the parts its
   pieces needed); ``planned_triangles``: those of the whole objects the plan gave it (the
   balancer's load); ``culling_cpu_ms``: the cull of those parts (inside ``rendering_cpu_ms``);
@@ -50,14 +53,17 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "present_ms", "swap_wait_ms", "swap_ms", "swap_skew_ms", "input_ms", "heartbeat_cpu_ms",
            "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms",
            "latency_ms", "load_balancing_waited_ms", "rendering_waited_ms", "synchronization_waited_ms",
-           "frame_exchange_waited_ms", "display_waited_ms", "balance"]
-#: the load balancing CPU time's three phases (learn, project, plan), adding up to it
-BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms")
+           "frame_exchange_waited_ms", "display_waited_ms", "render_scale", "lod_error_px", "choosing_cpu_ms",
+           "balance"]
+#: the load balancing CPU time's four phases (learn, project, choose, plan), adding up to it
+BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
 #: the part of each component's wall time the rank's thread did not run (waited), by component
 WAITED = {c: c.replace("_ms", "_waited_ms") for c in COMPONENTS}
 #: what the ``balance`` column can name: a strategy of the screen decomposition, or another decomposition
 BALANCE_NAMES = (*STRATEGIES, *(d for d in DECOMPOSITIONS if d != "screen"))
+#: a frame holds a frame-rate target when its period lies within this share of the target's
+TARGET_BAND = 0.10
 INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes",
                "planned_triangles"}
 
@@ -111,6 +117,30 @@ def read_timings(path: Path) -> np.ndarray:
     data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2,
                       converters={COLUMNS.index("balance"): lambda s: float(BALANCE_NAMES.index(s))})
     return data.reshape(-1, len(COLUMNS))
+
+
+def target_stats(rows: np.ndarray, ranks: int, target_fps: float, scale: float = 1.0, lod_px: float = 0.0) -> dict:
+    """How a run held ``--target-fps``: of its frames after the first ``WARMUP`` (the controller
+    has measured nothing before), the share whose period (the mean over ranks) lies within
+    ``TARGET_BAND`` of the target's, the share at least ``1 - TARGET_BAND`` of the target rate,
+    and how many were drawn below full quality (``scale``, ``lod_px``)."""
+    from multigpu.core.quality import WARMUP
+
+    col = {c: i for i, c in enumerate(COLUMNS)}
+    rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(COLUMNS))
+    frames = np.unique(rows[:, col["frame"]])
+    complete = frames[[(rows[:, col["frame"]] == f).sum() == ranks for f in frames]]  # frames, once at the end
+    rows = rows[np.isin(rows[:, col["frame"]], complete[complete >= WARMUP])]
+    rows = rows[np.lexsort((rows[:, col["rank"]], rows[:, col["frame"]]))]
+    per = rows.reshape(-1, ranks, len(COLUMNS))
+    period = per[:, :, col["frame_ms"]].mean(axis=1)
+    target_ms = 1e3 / target_fps
+    reduced = (per[:, 0, col["render_scale"]] < scale) | (per[:, 0, col["lod_error_px"]] > lod_px)
+    judged = max(len(period), 1)
+    return {"target_fps": float(target_fps), "frames_judged": int(len(period)),
+            "within_band": float((np.abs(period / target_ms - 1.0) <= TARGET_BAND).sum() / judged),
+            "at_least_rate": float((1e3 / np.maximum(period, 1e-9) >= (1 - TARGET_BAND) * target_fps).sum() / judged),
+            "reduced_frames": int(reduced.sum()), "fps": float(1e3 / period.mean()) if len(period) else 0.0}
 
 
 def summarize(rows: np.ndarray, ranks: int) -> dict:
@@ -172,6 +202,8 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "outside_phases_ms": float(np.maximum(get("frame_ms") - sum(get(c) for c in COMPONENTS), 0.0).mean()),
         "input_to_photon_ms": float(get("latency_ms").max(axis=1).mean()),
         "input_to_photon_frames": float(get("latency_ms").max(axis=1).mean() / frame_ms.mean()),
+        "quality": {"render_scale_mean": float(get("render_scale")[:, 0].mean()),
+                    "lod_error_px_mean": float(get("lod_error_px")[:, 0].mean())},
         "per_frame_emulated_ms": emulated.round(3).tolist(),
         "per_frame_wall_ms": frame_ms.round(3).tolist(),
     }
@@ -200,6 +232,14 @@ def table(summary: dict, title: str = "") -> str:
               f"Imbalance max/mean: triangles {_fmt(summary['imbalance_triangles'])}, render CPU time "
               f"{_fmt(summary['imbalance_render_cpu'])}{_empty(summary)}; bytes exchanged per frame "
               f"{summary['bytes_sent_per_frame']:.0f}"]
+    if "target" in summary:
+        t, q = summary["target"], summary.get("quality", {})
+        lines.append(f"Target {t['target_fps']:.1f} FPS: {100 * t['within_band']:.0f} % of {t['frames_judged']} frames "
+                     f"within {100 * TARGET_BAND:.0f} % of it, {100 * t['at_least_rate']:.0f} % at "
+                     f"{100 - 100 * TARGET_BAND:.0f} % of it or faster ({t['fps']:.1f} FPS); "
+                     f"{t['reduced_frames']} frames below full quality (render scale "
+                     f"{q.get('render_scale_mean', 1.0):.2f}, LOD bound {q.get('lod_error_px_mean', 0.0):.2f} px "
+                     "on average)")
     return "\n".join(lines)
 
 
@@ -220,7 +260,7 @@ def _parts(cpu: dict) -> str:
     """The load balancing CPU time's phases, where the summary has them."""
     if not all(c in cpu for c in BALANCE_CPU):
         return ""
-    return " (learn {:.2f}, project {:.2f}, plan {:.2f})".format(*(cpu[c] for c in BALANCE_CPU))
+    return " (learn {:.2f}, project {:.2f}, choose {:.2f}, plan {:.2f})".format(*(cpu[c] for c in BALANCE_CPU))
 
 
 def _cull(cpu: dict) -> str:

@@ -19,7 +19,8 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-FORMAT_VERSION = 5  # 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
+#: 6: levels of detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
+FORMAT_VERSION = 6
 
 
 @dataclass
@@ -39,6 +40,11 @@ class Scene:
         index range, from its ``first_index``)
     part_bmin, part_bmax : (P, 3) float64  each part's bounding box (world space)
     (None: no parts, each object one part; ``scene/parts.py`` makes them)
+    lod_first, lod_count : (N, L) int64  object i's level l is drawn by ``lod_count[i, l]`` indices of
+        ``indices`` from ``lod_first[i, l]`` (level 0: its own range; coarser levels follow the
+        scene's own indices, relative to its base vertex as those)
+    lod_error : (N, L) float64  each level's geometric error (world units), non-decreasing
+    (None: no levels; ``scene/lod.py`` makes them)
     """
 
     vertices: np.ndarray
@@ -58,6 +64,9 @@ class Scene:
     part_count: np.ndarray | None = None
     part_bmin: np.ndarray | None = None
     part_bmax: np.ndarray | None = None
+    lod_first: np.ndarray | None = None
+    lod_count: np.ndarray | None = None
+    lod_error: np.ndarray | None = None
 
     @property
     def n_objects(self) -> int:
@@ -87,14 +96,22 @@ class Scene:
 
     #: the parts' arrays (``part_start`` indexes the others)
     PARTS = ("part_start", "part_count", "part_bmin", "part_bmax")
+    #: the levels of detail's arrays (one row per object, a column per level)
+    LODS = ("lod_first", "lod_count", "lod_error")
 
     @property
     def n_parts(self) -> int:
         """Parts in all (one per object where the scene has none)."""
         return self.n_objects if self.part_start is None else int(self.part_start[-1])
 
-    def _arrays(self, parts: bool = True) -> dict[str, np.ndarray]:
-        names = ("vertices", "indices", *self.PER_OBJECT, "origin", *(self.PARTS if parts else ()))
+    @property
+    def levels(self) -> int:
+        """Levels of detail per object (1: only the object as modelled)."""
+        return 1 if self.lod_count is None else int(self.lod_count.shape[1])
+
+    def _arrays(self, parts: bool = True, lods: bool = True) -> dict[str, np.ndarray]:
+        names = ("vertices", "indices", *self.PER_OBJECT, "origin", *(self.PARTS if parts else ()),
+                 *(self.LODS if lods else ()))
         return {k: getattr(self, k) for k in names if getattr(self, k) is not None}
 
     def translated(self, offset) -> "Scene":
@@ -117,7 +134,7 @@ class Scene:
             raise InputError(f"object indices must be a 1-D array, got shape {idx.shape}")
         if idx.size and (idx.min() < 0 or idx.max() >= self.n_objects):
             raise InputError(f"object indices must lie in [0, {self.n_objects}), got {idx.min()}..{idx.max()}")
-        picked = {k: getattr(self, k)[idx] for k in self.PER_OBJECT}
+        picked = {k: getattr(self, k)[idx] for k in (*self.PER_OBJECT, *self.LODS) if getattr(self, k) is not None}
         if self.part_start is not None:  # the picked objects' parts, in the same order
             n = self.part_start[idx + 1] - self.part_start[idx]
             rows = np.repeat(self.part_start[idx] - np.concatenate([[0], np.cumsum(n)[:-1]]), n) + np.arange(n.sum())

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError, check_file
+from multigpu.scene import lod as scene_lod
 from multigpu.scene import parts as scene_parts
 from multigpu.scene.blocks import blocks, per_object
 from multigpu.scene.labels import face_labels
@@ -86,8 +87,9 @@ def cache_dir() -> Path:
 
 
 def _key(*parts) -> str:
-    """The cache key: the format, the part size (it shapes the cached layout) and the spec."""
-    return hashlib.sha1(repr((FORMAT_VERSION, scene_parts.PART_TRIS) + parts).encode()).hexdigest()[:16]
+    """The cache key: the format, the part size and levels of detail (the cached layout), the spec."""
+    shape = (FORMAT_VERSION, scene_parts.PART_TRIS, scene_lod.LEVELS, scene_lod.RATIO, scene_lod.MIN_TRIS)
+    return hashlib.sha1(repr(shape + parts).encode()).hexdigest()[:16]
 
 
 def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
@@ -124,7 +126,7 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
             scene = split_objects(scene, size)
         scene.meta["objects"] = {"split": scene.meta.get("split", spec.split), "modelled": modelled,
                                  "objects": scene.n_objects, "cluster": int(size), "why": why}
-        return with_parts(scene)  # objects of many triangles cut inside themselves, for culling
+        return scene_lod.with_lods(with_parts(scene))  # parts for culling, then levels of detail
     path = cache_dir() / name
     scene, cached = None, False
     if use_cache and path.is_file():

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from multigpu.parallel.report import BALANCE_CPU
 from multigpu.strategies import REGISTRY
 from multigpu.studies.floor import run as floor_run
 from multigpu.studies.runs import Settings, walk
@@ -43,7 +42,7 @@ def scenes(s: Settings, out: Path) -> dict[str, list[str]]:
 
 
 #: the balancing CPU's phases in a payoff row, from each run's summary's columns of them
-PARTS = dict(zip(("learn_ms", "project_ms", "plan_ms"), BALANCE_CPU))
+PARTS = {"learn_ms": "learning_cpu_ms", "project_ms": "projection_cpu_ms", "plan_ms": "planning_cpu_ms"}
 
 
 def balancing_parts(rows: list[dict], checks: list[dict]) -> list[dict]:

@@ -1,0 +1,34 @@
+"""Levels of detail chosen compiled (``lod.LevelChooser.choose``): one pass over the objects,
+where the reference makes a dozen numpy passes over (N, L) temporaries (~0.4 ms at 7k objects).
+The same levels (tests/test_lod.py). Per frame."""
+
+from __future__ import annotations
+
+import math
+
+from multigpu.core.jit import compile_all
+
+
+def _choose(centers, radii, error, tris, ex, ey, ez, focal, near, bound, levels, drawn):
+    """Each object's coarsest level whose error ``error[i, l] * focal / distance`` is within
+    ``bound`` pixels into ``levels``, its triangles into ``drawn``; how many are above level 0."""
+    n, n_levels = error.shape
+    coarse = 0
+    for i in range(n):
+        dx, dy, dz = centers[i, 0] - ex, centers[i, 1] - ey, centers[i, 2] - ez
+        d = max(math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i], near)
+        scale = focal / d
+        lv = 0
+        for k in range(1, n_levels):
+            if error[i, k] * scale <= bound:
+                lv = k
+            else:
+                break
+        levels[i] = lv
+        drawn[i] = tris[i, lv]
+        if lv:
+            coarse += 1
+    return coarse
+
+
+compile_all(globals(), ("_choose",))

@@ -1,0 +1,79 @@
+"""Render scale: a frame drawn on fewer pixels and brought back to the tile's, the same on every rank.
+
+At scale ``s`` the canvas (W, H) is drawn as a ``scaled_size`` canvas (sW, sH): the same camera,
+fewer pixels. Canvas pixel ``x`` shows scaled pixel ``x * sW // W`` (nearest neighbour, integer
+arithmetic), so the picture depends on the scale and the camera only, never on how the wall is
+cut into regions: a rank draws the scaled pixels its region needs (``footprint``) and brings
+them to its region's pixels (``upscale``), and the composite equals one rank's scaled render
+brought to the canvas, bit for bit. A scaled pixel's sample may lie a little outside the region
+whose pixels show it, so a rank draws the objects that reach the canvas area its scaled pixels
+cover (``covered``), not only its region's (``Widen``). Pure numpy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multigpu.core.regions import overlaps, pixel_spans
+
+#: the smallest render scale (a sixteenth of the pixels)
+MIN_SCALE = 0.25
+
+
+def scaled_size(size: tuple[int, int], scale: float) -> tuple[int, int]:
+    """(sW, sH): the canvas ``size`` at ``scale`` (at least a pixel a side)."""
+    return max(1, int(round(size[0] * scale))), max(1, int(round(size[1] * scale)))
+
+
+def footprint(region, size: tuple[int, int], ssize: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The scaled pixels ``[sx0, sy0, sx1, sy1)`` that canvas ``region`` ``[x0, y0, x1, y1)`` shows."""
+    x0, y0, x1, y1 = (int(v) for v in region)
+    (W, H), (sW, sH) = size, ssize
+    return x0 * sW // W, y0 * sH // H, (x1 - 1) * sW // W + 1, (y1 - 1) * sH // H + 1
+
+
+def covered(region, size: tuple[int, int], ssize: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The canvas pixels ``[x0, y0, x1, y1)`` that the scaled pixels of ``region``'s footprint
+    cover (a superset of ``region``): where their samples may lie."""
+    sx0, sy0, sx1, sy1 = footprint(region, size, ssize)
+    (W, H), (sW, sH) = size, ssize
+    return sx0 * W // sW, sy0 * H // sH, -(-sx1 * W // sW), -(-sy1 * H // sH)
+
+
+def upscale(small: np.ndarray, region, size: tuple[int, int], ssize: tuple[int, int]) -> np.ndarray:
+    """``region``'s pixels (h, w, ...) from its footprint's scaled pixels ``small`` (row 0 at the
+    bottom, as the GL reads them): each canvas pixel takes the scaled pixel it shows."""
+    x0, y0, x1, y1 = (int(v) for v in region)
+    sx0, sy0, _, _ = footprint(region, size, ssize)
+    (W, H), (sW, sH) = size, ssize
+    rows = np.arange(y0, y1, dtype=np.int64) * sH // H - sy0
+    cols = np.arange(x0, x1, dtype=np.int64) * sW // W - sx0
+    return small.take(rows, axis=0).take(cols, axis=1)
+
+
+class Widen:
+    """The masks of a frame's pieces widened to the objects that reach what their scaled pixels
+    cover (``covered``), in the visible space where the plan was made (``canvas.to_visible``)."""
+
+    def __init__(self, canvas):
+        self.canvas = canvas
+
+    def masks(self, rects: np.ndarray, masks, vrects: np.ndarray, scale: float) -> list:
+        """``masks`` of the canvas pieces ``rects`` (M, 4) widened for ``scale``; ``vrects``: this
+        frame's normalized visible object rects."""
+        canvas = self.canvas
+        size, vis = canvas.size, canvas.visible
+        ssize = scaled_size(size, scale)
+        spans, on = pixel_spans(vrects, vis)
+        out = []
+        for rect, mask in zip(rects, masks):  # pieces, not objects
+            cx0, cy0, cx1, cy1 = covered(rect, size, ssize)
+            norm = np.array([[cx0 / size[0], cy0 / size[1], cx1 / size[0], cy1 / size[1]]])
+            v = canvas.to_visible(norm)[0]
+            if not np.isfinite(v).all():  # wholly behind a bezel: nothing more to draw
+                out.append(mask)
+                continue
+            area = (int(np.floor(v[0] * vis[0])), int(np.floor(v[1] * vis[1])),
+                    int(np.ceil(v[2] * vis[0])), int(np.ceil(v[3] * vis[1])))
+            out.append(mask | (on & overlaps(spans, area)))
+        return out
