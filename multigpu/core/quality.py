@@ -2,8 +2,8 @@
 
 ``Controller`` holds a frame-rate target (``--target-fps``) the way Equalizer's DFR equalizer
 does: it keeps ``load``, the share of a full-quality frame's cost asked for, and after each
-measured frame moves it geometrically toward ``target / measured`` with a damping exponent (half
-the way in log space), from the median of the last three frames (one slow frame does not move it)
+measured frame moves it geometrically toward ``target / measured`` with a damping exponent (a
+quarter of the way in log space: ``DAMPING``), from the median of the last three frames (one slow frame does not move it)
 and not at all within a dead band of 5 % around the target, so it neither oscillates nor leaves
 full quality while the target is met. ``load`` buys its cost half in pixels, half in triangles:
 the render scale is ``load ** (1/4)`` (pixels ``sqrt(load)``), and the level-of-detail bound grows
@@ -32,8 +32,10 @@ from multigpu.core.resample import MIN_SCALE
 MAX_LOD_PX = 8.0
 #: the least share of a full frame's cost the controller asks for (the render scale reaches MIN_SCALE)
 MIN_LOAD = MIN_SCALE ** 4
-#: the exponent of each step toward the target (Equalizer's DFR damping: half the way)
-DAMPING = 0.5
+#: the exponent of each step toward the target (Equalizer's DFR damps its step too); a frame's time is
+#: measured one to three frames after its choice, and 0.5 then oscillates where 0.25 settles within
+#: 20 frames (tests/test_quality.py's simulated wall, lags 1 to 3, 5 % noise)
+DAMPING = 0.25
 #: no step while the measured frame is within this share of the target
 BAND = 0.05
 #: measured frames the controller takes the median of

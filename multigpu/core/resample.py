@@ -7,7 +7,8 @@ cut into regions: a rank draws the scaled pixels its region needs (``footprint``
 them to its region's pixels (``upscale``), and the composite equals one rank's scaled render
 brought to the canvas, bit for bit. A scaled pixel's sample may lie a little outside the region
 whose pixels show it, so a rank draws the objects that reach the canvas area its scaled pixels
-cover (``covered``), not only its region's (``Widen``). Pure numpy.
+cover (``covered``), not only its region's (``Widen``); a sort-last piece, whose objects are
+its own wherever they fall, grows instead (``grown``). Pure numpy.
 """
 
 from __future__ import annotations
@@ -51,6 +52,16 @@ def upscale(small: np.ndarray, region, size: tuple[int, int], ssize: tuple[int, 
     return small.take(rows, axis=0).take(cols, axis=1)
 
 
+def grown(rects: np.ndarray, size: tuple[int, int], scale: float) -> np.ndarray:
+    """Sort-last pieces (M, 4) grown by the span of a scaled pixel (and one more) on every side,
+    within the canvas: a canvas pixel outside a piece may show a scaled pixel whose sample lies
+    inside it, and the composite takes each pixel's nearest fragment from every piece that has it."""
+    g = int(np.ceil(1.0 / scale)) + 1
+    r = np.asarray(rects, dtype=np.int64).reshape(-1, 4) + np.array([-g, -g, g, g])
+    W, H = size
+    return np.clip(r, 0, [W, H, W, H])
+
+
 class Widen:
     """The masks of a frame's pieces widened to the objects that reach what their scaled pixels
     cover (``covered``), in the visible space where the plan was made (``canvas.to_visible``)."""
@@ -73,7 +84,8 @@ class Widen:
             if not np.isfinite(v).all():  # wholly behind a bezel: nothing more to draw
                 out.append(mask)
                 continue
-            area = (int(np.floor(v[0] * vis[0])), int(np.floor(v[1] * vis[1])),
-                    int(np.ceil(v[2] * vis[0])), int(np.ceil(v[3] * vis[1])))
+            px = v * np.array([vis[0], vis[1], vis[0], vis[1]])  # whole pixels, give or take the rounding
+            area = (int(np.floor(px[0] + 1e-6)), int(np.floor(px[1] + 1e-6)), int(np.ceil(px[2] - 1e-6)),
+                    int(np.ceil(px[3] - 1e-6)))
             out.append(mask | (on & overlaps(spans, area)))
         return out

@@ -19,7 +19,7 @@ from multigpu.core.camera import unshifted
 from multigpu.core.culling import PartCuller
 from multigpu.core.inflight import read_lag, step
 from multigpu.core.quality import Fidelity, Quality
-from multigpu.core.resample import Widen, covered, scaled_size
+from multigpu.core.resample import Widen, covered, grown, scaled_size
 from multigpu.core.work import Work, transfers
 from multigpu.errors import WriteFailed
 from multigpu.parallel.backends import Exchange, Projection
@@ -282,6 +282,8 @@ class Frames:
             work = self.planner.work(f, rects, self.relay, None if levels is None else tris.copy())
             if self.latency:  # the planner's arrays may be its own again by the time the frame is shown
                 work = work._replace(rects=tuple(r.copy() for r in work.rects))
+            if work.depth and quality.scale != 1.0:  # sort-last pieces reach the pixels their scaled samples show
+                work = work._replace(rects=tuple(grown(r, self.canvas.size, quality.scale) for r in work.rects))
         pending = self.render(t, work, view, proj, light, rects, quality.scale)
         with t.phase("exchange"):
             plan = transfers(work, self.tiles)
