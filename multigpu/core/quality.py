@@ -3,11 +3,12 @@
 ``Controller`` holds a frame-rate target (``--target-fps``) the way Equalizer's DFR equalizer
 does: it keeps ``load``, the share of a full-quality frame's cost asked for, and after each
 measured frame moves it geometrically toward ``target / measured`` with a damping exponent (a
-quarter of the way in log space: ``DAMPING``), from the median of the last three frames (one slow frame does not move it)
-and not at all within a dead band of 5 % around the target, so it neither oscillates nor leaves
-full quality while the target is met. ``load`` buys its cost half in pixels, half in triangles:
-the render scale is ``load ** (1/4)`` (pixels ``sqrt(load)``), and the level-of-detail bound grows
-from the user's ``--lod-error`` by up to ``MAX_LOD_PX`` pixels as ``sqrt(load)`` falls.
+quarter of the way in log space: ``DAMPING``), from the median of the last three frames (one
+slow frame does not move it) and not at all within a dead band of 5 % around the target, so it
+neither oscillates nor leaves full quality while the target is met. ``load`` buys its cost half
+in pixels, half in triangles: the render scale is ``load ** (1/4)`` (pixels ``sqrt(load)``), and
+the level-of-detail bound grows from the user's ``--lod-error`` by up to ``MAX_LOD_PX`` pixels as
+``sqrt(load)`` falls.
 
 ``Fidelity`` is a rank's per-frame choice: the controller's quality while the camera moves; the
 full quality of a run without a target (``--render-scale``, ``--lod-error``) on a frame whose
