@@ -3,7 +3,7 @@
 ``Controller`` holds a frame-rate target (``--target-fps``) the way Equalizer's DFR equalizer
 does: it keeps ``load``, the share of a full-quality frame's cost asked for, and after each
 measured frame moves it geometrically toward ``target / measured`` with a damping exponent (a
-quarter of the way in log space: ``DAMPING``), from the median of the last three frames (one
+half of the way in log space: ``DAMPING``), from the median of the last three frames (one
 slow frame does not move it) and not at all within a dead band of 5 % around the target, so it
 neither oscillates nor leaves full quality while the target is met. ``load`` buys its cost half
 in pixels, half in triangles: the render scale is ``load ** (1/4)`` (pixels ``sqrt(load)``), and
@@ -33,10 +33,11 @@ from multigpu.core.resample import MIN_SCALE
 MAX_LOD_PX = 8.0
 #: the least share of a full frame's cost the controller asks for (the render scale reaches MIN_SCALE)
 MIN_LOAD = MIN_SCALE ** 4
-#: the exponent of each step toward the target (Equalizer's DFR damps its step too); a frame's time is
-#: measured one to three frames after its choice, and 0.5 then oscillates where 0.25 settles within
-#: 20 frames (tests/test_quality.py's simulated wall, lags 1 to 3, 5 % noise)
-DAMPING = 0.25
+#: the exponent of each step toward the target where a frame's time is measured at most two frames
+#: after its choice (``--latency`` 0 and 1); halved where it comes later, where 0.5 would oscillate
+#: (tests/test_quality.py's simulated wall). On this machine's plant walk 0.5 held the target for
+#: 47-49 % of frames, 0.25 for 37 % (its frames vary +-30 % unconstrained: docs/ACCURACY.md)
+DAMPING = 0.5
 #: no step while the measured frame is within this share of the target
 BAND = 0.05
 #: measured frames the controller takes the median of
@@ -58,9 +59,9 @@ class Quality:
 class Controller:
     """A frame-rate target held by trading pixels and triangles (module docstring)."""
 
-    def __init__(self, target_fps: float, damping: float = DAMPING, band: float = BAND, window: int = WINDOW):
+    def __init__(self, target_fps: float, lag: int = 2, band: float = BAND, window: int = WINDOW):
         self.target_ms = 1e3 / float(target_fps)
-        self.damping, self.band = float(damping), float(band)
+        self.damping, self.band = DAMPING if lag <= 2 else DAMPING / 2, float(band)
         self.load = 1.0
         self.times: deque = deque(maxlen=int(window))
 
@@ -87,9 +88,10 @@ class Controller:
 class Fidelity:
     """A rank's per-frame quality: scale, levels of detail and the triangles they draw."""
 
-    def __init__(self, scene, height: int, target_fps: float | None, scale: float = 1.0, lod_error: float = 0.0):
+    def __init__(self, scene, height: int, target_fps: float | None, scale: float = 1.0, lod_error: float = 0.0,
+                 lag: int = 2):
         self.scale, self.lod_error = float(scale), float(lod_error)
-        self.controller = Controller(target_fps) if target_fps else None
+        self.controller = Controller(target_fps, lag) if target_fps else None
         self.chooser = LevelChooser(scene, height)
         self.last_camera = None
         self.chosen: dict[int, Quality] = {}  # frame -> its quality, until its time is observed

@@ -84,7 +84,8 @@ class Frames:
         self.planner = Planner(cfg, scene, self.rank)  # MPI-free: projection, strategy, decomposition
         self.culler = PartCuller(scene) if renderer.draws.parts else None  # objects cut into parts
         # speed for accuracy: each frame's render scale and levels of detail (core/quality.py)
-        self.fidelity = Fidelity(scene, self.canvas.size[1], cfg.target_fps, cfg.render_scale, cfg.lod_error)
+        self.fidelity = Fidelity(scene, self.canvas.size[1], cfg.target_fps, cfg.render_scale, cfg.lod_error,
+                                 lag=cfg.latency + 1)  # a frame's time is learnt about latency + 1 frames later
         self.widen = Widen(self.canvas)
         self.drawn = 0  # triangles this rank drew in the last frame
         self.balance_ids = [BALANCE_NAMES.index(b) for b in self.planner.balances]  # the CSV's balance column
