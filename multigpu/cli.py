@@ -103,7 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | passes | imbalance | "
                                 "exchange | memory | memory-steps | model-load | latency (frames in flight: wall time, "
                                 "input to photon) | timeline (every rank's phases at "
-                                "--latency 0 and 1, plotted) | peer (beside ParaView + IceT: --model FILE --ranks 1,4)")
+                                "--latency 0 and 1, plotted) | peer (beside ParaView + IceT: --model FILE --ranks 1,4) "
+                                "| simplify (the level-of-detail simplifiers compared: [--model FILE])")
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
     b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)
@@ -111,8 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--ranks", default="4", help="floor, peer: the rank counts to measure, e.g. 4,9,16 or 1,4 "
                                                 "(default 4)")
     b.add_argument("--rounds", type=int, default=2, help="peer, latency: alternated rounds (default 2)")
-    b.add_argument("--out", default="out/peer", help="peer, latency: where the runs and the results CSV go "
-                                                     "(default out/peer, out/latency)")
+    b.add_argument("--out", default="out/peer", help="peer, latency, simplify: where the runs and the results CSV go "
+                                                     "(default out/peer, out/latency, out/simplify)")
     scene_args(b)  # bench floor's worker: the scene it renders
     return ap
 
@@ -167,6 +168,11 @@ def main(argv: list[str] | None = None) -> int:
 
                 bench_latency(args.quick, out=args.out if args.out != "out/peer" else "out/latency",
                               rounds=args.rounds)
+                return 0
+            if args.what == "simplify":
+                from multigpu.studies.simplify import bench_simplify
+
+                bench_simplify(args.model, args.quick, out=args.out if args.out != "out/peer" else "out/simplify")
                 return 0
             if args.what == "timeline":
                 from multigpu.studies.timeline import bench_timeline

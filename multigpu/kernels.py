@@ -9,6 +9,7 @@ Each kernel sits beside the code it serves, as ``<module>_kernel.py``, with its 
 * ``core/splits_kernel.py``: Equalizer's time chooser (time feedback's cuts, which the walk takes);
 * ``core/drawlist_kernel.py``: a rank's mask to run-merged draw commands (of objects, or of parts);
 * ``core/culling_kernel.py``: the parts of the objects a region needs that reach it;
+* ``core/lod_kernel.py``: each object's level of detail from its distance and the pixel bound;
 * ``core/work_kernel.py``: a frame's transfers, every (piece, tile) overlap in message order;
 * ``strategies/cross_kernel.py``: cross-segment balancing (profiles, shares, cuts, piece masks);
 * ``strategies/cost_kernel.py``: the cost model's least-squares fit and term selection;
@@ -37,6 +38,7 @@ from multigpu.core.camera import Camera, look_at, perspective
 from multigpu.core.culling_kernel import _seen
 from multigpu.core.drawlist_kernel import _commands, _part_commands
 from multigpu.core.jit import available
+from multigpu.core.lod_kernel import _choose
 from multigpu.core.tree import gpu_tree
 from multigpu.core.work_kernel import _parts
 from multigpu.scene.parts import with_parts
@@ -47,7 +49,7 @@ from multigpu.strategies.cost_kernel import fit_terms
 
 #: every kernel module, for the tests that check them all (compiled, cached, no Python objects)
 MODULES = ("multigpu.core.bounds_kernel", "multigpu.core.balance_kernel", "multigpu.core.splits_kernel",
-           "multigpu.core.culling_kernel",
+           "multigpu.core.culling_kernel", "multigpu.core.lod_kernel",
            "multigpu.core.drawlist_kernel", "multigpu.core.work_kernel", "multigpu.strategies.cross_kernel",
            "multigpu.strategies.cost_kernel", "multigpu.strategies.base_kernel",
            "multigpu.strategies.adaptive_kernel", "multigpu.strategies.auto_kernel",
@@ -85,6 +87,8 @@ def warm() -> float:
     _parts(np.array([[0, 0, 4, 4]]), np.array([1]), np.array([[0, 0, 2, 2]]))
     _seen(np.zeros((4, 1)), 64.0, 64.0, 0, 0, 64, 64, np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.bool_))
     with_parts(generate_plant(2000, seed=0), 16)  # the parts kernels, as a scene's first load runs them
+    _choose(np.zeros((1, 3)), np.ones(1), np.zeros((1, 2)), np.ones((1, 2), dtype=np.int64), 0.0, 0.0, 5.0, 100.0,
+            0.1, 1.0, np.empty(1, dtype=np.int8), np.empty(1, dtype=np.int64))
     return time.perf_counter() - t0
 
 

@@ -132,3 +132,27 @@ def test_nearer_objects_are_never_coarser(bound):
         levels, _ = chooser.choose(cam, bound, compiled=False)
         got.append(0 if levels is None else int(levels[i]))
     assert got == sorted(got, reverse=True)
+
+
+def test_the_simplifier_benchmark_measures_distance_to_the_surface():
+    """``bench simplify``'s error estimate: a point's distance to a triangle is never more than to
+    any point on it (dense samples), and within their spacing of the nearest."""
+    from scipy.spatial import cKDTree
+
+    from multigpu.studies.simplify import _to_triangles, distances
+
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        a, b, c = rng.random((3, 1, 3))
+        p = rng.random((300, 3)) * 2 - 0.5
+        d = _to_triangles(p, *(np.repeat(x, 300, 0) for x in (a, b, c)))
+        u = rng.random((100_000, 2))
+        u[u.sum(1) > 1] = 1 - u[u.sum(1) > 1]
+        dense = a[0] + (b[0] - a[0]) * u[:, :1] + (c[0] - a[0]) * u[:, 1:]
+        near = cKDTree(dense).query(p)[0]
+        assert (d <= near + 1e-12).all() and (near - d).max() < 0.01
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    f = np.array([[0, 1, 2], [1, 3, 2]])
+    assert max(distances(v, f, v, f)) < 1e-12
+    h, mean = distances(v, f, v + [0, 0, 0.25], f)
+    assert h == pytest.approx(0.25) and mean == pytest.approx(0.25)

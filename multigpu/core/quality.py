@@ -42,6 +42,9 @@ DAMPING = 0.5
 BAND = 0.05
 #: measured frames the controller takes the median of
 WINDOW = 3
+#: the controller's scales and bounds are multiples of 1/STEPS (of a side, of a pixel): timings.csv's
+#: four decimals then give back the very frame (``experiment fidelity`` renders it again)
+STEPS = 64
 #: a run's first frames (setup's last costs, the first waits) teach the controller nothing
 WARMUP = 2
 
@@ -80,9 +83,9 @@ class Controller:
         if self.load >= 1.0:
             return Quality(scale, lod_px, True)
         root = math.sqrt(self.load)
-        s = max(MIN_SCALE, min(scale, scale * math.sqrt(root)))
-        extra = MAX_LOD_PX * (1.0 - root) / (1.0 - math.sqrt(MIN_LOAD))
-        return Quality(s, lod_px + extra, False)
+        s = max(MIN_SCALE, math.floor(scale * math.sqrt(root) * STEPS) / STEPS)
+        extra = math.ceil(MAX_LOD_PX * (1.0 - root) / (1.0 - math.sqrt(MIN_LOAD)) * STEPS) / STEPS
+        return Quality(min(s, scale), lod_px + extra, False)
 
 
 class Fidelity:

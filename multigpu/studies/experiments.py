@@ -21,6 +21,7 @@ from pathlib import Path
 from multigpu.errors import InputError
 from multigpu.studies.beyond import exp_cost, exp_overlap, exp_partition, exp_speedup
 from multigpu.studies.compare import exp_compare
+from multigpu.studies.fidelity import exp_fidelity
 from multigpu.studies.paper import exp_balance, exp_gpus, exp_orbit, exp_resolution, exp_strips
 from multigpu.studies.payoff import exp_payoff
 from multigpu.studies.runs import PAPER, Settings
@@ -29,7 +30,7 @@ from multigpu.studies.walls import exp_walls
 EXPERIMENTS = {"gpus": exp_gpus, "resolution": exp_resolution, "balance": exp_balance, "strips": exp_strips,
                "orbit": exp_orbit, "overlap": exp_overlap, "cost": exp_cost,
                "speedup": exp_speedup, "partition": exp_partition, "compare": exp_compare, "payoff": exp_payoff,
-               "walls": exp_walls}
+               "walls": exp_walls, "fidelity": exp_fidelity}
 
 
 def run(name: str, out: Path, quick: bool = False, results: Path | None = None, rounds: int | None = None) -> int:
