@@ -11,7 +11,7 @@ fi
 STAMP="$VENV/.multigpu-installed"
 WANT="$(cat "$ROOT/pyproject.toml" | sha1sum | cut -d' ' -f1)"
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
-    EXTRAS="test,plots,video"
+    EXTRAS="test,plots,video,bench"
     if ! command -v mpiexec >/dev/null 2>&1 && [ ! -x "$VENV/bin/mpiexec" ]; then
         EXTRAS="$EXTRAS,mpich"
     fi

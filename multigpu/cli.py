@@ -344,6 +344,11 @@ def _scene_info(a) -> int:
     if objs:
         print(f"split      {objs['split']}: {objs['modelled']} objects as modelled -> {objs['objects']}; {objs['why']}")
     per_tri = scene.nbytes / max(scene.n_triangles, 1)
+    lods = scene.meta.get("lods")
+    if lods:
+        borders = "locked" if lods["locked_borders"] else "free"
+        print(f"levels     {lods['levels']} of detail: {lods['objects']} objects simplified, the coarsest "
+              f"{lods['coarsest_triangles']} triangles in all (borders {borders})")
     print(f"memory     {scene.nbytes / 2**20:.1f} MiB in arrays ({per_tri:.1f} B/triangle), peak RSS {peak:.0f} MiB")
     where = ", " + info["cache"] if info["cache"] else ""
     print(f"load       {info['seconds']:.3f} s ({'cache hit' if info['cached'] else 'built'}{where})")

@@ -97,6 +97,14 @@ def _camera(rng):
 def test_choice_is_the_coarsest_within_the_bound_and_the_kernel_agrees(seed, bound):
     cam = _camera(np.random.default_rng(seed))
     chooser = LevelChooser(SCENE, 480)
+    rects = np.random.default_rng(seed).random((SCENE.n_objects, 4))
+    rects[::3] = np.nan  # unseen objects keep level 0
+    got = chooser.choose(cam, bound, rects), chooser.choose(cam, bound, rects, compiled=False)
+    for levels, tris in got:
+        lv = np.zeros(SCENE.n_objects, np.int64) if levels is None else levels.astype(np.int64)
+        assert (lv[::3] == 0).all() and (tris[::3] == SCENE.tris[::3]).all()
+    np.testing.assert_array_equal(*(np.zeros(SCENE.n_objects) if g[0] is None else g[0] for g in got))
+    np.testing.assert_array_equal(got[0][1], got[1][1])
     ref_levels, ref_tris = chooser.choose(cam, bound, compiled=False)
     levels, tris = chooser.choose(cam, bound)
     lv = np.zeros(SCENE.n_objects, np.int64) if levels is None else levels.astype(np.int64)

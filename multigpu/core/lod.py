@@ -32,6 +32,7 @@ class LevelChooser:
         self.tris = np.ascontiguousarray(count, dtype=np.int64) // 3  # (N, L) triangles of each level
         self._rows = np.arange(scene.n_objects)
         self._out = None  # the kernel's output arrays, reused every frame (valid until the next choice)
+        self._entry = None  # the kernel's compiled entry point (``jit.entry``): no type dispatch per frame
 
     @property
     def levels(self) -> int:
@@ -44,14 +45,16 @@ class LevelChooser:
         d = np.sqrt(((self.centers - eye) ** 2).sum(axis=1)) - self.radii
         return focal / np.maximum(d, max(float(camera.near), 1e-12))
 
-    def choose(self, camera: Camera, bound_px: float, compiled: bool | None = None
+    def choose(self, camera: Camera, bound_px: float, rects: np.ndarray | None = None, compiled: bool | None = None
                ) -> tuple[np.ndarray | None, np.ndarray]:
         """((N,) int8 levels, (N,) int64 triangles drawn at them); levels None where every object
         is at level 0 (a bound of 0, or a scene without levels): the draw path of a run without
-        levels. ``compiled``: the one-pass kernel (``lod_kernel.py``) where numba is installed
-        (None), or this numpy reference (False)."""
+        levels. ``rects``: the frame's (N, 4) object rects, NaN where unseen: an unseen object
+        is drawn by no rank and keeps level 0 unchosen. ``compiled``: the one-pass kernel
+        (``lod_kernel.py``) where numba is installed (None), or this numpy reference (False)."""
         if bound_px <= 0 or self.levels == 1:
             return None, self.tris[:, 0]
+        seen = np.ones((len(self.radii), 1)) if rects is None else np.ascontiguousarray(rects[:, :1], dtype=np.float64)
         if jit.use(compiled):
             from multigpu.core.lod_kernel import _choose
 
@@ -60,11 +63,15 @@ class LevelChooser:
             levels, drawn = self._out
             ex, ey, ez = (float(v) for v in camera.position)
             focal = self.height / (2.0 * math.tan(math.radians(camera.fov) / 2.0))
-            coarse = _choose(self.centers, self.radii, self.error, self.tris, ex, ey, ez, focal,
-                             max(float(camera.near), 1e-12), float(bound_px), levels, drawn)
+            args = (self.centers, self.radii, self.error, self.tris, seen, ex, ey, ez, focal,
+                    max(float(camera.near), 1e-12), float(bound_px), levels, drawn)
+            if self._entry is None:
+                self._entry = jit.entry(_choose, args)
+            coarse = self._entry(*args)
             return (levels, drawn) if coarse else (None, self.tris[:, 0])
         px = self.error * self.pixels_per_unit(camera)[:, None]  # (N, L) non-decreasing along each row
         levels = ((px <= bound_px).sum(axis=1) - 1).astype(np.int8)  # level 0's error is 0: always within
+        levels[np.isnan(seen[:, 0])] = 0
         if not levels.any():
             return None, self.tris[:, 0]
         return levels, self.tris[self._rows, levels]

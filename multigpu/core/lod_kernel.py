@@ -9,12 +9,17 @@ import math
 from multigpu.core.jit import compile_all
 
 
-def _choose(centers, radii, error, tris, ex, ey, ez, focal, near, bound, levels, drawn):
+def _choose(centers, radii, error, tris, seen, ex, ey, ez, focal, near, bound, levels, drawn):
     """Each object's coarsest level whose error ``error[i, l] * focal / distance`` is within
-    ``bound`` pixels into ``levels``, its triangles into ``drawn``; how many are above level 0."""
+    ``bound`` pixels into ``levels``, its triangles into ``drawn`` (level 0 where ``seen[i, 0]``
+    is NaN: nobody draws it); how many are above level 0."""
     n, n_levels = error.shape
     coarse = 0
     for i in range(n):
+        if math.isnan(seen[i, 0]):
+            levels[i] = 0
+            drawn[i] = tris[i, 0]
+            continue
         dx, dy, dz = centers[i, 0] - ex, centers[i, 1] - ey, centers[i, 2] - ez
         d = max(math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i], near)
         scale = focal / d

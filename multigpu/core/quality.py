@@ -104,8 +104,9 @@ class Fidelity:
         """Whether any frame may differ from an every-pixel, as-modelled one."""
         return self.controller is not None or self.scale != 1.0 or self.lod_error > 0
 
-    def frame(self, f: int, camera) -> tuple[Quality, np.ndarray | None, np.ndarray]:
-        """Frame ``f``'s quality, each object's level (None: all as modelled) and triangles."""
+    def frame(self, f: int, camera, rects: np.ndarray | None = None) -> tuple[Quality, np.ndarray | None, np.ndarray]:
+        """Frame ``f``'s quality, each object's level (None: all as modelled) and triangles
+        (``rects``: the frame's object rects, NaN where unseen: only seen objects are chosen for)."""
         still = camera == self.last_camera
         self.last_camera = camera
         if self.controller is None or still:
@@ -116,7 +117,7 @@ class Fidelity:
             self.chosen[f] = q
             while len(self.chosen) > 16:  # frames whose times never came (a stopped run)
                 del self.chosen[next(iter(self.chosen))]
-        levels, tris = self.chooser.choose(camera, q.lod_px)
+        levels, tris = self.chooser.choose(camera, q.lod_px, rects)
         return q, levels, tris
 
     def landed(self, f: int, frame_ms: float) -> None:

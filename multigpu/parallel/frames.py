@@ -277,7 +277,7 @@ class Frames:
             self.learn.clear()
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
-            quality, levels, tris = self.fidelity.frame(f, camera)
+            quality, levels, tris = self.fidelity.frame(f, camera, rects)
             self.renderer.scale, self.renderer.levels = quality.scale, levels
         with t.phase("plan"):
             work = self.planner.work(f, rects, self.relay, None if levels is None else tris.copy())

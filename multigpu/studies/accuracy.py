@@ -363,6 +363,9 @@ def run(out: Path, page: Path | None, quick: bool = False) -> int:
         "The stability extremes (near/far ratios, field of view, eye inside a box, near-plane crossings, "
         "offsets, needle rects, 1x16 walls, sums near 2**53) are tests: `tests/test_extremes.py`, "
         "`tests/test_accuracy.py`.", "",
+        "The trades made while the wall runs (render scale, levels of detail, `--target-fps`: frame time against "
+        "PSNR and the pixels that differ, every frame of a target run) are measured with the wall itself by "
+        "`multigpu experiment fidelity`: [RESULTS.md, fidelity](RESULTS.md#fidelity).", "",
         *sections]))
     print(f"accuracy page: {page}")
     return 0

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.errors import InputError
+
 #: the triangle targets, as shares of the input
 TARGETS = (0.25, 1 / 16)
 #: points sampled on each surface for the distance estimate
@@ -34,7 +36,10 @@ def _meshopt(v: np.ndarray, f: np.ndarray, share: float) -> tuple[np.ndarray, np
 
 
 def _fast(v: np.ndarray, f: np.ndarray, share: float) -> tuple[np.ndarray, np.ndarray]:
-    import fast_simplification
+    try:
+        import fast_simplification
+    except ImportError:
+        raise InputError("bench simplify: fast-simplification is not installed (pip install -e '.[bench]')") from None
 
     pts, faces = fast_simplification.simplify(v.astype(np.float64), f.astype(np.int64), target_reduction=1 - share)
     return pts, faces
