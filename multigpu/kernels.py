@@ -87,8 +87,9 @@ def warm() -> float:
     _parts(np.array([[0, 0, 4, 4]]), np.array([1]), np.array([[0, 0, 2, 2]]))
     _seen(np.zeros((4, 1)), 64.0, 64.0, 0, 0, 64, 64, np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.bool_))
     with_parts(generate_plant(2000, seed=0), 16)  # the parts kernels, as a scene's first load runs them
-    _choose(np.zeros((1, 3)), np.ones(1), np.zeros((1, 2)), np.ones((1, 2), dtype=np.int64), np.zeros((1, 1)), 0.0,
-            0.0, 5.0, 100.0, 0.1, 1.0, np.empty(1, dtype=np.int8), np.empty(1, dtype=np.int64))
+    _choose(np.zeros((1, 3)), np.ones(1), np.zeros((1, 2)), np.ones((1, 2), dtype=np.int64), np.zeros((1, 1)),
+            np.zeros(1, dtype=np.int64), 0.0, 0.0, 5.0, 100.0, 0.1, 1.0, np.empty(1, dtype=np.int8),
+            np.empty(1, dtype=np.int64))
     return time.perf_counter() - t0
 
 

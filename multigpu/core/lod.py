@@ -31,6 +31,8 @@ class LevelChooser:
         count = scene.lod_count if have else scene.index_count[:, None]
         self.tris = np.ascontiguousarray(count, dtype=np.int64) // 3  # (N, L) triangles of each level
         self._rows = np.arange(scene.n_objects)
+        # the objects with a coarser level: the only ones a frame chooses for (the city: two in five)
+        self.which = np.flatnonzero(np.isfinite(self.error[:, 1])) if self.levels > 1 else np.zeros(0, np.int64)
         self._out = None  # the kernel's output arrays, reused every frame (valid until the next choice)
         self._entry = None  # the kernel's compiled entry point (``jit.entry``): no type dispatch per frame
 
@@ -58,12 +60,12 @@ class LevelChooser:
         if jit.use(compiled):
             from multigpu.core.lod_kernel import _choose
 
-            if self._out is None:
-                self._out = (np.empty(len(self.radii), dtype=np.int8), np.empty(len(self.radii), dtype=np.int64))
+            if self._out is None:  # the others stay at level 0 for good
+                self._out = (np.zeros(len(self.radii), dtype=np.int8), self.tris[:, 0].copy())
             levels, drawn = self._out
             ex, ey, ez = (float(v) for v in camera.position)
             focal = self.height / (2.0 * math.tan(math.radians(camera.fov) / 2.0))
-            args = (self.centers, self.radii, self.error, self.tris, seen, ex, ey, ez, focal,
+            args = (self.centers, self.radii, self.error, self.tris, seen, self.which, ex, ey, ez, focal,
                     max(float(camera.near), 1e-12), float(bound_px), levels, drawn)
             if self._entry is None:
                 self._entry = jit.entry(_choose, args)

@@ -9,13 +9,15 @@ import math
 from multigpu.core.jit import compile_all
 
 
-def _choose(centers, radii, error, tris, seen, ex, ey, ez, focal, near, bound, levels, drawn):
-    """Each object's coarsest level whose error ``error[i, l] * focal / distance`` is within
-    ``bound`` pixels into ``levels``, its triangles into ``drawn`` (level 0 where ``seen[i, 0]``
-    is NaN: nobody draws it); how many are above level 0."""
-    n, n_levels = error.shape
+def _choose(centers, radii, error, tris, seen, which, ex, ey, ez, focal, near, bound, levels, drawn):
+    """Each object ``which`` lists (those with a coarser level; the others stay at level 0): its
+    coarsest level whose error ``error[i, l] * focal / distance`` is within ``bound`` pixels into
+    ``levels``, its triangles into ``drawn`` (level 0 where ``seen[i, 0]`` is NaN: nobody draws
+    it); how many are above level 0."""
+    n_levels = error.shape[1]
     coarse = 0
-    for i in range(n):
+    for j in range(which.shape[0]):
+        i = which[j]
         if math.isnan(seen[i, 0]):
             levels[i] = 0
             drawn[i] = tris[i, 0]
