@@ -165,8 +165,8 @@ def _rows(name: str, runs: dict, errors: dict, base) -> tuple[list[dict], list[d
                "psnr_median": float(np.median([e[1] for e in err])) if err else 99.0,
                "psnr_min": float(min(e[1] for e in err)) if err else 99.0,
                "differ_share": float(np.mean([e[2] for e in err])) if err else 0.0,
-               "target_fps": target or 0.0, "noise_floor": floor, "within_band": "", "windowed_within_band": "",
-               "settle_frames": "", "reduced_frames": ""}
+               "target_fps": target or 0.0, "noise_floor": floor, "within_band": "-", "windowed_within_band": "-",
+               "settle_frames": "-", "reduced_frames": "-"}  # "-": not a target run
         if target:
             row.update(_judge(period, 1e3 / target))
             row["reduced_frames"] = s["target"]["reduced_frames"]
@@ -231,7 +231,8 @@ def _markdown(rows: list[dict]) -> str:
         lines.append(f"| {r['scene']} | {r['config']} | {r['render_scale']:.2f} | {r['lod_error_px']:.2f} | "
                      f"{r['frame_ms']:.2f} | {r['speedup']:.2f}x | {r['emulated_ms']:.2f} | "
                      f"{r['psnr_median']:.1f} / {r['psnr_min']:.1f} | {100 * r['differ_share']:.1f} % | {hold} | "
-                     f"{r['settle_frames']} | {r['reduced_frames']} | {100 * r['choose_share']:.2f} % |")
+                     f"{r['settle_frames'] if r['target_fps'] else ''} | "
+                     f"{r['reduced_frames'] if r['target_fps'] else ''} | {100 * r['choose_share']:.2f} % |")
     return ("Frame time against image error (`multigpu experiment fidelity`; 2x2 wall of 512x512, 4 ranks; "
             "PSNR 99 = identical). Targets are multiples of the full run's frame rate; \"floor\": the full "
             "run's own frames within 10 % of its median.\n\n" + "\n".join(lines)

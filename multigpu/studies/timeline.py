@@ -14,7 +14,8 @@ from pathlib import Path
 
 #: phase -> (component, colour)
 COMPONENT = {"input": ("load balancing", "#4c72b0"), "learn": ("load balancing", "#4c72b0"),
-             "project": ("load balancing", "#4c72b0"), "plan": ("load balancing", "#4c72b0"),
+             "project": ("load balancing", "#4c72b0"), "choose": ("load balancing", "#4c72b0"),
+             "plan": ("load balancing", "#4c72b0"),
              "cull": ("rendering", "#dd8452"), "render": ("rendering", "#dd8452"),
              "readback": ("rendering", "#dd8452"), "sync": ("synchronization", "#c44e52"),
              "exchange": ("frame exchange", "#55a868"), "display": ("display", "#8172b3"),
