@@ -13,6 +13,7 @@ import pytest
 from mpirun import SMALL, read_png, run_mpi
 from simhosts import SimHosts
 
+from multigpu.gpu.buffers import VERSION as GL_VERSION
 from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
 
 pytestmark = pytest.mark.mpi
@@ -68,7 +69,7 @@ def test_two_hosts_compose_like_one_rank_and_build_the_shared_cache_once(tmp_pat
     partial = [n for n in built if ".part" in n or ".tmp" in n or n.startswith(".")]
     assert built and not partial, built  # whole files only
     # the GL buffers file beside the cache, written once, is what every rank on both hosts draws from
-    gl = [n for n in built if n.endswith(".gl1")]
+    gl = [n for n in built if n.endswith(f".gl{GL_VERSION}")]
     assert len(gl) == 1 and all(r["gl_buffers"].endswith(gl[0]) or gl[0] in r["gl_buffers"]
                                 for r in s["config"]["ranks"]), (gl, s["config"]["ranks"])
     ref = run_mpi(1, [*args(tmp_path / "one"), "--grid", "1x1", "--tile", f"{W}x{H}"],

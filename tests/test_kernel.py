@@ -72,7 +72,7 @@ def same_rects(bmin, bmax, view, proj, dtype):
     ref = BoxProjector(bmin, bmax, dtype, compiled=False)(view, proj, ref_cov)
     got = BoxProjector(bmin, bmax, dtype, compiled=True)(view, proj, got_cov)
     assert np.array_equal(ref, got, equal_nan=True), np.flatnonzero(~np.isclose(ref, got, equal_nan=True).all(1))
-    assert np.array_equal(ref_cov, got_cov)
+    assert np.array_equal(ref_cov, got_cov, equal_nan=True)
     plain = BoxProjector(bmin, bmax, dtype, compiled=True)(view, proj)  # without coverage: the same rects
     assert np.array_equal(plain, got, equal_nan=True)
     for order in (0, 1):  # the boxes always by groups (0), always in their own order (1): the same rects
@@ -128,7 +128,7 @@ def test_compiled_frame_forms_the_reference_matrices_and_rects(data, n, s, shift
     got = BoxProjector(*boxes, compiled=True).frame(camera, size, got_cov)
     for a, b in zip(ref, got):
         assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
-    assert np.array_equal(ref_cov, got_cov)
+    assert np.array_equal(ref_cov, got_cov, equal_nan=True)
     assert np.array_equal(ref[0], look_at(camera.position, camera.target, camera.up))
     assert np.array_equal(ref[1], perspective(fov, size[0] / size[1], camera.near, camera.far))
     on_target = Camera(eye, eye, (0, 0, 1), fov, 0.1 * s, 1e3 * s)

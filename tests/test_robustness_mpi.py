@@ -239,7 +239,7 @@ def test_ctrl_c_ends_a_job_waiting_on_a_frozen_rank(tmp_path):
 
 
 def test_second_job_on_the_same_out_is_refused(tmp_path):
-    proc, kill = _start(["--frames", "2000"], tmp_path)
+    proc, kill = _start(["--frames", "100000"], tmp_path)  # still running when the second job starts
     try:
         _wait_for_frames(tmp_path / "o" / "timings.csv", 4)
         res = run_mpi(2, ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "3", "--out", str(tmp_path / "o")])

@@ -115,7 +115,7 @@ def test_none_and_strips_give_same_images_and_schema(tmp_path, reference):
     for r in rows:  # the balancing CPU is its four phases, each timed (learn, project, choose, plan)
         parts = [float(r[c]) for c in ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")]
         assert min(parts) >= 0 and float(r["projection_cpu_ms"]) > 0 and float(r["planning_cpu_ms"]) > 0
-        assert sum(parts) == pytest.approx(float(r["load_balancing_cpu_ms"]), abs=2e-4)  # 4 decimals each
+        assert sum(parts) == pytest.approx(float(r["load_balancing_cpu_ms"]), abs=3e-4)  # 4 decimals each
     cpu = s["cpu"]
     phases = ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
     assert sum(cpu[c] for c in phases) == pytest.approx(cpu["load_balancing_cpu_ms"], rel=1e-3)
