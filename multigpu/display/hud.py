@@ -50,8 +50,9 @@ def overlay(img: np.ndarray, rects, alpha: float = 0.18, origin=(0, 0), scale: i
 
 
 def stats_panel(fps: float, balance: str, phases: np.ndarray, triangles: np.ndarray, mode: str,
-                width: int = 220) -> np.ndarray:
-    """The statistics panel as an RGB image: a line of FPS, strategy and mode, a line of
+                width: int = 220, quality: str = "") -> np.ndarray:
+    """The statistics panel as an RGB image: a line of FPS, strategy and mode (and ``quality``:
+    the frame's render scale and LOD bound where below full), a line of
     imbalance, then one bar per rank with its balancing, rendering and exchange milliseconds
     (``phases``, (K, 3)) stacked to scale, and the scale."""
     from PIL import Image, ImageDraw, ImageFont
@@ -64,7 +65,7 @@ def stats_panel(fps: float, balance: str, phases: np.ndarray, triangles: np.ndar
     font = ImageFont.load_default()
     mean = float(np.mean(triangles)) if K else 0.0
     imbalance = float(np.max(triangles)) / mean if mean > 0 else 1.0
-    draw.text((pad, pad), f"{fps:5.1f} fps  {balance}  {mode}", fill=(240, 240, 240), font=font)
+    draw.text((pad, pad), f"{fps:5.1f} fps  {balance}  {mode}{quality}", fill=(240, 240, 240), font=font)
     draw.text((pad, pad + line), f"imbalance {imbalance:.2f} (max/mean triangles)", fill=(200, 200, 200), font=font)
     total = np.sum(phases, axis=1)
     top = max(float(total.max()) if K else 0.0, 1e-6)

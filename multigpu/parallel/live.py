@@ -89,8 +89,10 @@ class Live:
         get = lambda c: rows[:, self.col[c]]
         phases = np.stack([get("load_balancing_cpu_ms"), get("rendering_cpu_ms"), get("frame_exchange_cpu_ms")], 1)
         mode = ("orbit" if control.orbiting else "walk") if self.cfg.path == INTERACTIVE else "path"
+        scale, lod = float(get("render_scale")[0]), float(get("lod_error_px")[0])
+        quality = f"  x{scale:.2f} {lod:.1f}px" if 0 < scale < 1.0 or lod > 0 else ""  # render scale, LOD bound
         return stats_panel(self.fps, self.balances[control.balance], phases, get("triangles"), mode,
-                           width=min(220, self.cfg.tile[0]))
+                           width=min(220, self.cfg.tile[0]), quality=quality)
 
     def tile(self, back: np.ndarray, work: Work, control: Control, rows: np.ndarray) -> np.ndarray:
         """What this rank's window shows: the composed tile, with the overlays that are on.
