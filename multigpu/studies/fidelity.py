@@ -20,7 +20,6 @@ run's own spread (the share of its frames within 10 % of its median) is this mac
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import math
 from pathlib import Path
@@ -28,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.studies.runs import Settings, _plt, walk
+from multigpu.studies.tables import write_csv
 
 #: fixed settings measured: (render scale, LOD bound px)
 FIXED = ((0.75, 0.0), (0.5, 0.0), (0.25, 0.0), (1.0, 1.0), (1.0, 4.0), (0.5, 4.0))
@@ -53,8 +53,8 @@ def exp_fidelity(s: Settings, out: Path) -> str:
         r, f = _scene(s, out / name, name, flags, n, tile)
         rows += r
         frames += f
-    _write(out / "fidelity.csv", rows)
-    _write(out / "fidelity_frames.csv", frames)
+    write_csv(out / "fidelity.csv", rows, ".4f")
+    write_csv(out / "fidelity_frames.csv", frames, ".4f")
     _plot(rows, frames, out)
     return _markdown(rows)
 
@@ -175,14 +175,6 @@ def _rows(name: str, runs: dict, errors: dict, base) -> tuple[list[dict], list[d
             frames.append({"scene": name, "config": label, "frame": f, "frame_ms": float(period[f]),
                            "render_scale": sc, "lod_error_px": lo, "psnr": psnr, "differ_share": share})
     return rows, frames
-
-
-def _write(path: Path, rows: list[dict]) -> None:
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: f"{v:.4f}" if isinstance(v, float) else v for k, v in r.items()})
 
 
 def _plot(rows: list[dict], frames: list[dict], out: Path) -> None:

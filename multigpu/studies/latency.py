@@ -8,11 +8,12 @@ latency, medians over the rounds; the cut in wall time against ``--latency 0``. 
 
 from __future__ import annotations
 
-import csv
 import json
 import sys
 import tempfile
 from pathlib import Path
+
+from multigpu.studies.tables import write_csv
 
 SCENES = {"plant": ["--scene", "plant"], "city": ["--scene", "city"]}
 LATENCIES = (0, 1, 2)
@@ -60,11 +61,7 @@ def _table(got: dict, frames: int, rounds: int, dest: Path) -> list[dict]:
         base = next(b for b in rows if b["scene"] == row["scene"] and b["latency"] == 0)
         row["wall_cut"] = 1.0 - row["wall_ms"] / base["wall_ms"]
     dest.mkdir(parents=True, exist_ok=True)
-    with open(dest / "latency.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        for row in rows:
-            w.writerow({k: f"{v:.3f}" if isinstance(v, float) else v for k, v in row.items()})
+    write_csv(dest / "latency.csv", rows, ".3f")
     print(f"frames in flight, 4 ranks, {frames} frames, {rounds} rotated rounds, medians:")
     print(f"{'scene':>6} {'latency':>7} {'wall ms':>8} {'cut':>6} {'emulated ms':>11} {'input to photon':>16}")
     for row in rows:

@@ -12,7 +12,6 @@ with ``--model FILE``, the user's. Writes ``simplify.csv`` (docs/results/simplif
 
 from __future__ import annotations
 
-import csv
 import sys
 import time
 from pathlib import Path
@@ -20,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError
+from multigpu.studies.tables import write_csv
 
 #: the triangle targets, as shares of the input
 TARGETS = (0.25, 1 / 16)
@@ -137,11 +137,7 @@ def bench_simplify(model: str | None, quick: bool, out: str = "out/simplify") ->
                              "new_vertices": int(v1 is not v)})
     dest = Path(out)
     dest.mkdir(parents=True, exist_ok=True)
-    with open(dest / "simplify.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: f"{v:.6g}" if isinstance(v, float) else v for k, v in r.items()})
+    write_csv(dest / "simplify.csv", rows)
     print(f"{'mesh':>18} {'library':>20} {'target':>7} {'reached':>8} {'s/Mtri':>7} {'Hausdorff':>10} {'mean':>9}")
     for r in rows:
         print(f"{r['mesh']:>18} {r['library']:>20} {r['target']:7.4f} {r['reached']:8.4f} {r['s_per_mtri']:7.2f} "

@@ -6,13 +6,13 @@ import csv
 from pathlib import Path
 
 
-def write_csv(path: Path, rows: list[dict]) -> None:
-    """``rows`` (dicts with the same keys) as CSV; floats with 6 significant digits."""
+def write_csv(path: Path, rows: list[dict], fmt: str = ".6g") -> None:
+    """``rows`` (dicts with the same keys) as CSV; floats in ``fmt`` (6 significant digits)."""
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+            w.writerow({k: (format(v, fmt) if isinstance(v, float) else v) for k, v in r.items()})
 
 
 def md_table(rows: list[dict], cols: list[tuple[str, str, str]]) -> str:
