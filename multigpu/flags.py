@@ -157,7 +157,8 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
     b.add_argument("--decomposition", default=d["decomposition"], metavar=_one_of(list(DECOMPOSITIONS)),
                    help="how a frame is divided: screen = the paper's screen partition (balanced by --balance); "
                         "db = sort-last database decomposition, depth-composited; bins = static bin patterns, "
-                        "no balancer")
+                        "no balancer; hybrid = the screen partition (--balance) for most objects, the wide ones "
+                        "drawn once and depth-composited")
     b.add_argument("--strips", type=int, default=d["strips"], metavar="N", help="strips per split axis (>= 2)")
     b.add_argument("--bounds", default=d["bounds"], metavar=_one_of(["box", "sphere"]),
                    help="object bounds: box (8 corners) or sphere")

@@ -14,7 +14,7 @@ pytestmark = pytest.mark.mpi
 FRAMES = 3
 WALLS = {"2x2": ((2, 2), (60, 48), (7, 5)), "1x3": ((1, 3), (40, 96), (11, 0))}
 KINDS = {"cross": ["--balance", "cross"], "strips": ["--balance", "strips"], "db": ["--decomposition", "db"],
-         "bins": ["--decomposition", "bins", "--bin-size", "16"]}
+         "bins": ["--decomposition", "bins", "--bin-size", "16"], "hybrid": ["--decomposition", "hybrid"]}
 
 
 def walk(out, grid, tile, mullion=None, extra=()):

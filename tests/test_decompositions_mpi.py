@@ -18,6 +18,9 @@ DECOMPOSITIONS = {
     # the host's ranks project a slice of the bounds each into one shared array (uneven on 1x3)
     "shared-projection": ["--projection", "shared"],
     "db-shared-projection": ["--decomposition", "db", "--projection", "shared"],
+    # the wide objects drawn once, depth-composited; regions by strips and by cross's pieces
+    "hybrid": ["--decomposition", "hybrid"],
+    "hybrid-cross": ["--decomposition", "hybrid", "--balance", "cross"],
 }
 
 
@@ -56,12 +59,13 @@ def test_walls_equal_one_rank_render(tmp_path, references, name, grid, tile):
 
 @pytest.mark.parametrize("latency", ["1", "2"])
 @pytest.mark.parametrize("name", ["screen", "db", "bins-vdc", "cross", "db-shared-projection", "messages",
-                                  "db-messages"])
+                                  "db-messages", "hybrid", "hybrid-messages"])
 def test_frames_in_flight_compose_what_the_strict_order_does(tmp_path, references, name, latency):
     """--latency: frames planned and drawn while earlier ones travel; every composite the same
     bit for bit (a shared segment and messages alike, depth too)."""
     extra = {**DECOMPOSITIONS, "screen": [], "messages": ["--exchange", "messages"],
-             "db-messages": ["--decomposition", "db", "--exchange", "messages"]}[name]
+             "db-messages": ["--decomposition", "db", "--exchange", "messages"],
+             "hybrid-messages": ["--decomposition", "hybrid", "--exchange", "messages"]}[name]
     out = walk(tmp_path, name, (2, 2), (60, 48), [*extra, "--latency", latency, "--timeline"])
     for f, (got, want) in enumerate(zip(frames_of(out), references[(120, 96)])):
         assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"

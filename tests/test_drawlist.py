@@ -83,3 +83,25 @@ def test_built_in_blocks_equals_the_whole_buffer_at_once(monkeypatch):
     objects = np.repeat(np.arange(scene.n_objects), count)
     pairs = np.unique(np.stack([absolute, objects]), axis=1)
     assert len(np.unique(pairs[0])) < pairs.shape[1]  # vertices shared between objects were there to test
+
+
+def test_wide_objects_are_drawn_last_in_morton_order():
+    from multigpu.core.drawlist import WIDE_SHARE, draw_order, morton_codes, wide_objects
+
+    rng = np.random.default_rng(5)
+    n = 500
+    centers = rng.random((n, 3))
+    half = rng.exponential(0.05, (n, 1))
+    tris = rng.integers(1, 400, n)
+    wide = wide_objects(tris, centers - half, centers + half)
+    size = tris * np.linalg.norm(2 * half, axis=1)
+    assert size[wide].min() >= size[~wide].max()  # the biggest by triangles x world size
+    held = tris[wide].sum() / tris.sum()
+    assert WIDE_SHARE <= held <= WIDE_SHARE + tris.max() / tris.sum()  # just enough of the triangles
+    order = draw_order(centers, wide)
+    assert sorted(order.tolist()) == list(range(n)) and not wide[order[:n - wide.sum()]].any()
+    for part in (order[~wide[order]], order[wide[order]]):
+        assert (np.diff(morton_codes(centers)[part].astype(np.int64)) >= 0).all()
+    assert not wide_objects(tris, centers, centers, 0.0).any()
+    assert not wide_objects(np.full(3, 2), centers[:3], centers[:3] + 1).any()  # none stands out
+    assert (draw_order(centers) == morton_order(centers)).all()

@@ -318,7 +318,9 @@ def test_compiled_draw_commands_equal_the_reference(data, n):
     counts = np.array(data.draw(st.lists(st.sampled_from([0, 3, 6, 30]), min_size=n, max_size=n)), dtype=np.int64)
     rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
     verts = max(int(counts.sum()), 1)
-    scene = SimpleNamespace(n_objects=n, index_count=counts, centers=rng.random((n, 3)),
+    centers = rng.random((n, 3))
+    scene = SimpleNamespace(n_objects=n, index_count=counts, centers=centers, bmin=centers - rng.random((n, 1)),
+                            bmax=centers + rng.random((n, 1)),
                             indices=rng.integers(0, verts, int(counts.sum())).astype(np.uint32),
                             base_vertex=np.zeros(n, dtype=np.int64),
                             first_index=np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64),

@@ -107,13 +107,16 @@ class Canvas:
         shift = self._shift()
         spans = None
         rects, masks, loads = [], [], np.zeros(work.ranks, dtype=np.int64)
+        front = None if work.front is None else [0] * work.ranks
         for k in range(work.ranks):  # ranks, not objects
             R = np.asarray(work.rects[k], dtype=np.int64).reshape(-1, 4)
             lo = np.maximum(R[:, None, :2], vtiles[None, :, :2])
             hi = np.minimum(R[:, None, 2:], vtiles[None, :, 2:])
-            p, t = np.nonzero((hi > lo).all(axis=-1))  # (piece, tile) that meet
+            p, t = np.nonzero((hi > lo).all(axis=-1))  # (piece, tile) that meet, by piece
             cut = np.concatenate([lo[p, t], hi[p, t]], axis=1)
             rects.append(cut + np.tile(shift[t], 2))
+            if front is not None:  # the cuts of the front pieces come first
+                front[k] = int(np.count_nonzero(p < work.front[k]))
             if len(work.masks[k]) != len(R):  # masks of this rank not computed here (bins: own rank only)
                 masks.append(work.masks[k])
                 loads[k] = work.loads[k]
@@ -128,7 +131,8 @@ class Canvas:
                     m[i] &= overlaps(spans, cut[i])
             masks.append(m)
             loads[k] = int((m.astype(np.int64) @ np.asarray(tris, dtype=np.int64)).sum()) if len(m) else 0
-        return Work(tuple(rects), tuple(masks), loads, work.depth, work.partition)
+        return Work(tuple(rects), tuple(masks), loads, work.depth, work.partition,
+                    None if front is None else tuple(front))
 
 
 def _squeeze(x: np.ndarray, n: int, t: int, m: int, low: bool):

@@ -42,6 +42,45 @@ def morton_order(points: np.ndarray, bits: int = MORTON_BITS) -> np.ndarray:
     return np.argsort(morton_codes(points, bits), kind="stable")
 
 
+#: the objects drawn last (``wide_objects``): the biggest in triangles times world size, holding
+#: this share of the scene's triangles (chosen by ``multigpu experiment walls``' hybrid runs)
+WIDE_SHARE = 0.25
+
+
+def wide_objects(tris: np.ndarray, bmin: np.ndarray, bmax: np.ndarray, share: float = WIDE_SHARE) -> np.ndarray:
+    """(N,) bool: the objects most likely to cross many regions of a wall, the largest by
+    triangles times world diagonal (above the median), taken in that order until they hold
+    ``share`` of the triangles. An object is drawn by every region its rect touches, so these
+    make most of the triangles drawn twice on big walls. The hybrid decomposition draws them
+    once, depth-composited; every decomposition draws them last, so depth ties resolve as in a
+    one-rank render (``decompositions/hybrid.py``)."""
+    tris = np.asarray(tris, dtype=np.float64)
+    out = np.zeros(tris.size, dtype=bool)
+    if tris.size == 0 or share <= 0:
+        return out
+    size = np.linalg.norm(np.asarray(bmax, dtype=np.float64) - np.asarray(bmin, dtype=np.float64), axis=1)
+    weight = tris * size
+    rank = np.argsort(-weight, kind="stable")
+    held = np.cumsum(tris[rank])
+    out[rank[:int(np.searchsorted(held, share * held[-1], side="left")) + 1]] = True
+    return out & (weight > np.median(weight))  # only objects that stand out: none where all are alike
+
+
+def draw_order(centers: np.ndarray, wide: np.ndarray | None = None) -> np.ndarray:
+    """The renderer's object order: the Morton order of the centres, the ``wide`` objects after
+    all others (each part in Morton order)."""
+    codes = morton_codes(centers)
+    if wide is None or not np.any(wide):
+        return np.argsort(codes, kind="stable")
+    return np.lexsort((codes, np.asarray(wide, dtype=bool)))
+
+
+def scene_order(scene) -> tuple[np.ndarray, np.ndarray]:
+    """(order, wide): a scene's draw order and its wide objects (``draw_order``, ``wide_objects``)."""
+    wide = wide_objects(np.asarray(scene.index_count) // 3, scene.bmin, scene.bmax)
+    return draw_order(scene.centers, wide), wide
+
+
 def owners(starts: np.ndarray, s: int, e: int) -> np.ndarray:
     """The object of every position in ``[s, e)``, objects laid out back to back from
     ``starts`` ((N+1,) cumulative, from 0)."""
@@ -56,7 +95,8 @@ class DrawList:
 
     Attributes
     ----------
-    order : (N,) int64  object ids in buffer order.
+    order : (N,) int64  object ids in buffer order (``draw_order``: Morton, the wide objects last).
+    wide : (N,) bool  the objects drawn last (``wide_objects``).
     indices : (3T,) uint32  absolute vertex indices (base vertex folded in), objects in ``order``
         (made on demand from the scene; ``index_blocks`` streams it).
     vertex_object : (V,) uint32  object id of every vertex (for per-object colour; on demand).
@@ -64,7 +104,7 @@ class DrawList:
 
     def __init__(self, scene):
         count = scene.index_count.astype(np.int64)
-        self.order = morton_order(scene.centers)
+        self.order, self.wide = scene_order(scene)
         lengths = count[self.order]
         self.offsets = np.zeros(scene.n_objects + 1, dtype=np.int64)  # buffer offset of each object in order
         np.cumsum(lengths, out=self.offsets[1:])

@@ -3,7 +3,9 @@
 A colour-only part (screen, bins) is copied: such parts tile the display exactly. A depth part
 (sort-last) replaces the tile's fragments only where it is strictly nearer; parts arrive in
 ascending sender order and ranks own ascending ranges of the draw order, so a depth tie keeps
-the lower rank's fragment, as a one-rank GL_LESS render keeps the first drawn. Pure numpy.
+the lower rank's fragment, as a one-rank GL_LESS render keeps the first drawn. A hybrid's screen
+regions hold the objects drawn before its wide ones (``core.drawlist.draw_order``), so their
+parts win ties (``ties``: nearer or equal) whatever order they arrive in. Pure numpy.
 """
 
 from __future__ import annotations
@@ -12,16 +14,16 @@ import numpy as np
 
 
 def merge_part(color: np.ndarray, depth: np.ndarray | None, tile_origin, rect, rgb: np.ndarray,
-               z: np.ndarray | None) -> None:
+               z: np.ndarray | None, ties: bool = False) -> None:
     """Put part ``rect`` (canvas pixels ``[x0, y0, x1, y1)``) with pixels ``rgb`` (h, w, 3) and,
     sort-last, ``z`` (h, w) into the tile ``color`` (th, tw, 3) / ``depth`` (th, tw) whose
-    lower-left canvas pixel is ``tile_origin``."""
+    lower-left canvas pixel is ``tile_origin``; ``ties``: the part wins depth ties."""
     x0, y0, x1, y1 = rect
     tx0, ty0 = int(tile_origin[0]), int(tile_origin[1])
     dst = np.s_[y0 - ty0:y1 - ty0, x0 - tx0:x1 - tx0]
     if depth is None:
         color[dst] = rgb
         return
-    nearer = z < depth[dst]
+    nearer = z <= depth[dst] if ties else z < depth[dst]
     color[dst][nearer] = rgb[nearer]
     depth[dst][nearer] = z[nearer]

@@ -7,7 +7,9 @@ display segment it helps for cross-segment balancing, and for sort-last (databas
 decomposition the rect where its objects project, rendered with depth. Every piece is cut by
 the display tiles it overlaps, and each part travels to the tile's owner (``transfers``).
 Colour-only pieces tile the display exactly and are copied; depth pieces overlap and the
-owner keeps the nearest fragment.
+owner keeps the nearest fragment. A hybrid's ranks each render a screen region and a depth piece
+of the wide objects: the regions (a rank's first ``front`` pieces) win depth ties, the depth
+pieces lose them (``core/merge.py``).
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ class Work(NamedTuple):
     loads : (K,) int64  triangles each rank processes (an object drawn in two pieces counts twice).
     depth : whether pieces carry depth and are composited by the nearest fragment (sort-last).
     partition : the screen strategy's partition (for its ``observe`` and reports), if any.
+    front : (K,) how many of each rank's first pieces are screen regions that win depth ties
+        (a hybrid's; None: none do).
 
     Immutable, and a named tuple rather than a frozen dataclass: one is made every frame, and
     a frozen dataclass sets each field through ``object.__setattr__`` (~8 us of CPU more with
@@ -37,6 +41,7 @@ class Work(NamedTuple):
     loads: np.ndarray
     depth: bool = False
     partition: Partition | None = None
+    front: tuple | None = None
 
     @property
     def ranks(self) -> int:
@@ -71,12 +76,13 @@ def from_partition(part: Partition, tris: np.ndarray) -> Work:
 
 class Piece(NamedTuple):
     """Part ``rect`` of sender's piece ``index`` that lands on receiver's tile (a named tuple:
-    a frame makes a few, built at C speed)."""
+    a frame makes a few, built at C speed); ``ties``: it wins depth ties (a hybrid's region)."""
 
     sender: int
     receiver: int
     index: int
     rect: tuple[int, int, int, int]
+    ties: bool = False
 
     @property
     def pixels(self) -> int:
@@ -101,7 +107,8 @@ def transfers(work: Work, tiles: np.ndarray, compiled: bool | None = None) -> li
     if sum(counts) * len(T) > SMALL and jit.use(compiled):
         R = np.array([rect for mine in pieces for rect in mine], dtype=np.int64).reshape(-1, 4)
         rows = _parts(R, np.array(counts, dtype=np.int64), np.array(T, dtype=np.int64).reshape(-1, 4))
-        return [Piece(s, r, i, (x0, y0, x1, y1)) for s, r, i, x0, y0, x1, y1 in rows.tolist()]
+        out = [Piece(s, r, i, (x0, y0, x1, y1)) for s, r, i, x0, y0, x1, y1 in rows.tolist()]
+        return out if work.front is None else _fronted(out, work.front)
     out = []
     for s, mine in enumerate(pieces):  # senders, tiles, the sender's pieces: the sorted order
         for r, (a0, b0, a1, b1) in enumerate(T):
@@ -111,7 +118,12 @@ def transfers(work: Work, tiles: np.ndarray, compiled: bool | None = None) -> li
                     ly, hy = (y0 if y0 > b0 else b0), (y1 if y1 < b1 else b1)
                     if hy > ly:
                         out.append(Piece(s, r, i, (lx, ly, hx, hy)))
-    return out
+    return out if work.front is None else _fronted(out, work.front)
+
+
+def _fronted(parts: list[Piece], front) -> list[Piece]:
+    """``parts`` with ``ties`` set on those of a rank's first ``front[sender]`` pieces."""
+    return [p._replace(ties=True) if p.index < front[p.sender] else p for p in parts]  # parts, not objects
 
 
 def pieces_tile_display(work: Work, size) -> bool:

@@ -3,7 +3,8 @@
 * ``screen``: the paper's sort-first screen partition with sort-last region exchange, around
   any balancing strategy (``--balance``);
 * ``db``: sort-last database decomposition, depth-composited onto the display tiles;
-* ``bins``: static bin patterns (sort-middle emulation), no balancer.
+* ``bins``: static bin patterns (sort-middle emulation), no balancer;
+* ``hybrid``: the screen partition for most objects, the wide ones drawn once, depth-composited.
 
 Every decomposition writes the same timing columns and composes walls bit-identical to a
 one-rank render. Pure: no MPI, no GL.
@@ -15,9 +16,10 @@ from multigpu.core.bins import PATTERNS
 from multigpu.decompositions.base import Decomposition
 from multigpu.decompositions.bins import Bins
 from multigpu.decompositions.db import RANGES, Database
+from multigpu.decompositions.hybrid import Hybrid
 from multigpu.decompositions.screen import Screen
 
-REGISTRY: dict[str, type] = {cls.name: cls for cls in (Screen, Database, Bins)}
+REGISTRY: dict[str, type] = {cls.name: cls for cls in (Screen, Database, Bins, Hybrid)}
 
 
 def make_decomposition(cfg, scene, balance: str | None = None, rank: int | None = None) -> Decomposition:
@@ -30,4 +32,5 @@ def make_decomposition(cfg, scene, balance: str | None = None, rank: int | None 
     return REGISTRY[cfg.decomposition].from_config(cfg, scene, balance or cfg.balance, rank)
 
 
-__all__ = ["REGISTRY", "PATTERNS", "RANGES", "Decomposition", "Screen", "Database", "Bins", "make_decomposition"]
+__all__ = ["REGISTRY", "PATTERNS", "RANGES", "Decomposition", "Screen", "Database", "Bins", "Hybrid",
+           "make_decomposition"]

@@ -17,6 +17,7 @@ from multigpu.core.work import Work
 class Bins:
     name = "bins"
     depth = False
+    layers = 1
     needs_coverage = False
 
     def __init__(self, grid, size, bin_size: int = 64, pattern: str = "diagonal", rank: int | None = None):

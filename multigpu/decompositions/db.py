@@ -2,7 +2,7 @@
 Moreland et al. 2001 on tiled displays).
 
 Objects are ordered along the renderer's own draw order (the Morton order of their centres,
-``core.drawlist.morton_order``) and cut into K contiguous ranges of equal triangles: over the
+the wide objects last: ``core.drawlist.scene_order``) and cut into K contiguous ranges of equal triangles: over the
 objects visible this frame (``ranges="visible"``, rebalanced every frame) or over all objects
 (``"static"``, fixed). A range is compact in space, so a rank's objects project to a small part
 of the display; the rank renders them with depth over the bounding rect of their projections
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.core.drawlist import morton_order
+from multigpu.core.drawlist import scene_order
 from multigpu.core.regions import pixel_spans
 from multigpu.core.work import Work
 
@@ -42,20 +42,21 @@ class Database:
 
     name = "db"
     depth = True
+    layers = 1
     needs_coverage = False
 
-    def __init__(self, grid, size, centers: np.ndarray, tris: np.ndarray, ranges: str = "visible"):
+    def __init__(self, grid, size, order: np.ndarray, tris: np.ndarray, ranges: str = "visible"):
         if ranges not in RANGES:
             raise ValueError(f"db ranges must be one of {', '.join(RANGES)}, got '{ranges}'")
         self.k = int(grid[0]) * int(grid[1])
         self.size = tuple(size)
-        self.order = morton_order(centers)
+        self.order = np.asarray(order, dtype=np.int64)  # the draw order
         self.ranges = ranges
         self.static_owner = ranges_by_weight(self.order, tris, self.k)
 
     @classmethod
     def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Database":
-        return cls(cfg.grid, cfg.size, scene.centers, scene.tris, cfg.db_ranges)
+        return cls(cfg.grid, cfg.size, scene_order(scene)[0], scene.tris, cfg.db_ranges)
 
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
         spans, onscreen = pixel_spans(rects, self.size)
@@ -82,4 +83,4 @@ class Database:
         """Ranges follow triangles; measured times are not used."""
 
     def report(self) -> dict:
-        return {"name": self.name, "ranges": self.ranges, "order": "morton (the draw order)"}
+        return {"name": self.name, "ranges": self.ranges, "order": "the draw order (morton, wide objects last)"}

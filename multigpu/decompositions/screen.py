@@ -14,6 +14,7 @@ class Screen:
 
     name = "screen"
     depth = False
+    layers = 1
 
     def __init__(self, strategy):
         self.strategy = strategy

@@ -28,8 +28,9 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-#: the file's layout and the packing it holds (2: levels of detail in the index buffer); a change makes a new name
-VERSION = 2
+#: the file's layout and the packing it holds (2: levels of detail in the index buffer; 3: wide objects
+#: drawn last); a change makes a new name
+VERSION = 3
 MAGIC = b"MULTIGPU-GL-BUFFERS\n"
 PAGE = mmap.PAGESIZE
 #: bytes per block when a buffer is uploaded or written

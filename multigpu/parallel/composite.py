@@ -109,7 +109,7 @@ def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bo
 
 def _merge(color, depth, tile, views) -> None:
     for p, rgb, z in views:  # parts, not pixels
-        merge_part(color, depth, tile[:2], p.rect, rgb, z)
+        merge_part(color, depth, tile[:2], p.rect, rgb, z, p.ties)
 
 
 class Messages:

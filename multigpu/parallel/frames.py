@@ -111,7 +111,7 @@ class Frames:
         shared, why = None, None
         if cfg.exchange != "messages":
             shared, why = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout, cfg.exchange == "shared",
-                                            slots=3 if cfg.latency else 2)
+                                            slots=3 if cfg.latency else 2, layers=self.planner.decomposition.layers)
         self.exchange: Exchange = shared or Messages(comm, cfg.timeout)
         # the bounds' projection: a slice per rank of a host into one shared array, where it can be
         self.projection: Projection

@@ -150,13 +150,14 @@ class SharedPieces:
 
     @classmethod
     def make(cls, comm, size: tuple[int, int], with_depth: bool, timeout: float,
-             asked: bool = True, slots: int = 2) -> "tuple[SharedPieces | None, str | None]":
+             asked: bool = True, slots: int = 2, layers: int = 1) -> "tuple[SharedPieces | None, str | None]":
         """The backend, or None and why not (every rank the same). ``asked``: the user chose
         ``--exchange shared``, so ranks on several hosts are an error, not a reason. ``slots``:
-        frames a rank's segment holds at once (2; 3 with frames in flight, ``frames.slots``)."""
+        frames a rank's segment holds at once (2; 3 with frames in flight, ``frames.slots``).
+        ``layers``: how many times a rank's pieces may cover the display (the decomposition's)."""
         from mpi4py import MPI
 
-        per_half = size[0] * size[1] * (7 if with_depth else 3)  # a rank's parts never exceed the display
+        per_half = size[0] * size[1] * (7 if with_depth else 3) * layers  # a rank's parts: at most its layers
         K = comm.Get_size()
         node = comm.Split_type(MPI.COMM_TYPE_SHARED)
         try:
