@@ -284,3 +284,31 @@ def test_bad_weights_are_refused_by_either_path_in_the_same_order(compiled, tile
         with pytest.raises(ValueError, match=message):  # the weights first, as the reference
             run(bad, tris)
     run(rects, np.r_[np.zeros(n - 2, dtype=np.int64), 2**61, 2**61 - 1])  # just below: accepted
+
+
+def test_shares_set_each_split_s_balratio():
+    """Per-rank shares (a faster GPU a larger one): equal shares are the paper's nl / nr, the
+    compiled walk equals the reference, and a rank of share 2 gets about twice the triangles."""
+    from multigpu.core.balance import node_ratios, partition
+    from multigpu.core.tree import gpu_tree
+
+    rng = np.random.default_rng(11)
+    n = 4000
+    lo = rng.random((n, 2))
+    rects = np.c_[lo, lo + rng.exponential(0.004, (n, 2))]
+    tris = rng.integers(1, 50, n)
+    for grid in ((1, 2), (2, 2), (3, 4)):
+        k = grid[0] * grid[1]
+        plain = partition(rects, tris, grid, (640, 480), 256)
+        same = partition(rects, tris, grid, (640, 480), 256, shares=np.full(k, 3.0))
+        assert (plain.regions == same.regions).all()
+        shares = rng.uniform(0.5, 2.0, k)
+        ref = partition(rects, tris, grid, (640, 480), 256, compiled=False, shares=shares)
+        fast = partition(rects, tris, grid, (640, 480), 256, compiled=True, shares=shares)
+        assert (ref.regions == fast.regions).all() and (ref.loads == fast.loads).all()
+        tree = gpu_tree(*grid)
+        assert np.allclose(node_ratios(tree, np.ones(k)), [nd.low.count / nd.high.count for nd in tree.internal])
+    two = partition(rects, tris, (1, 2), (640, 480), 256, shares=[2.0, 1.0])
+    assert abs(two.loads[0] / two.loads[1] - 2.0) < 0.1
+    with pytest.raises(ValueError, match="shares must be 2 positive"):
+        partition(rects, tris, (1, 2), (640, 480), 256, shares=[1.0, 0.0])

@@ -223,7 +223,7 @@ def test_record_into_a_directory_that_takes_no_files_is_refused_at_the_door(tmp_
     (["--tile", "0x5"], "--tile must be positive"),
     (["--grid", "two"], "--grid must look like"),
     (["--frames", "0"], "--frames must be >= 1"),
-    (["--balance", "magic"], "--balance must be one of strips, cost, time, adaptive, cross, auto, none"),
+    (["--balance", "magic"], "--balance must be one of strips, cost, time, adaptive, cross, shares, auto, none"),
     (["--subfrustum", "tiles"], "--subfrustum must be one of"),
     (["--partition", "gossip"], "--partition must be 'redundant' or 'broadcast'"),
     (["--exchange", "pigeon"], "--exchange must be one of auto, messages, shared"),

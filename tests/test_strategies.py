@@ -145,7 +145,7 @@ def test_time_feedback_converges_and_tiles():
 
 
 def test_registry_and_unknown_name():
-    assert set(REGISTRY) == {"strips", "cost", "time", "adaptive", "cross", "auto", "none"}
+    assert set(REGISTRY) == {"strips", "cost", "time", "adaptive", "cross", "shares", "auto", "none"}
     assert all(name in describe() for name in REGISTRY)
     with pytest.raises(ValueError, match="unknown balancing strategy"):
         make_strategy("magic", (2, 2), (64, 64), 16)
@@ -520,3 +520,30 @@ def test_cross_time_model_weights_are_checked(weight, bad):
 
     with pytest.raises(ValueError, match=weight):
         CrossSegment((2, 2), (128, 128), 64, **{weight: bad})
+
+
+def test_shares_learn_a_slow_rank_and_settle_where_times_are_equal():
+    """A simulated 2x2 wall whose rank 0 takes twice the time per triangle: the shares learn it
+    from the times alone, and the times of the plans made with them come out near equal."""
+    from multigpu.strategies.shares import Shares
+
+    rng = np.random.default_rng(4)
+    n = 3000
+    lo = rng.random((n, 2))
+    rects = np.c_[lo, lo + rng.exponential(0.01, (n, 2))]
+    tris = rng.integers(1, 40, n)
+    speed = np.array([0.5, 1.0, 1.0, 1.0])
+    s = Shares((2, 2), (512, 512), 256)
+    first = s.plan(rects, tris)
+    spread = []
+    for f in range(40):
+        p = s.plan(rects, tris)
+        times = 0.2 + p.loads / speed / 1e4  # a fixed cost, and rank 0 at half speed
+        spread.append(times.max() / times.mean())
+        s.observe(f, p, times * rng.lognormal(0, 0.03, 4))
+    assert (s.plan(rects, tris).regions != first.regions).any()
+    assert s.shares[0] < 0.7 * s.shares[1:].min()  # rank 0 learnt as the slow one
+    assert spread[0] > 1.3 and max(spread[-10:]) < 1.08
+    assert abs(np.log(s.shares).mean()) < 1e-9 and s.report()["shares"][0] < 1.0
+    s.observe(41, p, np.array([1.0, 0.0, 1.0, 1.0]))  # a rank without a time: nothing learnt
+    assert s.shares[0] < 0.7

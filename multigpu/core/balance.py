@@ -127,7 +127,8 @@ def validate_inputs(rects, tris, grid, size, strips, rows: bool = True
     return rects, tris, gpu_tree(n_rows, cols), (W, H)
 
 
-def _task(n: int, node, reg: np.ndarray, strips: int, W: int, H: int, idx, spans, tris) -> tuple[SplitTask, int, int]:
+def _task(n: int, node, reg: np.ndarray, strips: int, W: int, H: int, idx, spans, tris,
+          ratio: float | None = None) -> tuple[SplitTask, int, int]:
     """What the chooser sees at internal node ``n`` over region ``reg``, and the pixels each
     child needs along the axis (every descendant tile keeps at least one pixel)."""
     axis = 0 if node.method == VERTICAL else 1
@@ -145,7 +146,7 @@ def _task(n: int, node, reg: np.ndarray, strips: int, W: int, H: int, idx, spans
     lo_px = spans[axis].take(idx)
     hi_px = spans[axis + 2].take(idx)
     task = SplitTask(n, node, reg, axis, a, b, q, nl, nr, idx, lo_px, hi_px, cuts, valid, target,
-                     W if axis == 0 else H, tris)
+                     W if axis == 0 else H, tris, nl / nr if ratio is None else float(ratio))
     return task, need_lo, need_hi
 
 
@@ -172,14 +173,15 @@ def node_cuts(tree: GpuTree, size, strips: int, choose) -> np.ndarray:
     return out
 
 
-def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool | None = None) -> Partition:
+def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool | None = None,
+                   shares=None) -> Partition:
     """Walk the GPU tree, asking ``choose(task, spans) -> cut pixel`` at every internal node.
 
     The walk (regions, T' masks, loads, split bookkeeping) is shared by every screen-space
     strategy; only the choice of the cut differs. ``spans`` is the (4, N) int32 pixel-span
     array. The returned cut is clamped to the valid range. A chooser that needs no objects
     (``object_free``) has its cuts found first and the compiled walk take them (``compiled``
-    as in ``partition``).
+    as in ``partition``). ``shares``: as in ``partition``.
     """
     object_free = getattr(choose, "object_free", False) and jit.use(compiled)
     # the compiled walk makes the per-object checks in its own pass
@@ -193,6 +195,7 @@ def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool 
     spans, onscreen = pixel_spans(rects, (W, H))
     spans = np.ascontiguousarray(spans.T)  # (4, N), a no-op: pixel_spans is coordinate-major
     K = tree.size
+    ratios = None if shares is None else node_ratios(tree, shares)
     regions = np.zeros((K, 4), dtype=np.int64)
     splits = np.zeros(K - 1, dtype=np.float64)
     split_pixels = np.zeros(K - 1, dtype=np.int64)
@@ -202,7 +205,8 @@ def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool 
     for n, node in enumerate(tree.internal):
         reg = node_region.pop(node.id)
         idx = node_idx.pop(node.id)
-        task, need_lo, need_hi = _task(n, node, reg, strips, W, H, idx, spans, tris)
+        task, need_lo, need_hi = _task(n, node, reg, strips, W, H, idx, spans, tris,
+                                       None if ratios is None else ratios[n])
         a, b, axis = task.a, task.b, task.axis
         cut = min(max(int(choose(task, spans)), a + need_lo), b - need_hi)
         splits[n] = (cut - a) / (b - a)
@@ -221,7 +225,8 @@ def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool 
     return Partition(regions, loads, visible, splits, split_pixels, spans)
 
 
-def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: bool | None = None) -> Partition:
+def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: bool | None = None,
+              shares=None) -> Partition:
     """Balance ``tris`` over a ``rows x cols`` wall by splitting the screen along the GPU tree.
 
     Parameters
@@ -239,6 +244,9 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
     compiled : Alg. 2 (with or without ``fill``) as one compiled call (``balance_kernel.py``: the
         same partition, bit for bit); None uses it where numba is installed, False runs this
         module's numpy reference.
+    shares : optional (K,) positive float: each rank's share of the work by rank label (a
+        faster GPU a larger one); a split's balRatio is then its two sides' shares summed, one
+        over the other. None: equal ranks, the paper's ``nl / nr``.
     """
     density = None
     if fill is not None:
@@ -248,8 +256,10 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
         density = np.ascontiguousarray(density)
     if jit.use(compiled):
         rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips, rows=False)
-        return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips), density=density))
-    return tree_partition(rects, tris, grid, size, strips, strip_chooser(density))
+        ratios = None if shares is None else node_ratios(tree, shares)
+        return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips), density=density,
+                                                 ratios=ratios))
+    return tree_partition(rects, tris, grid, size, strips, strip_chooser(density), compiled, shares)
 
 
 def partition_tiles(rects, tris, grid, size, compiled: bool | None = None) -> Partition:
@@ -298,3 +308,25 @@ def _tile_splits(rows: int, cols: int, W: int, H: int) -> tuple[np.ndarray, np.n
     splits.setflags(write=False)
     pixels.setflags(write=False)
     return splits, pixels
+
+
+def node_ratios(tree, shares) -> np.ndarray:
+    """(K-1,) float64 balRatio of every internal node, breadth first: the shares of the ranks on
+    its low side summed, over those on its high side (``shares`` (K,) positive, by rank label)."""
+    shares = np.asarray(shares, dtype=np.float64)
+    if shares.shape != (tree.size,) or not np.isfinite(shares).all() or shares.min() <= 0:
+        raise ValueError(f"shares must be {tree.size} positive finite numbers, one per rank")
+    low, high = _sides(tree.rows, tree.cols)
+    return (low @ shares) / (high @ shares)
+
+
+@functools.lru_cache(maxsize=16)
+def _sides(rows: int, cols: int) -> tuple[np.ndarray, np.ndarray]:
+    """(K-1, K) 0/1: the ranks on each internal node's low and high side (made once per wall)."""
+    tree = gpu_tree(rows, cols)
+    out = np.zeros((2, len(tree.internal), tree.size))
+    for n, node in enumerate(tree.internal):  # K - 1 nodes, once per wall
+        for side, child in enumerate((node.low, node.high)):
+            for c in range(child.c0, child.c1):
+                out[side, n, c * rows + child.r0:c * rows + child.r1] = 1.0
+    return out[0], out[1]

@@ -178,11 +178,12 @@ def _split(idx, spans, axis, cut):
     return lo[:p], hi[:r]
 
 
-def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density):
+def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density, ratios):
     """``balance.tree_partition`` with the strip chooser, in one call (``rt``: (4, N) rects);
     a node whose ``fixed`` cut is >= 0 takes that cut instead (choosers that need no objects:
     time feedback, the static tiles). A non-empty ``density`` (N,) adds the cost model's fill
-    term to every chosen cut (``splits.strip_chooser(density)``)."""
+    term to every chosen cut (``splits.strip_chooser(density)``); ``ratios`` (K-1,) every node's
+    balRatio."""
     n = rt.shape[1]
     K = leaves.shape[0]
     # the root's Start/End arrays are filled in the spans' own pass (its region is the display)
@@ -234,7 +235,7 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density):
             if density.shape[0] > 0:
                 below, total = _fill_line(idx, spans, density, regs[me], axis, a, b,
                                           a + (np.arange(1, q) * length) // q)
-            cut = _choose(s, e, below, total, nl / nr, a, length, q, need_lo, need_hi, target)
+            cut = _choose(s, e, below, total, ratios[m], a, length, q, need_lo, need_hi, target)
         cut = min(max(cut, a + need_lo), b - need_hi)
         splits[m] = (cut - a) / length
         split_pixels[m] = cut
@@ -261,20 +262,23 @@ compile_all(globals(), ("_spans", "_strip_table", "_fill_line", "_choose", "_spl
 
 
 def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int, cuts: np.ndarray | None = None,
-                    density: np.ndarray | None = None):
+                    density: np.ndarray | None = None, ratios: np.ndarray | None = None):
     """The compiled walk on validated inputs (``balance.validate_inputs``; the per-object
     checks are made here, in the walk's own pass over the objects): regions, loads,
     T' masks, splits in p-pos and pixels, spans (4, N). ``cuts`` (K-1,) fixes every node's cut
     (-1: the strip chooser's); ``density`` (N,) float64, validated: the cost model's fill per
-    covered pixel of each object. Integer loads are exact sums; float loads are summed again by
-    numpy as the reference sums them (pairwise)."""
+    covered pixel of each object; ``ratios`` (K-1,) float64 each node's balRatio (None: its ranks
+    ``nl / nr``). Integer loads are exact sums; float loads are summed again by numpy as the
+    reference sums them (pairwise)."""
     nodes, leaves, free = _tree(tree)
     if cuts is None:
         cuts = free
+    if ratios is None:
+        ratios = nodes[:, 1] / nodes[:, 2]
     rt = np.ascontiguousarray(rects.T, dtype=np.float64)  # the projectors' own layout: no copy
     regions, loads, visible, splits, split_pixels, spans, (inverted, not_finite, negative, total) = _walk(
         rt, tris, int(size[0]), int(size[1]), int(strips), nodes, leaves, cuts,
-        _NO_FILL if density is None else density)
+        _NO_FILL if density is None else density, np.ascontiguousarray(ratios, dtype=np.float64))
     if not_finite or negative or inverted or (tris.dtype.kind == "i" and int(total) >= MAX_TOTAL):
         if not_finite:  # the reference's order: weights, their total, then the rects
             raise ValueError(NOT_FINITE)

@@ -26,8 +26,9 @@ class SplitTask:
 
     ``idx`` are the objects visible in the node's region ``reg``; ``lo_px``/``hi_px`` their
     inclusive pixel spans along ``axis``; the split cuts ``[a, b)`` with ``nl`` ranks on the
-    low side and ``nr`` on the high side; ``valid`` marks which of the candidate ``cuts``
-    leave every descendant tile at least one pixel; ``target`` is the area-proportional cut.
+    low side and ``nr`` on the high side, their shares of the work in ``ratio``; ``valid``
+    marks which of the candidate ``cuts`` leave every descendant tile at least one pixel;
+    ``target`` is the area-proportional cut.
     """
 
     n: int
@@ -47,6 +48,7 @@ class SplitTask:
     target: int
     extent: int  # display pixels along ``axis``
     weights: np.ndarray  # validated per-object weights (all objects; index with ``idx``)
+    ratio: float  # balRatio: the low side's share over the high side's (``nl / nr`` for equal ranks)
 
 
 def strip_sums(first: np.ndarray, last: np.ndarray, w: np.ndarray, q: int) -> tuple[np.ndarray, np.ndarray]:
@@ -156,7 +158,7 @@ def strip_chooser(density: np.ndarray | None = None):
         last = _strip_index(t.hi_px, t.a, length, t.q, t.extent)
         s, e = strip_sums(first, last, t.weights[t.idx], t.q)
         fill = None if density is None else fill_prefix(t, spans, density)
-        pick = choose_split(s, e, t.nl / t.nr, t.cuts, t.valid, t.target, fill)
+        pick = choose_split(s, e, t.ratio, t.cuts, t.valid, t.target, fill)
         return int(t.cuts[pick]) if pick >= 0 else t.target
 
     return choose
@@ -183,7 +185,7 @@ def time_chooser(regions: np.ndarray, times: np.ndarray, prev_cuts: np.ndarray |
         if total <= 0:
             return t.target
         with np.errstate(divide="ignore", invalid="ignore"):
-            diff = np.abs(below / (total - below) - t.nl / t.nr)
+            diff = np.abs(below / (total - below) - t.ratio)
         diff[~t.valid | (below <= 0) | (total - below <= 0)] = np.inf
         if not np.isfinite(diff.min()):
             return t.target

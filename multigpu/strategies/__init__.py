@@ -12,11 +12,12 @@ from multigpu.strategies.base import Configured, Strategy, rank_pixels
 from multigpu.strategies.cost import CostModel
 from multigpu.strategies.cross import CrossSegment
 from multigpu.strategies.none import NoBalance
+from multigpu.strategies.shares import Shares
 from multigpu.strategies.strips import Strips
 from multigpu.strategies.time import TimeFeedback
 
 REGISTRY: dict[str, type] = {cls.name: cls for cls in (Strips, CostModel, TimeFeedback, Adaptive, CrossSegment,
-                                                      Auto, NoBalance)}
+                                                      Shares, Auto, NoBalance)}
 
 
 def describe() -> str:
@@ -31,4 +32,4 @@ def make_strategy(name: str, grid, size, strips: int) -> Strategy:
 
 
 __all__ = ["REGISTRY", "Strategy", "Configured", "make_strategy", "describe", "rank_pixels",
-           "Strips", "CostModel", "TimeFeedback", "Adaptive", "CrossSegment", "Auto", "NoBalance"]
+           "Strips", "CostModel", "TimeFeedback", "Adaptive", "CrossSegment", "Shares", "Auto", "NoBalance"]

@@ -1,0 +1,62 @@
+"""``shares``: the paper's strips, with each rank's share of the work learned from its render times.
+
+The strip balancer splits every node's work in the ratio of its ranks (``nl / nr``): right for
+equal GPUs and a cost that triangles predict. Where a rank is slower (another GPU, a region whose
+pixels cost more than its triangles say, a core it shares), its render time stays above the
+others' frame after frame. Here each rank keeps a share; after every frame's times land, a
+rank that took longer than the mean loses share and a faster one gains, by ``rate`` of the log of
+the ratio, so the shares settle where the times are equal; the split at each node then takes the
+ratio of its two sides' shares (``core.balance.partition(shares=...)``, the paper's balRatio for
+unequal ranks). The content of the frame is still balanced the moment the camera moves (the
+strips count this frame's triangles); only the residual the triangles do not explain is learned,
+slowly. Shares stay within ``limit`` of each other's mean.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multigpu.core.balance import Partition, partition
+from multigpu.strategies.base import Configured
+
+
+@dataclass
+class Shares(Configured):
+    """Strips, each split's balRatio from per-rank shares learned from the measured times."""
+
+    rate: float = 0.25  # how far a frame's log time ratio moves a share (damped: times are noisy)
+    limit: float = 4.0  # a share stays within [mean / limit, mean * limit]
+
+    name = "shares"
+    summary = "strips with each rank's share of the work learned from its measured render times"
+    reproducible = False  # it follows measured times
+
+    def __post_init__(self):
+        if not (0 < self.rate <= 1 and self.limit > 1):
+            raise ValueError("shares: need 0 < rate <= 1 and limit > 1")
+        self.log_share = np.zeros(int(self.grid[0]) * int(self.grid[1]))
+
+    @property
+    def shares(self) -> np.ndarray:
+        return np.exp(self.log_share)
+
+    def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
+        learned = self.log_share.any()
+        return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled,
+                         shares=self.shares if learned else None)
+
+    def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
+        """Move every rank's share by ``rate`` of log(mean time / its time), keep their mean at 1."""
+        t = np.asarray(times, dtype=np.float64)
+        if t.shape != self.log_share.shape or not np.isfinite(t).all() or t.min() <= 0:
+            return  # a frame without a time for every rank says nothing about their speeds
+        step = self.rate * (np.log(t.mean()) - np.log(t))
+        s = self.log_share + step
+        s -= s.mean()
+        bound = np.log(self.limit)
+        self.log_share = np.clip(s, -bound, bound)
+
+    def report(self) -> dict:
+        return {"name": self.name, "shares": [round(float(v), 3) for v in self.shares]}
