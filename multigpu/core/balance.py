@@ -174,14 +174,14 @@ def node_cuts(tree: GpuTree, size, strips: int, choose) -> np.ndarray:
 
 
 def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool | None = None,
-                   shares=None) -> Partition:
+                   shares=None, ratios=None) -> Partition:
     """Walk the GPU tree, asking ``choose(task, spans) -> cut pixel`` at every internal node.
 
     The walk (regions, T' masks, loads, split bookkeeping) is shared by every screen-space
     strategy; only the choice of the cut differs. ``spans`` is the (4, N) int32 pixel-span
     array. The returned cut is clamped to the valid range. A chooser that needs no objects
     (``object_free``) has its cuts found first and the compiled walk take them (``compiled``
-    as in ``partition``). ``shares``: as in ``partition``.
+    as in ``partition``). ``shares``, ``ratios``: as in ``partition``.
     """
     object_free = getattr(choose, "object_free", False) and jit.use(compiled)
     # the compiled walk makes the per-object checks in its own pass
@@ -195,7 +195,8 @@ def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool 
     spans, onscreen = pixel_spans(rects, (W, H))
     spans = np.ascontiguousarray(spans.T)  # (4, N), a no-op: pixel_spans is coordinate-major
     K = tree.size
-    ratios = None if shares is None else node_ratios(tree, shares)
+    if ratios is None and shares is not None:
+        ratios = node_ratios(tree, shares)
     regions = np.zeros((K, 4), dtype=np.int64)
     splits = np.zeros(K - 1, dtype=np.float64)
     split_pixels = np.zeros(K - 1, dtype=np.int64)
@@ -226,7 +227,7 @@ def tree_partition(rects, tris, grid, size, strips: int, choose, compiled: bool 
 
 
 def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: bool | None = None,
-              shares=None) -> Partition:
+              shares=None, ratios=None) -> Partition:
     """Balance ``tris`` over a ``rows x cols`` wall by splitting the screen along the GPU tree.
 
     Parameters
@@ -247,6 +248,8 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
     shares : optional (K,) positive float: each rank's share of the work by rank label (a
         faster GPU a larger one); a split's balRatio is then its two sides' shares summed, one
         over the other. None: equal ranks, the paper's ``nl / nr``.
+    ratios : optional (K-1,) float64, instead of ``shares``: every node's balRatio as
+        ``node_ratios`` gives it (a strategy whose shares change once a frame makes them then).
     """
     density = None
     if fill is not None:
@@ -256,10 +259,11 @@ def partition(rects, tris, grid, size, strips: int = 2048, fill=None, compiled: 
         density = np.ascontiguousarray(density)
     if jit.use(compiled):
         rects, tris, tree, size = validate_inputs(rects, tris, grid, size, strips, rows=False)
-        ratios = None if shares is None else node_ratios(tree, shares)
+        if ratios is None and shares is not None:
+            ratios = node_ratios(tree, shares)
         return Partition(*kernel.strip_partition(rects, tris, tree, size, int(strips), density=density,
                                                  ratios=ratios))
-    return tree_partition(rects, tris, grid, size, strips, strip_chooser(density), compiled, shares)
+    return tree_partition(rects, tris, grid, size, strips, strip_chooser(density), compiled, shares, ratios)
 
 
 def partition_tiles(rects, tris, grid, size, compiled: bool | None = None) -> Partition:

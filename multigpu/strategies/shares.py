@@ -14,11 +14,13 @@ slowly. Shares stay within ``limit`` of each other's mean.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from multigpu.core.balance import Partition, partition
+from multigpu.core.balance import Partition, node_ratios, partition
+from multigpu.core.tree import gpu_tree
 from multigpu.strategies.base import Configured
 
 
@@ -36,27 +38,28 @@ class Shares(Configured):
     def __post_init__(self):
         if not (0 < self.rate <= 1 and self.limit > 1):
             raise ValueError("shares: need 0 < rate <= 1 and limit > 1")
-        self.log_share = np.zeros(int(self.grid[0]) * int(self.grid[1]))
+        self.k = int(self.grid[0]) * int(self.grid[1])
+        self._log = [0.0] * self.k  # each rank's log share, mean 0 (floats: K of them, a frame)
+        self._ratios = None  # every node's balRatio from the shares (None: equal, the paper's)
+        self._tree = gpu_tree(*self.grid)
 
     @property
     def shares(self) -> np.ndarray:
-        return np.exp(self.log_share)
+        return np.exp(np.array(self._log))
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
-        learned = self.log_share.any()
-        return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled,
-                         shares=self.shares if learned else None)
+        return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled, ratios=self._ratios)
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         """Move every rank's share by ``rate`` of log(mean time / its time), keep their mean at 1."""
-        t = np.asarray(times, dtype=np.float64)
-        if t.shape != self.log_share.shape or not np.isfinite(t).all() or t.min() <= 0:
+        t = [float(v) for v in times]  # K ranks: plain floats cost less than numpy calls here
+        if len(t) != self.k or not all(0.0 < v < math.inf for v in t):
             return  # a frame without a time for every rank says nothing about their speeds
-        step = self.rate * (np.log(t.mean()) - np.log(t))
-        s = self.log_share + step
-        s -= s.mean()
-        bound = np.log(self.limit)
-        self.log_share = np.clip(s, -bound, bound)
+        mean = math.log(sum(t) / self.k)
+        s = [ls + self.rate * (mean - math.log(v)) for ls, v in zip(self._log, t)]
+        centre, bound = sum(s) / self.k, math.log(self.limit)
+        self._log = [min(max(v - centre, -bound), bound) for v in s]
+        self._ratios = node_ratios(self._tree, self.shares)
 
     def report(self) -> dict:
         return {"name": self.name, "shares": [round(float(v), 3) for v in self.shares]}
