@@ -112,6 +112,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--ranks", default="4", help="floor, peer: the rank counts to measure, e.g. 4,9,16 or 1,4 "
                                                 "(default 4)")
     b.add_argument("--rounds", type=int, default=2, help="peer, latency: alternated rounds (default 2)")
+    b.add_argument("--tile", type=int, default=256, help="floor: the side of the region every rank renders, pixels "
+                                                        "(default 256)")
+    b.add_argument("--display", type=int, default=None, help="floor: the side of the display that region is the "
+                                                             "centre of, pixels (default twice the tile)")
     b.add_argument("--out", default="out/peer", help="peer, latency, simplify: where the runs and the results CSV go "
                                                      "(default out/peer, out/latency, out/simplify)")
     scene_args(b)  # bench floor's worker: the scene it renders
@@ -161,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
                 from multigpu.flags import spec
                 from multigpu.parallel import floor
 
-                floor.main(spec(args), args.path_kind, args.frames or 120)
+                floor.main(spec(args), args.path_kind, args.frames or 120, args.tile, args.display)
                 return 0
             if args.what == "latency":
                 from multigpu.studies.latency import bench_latency
@@ -190,7 +194,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.what == "floor":
                 from multigpu.studies.floor import bench_floor
 
-                bench_floor(args.quick, args.frames, _ranks_list(args.ranks))
+                if args.tile < 1 or (args.display is not None and args.display < args.tile):
+                    raise InputError(f"bench floor: --tile must be >= 1 and --display >= the tile, got --tile "
+                                     f"{args.tile} --display {args.display}")
+                bench_floor(args.quick, args.frames, _ranks_list(args.ranks), args.tile, args.display)
                 return 0
             return bench.main(args.what, quick=args.quick)
     except InputError as exc:

@@ -15,6 +15,7 @@ DECOMPOSITIONS = {
     "bins-vdc": ["--decomposition", "bins", "--bin-pattern", "vandercorput", "--bin-size", "16"],
     "bins-scan": ["--decomposition", "bins", "--bin-pattern", "scanline", "--bin-size", "5"],
     "cross": ["--balance", "cross"],
+    "shares": ["--balance", "shares"],  # learns each rank's share from the gathered times
     # the host's ranks project a slice of the bounds each into one shared array (uneven on 1x3)
     "shared-projection": ["--projection", "shared"],
     "db-shared-projection": ["--decomposition", "db", "--projection", "shared"],

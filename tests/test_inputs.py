@@ -293,6 +293,15 @@ def test_decomposition_flags_are_validated_at_the_door(flags, needle):
     assert needle in as_flags(e.value)
 
 
+def test_bench_floor_sizes_are_checked_in_one_line(capsys):
+    from multigpu.cli import main
+
+    assert main(["bench", "floor", "--tile", "0"]) == 2
+    assert main(["bench", "floor", "--tile", "64", "--display", "32"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("--tile must be >= 1 and --display >= the tile") == 2 and len(err.strip().splitlines()) == 2
+
+
 def test_bench_floor_ranks_are_counts_or_one_line():
     from multigpu.cli import _ranks_list
 

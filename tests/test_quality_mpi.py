@@ -21,7 +21,8 @@ def walk(out, n, grid, frames, extra=()):
     return [read_png(out / "mosaic" / f"frame_{f:05d}.png") for f in range(frames)]
 
 
-@pytest.mark.parametrize("extra", [[], ["--decomposition", "db"], ["--latency", "0", "--balance", "cross"]])
+@pytest.mark.parametrize("extra", [[], ["--decomposition", "db"], ["--latency", "0", "--balance", "cross"],
+                                   ["--decomposition", "hybrid"]])
 def test_scaled_levelled_composite_equals_one_rank_with_the_same_settings(tmp_path, extra):
     quality = ["--render-scale", "0.45", "--lod-error", "3", *extra]
     one = walk(tmp_path / "one", 1, (1, 1), 4, quality)

@@ -214,3 +214,6 @@ def test_noise_floor_bench_measures_identical_work_on_every_rank():
     assert got["scene"] == "two plants" and got["ranks"] == 2 and got["frames"] == 3
     assert got["render_ms_mean"] > 0
     assert 1.0 <= got["imbalance_floor"] < 2.0 and got["noise_cv"] >= 0.0
+    assert (got["tile"], got["display"]) == (256, 512)
+    small = run(scenes={"plant": ["--triangles", "20000"]}, ranks=2, frames=8, timeout=240, tile=32, display=128)[0]
+    assert (small["tile"], small["display"]) == (32, 128) and small["render_ms_mean"] > 0

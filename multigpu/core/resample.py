@@ -52,14 +52,16 @@ def upscale(small: np.ndarray, region, size: tuple[int, int], ssize: tuple[int, 
     return small.take(rows, axis=0).take(cols, axis=1)
 
 
-def grown(rects: np.ndarray, size: tuple[int, int], scale: float) -> np.ndarray:
+def grown(rects: np.ndarray, size: tuple[int, int], scale: float, skip: int = 0) -> np.ndarray:
     """Sort-last pieces (M, 4) grown by the span of a scaled pixel (and one more) on every side,
     within the canvas: a canvas pixel outside a piece may show a scaled pixel whose sample lies
-    inside it, and the composite takes each pixel's nearest fragment from every piece that has it."""
+    inside it, and the composite takes each pixel's nearest fragment from every piece that has it.
+    The first ``skip`` pieces (a hybrid's screen regions, which tile the canvas) stay as they are."""
     g = int(np.ceil(1.0 / scale)) + 1
-    r = np.asarray(rects, dtype=np.int64).reshape(-1, 4) + np.array([-g, -g, g, g])
+    r = np.asarray(rects, dtype=np.int64).reshape(-1, 4).copy()
     W, H = size
-    return np.clip(r, 0, [W, H, W, H])
+    r[skip:] = np.clip(r[skip:] + np.array([-g, -g, g, g]), 0, [W, H, W, H])
+    return r
 
 
 class Widen:

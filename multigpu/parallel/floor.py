@@ -20,9 +20,11 @@ MARK = "floor-json: "
 TIMEOUT = 300.0
 
 
-def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
+def measure(spec, path_kind: str, frames: int, tile: int = 256, display: int | None = None) -> dict | None:
     """The worker, on every rank of an MPI job, for the scene of ``spec`` (a ``SceneSpec``)
-    along its generated ``path_kind`` path: returns the figures on rank 0."""
+    along its generated ``path_kind`` path: every rank renders the ``tile``-sided centre region
+    of a ``display``-sided display (default twice the tile: a 2x2 wall's); returns the figures
+    on rank 0."""
     from mpi4py import MPI
 
     from multigpu.config import WalkConfig
@@ -39,12 +41,14 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
         load_scene(spec)  # build the cache once
     barrier(comm, TIMEOUT)
     scene, _ = load_scene(spec)
-    size = (2 * tile, 2 * tile)
+    side = 2 * tile if display is None else int(display)
+    size = (side, side)
     ctx, _ = create_context(local_rank=rank, host_ranks=comm.Get_size())  # one host
     renderer = RegionRenderer(ctx, scene, size)
     path = generate(path_kind, scene, frames)
-    planner = Planner(WalkConfig(grid=(2, 2), tile=(tile, tile)), scene, rank)  # the frame loop's projection
-    region = (tile // 2, tile // 2, tile // 2 + tile, tile // 2 + tile)  # a tile-sized centre region
+    planner = Planner(WalkConfig(grid=(1, 1), tile=size), scene, rank)  # the frame loop's projection
+    at = (side - tile) // 2
+    region = (at, at, at + tile, at + tile)  # a tile-sized centre region
     times = np.zeros(frames)
     for f in range(frames):  # frames, not objects
         view, proj, light, rects = planner.frame(path.camera(f))
@@ -60,14 +64,15 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256) -> dict | None:
     if rank != 0:
         return None
     t = allt.T[min(5, frames - 1):]  # (F, K), first frames warm up
-    return {"scene": scene.name, "ranks": int(comm.Get_size()), "frames": int(t.shape[0]),
+    return {"scene": scene.name, "ranks": int(comm.Get_size()), "frames": int(t.shape[0]), "tile": int(tile),
+            "display": side,
             "render_ms_mean": float(t.mean()),
             "imbalance_floor": float(np.mean(t.max(axis=1) / t.mean(axis=1))),
             "noise_cv": float(np.mean(t.std(axis=1) / t.mean(axis=1)))}
 
 
-def main(spec, path_kind: str, frames: int) -> None:
+def main(spec, path_kind: str, frames: int, tile: int = 256, display: int | None = None) -> None:
     """Measure and print rank 0's figures as one JSON line after ``MARK``."""
-    got = measure(spec, path_kind, frames)
+    got = measure(spec, path_kind, frames, tile, display)
     if got is not None:
         print(MARK + json.dumps(got), flush=True)

@@ -159,8 +159,10 @@ class Frames:
             size = self.canvas.size
             small = scaled_size(size, scale)
             reach = [covered(r, size, small) for r in reach]  # pieces, not objects
-            if not work.depth:  # sort-last masks are the rank's objects wherever they fall
-                masks = self.widen.masks(work.rects[self.rank], masks, rects, scale)
+            front = len(masks) if not work.depth else work.front[self.rank] if work.front else 0
+            if front:  # screen regions widened; sort-last masks are the rank's objects wherever they fall
+                masks = [*self.widen.masks(work.rects[self.rank][:front], masks[:front], rects, scale),
+                         *masks[front:]]
         mine = list(zip(work.rects[self.rank], masks, reach))
         if self.culler is not None:
             with t.phase("cull"):
@@ -284,7 +286,9 @@ class Frames:
             if self.latency:  # the planner's arrays may be its own again by the time the frame is shown
                 work = work._replace(rects=tuple(r.copy() for r in work.rects))
             if work.depth and quality.scale != 1.0:  # sort-last pieces reach the pixels their scaled samples show
-                work = work._replace(rects=tuple(grown(r, self.canvas.size, quality.scale) for r in work.rects))
+                front = work.front or (0,) * work.ranks  # a hybrid's regions stay
+                work = work._replace(rects=tuple(grown(r, self.canvas.size, quality.scale, f)
+                                                 for r, f in zip(work.rects, front)))
         pending = self.render(t, work, view, proj, light, rects, quality.scale)
         with t.phase("exchange"):
             plan = transfers(work, self.tiles)

@@ -25,12 +25,12 @@ from multigpu.studies.fidelity import exp_fidelity
 from multigpu.studies.paper import exp_balance, exp_gpus, exp_orbit, exp_resolution, exp_strips
 from multigpu.studies.payoff import exp_payoff
 from multigpu.studies.runs import PAPER, Settings
-from multigpu.studies.walls import exp_hybrid, exp_walls
+from multigpu.studies.walls import exp_hybrid, exp_sixteen, exp_walls
 
 EXPERIMENTS = {"gpus": exp_gpus, "resolution": exp_resolution, "balance": exp_balance, "strips": exp_strips,
                "orbit": exp_orbit, "overlap": exp_overlap, "cost": exp_cost,
                "speedup": exp_speedup, "partition": exp_partition, "compare": exp_compare, "payoff": exp_payoff,
-               "walls": exp_walls, "hybrid": exp_hybrid, "fidelity": exp_fidelity}
+               "walls": exp_walls, "hybrid": exp_hybrid, "sixteen": exp_sixteen, "fidelity": exp_fidelity}
 
 
 def run(name: str, out: Path, quick: bool = False, results: Path | None = None, rounds: int | None = None) -> int:

@@ -18,7 +18,7 @@ SCENES = {"plant": ["--scene", "plant"], "city": ["--scene", "city"]}
 
 
 def run(scenes: dict[str, list[str]] | None = None, ranks: int = 4, frames: int = 120,
-        timeout: float = 600) -> list[dict]:
+        timeout: float = 600, tile: int = 256, display: int | None = None) -> list[dict]:
     """Start the worker under mpiexec for each scene (name -> scene flags, and ``--path-kind``
     where not the walkthrough); the figures it printed, each with its ``scene`` name."""
     from multigpu.parallel.mpirun import run_multigpu
@@ -26,7 +26,8 @@ def run(scenes: dict[str, list[str]] | None = None, ranks: int = 4, frames: int 
 
     rows = []
     for name, flags in (scenes or SCENES).items():
-        job = run_multigpu(ranks, ["bench", "floor", "--worker", *flags, "--frames", str(frames)], timeout,
+        size = ["--tile", str(tile)] + ([] if display is None else ["--display", str(display)])
+        job = run_multigpu(ranks, ["bench", "floor", "--worker", *flags, "--frames", str(frames), *size], timeout,
                            env=study_env(), merge_stderr=True)
         lines = [ln for ln in job.stdout.splitlines() if ln.startswith(MARK)]
         if job.returncode != 0 or not lines:
@@ -36,11 +37,15 @@ def run(scenes: dict[str, list[str]] | None = None, ranks: int = 4, frames: int 
     return rows
 
 
-def bench_floor(quick: bool, frames: int | None = None, ranks: list[int] | tuple[int, ...] = (4,)) -> list[dict]:
-    """Run the measurement on the plant and the city with each of ``ranks`` ranks; print the table."""
+def bench_floor(quick: bool, frames: int | None = None, ranks: list[int] | tuple[int, ...] = (4,), tile: int = 256,
+                display: int | None = None) -> list[dict]:
+    """Run the measurement on the plant and the city with each of ``ranks`` ranks, every rank the
+    ``tile``-sided centre of a ``display``-sided display; print the table."""
     frames = frames or (20 if quick else 120)
-    rows = [r for k in ranks for r in run(ranks=k, frames=frames)]
-    print("identical work on every rank (same region, objects and camera), process CPU time per rank:")
+    rows = [r for k in ranks for r in run(ranks=k, frames=frames, tile=tile, display=display)]
+    side = 2 * tile if display is None else display
+    print(f"identical work on every rank (the same {tile}x{tile} region of a {side}x{side} display, objects and "
+          "camera), process CPU time per rank:")
     print(f"{'scene':>6} {'ranks':>5} {'frames':>6} {'render ms':>9} {'imbalance floor':>15} {'noise c_v':>9}")
     for r in rows:
         print(f"{r['scene']:>6} {r['ranks']:5d} {r['frames']:6d} {r['render_ms_mean']:9.2f} "

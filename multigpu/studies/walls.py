@@ -202,3 +202,51 @@ def _hybrid_verdict(rows: list[dict]) -> str:
             "every region's depth is read back and sent and the depth pieces of the wide objects near the camera "
             "cover much of the display; on llvmpipe pixels cost more than triangles, so the default keeps "
             "`screen` wherever `screen` is fastest here.")
+
+
+SIXTEEN = ("strips", "shares", "cross", "auto")
+
+
+def exp_sixteen(s: Settings, out: Path) -> str:
+    """Balancing a 16-rank wall against this machine's noise floor for the same work: the plant
+    walk on a 4x4 wall of 64x64 tiles (a 256x256 display, so 16 ranks fit two cores), each
+    strategy's render imbalance and slowest render beside the imbalance identical work shows
+    (``bench floor`` with a 64x64 region of a 256x256 display on 16 ranks), and the efficiency
+    that floor alone allows at each run's time overlap."""
+    from multigpu.studies.floor import run as floor_run
+
+    frames, tile, n = (6, 32, 2) if s.quick else (120, 64, 4)  # --quick: a 2x2 wall (the suite runs 2-4 ranks)
+    side, k = n * tile, n * n
+    scene = ["--triangles", str(s.triangles)]
+    common = [*scene, "--frames", str(frames), "--mosaic-every", "0"]
+    floor = floor_run({"plant": scene}, ranks=k, frames=max(frames // 2, 8), timeout=s.timeout, tile=tile,
+                      display=side)[0]["imbalance_floor"]
+    one = walk(out / "plant_1x1", (1, 1), (side, side), common, s.timeout)
+    rows = []
+    for name in SIXTEEN:
+        run = walk(out / f"plant_{n}x{n}_{name}", (n, n), (tile, tile), [*common, "--balance", name], s.timeout)
+        m = _metrics(one, run, k)
+        allowed = 1.0 / (m["time_overlap"] * floor)  # the efficiency were the imbalance at the floor
+        rows.append({"balance": name, "imbalance": m["imbalance"], "floor": floor,
+                     "render_max_ms": float(run.render_max_cpu.mean()), "time_overlap": m["time_overlap"],
+                     "efficiency": m["efficiency"], "allowed": allowed, "of_allowed": m["efficiency"] / allowed,
+                     "balancing_cpu_ms": m["balancing_cpu_ms"], "emulated_ms": m["emulated_ms"]})
+    write_csv(out / "sixteen.csv", rows)
+    best = min(rows, key=lambda r: r["imbalance"])
+    fastest = min(rows, key=lambda r: r["emulated_ms"])
+    return "\n".join([
+        f"The plant walk ({frames} frames) on a {n}x{n} wall of {tile}x{tile} tiles ({side}x{side}: {k} ranks on "
+        f"this machine's two cores), against one rank on the same display. `Floor`: the render imbalance of "
+        f"identical work on {k} ranks (`multigpu bench floor --ranks {k} --tile {tile} --display {side}`, the same "
+        "region size); "
+        "`Allowed`: the efficiency that floor alone allows at the run's time overlap, 1 / (time overlap x floor); "
+        "`Of allowed`: efficiency / allowed.",
+        "",
+        md_table(rows, [("balance", "Balance", ""), ("imbalance", "Render imbalance", ".2f"),
+                        ("floor", "Floor", ".2f"), ("render_max_ms", "Slowest render ms", ".2f"),
+                        ("time_overlap", "Time overlap", ".2f"), ("efficiency", "Efficiency", ".1%"),
+                        ("allowed", "Allowed", ".1%"), ("of_allowed", "Of allowed", ".2f"),
+                        ("balancing_cpu_ms", "Balancing ms", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f")]),
+        "",
+        f"Lowest render imbalance: `{best['balance']}` ({best['imbalance']:.2f} against the floor's {floor:.2f}); "
+        f"shortest emulated frame: `{fastest['balance']}` ({fastest['emulated_ms']:.2f} ms)."])
