@@ -75,21 +75,22 @@ class Hybrid:
         idx = self.order[onscreen]  # the visible wide objects, in draw order
         spans = spans[onscreen]
         owner = fill_ranges(tris[idx], base.loads)
-        cuts = np.searchsorted(owner, np.arange(self.k + 1))  # rank k's range: idx[cuts[k]:cuts[k + 1]]
-        out_rects, out_masks = list(base.rects), list(base.masks)
-        loads = np.asarray(base.loads, dtype=np.int64).copy()
         n = tris.size
-        for k in range(self.k):  # ranks, not objects
-            a, b = int(cuts[k]), int(cuts[k + 1])
-            if a == b:
-                continue
-            sp = spans[a:b]
-            box = np.array([[sp[:, 0].min(), sp[:, 1].min(), sp[:, 2].max() + 1, sp[:, 3].max() + 1]], dtype=np.int64)
-            mask = np.zeros((1, n), dtype=bool)
-            mask[0, idx[a:b]] = True
-            out_rects[k] = np.concatenate([np.asarray(out_rects[k], dtype=np.int64).reshape(-1, 4), box])
-            out_masks[k] = np.concatenate([np.asarray(out_masks[k]).reshape(-1, n), mask])
-            loads[k] += int(tris[idx[a:b]].sum())
+        masks = np.zeros((self.k, n), dtype=bool)
+        masks[owner, idx] = True
+        cuts = np.searchsorted(owner, np.arange(self.k + 1))  # rank k's range: idx[cuts[k]:cuts[k + 1]]
+        ranks = np.flatnonzero(cuts[1:] > cuts[:-1])  # the ranks with wide objects to draw
+        at = cuts[ranks]
+        boxes = np.stack([np.minimum.reduceat(spans[:, 0], at), np.minimum.reduceat(spans[:, 1], at),
+                          np.maximum.reduceat(spans[:, 2], at) + 1, np.maximum.reduceat(spans[:, 3], at) + 1],
+                         axis=1).astype(np.int64) if ranks.size else np.zeros((0, 4), dtype=np.int64)
+        loads = np.asarray(base.loads, dtype=np.int64).copy()
+        if ranks.size:
+            loads[ranks] += np.add.reduceat(tris[idx], at)
+        out_rects, out_masks = list(base.rects), list(base.masks)
+        for j, k in enumerate(ranks.tolist()):  # ranks, not objects
+            out_rects[k] = np.concatenate([np.asarray(out_rects[k], dtype=np.int64).reshape(-1, 4), boxes[j:j + 1]])
+            out_masks[k] = np.concatenate([np.asarray(out_masks[k]).reshape(-1, n), masks[k:k + 1]])
         self.last = {"wide": int(self.wide.sum()), "wide_visible": int(idx.size),
                      "wide_triangles": int(tris[idx].sum())}
         front = tuple(len(r) for r in base.rects)
