@@ -212,35 +212,41 @@ def exp_sixteen(s: Settings, out: Path) -> str:
     walk on a 4x4 wall of 64x64 tiles (a 256x256 display, so 16 ranks fit two cores), each
     strategy's render imbalance and slowest render beside the imbalance identical work shows
     (``bench floor`` with a 64x64 region of a 256x256 display on 16 ranks), and the efficiency
-    that floor alone allows at each run's time overlap."""
+    that floor alone allows at each run's time overlap; alternated rounds, medians."""
     from multigpu.studies.floor import run as floor_run
 
     frames, tile, n = (6, 32, 2) if s.quick else (120, 64, 4)  # --quick: a 2x2 wall (the suite runs 2-4 ranks)
-    side, k = n * tile, n * n
+    side, k, rounds = n * tile, n * n, s.repeat(5)
     scene = ["--triangles", str(s.triangles)]
     common = [*scene, "--frames", str(frames), "--mosaic-every", "0"]
-    floor = floor_run({"plant": scene}, ranks=k, frames=max(frames // 2, 8), timeout=s.timeout, tile=tile,
-                      display=side)[0]["imbalance_floor"]
-    one = walk(out / "plant_1x1", (1, 1), (side, side), common, s.timeout)
+    got: dict[str, list[dict]] = {name: [] for name in SIXTEEN}
+    floors = []
+    for r in range(rounds):  # rounds alternate the order, so drift hits every strategy alike
+        floors.append(floor_run({"plant": scene}, ranks=k, frames=max(frames // 2, 8), timeout=s.timeout, tile=tile,
+                                display=side)[0]["imbalance_floor"])
+        one = walk(out / "plant_1x1", (1, 1), (side, side), common, s.timeout)
+        for name in (SIXTEEN if r % 2 == 0 else SIXTEEN[::-1]):
+            run = walk(out / f"plant_{n}x{n}_{name}", (n, n), (tile, tile), [*common, "--balance", name], s.timeout)
+            m = _metrics(one, run, k)
+            got[name].append({**m, "render_max_ms": float(run.render_max_cpu.mean()), "floor": floors[-1]})
+    floor = float(np.median(floors))
     rows = []
-    for name in SIXTEEN:
-        run = walk(out / f"plant_{n}x{n}_{name}", (n, n), (tile, tile), [*common, "--balance", name], s.timeout)
-        m = _metrics(one, run, k)
-        allowed = 1.0 / (m["time_overlap"] * floor)  # the efficiency were the imbalance at the floor
-        rows.append({"balance": name, "imbalance": m["imbalance"], "floor": floor,
-                     "render_max_ms": float(run.render_max_cpu.mean()), "time_overlap": m["time_overlap"],
-                     "efficiency": m["efficiency"], "allowed": allowed, "of_allowed": m["efficiency"] / allowed,
-                     "balancing_cpu_ms": m["balancing_cpu_ms"], "emulated_ms": m["emulated_ms"]})
+    for name, runs in got.items():
+        med = {key: float(np.median([x[key] for x in runs])) for key in runs[0]}
+        allowed = 1.0 / (med["time_overlap"] * floor)  # the efficiency were the imbalance at the floor
+        rows.append({"balance": name, "imbalance": med["imbalance"], "floor": floor,
+                     "render_max_ms": med["render_max_ms"], "time_overlap": med["time_overlap"],
+                     "efficiency": med["efficiency"], "allowed": allowed, "of_allowed": med["efficiency"] / allowed,
+                     "balancing_cpu_ms": med["balancing_cpu_ms"], "emulated_ms": med["emulated_ms"]})
     write_csv(out / "sixteen.csv", rows)
     best = min(rows, key=lambda r: r["imbalance"])
     fastest = min(rows, key=lambda r: r["emulated_ms"])
     return "\n".join([
         f"The plant walk ({frames} frames) on a {n}x{n} wall of {tile}x{tile} tiles ({side}x{side}: {k} ranks on "
-        f"this machine's two cores), against one rank on the same display. `Floor`: the render imbalance of "
-        f"identical work on {k} ranks (`multigpu bench floor --ranks {k} --tile {tile} --display {side}`, the same "
-        "region size); "
-        "`Allowed`: the efficiency that floor alone allows at the run's time overlap, 1 / (time overlap x floor); "
-        "`Of allowed`: efficiency / allowed.",
+        f"this machine's two cores), against one rank on the same display; {rounds} alternated rounds, medians. "
+        f"`Floor`: the render imbalance of identical work on {k} ranks (`multigpu bench floor --ranks {k} --tile "
+        f"{tile} --display {side}`, the same region size, in every round); `Allowed`: the efficiency that floor "
+        "alone allows at the run's time overlap, 1 / (time overlap x floor); `Of allowed`: efficiency / allowed.",
         "",
         md_table(rows, [("balance", "Balance", ""), ("imbalance", "Render imbalance", ".2f"),
                         ("floor", "Floor", ".2f"), ("render_max_ms", "Slowest render ms", ".2f"),
