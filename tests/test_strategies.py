@@ -545,5 +545,15 @@ def test_shares_learn_a_slow_rank_and_settle_where_times_are_equal():
     assert s.shares[0] < 0.7 * s.shares[1:].min()  # rank 0 learnt as the slow one
     assert spread[0] > 1.3 and max(spread[-10:]) < 1.08
     assert abs(np.log(s.shares).mean()) < 1e-9 and s.report()["shares"][0] < 1.0
+    before = s.shares.copy()
     s.observe(41, p, np.array([1.0, 0.0, 1.0, 1.0]))  # a rank without a time: nothing learnt
-    assert s.shares[0] < 0.7
+    s.observe(42, p._replace(features=None), np.array([9.0, 1.0, 1.0, 1.0]))  # nor from a plan not its own
+    assert (s.shares == before).all()
+
+
+def test_auto_tries_shares_instead_of_strips_on_big_walls():
+    from multigpu.strategies.auto import BIG_WALL, Auto
+
+    for grid, second in (((2, 2), "strips"), ((3, 3), "shares"), ((4, 4), "shares")):
+        assert [c.name for c in Auto(grid, (192, 192), 64).candidates] == ["cross", second]
+        assert (grid[0] * grid[1] >= BIG_WALL) == (second == "shares")

@@ -1,4 +1,5 @@
-"""``auto``: picks per scene, from measured frames, between ``cross`` and ``strips``.
+"""``auto``: picks per scene, from measured frames, between ``cross`` and ``strips`` (``shares``
+on walls of ``BIG_WALL`` ranks or more).
 
 No single strategy wins everywhere (docs/RESULTS.md, payoff): cross-segment balancing leads on
 scenes of many small objects, the paper's strips on scenes of few large or triangle-bound
@@ -36,10 +37,13 @@ from multigpu.core.balance import Partition
 from multigpu.strategies import auto_kernel
 from multigpu.strategies.base import Configured
 from multigpu.strategies.cross import CrossSegment
+from multigpu.strategies.shares import Shares
 from multigpu.strategies.strips import Strips
 
 #: decisions kept in the report (the latest ones)
 REPORT_TRIALS = 8
+#: walls of at least this many ranks try ``shares`` instead of ``strips``
+BIG_WALL = 9
 
 
 @dataclass
@@ -62,7 +66,10 @@ class Auto(Configured):
                 or not self.z > 0):
             raise ValueError("auto: need 0 <= settle < window, rounds >= 1, 0 <= hold <= max_hold, z > 0")
         args = (self.grid, self.size, self.strips, self.compiled)
-        self.candidates = (CrossSegment(*args), Strips(*args))
+        # on big walls the strips' second candidate learns each rank's share (``experiment sixteen``:
+        # render imbalance 1.39 against strips' 1.58 on 16 ranks); smaller walls keep the paper's strips
+        big = int(self.grid[0]) * int(self.grid[1]) >= BIG_WALL
+        self.candidates = (CrossSegment(*args), (Shares if big else Strips)(*args))
         # the candidates that learn from measured times (a no-op ``observe`` is not called per frame)
         self._learners = tuple(c for c in self.candidates if type(c).observe is not Configured.observe)
         self.chosen = 0  # cross until a trial says otherwise

@@ -23,6 +23,9 @@ from multigpu.core.balance import Partition, node_ratios, partition
 from multigpu.core.tree import gpu_tree
 from multigpu.strategies.base import Configured
 
+#: the features a ``shares`` plan carries: the mark of its own partitions
+MINE = {"planner": "shares"}
+
 
 @dataclass
 class Shares(Configured):
@@ -48,10 +51,13 @@ class Shares(Configured):
         return np.exp(np.array(self._log))
 
     def plan(self, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Partition:
-        return partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled, ratios=self._ratios)
+        p = partition(rects, tris, self.grid, self.size, self.strips, compiled=self.compiled, ratios=self._ratios)
+        return p._replace(features=MINE)  # ``observe`` learns only from its own plans (``auto`` shows it others)
 
     def observe(self, frame: int, partition: Partition, times: np.ndarray) -> None:
         """Move every rank's share by ``rate`` of log(mean time / its time), keep their mean at 1."""
+        if partition is None or partition.features is not MINE:
+            return  # another strategy's plan (auto's other candidate) or one planned elsewhere
         t = [float(v) for v in times]  # K ranks: plain floats cost less than numpy calls here
         if len(t) != self.k or not all(0.0 < v < math.inf for v in t):
             return  # a frame without a time for every rank says nothing about their speeds
