@@ -198,10 +198,14 @@ def _hybrid_verdict(rows: list[dict]) -> str:
         cases.append(f"{key[0]} {key[1]}: fastest `{best['decomposition']}`; hybrid triangle overlap "
                      f"{hybrid['triangle_overlap']:.2f} against {screen['triangle_overlap']:.2f}, frame "
                      f"{hybrid['emulated_ms'] / screen['emulated_ms']:.2f}x screen's")
+    won = sorted({f"{r['scene']} {r['grid']}" for r in rows if r["decomposition"] == "hybrid"
+                  and r["emulated_ms"] == min(x["emulated_ms"] for x in rows
+                                              if (x["scene"], x["grid"]) == (r["scene"], r["grid"]))})
+    verdict = (f"`hybrid` is the fastest on {', '.join(won)}; `screen` stays the default elsewhere." if won else
+               "`screen` is the fastest on every scene and wall here, so it stays the default.")
     return ("**What wins.** " + "; ".join(cases) + ". Drawing the wide objects once cuts the triangles, but "
             "every region's depth is read back and sent and the depth pieces of the wide objects near the camera "
-            "cover much of the display; on llvmpipe pixels cost more than triangles, so the default keeps "
-            "`screen` wherever `screen` is fastest here.")
+            "cover much of the display: on llvmpipe pixels cost more than triangles. " + verdict)
 
 
 SIXTEEN = ("strips", "shares", "cross", "auto")
