@@ -99,7 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
     ac.add_argument("--quick", action="store_true", help="tiny sizes: the same code in under a minute")
     ac.add_argument("--out", default="out/accuracy", help="directory for the CSV tables")
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
-    b = sub.add_parser("bench", help="benchmarks: print speed and memory figures")
+    _bench_args(sub.add_parser("bench", help="benchmarks: print speed and memory figures"))
+    return ap
+
+
+def _bench_args(b: argparse.ArgumentParser) -> None:
+    """The ``bench`` subcommand's arguments."""
     b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | passes | imbalance | "
                                 "exchange | memory | memory-steps | model-load | latency (frames in flight: wall time, "
                                 "input to photon) | timeline (every rank's phases at "
@@ -119,8 +124,18 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default="out/peer", help="peer, latency, simplify: where the runs and the results CSV go "
                                                      "(default out/peer, out/latency, out/simplify)")
     scene_args(b)  # bench floor's worker: the scene it renders
-    return ap
 
+
+
+def _bench_floor(args) -> int:
+    """``bench floor`` with its sizes checked at the door."""
+    from multigpu.studies.floor import bench_floor
+
+    if args.tile < 1 or (args.display is not None and args.display < args.tile):
+        raise InputError(f"bench floor: --tile must be >= 1 and --display >= the tile, got --tile {args.tile} "
+                         f"--display {args.display}")
+    bench_floor(args.quick, args.frames, _ranks_list(args.ranks), args.tile, args.display)
+    return 0
 
 def main(argv: list[str] | None = None) -> int:
     try:
@@ -192,13 +207,7 @@ def main(argv: list[str] | None = None) -> int:
                            rounds=args.rounds, out=args.out)
                 return 0
             if args.what == "floor":
-                from multigpu.studies.floor import bench_floor
-
-                if args.tile < 1 or (args.display is not None and args.display < args.tile):
-                    raise InputError(f"bench floor: --tile must be >= 1 and --display >= the tile, got --tile "
-                                     f"{args.tile} --display {args.display}")
-                bench_floor(args.quick, args.frames, _ranks_list(args.ranks), args.tile, args.display)
-                return 0
+                return _bench_floor(args)
             return bench.main(args.what, quick=args.quick)
     except InputError as exc:
         print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr)
