@@ -48,7 +48,8 @@ BIG_WALL = 9
 
 @dataclass
 class Auto(Configured):
-    """Chooses cross or strips per scene from trial frames, and re-checks every ``hold`` frames."""
+    """Chooses cross or strips (shares on big walls) per scene from trial frames, and re-checks
+    every ``hold`` frames."""
 
     window: int = 8  # frames per trial window
     settle: int = 2  # first frames of a window not scored
@@ -58,7 +59,8 @@ class Auto(Configured):
     z: float = 2.5  # a trial ends after a round once the best leads by this many standard errors
 
     name = "auto"
-    summary = 'chooses cross or strips per scene from trial frames, and checks again now and then'
+    summary = ('chooses cross or strips (shares on walls of 9+ ranks) per scene from trial frames, and checks '
+               'again now and then')
     reproducible = False  # it follows measured times
 
     def __post_init__(self):
