@@ -56,7 +56,6 @@ class Hybrid:
         self.size = tuple(size)
         self.wide = np.asarray(wide, dtype=bool)
         self.order = np.asarray(order, dtype=np.int64)[self.wide[order]]  # the wide objects in draw order
-        self.last = {"wide": int(self.wide.sum())}
 
     @classmethod
     def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Hybrid":
@@ -91,8 +90,6 @@ class Hybrid:
         for j, k in enumerate(ranks.tolist()):  # ranks, not objects
             out_rects[k] = np.concatenate([np.asarray(out_rects[k], dtype=np.int64).reshape(-1, 4), boxes[j:j + 1]])
             out_masks[k] = np.concatenate([np.asarray(out_masks[k]).reshape(-1, n), masks[k:k + 1]])
-        self.last = {"wide": int(self.wide.sum()), "wide_visible": int(idx.size),
-                     "wide_triangles": int(tris[idx].sum())}
         front = tuple(len(r) for r in base.rects)
         return Work(tuple(out_rects), tuple(out_masks), loads, True, base.partition, front)
 
