@@ -141,20 +141,23 @@ def _choose(s, e, below, total, ratio, a, length, q, need_lo, need_hi, target):
     for i in range(q - 2, -1, -1):
         e[i] += e[i + 1]
     best = np.inf
+    per_pixel = q == length  # a strip per pixel: cut i is a + i + 1 (no division)
+    diffs = np.empty(q - 1)  # each cut's Diff (inf: not a candidate), read again by the second pass
     for i in range(q - 1):
-        cut = a + ((i + 1) * length) // q
+        cut = a + i + 1 if per_pixel else a + ((i + 1) * length) // q
         left = s[i] + below[i] if fill else s[i] + 0.0
         right = e[i + 1] + (total - below[i]) if fill else e[i + 1] + 0.0
+        d = np.inf
         if cut - a >= need_lo and a + length - cut >= need_hi and left > 0 and right > 0:
-            best = min(best, abs(left / right - ratio))
+            d = abs(left / right - ratio)
+            best = min(best, d)
+        diffs[i] = d
     pick, pick_dist = -1, 0
     for i in range(q - 1):
-        cut = a + ((i + 1) * length) // q
+        cut = a + i + 1 if per_pixel else a + ((i + 1) * length) // q
         if cut - a < need_lo or a + length - cut < need_hi:
             continue
-        left = s[i] + below[i] if fill else s[i] + 0.0
-        right = e[i + 1] + (total - below[i]) if fill else e[i + 1] + 0.0
-        if best < np.inf and not (left > 0 and right > 0 and abs(left / right - ratio) == best):
+        if best < np.inf and not diffs[i] == best:
             continue
         dist = abs(cut - target)
         if pick < 0 or dist < pick_dist:
@@ -217,6 +220,12 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density, ratios):
             extent = W if axis == 0 else H
             if m == 0 and fuse:  # filled with the spans
                 s, e = s0, e0
+            elif q == length:  # a strip per pixel (strips >= the region's pixels, the usual): no table
+                top = q - 1
+                for t in range(idx.shape[0]):
+                    o = idx[t]
+                    s[min(max(spans[axis, o] - a, 0), top)] += tris[o]
+                    e[min(max(spans[axis + 2, o] - a, 0), top)] += tris[o]
             elif extent <= TABLE_MAX:  # the strip of every display pixel, once: no division per object
                 table = _strip_table(extent, a, length, q)
                 for t in range(idx.shape[0]):  # Start/End arrays: each object at its first and last strip
