@@ -181,6 +181,34 @@ def _split(idx, spans, axis, cut):
     return lo[:p], hi[:r]
 
 
+def _starts_ends(idx, spans, tris, axis, a, length, q, extent):
+    """A node's Start/End arrays: the ``tris`` of each object of ``idx`` added at the strip of its
+    first and of its last pixel along ``axis``, the node's ``[a, a + length)`` cut into ``q``
+    strips (pixels outside clamp to the end strips)."""
+    s = np.zeros(q, dtype=tris.dtype)
+    e = np.zeros(q, dtype=tris.dtype)
+    if q == length:  # a strip per pixel (strips >= the region's pixels, the usual): no table
+        top = q - 1
+        for t in range(idx.shape[0]):
+            o = idx[t]
+            s[min(max(spans[axis, o] - a, 0), top)] += tris[o]
+            e[min(max(spans[axis + 2, o] - a, 0), top)] += tris[o]
+    elif extent <= TABLE_MAX:  # the strip of every display pixel, once: no division per object
+        table = _strip_table(extent, a, length, q)
+        for t in range(idx.shape[0]):
+            o = idx[t]
+            s[table[spans[axis, o]]] += tris[o]
+            e[table[spans[axis + 2, o]]] += tris[o]
+    else:
+        for t in range(idx.shape[0]):
+            o = idx[t]
+            f = ((spans[axis, o] - a + 1) * q - 1) // length
+            g = ((spans[axis + 2, o] - a + 1) * q - 1) // length
+            s[min(max(f, 0), q - 1)] += tris[o]
+            e[min(max(g, 0), q - 1)] += tris[o]
+    return s, e
+
+
 def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density, ratios):
     """``balance.tree_partition`` with the strip chooser, in one call (``rt``: (4, N) rects);
     a node whose ``fixed`` cut is >= 0 takes that cut instead (choosers that need no objects:
@@ -215,30 +243,10 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density, ratios):
             cut = fixed[m]
         else:
             q = min(strips, length)
-            s = np.zeros(q, dtype=tris.dtype)
-            e = np.zeros(q, dtype=tris.dtype)
-            extent = W if axis == 0 else H
             if m == 0 and fuse:  # filled with the spans
                 s, e = s0, e0
-            elif q == length:  # a strip per pixel (strips >= the region's pixels, the usual): no table
-                top = q - 1
-                for t in range(idx.shape[0]):
-                    o = idx[t]
-                    s[min(max(spans[axis, o] - a, 0), top)] += tris[o]
-                    e[min(max(spans[axis + 2, o] - a, 0), top)] += tris[o]
-            elif extent <= TABLE_MAX:  # the strip of every display pixel, once: no division per object
-                table = _strip_table(extent, a, length, q)
-                for t in range(idx.shape[0]):  # Start/End arrays: each object at its first and last strip
-                    o = idx[t]
-                    s[table[spans[axis, o]]] += tris[o]
-                    e[table[spans[axis + 2, o]]] += tris[o]
             else:
-                for t in range(idx.shape[0]):
-                    o = idx[t]
-                    f = ((spans[axis, o] - a + 1) * q - 1) // length
-                    g = ((spans[axis + 2, o] - a + 1) * q - 1) // length
-                    s[min(max(f, 0), q - 1)] += tris[o]
-                    e[min(max(g, 0), q - 1)] += tris[o]
+                s, e = _starts_ends(idx, spans, tris, axis, a, length, q, W if axis == 0 else H)
             target = a + (length * nl) // (nl + nr)
             below, total = density[:0], 0.0  # no fill term
             if density.shape[0] > 0:
@@ -267,7 +275,7 @@ def _walk(rt, tris, W, H, strips, nodes, leaves, fixed, density, ratios):
     return regions, loads, visible, splits, split_pixels, spans, checks
 
 
-compile_all(globals(), ("_spans", "_strip_table", "_fill_line", "_choose", "_split", "_walk"))
+compile_all(globals(), ("_spans", "_strip_table", "_starts_ends", "_fill_line", "_choose", "_split", "_walk"))
 
 
 def strip_partition(rects: np.ndarray, tris: np.ndarray, tree, size, strips: int, cuts: np.ndarray | None = None,
