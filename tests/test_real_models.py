@@ -11,7 +11,7 @@ from multigpu.cli import main as cli
 from multigpu.core.camera import frame_matrices
 from multigpu.core.projectors import make_projector
 from multigpu.errors import InputError
-from multigpu.parallel.report import COLUMNS, summarize
+from multigpu.parallel.report import COLUMNS, summarize, table
 from multigpu.scene.models import SceneSpec, axis_name, load_scene
 from multigpu.scene.paths import orbit, walkthrough
 
@@ -202,6 +202,22 @@ def test_imbalance_leaves_out_frames_that_drew_nothing():
     assert s["empty_frames"] == 1
     assert s["imbalance_triangles"] == pytest.approx((1.0 + 1.5) / 2)
     assert s["imbalance_triangles"] >= 1.0 and s["imbalance_render_cpu"] >= 1.0
+
+
+def test_balancing_share_is_the_mean_ranks_balancing_and_cull_over_the_emulated_frame():
+    rows = np.zeros((2 * 2, len(COLUMNS)))
+    col = {c: i for i, c in enumerate(COLUMNS)}
+    rows[:, col["frame"]] = np.repeat([0, 1], 2)
+    rows[:, col["rank"]] = np.tile([0, 1], 2)
+    rows[:, col["triangles"]] = 10
+    rows[:, col["load_balancing_cpu_ms"]] = [0.2, 0.4, 0.2, 0.4]  # mean 0.3
+    rows[:, col["culling_cpu_ms"]] = 0.1
+    rows[:, col["rendering_cpu_ms"]] = [5.0, 7.6, 9.0, 2.0]  # slowest rank's CPU: 8.0 and 9.2 ms
+    rows[:, col["frame_ms"]] = 10.0
+    s = summarize(rows, 2)
+    assert s["emulated_frame_ms"] == pytest.approx(8.6)
+    assert s["balancing_share"] == pytest.approx(0.4 / 8.6)
+    assert "balancing and culling 4.7 % of it" in table(s)
 
 
 def test_the_shipped_pump_model():

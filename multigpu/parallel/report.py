@@ -6,7 +6,8 @@ Figures and what they are:
   honest when ranks outnumber cores;
 * ``emulated_frame_ms`` is the emulated parallel frame time: per frame, the slowest rank's CPU
   time for load balancing + rendering + exchange + display, i.e. the frame time the run would
-  have with one core (GPU) per rank;
+  have with one core (GPU) per rank; ``balancing_share`` the mean rank's load balancing and
+  culling CPU over it (means over frames);
 * presenting (``--present window``): ``present_ms`` is a rank's upload + blit + swap (wall),
   ``swap_wait_ms`` its wait in the swap barrier, ``swap_ms`` the moment its swap returned,
   after the frame's earliest swap (one clock per host), and ``swap_skew_ms`` the frame's latest
@@ -181,6 +182,9 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "emulated_frame_ms": float(emulated.mean()),
         "emulated_fps": float(1000.0 / emulated.mean()),
         "emulated_frame_ms_median": float(np.median(emulated)),
+        # what a frame's balancing and cull cost beside the frame they plan (issue 55's figure)
+        "balancing_share": float((get("load_balancing_cpu_ms").mean() + get("culling_cpu_ms").mean())
+                                 / max(float(emulated.mean()), 1e-12)),
         "render_cpu_max_ms": float(rend.max(axis=1).mean()),
         "imbalance_triangles": ratio(tri),
         "imbalance_render_cpu": ratio(rend),
@@ -228,7 +232,8 @@ def table(summary: dict, title: str = "") -> str:
               f"{c.get('heartbeat_cpu_ms', 0.0):.3f}",
               _waits(summary),
               f"Emulated parallel frame (slowest rank's CPU time): {summary['emulated_frame_ms']:.2f} ms = "
-              f"{summary['emulated_fps']:.2f} FPS (median {summary['emulated_frame_ms_median']:.2f} ms)",
+              f"{summary['emulated_fps']:.2f} FPS (median {summary['emulated_frame_ms_median']:.2f} ms); balancing and "
+              f"culling {100 * summary.get('balancing_share', 0.0):.1f} % of it",
               f"Imbalance max/mean: triangles {_fmt(summary['imbalance_triangles'])}, render CPU time "
               f"{_fmt(summary['imbalance_render_cpu'])}{_empty(summary)}; bytes exchanged per frame "
               f"{summary['bytes_sent_per_frame']:.0f}"]

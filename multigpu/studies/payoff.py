@@ -92,6 +92,8 @@ def exp_payoff(s: Settings, out: Path) -> str:
                          "imb_render": float(np.median([r.summary["imbalance_render_cpu"] for r in rs])),
                          "imb_tris": float(np.median([r.summary["imbalance_triangles"] for r in rs])),
                          "lb_cpu_ms": float(np.median(lb)), "lb_share": float(np.median(lb) / np.median(em)),
+                         "cull_ms": float(np.median([r.summary["cpu"]["culling_cpu_ms"] for r in rs])),
+                         "lb_cull_share": float(np.median([r.summary["balancing_share"] for r in rs])),
                          **{k: float(np.median([r.summary["cpu"][c] for r in rs])) for k, c in PARTS.items()},
                          "render_max_ms": float(np.median([r.summary["render_cpu_max_ms"] for r in rs])),
                          "render_mean_ms": float(np.median([r.summary["cpu"]["rendering_cpu_ms"] for r in rs])),
@@ -129,13 +131,15 @@ def _page(s: Settings, rows, bounds, ranking, verdict: str, checks, rounds: int,
         "medians over rounds (min..max of the speedup beside). Emulated "
         "parallel frame = "
         "slowest rank's CPU time per frame; `LB share` = load-balancing CPU per rank (projection, plan, learning "
-        "from the last frame's times) / emulated frame.", "",
+        "from the last frame's times) / emulated frame; `Cull ms` = the cull of big objects' parts per rank; "
+        "`LB + cull share` = both over the emulated frame (the walkthrough's own summary line).", "",
         md_table(rows, [("scene", "Scene", ""), ("objects", "Objects", "d"), ("balance", "Balance", ""),
                         ("emulated_ms", "Frame (emulated) ms", ".2f"), ("speedup_vs_none", "vs none", ".2f"),
                         ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f"),
                         ("render_max_ms", "Slowest render ms", ".2f"), ("imb_render", "Imb. render", ".3f"),
                         ("imb_tris", "Imb. tris", ".3f"), ("tris_drawn", "Tris drawn / frame", ",.0f"),
-                        ("lb_cpu_ms", "LB CPU ms", ".2f"), ("lb_share", "LB share", ".1%")]), "",
+                        ("lb_cpu_ms", "LB CPU ms", ".2f"), ("lb_share", "LB share", ".1%"),
+                        ("cull_ms", "Cull ms", ".2f"), ("lb_cull_share", "LB + cull share", ".1%")]), "",
         "How far balancing can go here. `Floor` = the render imbalance of identical work on every rank "
         "(`multigpu bench floor`, measured in every round beside the runs: this machine's noise, which a perfect "
         "balancer would still show). `Ideal frame` = `none`'s frame with its balancing, exchange and display CPU "
