@@ -182,7 +182,7 @@ def summarize(rows: np.ndarray, ranks: int) -> dict:
         "emulated_frame_ms": float(emulated.mean()),
         "emulated_fps": float(1000.0 / emulated.mean()),
         "emulated_frame_ms_median": float(np.median(emulated)),
-        # what a frame's balancing and cull cost beside the frame they plan (issue 55's figure)
+        # what a frame's balancing and cull cost beside the frame they plan
         "balancing_share": float((get("load_balancing_cpu_ms").mean() + get("culling_cpu_ms").mean())
                                  / max(float(emulated.mean()), 1e-12)),
         "render_cpu_max_ms": float(rend.max(axis=1).mean()),
