@@ -126,7 +126,6 @@ def _bench_args(b: argparse.ArgumentParser) -> None:
     scene_args(b)  # bench floor's worker: the scene it renders
 
 
-
 def _bench_floor(args) -> int:
     """``bench floor`` with its sizes checked at the door."""
     from multigpu.studies.floor import bench_floor
@@ -136,6 +135,7 @@ def _bench_floor(args) -> int:
                          f"--display {args.display}")
     bench_floor(args.quick, args.frames, _ranks_list(args.ranks), args.tile, args.display)
     return 0
+
 
 def main(argv: list[str] | None = None) -> int:
     try:
