@@ -173,7 +173,7 @@ def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
 
 
 def test_a_recorded_path_that_cannot_be_written_is_the_runs_failure(tmp_path, monkeypatch):
-    """``--record``'s file failing at the end (disk full): the record names it (``failed``, which
+    """``--record``'s file failing (disk full): the record names it (``failed``, which
     ends the job with one line and exit 2), timings and summary are still written whole, and
     the printout claims no recorded frames."""
     import io
@@ -181,12 +181,12 @@ def test_a_recorded_path_that_cannot_be_written_is_the_runs_failure(tmp_path, mo
 
     from multigpu.parallel.outdir import OutputDir
     from multigpu.parallel.record import RunRecord
-    from multigpu.scene.paths import CameraPath
+    from multigpu.scene.paths import PathAppender
 
-    def full(self, path):
+    def full(self, data, frames):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(CameraPath, "save", full)
+    monkeypatch.setattr(PathAppender, "_write", full)
     record = RunRecord(OutputDir(tmp_path / "o"), 1, 2, {}, lambda: None, False, False, False,
                        str(tmp_path / "rec.json"))
     rows = np.ones((1, len(COLUMNS)))

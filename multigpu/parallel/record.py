@@ -2,8 +2,11 @@
 
 Rows reach the CSV a whole frame at a time and before anything else of that frame, so the
 summary, rewritten every ``SUMMARY_EVERY`` frames and whenever the run ends, always describes
-exactly the rows written; the recorded camera path (``--record``) is rewritten with it, holding
-the camera of every frame written. No MPI here: the frame loop hands over the gathered rows and images.
+exactly the rows written; the recorded camera path (``--record``) grows with it, holding the
+camera of every frame written. Nothing here grows with the run's length: rows are added to a
+running tally (``parallel/tally.py``) a checkpoint's batch at a time and let go, cameras are
+appended to the path file as they are written. No MPI here: the frame loop hands over the
+gathered rows and images.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
 from multigpu.parallel.mosaic import save_png
 from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, summarize, table, target_stats, write_json
+from multigpu.parallel.report import COLUMNS, TimingWriter, table, write_json
+from multigpu.parallel.tally import RunningSummary, summarize_file
 from multigpu.scene.models import axis_name
 
 
@@ -31,10 +35,15 @@ class RunRecord:
         self.out, self.K, self.n_frames = out, ranks, n_frames
         self.config, self.report = config, report
         self.overlay = overlay_mosaics
-        self.history: list[np.ndarray] = []
+        self.tally = RunningSummary(ranks, *tally_options(config))
+        self.batch: list[np.ndarray] = []  # rows of the frames since the last checkpoint (at most SUMMARY_EVERY)
         self.record_to = Path(record) if record else None
-        self.cameras: list = []  # (F, 12): position, target, up, fov, near, far of each frame written
-        self.recorded = 0  # frames in the path file on disk
+        self.path = None
+        if self.record_to is not None:
+            from multigpu.scene.paths import PathAppender
+
+            self.path = PathAppender(self.record_to)
+        self.cameras: list = []  # (12,) position, target, up, fov, near, far of the frames not yet in the path file
         self.failed: WriteFailed | None = None  # the first output that could not be written
         self.done = 0
         out.clear_previous()
@@ -50,36 +59,38 @@ class RunRecord:
 
             self.bar = tqdm(total=n_frames, unit="frame", desc=f"{ranks} ranks", dynamic_ncols=True, mininterval=1.0)
 
+    @property
+    def recorded(self) -> int:
+        """Frames in the path file on disk."""
+        return self.path.frames if self.path is not None else 0
+
     def camera(self, cam) -> None:
         """The next frame's camera (path-file coordinates), kept for ``--record``."""
         self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far])
 
     def _save_path(self) -> None:
-        """Rewrite the ``--record`` file (atomically) with the camera of every frame written."""
-        if self.record_to is None or not self.done or self.recorded == self.done:
+        """Append the cameras of the frames written since the last time to the ``--record`` file."""
+        if self.path is None or self.recorded == self.done:
             return
-        from multigpu.scene.paths import CameraPath
-
-        c = np.array(self.cameras[:self.done], dtype=np.float64)
+        n = self.done - self.recorded
         try:
-            CameraPath(c[:, 0:3], c[:, 3:6], c[:, 6:9], c[:, 9], c[:, 10], c[:, 11]).save(self.record_to)
+            self.path.append(np.array(self.cameras[:n], dtype=np.float64))
         except OSError as exc:
             kept = f"kept its first {self.recorded} frames" if self.recorded else ""
             raise WriteFailed.of(self.record_to, exc, kept) from None
-        self.recorded = self.done
+        del self.cameras[:n]
 
     def rows(self, f: int, rows: np.ndarray) -> None:
-        """Frame ``f``'s (K, len(COLUMNS)) rows: to the CSV first, then the history."""
+        """Frame ``f``'s (K, len(COLUMNS)) rows: to the CSV first, then the tally."""
         self.writer.write(rows)
-        self.history.append(rows.copy())
+        self.batch.append(rows[np.argsort(rows[:, COLUMNS.index("rank")], kind="stable")])
         self.done = f + 1
         if self.bar is not None:
             self.bar.update(1)
-            self.bar.set_postfix(fps=f"{1e3 / max(rows[:, COLUMNS.index('frame_ms')].max(), 1e-9):.1f}")
+            self.bar.set_postfix(fps=f"{1e3 / max(rows[:, COLUMNS.index('frame_ms')].max(), 1e-9):.1f}", refresh=False)
         if f % SUMMARY_EVERY == SUMMARY_EVERY - 1:
             self.summary(complete=False)
-            if self.done - self.recorded >= max(SUMMARY_EVERY, self.done // 10):  # linear in frames overall
-                self._save_path()
+            self._save_path()
 
     def image(self, f: int, img: np.ndarray, rects, mosaic: bool) -> None:
         """The stitched wall of frame ``f``: a mosaic PNG (and its partition overlay) when
@@ -92,14 +103,11 @@ class RunRecord:
             self.video.append_data(img)
 
     def summary(self, complete: bool, stopped_by: str | None = None) -> dict:
-        rows = np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS)))
-        summary = summarize(rows, self.K)
-        hosts = [r.get("host") for r in self.config.get("ranks", [])]
-        if summary.get("frames") and len(set(hosts)) > 1 and self.config.get("present") == "window":
-            summary["present"]["swap_skew_ms_by_host"] = skew_by_host(rows, self.K, hosts)
-        if summary.get("frames") and self.config.get("target_fps"):
-            summary["target"] = target_stats(rows, self.K, self.config["target_fps"], self.config["render_scale"],
-                                             self.config["lod_error"])
+        """Rewrite summary.json from the tally, the rows since the last checkpoint added first."""
+        if self.batch:
+            self.tally.add(np.stack(self.batch))
+            self.batch.clear()
+        summary = self.tally.result()
         doc = {"complete": complete, "frames_written": self.done, "config": self.config,
                "decomposition": self.report(), **summary}
         if stopped_by:
@@ -114,7 +122,7 @@ class RunRecord:
             self._save_path()
         except WriteFailed as exc:  # the timings and summary are still written
             self.failed = self.failed or exc
-        for thing in (self.bar, self.writer, self.video):
+        for thing in (self.bar, self.writer, self.video, self.path):
             if thing is not None:
                 try:
                     thing.close()
@@ -124,7 +132,7 @@ class RunRecord:
             return self.summary(complete=complete, stopped_by=stopped_by)
         except WriteFailed as exc:
             self.failed = self.failed or exc
-            return summarize(np.concatenate(self.history) if self.history else np.zeros((0, len(COLUMNS))), self.K)
+            return self.tally.result()
 
     def timeline(self, ranks: list, latency: int) -> None:
         """``timeline.json``: per rank, the last frames' phases as [name, start, end] in ms from
@@ -142,19 +150,14 @@ class RunRecord:
             print(f"camera path of the {self.recorded} frames written in {self.record_to} (replay: --path)", flush=True)
 
 
-def skew_by_host(rows: np.ndarray, ranks: int, hosts: list) -> dict:
-    """Per host, the median over frames of its own ranks' swap skew (latest minus earliest swap
-    return among them, each host on its own clock): whether each PC's monitors swap together."""
-    col = {c: i for i, c in enumerate(COLUMNS)}
-    frames = rows.shape[0] // ranks
-    per = rows[:frames * ranks][np.lexsort((rows[:frames * ranks, col["rank"]], rows[:frames * ranks, col["frame"]]))]
-    swap = per.reshape(frames, ranks, len(COLUMNS))[:, :, col["swap_ms"]]
-    out = {}
-    for h in dict.fromkeys(hosts):  # hosts, a few
-        mine = [k for k, x in enumerate(hosts) if x == h]
-        s = swap[:, mine]
-        out[str(h)] = float(np.median(s.max(axis=1) - s.min(axis=1)))
-    return out
+def tally_options(config: dict) -> tuple:
+    """The tally's ``hosts`` and ``target`` for a run of this configuration: the swap skew per
+    host of a windowed wall on several PCs, how a ``--target-fps`` run held its rate."""
+    hosts = [r.get("host") for r in config.get("ranks", [])]
+    by_host = hosts if len(set(hosts)) > 1 and config.get("present") == "window" else None
+    target = ((config["target_fps"], config["render_scale"], config["lod_error"])
+              if config.get("target_fps") else None)
+    return by_host, target
 
 
 def salvage(out: Path, reason: str) -> int | None:
@@ -167,13 +170,11 @@ def salvage(out: Path, reason: str) -> int | None:
     path = Path(out) / "summary.json"
     try:
         doc = json.loads(path.read_text())
-        rows = read_timings(Path(out) / "timings.csv")
-        ranks = len(doc["config"]["ranks"])
+        if doc.get("complete") or doc.get("stopped_by"):
+            return None
+        summary = summarize_file(Path(out) / "timings.csv", len(doc["config"]["ranks"]), *tally_options(doc["config"]))
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    if doc.get("complete") or doc.get("stopped_by"):
-        return None
-    summary = summarize(rows, ranks)
     write_json(path, {"complete": False, "frames_written": summary["frames"], "config": doc["config"],
                       "decomposition": doc.get("decomposition"), **summary, "stopped_by": reason})
     return summary["frames"]

@@ -115,103 +115,16 @@ def _cell(column: str, v: float) -> str:
 def read_timings(path: Path) -> np.ndarray:
     """timings.csv back to an (R, len(COLUMNS)) float array (``balance`` as its index in
     ``BALANCE_NAMES``)."""
-    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2,
+    with open(path) as f:
+        next(f, None)  # the header
+        return parse_rows(f)
+
+
+def parse_rows(lines) -> np.ndarray:
+    """Lines of timings.csv rows (no header) to an (R, len(COLUMNS)) float array."""
+    data = np.loadtxt(lines, delimiter=",", ndmin=2,
                       converters={COLUMNS.index("balance"): lambda s: float(BALANCE_NAMES.index(s))})
     return data.reshape(-1, len(COLUMNS))
-
-
-def target_stats(rows: np.ndarray, ranks: int, target_fps: float, scale: float = 1.0, lod_px: float = 0.0) -> dict:
-    """How a run held ``--target-fps``: of its frames after the first ``WARMUP`` (the controller
-    has measured nothing before), the share whose period (the mean over ranks) lies within
-    ``TARGET_BAND`` of the target's, the share at least ``1 - TARGET_BAND`` of the target rate,
-    and how many were drawn below full quality (``scale``, ``lod_px``)."""
-    from multigpu.core.quality import WARMUP
-
-    col = {c: i for i, c in enumerate(COLUMNS)}
-    rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(COLUMNS))
-    frames = np.unique(rows[:, col["frame"]])
-    complete = frames[[(rows[:, col["frame"]] == f).sum() == ranks for f in frames]]  # frames, once at the end
-    rows = rows[np.isin(rows[:, col["frame"]], complete[complete >= WARMUP])]
-    rows = rows[np.lexsort((rows[:, col["rank"]], rows[:, col["frame"]]))]
-    per = rows.reshape(-1, ranks, len(COLUMNS))
-    period = per[:, :, col["frame_ms"]].mean(axis=1)
-    target_ms = 1e3 / target_fps
-    reduced = (per[:, 0, col["render_scale"]] < scale) | (per[:, 0, col["lod_error_px"]] > lod_px)
-    judged = max(len(period), 1)
-    return {"target_fps": float(target_fps), "frames_judged": int(len(period)),
-            "within_band": float((np.abs(period / target_ms - 1.0) <= TARGET_BAND).sum() / judged),
-            "at_least_rate": float((1e3 / np.maximum(period, 1e-9) >= (1 - TARGET_BAND) * target_fps).sum() / judged),
-            "reduced_frames": int(reduced.sum()), "fps": float(1e3 / period.mean()) if len(period) else 0.0}
-
-
-def summarize(rows: np.ndarray, ranks: int) -> dict:
-    """The averaged breakdown of complete frames (all ranks present)."""
-    col = {c: i for i, c in enumerate(COLUMNS)}
-    rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(COLUMNS))
-    frames = np.unique(rows[:, col["frame"]]) if len(rows) else np.zeros(0)
-    counts = np.array([(rows[:, col["frame"]] == f).sum() for f in frames])
-    frames = frames[counts == ranks]
-    if frames.size == 0:
-        return {"frames": 0}
-    rows = rows[np.isin(rows[:, col["frame"]], frames)]
-    rows = rows[np.lexsort((rows[:, col["rank"]], rows[:, col["frame"]]))]
-    per = rows.reshape(frames.size, ranks, len(COLUMNS))  # (F, K, C)
-    get = lambda c: per[:, :, col[c]]
-    # the frame period, each rank's time from its last frame shown to this one, averaged over the ranks:
-    # the run's frames per second (with frames in flight a rank's periods jitter around the common rate,
-    # and their maximum would overstate it)
-    frame_ms = get("frame_ms").mean(axis=1)
-    cpu = get("load_balancing_cpu_ms") + get("rendering_cpu_ms") + get("frame_exchange_cpu_ms") + get("display_cpu_ms")
-    emulated = cpu.max(axis=1)
-    tri = get("triangles")
-    rend = get("rendering_cpu_ms")
-    drawn = tri.sum(axis=1) > 0  # frames that drew nothing have no balance to measure (max/mean >= 1)
-
-    def ratio(a):
-        a = a[drawn]
-        return float(np.mean(a.max(axis=1) / np.maximum(a.mean(axis=1), 1e-12))) if len(a) else None
-    out = {
-        "frames": int(frames.size),
-        "ranks": int(ranks),
-        "wall": {c: float(get(c).mean()) for c in COMPONENTS},
-        "frame_ms": float(frame_ms.mean()),
-        "fps": float(1000.0 / frame_ms.mean()),
-        "cpu": {c: float(get(c).mean()) for c in ("load_balancing_cpu_ms", "rendering_cpu_ms",
-                                                  "frame_exchange_cpu_ms", "display_cpu_ms", "heartbeat_cpu_ms",
-                                                  "culling_cpu_ms", *BALANCE_CPU)},
-        "emulated_frame_ms": float(emulated.mean()),
-        "emulated_fps": float(1000.0 / emulated.mean()),
-        "emulated_frame_ms_median": float(np.median(emulated)),
-        # what a frame's balancing and cull cost beside the frame they plan
-        "balancing_share": float((get("load_balancing_cpu_ms").mean() + get("culling_cpu_ms").mean())
-                                 / max(float(emulated.mean()), 1e-12)),
-        "render_cpu_max_ms": float(rend.max(axis=1).mean()),
-        "imbalance_triangles": ratio(tri),
-        "imbalance_render_cpu": ratio(rend),
-        "empty_frames": int((~drawn).sum()),
-        "triangles_per_frame": float(tri.sum(axis=1).mean()),
-        "planned_triangles_per_frame": float(get("planned_triangles").sum(axis=1).mean()),
-        "bytes_sent_per_frame": float(get("bytes_sent").sum(axis=1).mean()),
-        "depth_bytes_per_frame": float(get("depth_bytes").sum(axis=1).mean()),
-        "load_cv": float(get("load_cv")[:, 0].mean()),  # std/mean of per-rank triangles (Kerbl's c_v)
-        "present": {"present_ms_median": float(np.median(get("present_ms"))),
-                    "present_ms_p99": float(np.percentile(get("present_ms"), 99)),
-                    "swap_skew_ms_median": float(np.median(get("swap_skew_ms")[:, 0])),
-                    "swap_skew_ms_p99": float(np.percentile(get("swap_skew_ms")[:, 0], 99)),
-                    "swap_skew_ms_max": float(get("swap_skew_ms")[:, 0].max())},
-        "balance_frames": {BALANCE_NAMES[int(i)]: int(n) for i, n in zip(*np.unique(get("balance")[:, 0],
-                                                                                   return_counts=True))},
-        "input_ms_median": float(np.median(get("input_ms"))),
-        "wall_waited": {c: float(get(w).mean()) for c, w in WAITED.items()},
-        "outside_phases_ms": float(np.maximum(get("frame_ms") - sum(get(c) for c in COMPONENTS), 0.0).mean()),
-        "input_to_photon_ms": float(get("latency_ms").max(axis=1).mean()),
-        "input_to_photon_frames": float(get("latency_ms").max(axis=1).mean() / frame_ms.mean()),
-        "quality": {"render_scale_mean": float(get("render_scale")[:, 0].mean()),
-                    "lod_error_px_mean": float(get("lod_error_px")[:, 0].mean())},
-        "per_frame_emulated_ms": emulated.round(3).tolist(),
-        "per_frame_wall_ms": frame_ms.round(3).tolist(),
-    }
-    return out
 
 
 def table(summary: dict, title: str = "") -> str:

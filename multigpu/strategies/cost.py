@@ -45,7 +45,7 @@ class CostModel(Configured):
         self.coef = np.array([1.0, 0.0, 0.0])  # a (per triangle), b (per pixel), c
         self.kept = ["triangles"]
         self.why = "warming up: balancing on triangles until enough frames are measured"
-        self.history: list[tuple[str, ...]] = []
+        self.observed = self.pixel_frames = 0  # frames learnt from, and those whose fit kept the pixel term
 
     def plan(self, rects, tris, coverage: np.ndarray | None = None):
         a, b = self.coef[0], self.coef[1]
@@ -69,7 +69,8 @@ class CostModel(Configured):
         self._samples.append(np.column_stack([tri, px, np.asarray(times, np.float64)]))
         if len(self._samples) >= self.warmup:
             self._fit(np.concatenate(self._samples))
-        self.history.append(tuple(self.kept))
+        self.observed += 1
+        self.pixel_frames += "pixels" in self.kept
 
     def _fit(self, data: np.ndarray) -> None:
         """The fit of ``cost_kernel.py`` (compiled, or its plain-Python self: the same
@@ -138,8 +139,7 @@ class CostModel(Configured):
                              for t, v in verdicts.items())
 
     def report(self) -> dict:
-        frames = max(len(self.history), 1)
-        pixel_frames = sum("pixels" in h for h in self.history)
+        frames, pixel_frames = max(self.observed, 1), self.pixel_frames
         return {"name": self.name, "terms": list(self.kept), "coef_ms": {"per_triangle": float(self.coef[0]),
                 "per_pixel": float(self.coef[1]), "per_rank": float(self.coef[2])}, "why": self.why,
                 "pixel_term_frames_share": pixel_frames / frames}

@@ -108,7 +108,7 @@ def exp_balance(s: Settings, out: Path) -> str:
     for name in s.strategies:
         runs[name] = walk(out / name, (2, 2), (256, 256), _scene_args(s) + [
             "--frames", str(s.frames), "--balance", name, "--mosaic-every", str(every)], s.timeout)
-    per = {n: np.array(r.summary["per_frame_emulated_ms"]) for n, r in runs.items()}
+    per = {n: r.emulated for n, r in runs.items()}
     rows = [{"balance": n, **_breakdown(r), "speedup_vs_none": float(per["none"].mean() / per[n].mean())}
             for n, r in runs.items()]
     write_csv(out / "balance.csv", rows)

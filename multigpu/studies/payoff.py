@@ -111,8 +111,9 @@ def exp_payoff(s: Settings, out: Path) -> str:
     default = checks[0]["default"] if checks else None
     for c in checks:  # which candidates planned the default's frames (auto), round by round
         c.update(planned_by(rows, c, [_planned(r.summary) for r in runs[(c["scene"], default)]]))
-        c.update(first_trial([r.summary for r in runs[(c["scene"], default)]],
-                             [r.summary for r in runs[(c["scene"], c["best"])]] if c["best"] != default else []))
+        series = lambda rs: [{**r.summary, "per_frame_emulated_ms": r.emulated} for r in rs]
+        c.update(first_trial(series(runs[(c["scene"], default)]),
+                             series(runs[(c["scene"], c["best"])]) if c["best"] != default else []))
     write_csv(out / "payoff_default.csv", checks)
     parts = balancing_parts(rows, checks)
     write_csv(out / "payoff_balancing.csv", parts)

@@ -82,6 +82,12 @@ class Run:
         return self.rows[:, :, COLUMNS.index(name)]
 
     @property
+    def emulated(self) -> np.ndarray:
+        """Per frame, the emulated parallel frame (the slowest rank's CPU time over the phases)."""
+        cpu = ("load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms")
+        return sum(self.col(c) for c in cpu).max(axis=1)
+
+    @property
     def render_max_cpu(self) -> np.ndarray:
         """Per frame, the slowest rank's rendering CPU time (the emulated render component)."""
         return self.col("rendering_cpu_ms").max(axis=1)
