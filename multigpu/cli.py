@@ -106,7 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
 def _bench_args(b: argparse.ArgumentParser) -> None:
     """The ``bench`` subcommand's arguments."""
     b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | passes | imbalance | "
-                                "exchange | memory | memory-steps | model-load | latency (frames in flight: wall time, "
+                                "exchange | memory | memory-steps | model-load | longrun (100,000 frames: frame time "
+                                "and memory over the run) | latency (frames in flight: wall time, "
                                 "input to photon) | timeline (every rank's phases at "
                                 "--latency 0 and 1, plotted) | peer (beside ParaView + IceT: --model FILE --ranks 1,4) "
                                 "| simplify (the level-of-detail simplifiers compared: [--model FILE])")
