@@ -182,7 +182,7 @@ def salvage(out: Path, reason: str) -> int | None:
 
 def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> dict:
     """The run's configuration for summary.json; ``placement``: every rank's host, index on
-    its host (``node_rank``) and EGL device."""
+    its host (``node_rank``), EGL device and the GL renderer it opened (which GPU it draws on)."""
     return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
             "decomposition": cfg.decomposition, "latency": cfg.latency, "target_fps": cfg.target_fps,
             "render_scale": cfg.render_scale, "lod_error": cfg.lod_error,

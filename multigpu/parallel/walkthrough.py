@@ -166,7 +166,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             raise InputError(error)
         placement = [json.loads(t) for t in allgather_text(comm, json.dumps(
             {"host": socket.gethostname(), "node_rank": local, "egl_device": device,
-             "gl_buffers": renderer.storage}), wait, "setup")]
+             "gl_renderer": ctx.info.get("GL_RENDERER"), "gl_buffers": renderer.storage}), wait, "setup")]
     except BaseException:
         _close(renderer, presenter, monitor)
         if out is not None:
