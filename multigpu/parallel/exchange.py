@@ -21,13 +21,19 @@ WATCH: list = []
 #: while what they look for (a peer silent for seconds, a failure, an interrupt's grace) is
 #: seen as soon either way
 CHECK_AFTER = 0.01
+#: the longest sleep between tests of a wait (s). MPI moves a non-blocking collective on only
+#: inside a test, so every step of a gather waits for its partner's next test: at 2 ms a frame's
+#: row gather and barriers took 7 ms a frame at 2x2 and 21 ms at 4x4 on an H100 (the frame period
+#: 9.1 and 23 ms, against 2.8 and 5.0 at 0.1 ms); on this 2-core machine with 4 ranks of small
+#: frames, 8.4 against 1.9 ms, the whole job's CPU time no higher (docs/BENCHMARKS.md)
+POLL = 1e-4
 
 
 class PeerTimeout(RuntimeError):
     """A wait on other ranks exceeded its bound."""
 
 
-def wait_all(requests, timeout: float, what: str, most: float = 2e-3) -> None:
+def wait_all(requests, timeout: float, what: str, most: float | None = None) -> None:
     """Complete MPI requests, sleeping between tests (growing to ``most`` s); raise PeerTimeout
     after ``timeout`` s. With none it returns before importing MPI (a process that never sent
     stays MPI-free)."""
@@ -37,7 +43,7 @@ def wait_all(requests, timeout: float, what: str, most: float = 2e-3) -> None:
 
     start = time.monotonic()
     deadline, checks = start + timeout, start + CHECK_AFTER
-    sleep = 1e-5
+    sleep, most = 1e-5, POLL if most is None else most
     while not MPI.Request.Testall(requests):
         now = time.monotonic()
         if now > deadline:
@@ -49,7 +55,7 @@ def wait_all(requests, timeout: float, what: str, most: float = 2e-3) -> None:
         sleep = min(sleep * 2, most)
 
 
-def barrier(comm, timeout: float, most: float = 2e-3) -> None:
+def barrier(comm, timeout: float, most: float | None = None) -> None:
     """A bounded, non-spinning barrier (the paper's GPU-GPU synchronization); ``most``: the
     longest sleep between tests (the swap lock's is short: every rank leaves it within as much)."""
     wait_all([comm.Ibarrier()], timeout, "synchronization", most)
