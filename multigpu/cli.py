@@ -36,8 +36,25 @@ class Parser(argparse.ArgumentParser):
             super()._print_message(message, file)
 
 
+#: what ``multigpu --help`` opens with
+DESCRIPTION = ("Render 3-D models on tiled display walls, one MPI rank per GPU and display tile, the "
+               "rendering work balanced between the ranks every frame (Dong & Peng 2019). Start with "
+               "'mpiexec -n 4 multigpu walkthrough' or launch/walkthrough; each command's --help has its flags.")
+
+
+def _version() -> str:
+    """The installed package's version (the source tree's when not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("multigpu")
+    except PackageNotFoundError:
+        return "(not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = Parser(prog="multigpu", description=__doc__.split("\n")[0])
+    ap = Parser(prog="multigpu", description=DESCRIPTION)
+    ap.add_argument("--version", action="version", version=f"multigpu {_version()}")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
     w = sub.add_parser("walkthrough", help="render a camera path on a display wall (run under mpiexec)",
@@ -86,9 +103,10 @@ def build_parser() -> argparse.ArgumentParser:
     dp.add_argument("--frame", type=int, default=0, help="which frame of the path")
     dp.add_argument("--size", default="1024x1024", help="display WxH in pixels")
     dp.add_argument("--out", default="out/depth", help="output directory")
+    from multigpu.studies.registry import EXPERIMENTS, names_help
+
     e = sub.add_parser("experiment", help="the paper's evaluation: tables, plots, Markdown")
-    e.add_argument("name", help="all | gpus | resolution | balance | strips | orbit | overlap | cost | speedup | "
-                                "partition | compare | payoff | walls")
+    e.add_argument("name", help=names_help(["all", *EXPERIMENTS]))
     e.add_argument("--quick", action="store_true", help="tiny sizes: the same code in a few minutes")
     e.add_argument("--out", default="out/experiments", help="output directory")
     e.add_argument("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)")
@@ -105,12 +123,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _bench_args(b: argparse.ArgumentParser) -> None:
     """The ``bench`` subcommand's arguments."""
-    b.add_argument("what", help="balance | scene | render | frame | growth | floor | present | passes | imbalance | "
-                                "exchange | memory | memory-steps | model-load | longrun (100,000 frames: frame time "
-                                "and memory over the run) | latency (frames in flight: wall time, "
-                                "input to photon) | timeline (every rank's phases at "
-                                "--latency 0 and 1, plotted) | peer (beside ParaView + IceT: --model FILE --ranks 1,4) "
-                                "| simplify (the level-of-detail simplifiers compared: [--model FILE])")
+    from multigpu.studies.registry import BENCHES
+
+    b.add_argument("what", help="; ".join(f"{n}: {about}" for n, (_, about) in BENCHES.items()))
     b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
     b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
     b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)

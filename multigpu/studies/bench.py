@@ -177,20 +177,13 @@ def bench_render(quick: bool) -> list[dict]:
 
 
 def main(what: str, quick: bool = False) -> int:
-    from multigpu.studies.exchange_bench import bench_exchange
-    from multigpu.studies.frame_bench import bench_frame, bench_growth
-    from multigpu.studies.imbalance_bench import bench_imbalance
-    from multigpu.studies.longrun_bench import bench_longrun
-    from multigpu.studies.memory_bench import bench_memory, bench_memory_steps, bench_model_load
-    from multigpu.studies.passes_bench import bench_passes
-    from multigpu.studies.present_bench import bench_present
+    """Run the benchmark ``what`` (``registry.BENCHES``: those that take only ``quick``)."""
+    from multigpu.studies.registry import BENCHES, load
 
-    fns = {"balance": bench_balance, "scene": bench_scene, "render": bench_render, "frame": bench_frame,
-           "growth": bench_growth, "present": bench_present, "memory": bench_memory,
-           "memory-steps": bench_memory_steps, "model-load": bench_model_load, "passes": bench_passes,
-           "imbalance": bench_imbalance, "exchange": bench_exchange,
-           "longrun": bench_longrun}
-    if what not in fns:
-        raise InputError(f"bench: unknown benchmark '{what}' (known: {', '.join(fns)})")
-    fns[what](quick)
+    simple = [n for n, (where, _) in BENCHES.items() if where is not None]
+    if what not in BENCHES:
+        raise InputError(f"bench: unknown benchmark '{what}' (known: {', '.join(BENCHES)})")
+    if what not in simple:
+        raise InputError(f"bench {what}: started by the command line with its own arguments (multigpu bench {what})")
+    load(BENCHES[what][0])(quick)
     return 0

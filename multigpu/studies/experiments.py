@@ -19,18 +19,12 @@ import time
 from pathlib import Path
 
 from multigpu.errors import InputError
-from multigpu.studies.beyond import exp_cost, exp_overlap, exp_partition, exp_speedup
-from multigpu.studies.compare import exp_compare
-from multigpu.studies.fidelity import exp_fidelity
-from multigpu.studies.paper import exp_balance, exp_gpus, exp_orbit, exp_resolution, exp_strips
-from multigpu.studies.payoff import exp_payoff
+from multigpu.studies.registry import EXPERIMENTS as NAMES
+from multigpu.studies.registry import load
 from multigpu.studies.runs import PAPER, Settings
-from multigpu.studies.walls import exp_hybrid, exp_sixteen, exp_walls
 
-EXPERIMENTS = {"gpus": exp_gpus, "resolution": exp_resolution, "balance": exp_balance, "strips": exp_strips,
-               "orbit": exp_orbit, "overlap": exp_overlap, "cost": exp_cost,
-               "speedup": exp_speedup, "partition": exp_partition, "compare": exp_compare, "payoff": exp_payoff,
-               "walls": exp_walls, "hybrid": exp_hybrid, "sixteen": exp_sixteen, "fidelity": exp_fidelity}
+#: every experiment by name (``registry.py`` names them; their modules load here)
+EXPERIMENTS = {name: load(where) for name, where in NAMES.items()}
 
 
 def run(name: str, out: Path, quick: bool = False, results: Path | None = None, rounds: int | None = None) -> int:
