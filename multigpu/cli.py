@@ -375,6 +375,13 @@ def _scene_info(a) -> int:
     objs = scene.meta.get("objects", {})
     if objs:
         print(f"split      {objs['split']}: {objs['modelled']} objects as modelled -> {objs['objects']}; {objs['why']}")
+    look = scene.meta.get("look")
+    if look:
+        per_vertex = "kept per vertex" if look.get("vertex_colors") else "one per object"
+        print(f"colours    {look['colors']} ({look['materials']} materials; {per_vertex})"
+              if look["colors"] != "none" else "colours    none in the file: one neutral grey (--colors objects: "
+                                               "a colour per object)")
+        print(f"normals    {look['normals']}")
     per_tri = scene.nbytes / max(scene.n_triangles, 1)
     lods = scene.meta.get("lods")
     if lods:

@@ -105,8 +105,13 @@ class WalkConfig:
     render_scale: float = 1.0  # share of each side's pixels drawn (nearest-neighbour upscaled)
     lod_error: float = 0.0  # level-of-detail bound in wall pixels (0: every object as modelled)
     timeline: bool = False  # timeline.json: every rank's phases over the run's last TIMELINE_FRAMES frames
+    colors: str = "model"  # the model's own colours, or "objects": a colour per object (scene/looks.py)
 
     def __post_init__(self):
+        from multigpu.scene.looks import COLOR_VIEWS
+
+        if self.colors not in COLOR_VIEWS:
+            raise InputError(f"--colors must be one of {', '.join(COLOR_VIEWS)}, got '{self.colors}'")
         if self.frames is not None and self.frames < 1:
             raise InputError(f"--frames must be >= 1, got {self.frames}")
         if self.strips < 2:

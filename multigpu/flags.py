@@ -194,12 +194,17 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
 
 def _output_args(w: argparse.ArgumentParser, d: dict) -> None:
     """The walkthrough's outputs, run control and the launcher's hosts flags."""
+    from multigpu.scene.looks import COLOR_VIEWS
+
     o = w.add_argument_group("outputs")
     o.add_argument("--out", default=d["out"], metavar="DIR",
                    help="output directory: timings.csv, summary.json, mosaic/")
     o.add_argument("--mosaic-every", type=int, default=d["mosaic_every"], metavar="N",
                    help="write the full wall as a PNG every N frames (0: never)")
     o.add_argument("--no-overlay", action="store_true", help="no partition overlay beside each mosaic")
+    o.add_argument("--colors", choices=COLOR_VIEWS, default=d["colors"], metavar="model|objects",
+                   help="model: the model's own colours (its materials and vertex colours; one grey where the file "
+                        "has none); objects: a colour per object, to see what the balancer moves between ranks")
     o.add_argument("--video", action="store_true", help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
     o.add_argument("--timeline", action="store_true",
                    help="write timeline.json: every rank's phases, start to end, over the run's last frames "
@@ -247,7 +252,7 @@ def walk_config(a):
                       db_ranges=a.db_ranges,
                       liveness=a.liveness, progress=not a.no_progress, record=a.record, timeline=a.timeline,
                       monitor=_monitor(a.monitor), target_fps=a.target_fps, render_scale=a.render_scale,
-                      lod_error=a.lod_error)
+                      lod_error=a.lod_error, colors=a.colors)
 
 
 def _monitor(text: str | None) -> tuple[int, int] | None:

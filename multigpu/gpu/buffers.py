@@ -29,8 +29,8 @@ import numpy as np
 from multigpu.errors import InputError
 
 #: the file's layout and the packing it holds (2: levels of detail in the index buffer; 3: wide objects
-#: drawn last); a change makes a new name
-VERSION = 3
+#: drawn last; 4: the model's vertex colours, where it has them); a change makes a new name
+VERSION = 4
 MAGIC = b"MULTIGPU-GL-BUFFERS\n"
 PAGE = mmap.PAGESIZE
 #: bytes per block when a buffer is uploaded or written
@@ -113,10 +113,12 @@ def _order_digest(draws) -> str:
     return hashlib.sha1(np.ascontiguousarray(draws.order, dtype=np.int64).tobytes()).hexdigest()
 
 
-def _layout(n_vertices: int, n_indices: int) -> dict[str, tuple[int, int]]:
-    """Byte offset and length of each array in the file, every one starting on a page."""
+def _layout(n_vertices: int, n_indices: int, colors: bool = False) -> dict[str, tuple[int, int]]:
+    """Byte offset and length of each array in the file, every one starting on a page (``colors``:
+    each vertex's RGBA8 as one uint32, only where the scene has vertex colours)."""
     out, at = {}, PAGE  # the first page: magic and header
-    for name, nbytes in (("vertices", 16 * n_vertices), ("indices", 4 * n_indices), ("objects", 4 * n_vertices)):
+    for name, nbytes in (("vertices", 16 * n_vertices), ("indices", 4 * n_indices), ("objects", 4 * n_vertices),
+                         ("colors", 4 * n_vertices if colors else 0)):
         out[name] = (at, nbytes)
         at += -(-nbytes // PAGE) * PAGE
     out["end"] = (at, 0)
@@ -127,10 +129,9 @@ def write_buffers(path: Path, scene, draws) -> None:
     """Write ``scene``'s GL buffers (``draws``' order) to ``path``, atomically: a temporary
     file beside it, then a rename, so a reader never sees it half-written and two writers
     (ranks of two hosts sharing the directory) leave one whole file."""
-    nv, ni = scene.vertices.shape[0], draws.total
-    lay = _layout(nv, ni)
-    head = json.dumps({"version": VERSION, "vertices": nv, "indices": ni, "objects": scene.n_objects,
-                       "order": _order_digest(draws)}).encode()
+    nv, ni, colors = scene.vertices.shape[0], draws.total, scene.vertex_colors is not None
+    lay = _layout(nv, ni, colors)
+    head = json.dumps(_head(scene, draws)).encode()
     if len(MAGIC) + len(head) + 1 > PAGE:
         raise ValueError("buffers file header too long")
     tmp = path.with_name(f"{path.name}.tmp-{socket.gethostname()}-{os.getpid()}")
@@ -147,17 +148,27 @@ def write_buffers(path: Path, scene, draws) -> None:
                 fh.write(block.tobytes())
             fh.seek(lay["objects"][0])
             fh.write(draws.vertex_object.tobytes())
+            if colors:
+                fh.seek(lay["colors"][0])
+                fh.write(np.ascontiguousarray(scene.vertex_colors, dtype=np.uint8).tobytes())
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
 
 
+def _head(scene, draws) -> dict:
+    """The header a buffers file of ``scene`` in ``draws``' order holds."""
+    return {"version": VERSION, "vertices": scene.vertices.shape[0], "indices": draws.total,
+            "objects": scene.n_objects, "colors": scene.vertex_colors is not None, "order": _order_digest(draws)}
+
+
 def map_buffers(path: Path, scene, draws) -> dict[str, np.ndarray] | None:
     """Read-only maps of the buffers file at ``path`` for ``scene`` drawn in ``draws``' order:
-    ``vertices`` (V, 4) uint32, ``indices`` (I,) uint32, ``objects`` (V,) uint32; None when
-    the file is missing or was written for another scene, order or version."""
-    nv, ni = scene.vertices.shape[0], draws.total
-    lay = _layout(nv, ni)
+    ``vertices`` (V, 4) uint32, ``indices`` (I,) uint32, ``objects`` (V,) uint32 and, where the
+    scene has vertex colours, ``colors`` (V,) uint32 (RGBA8); None when the file is missing or
+    was written for another scene, order or version."""
+    nv, ni, colors = scene.vertices.shape[0], draws.total, scene.vertex_colors is not None
+    lay = _layout(nv, ni, colors)
     try:
         with open(path, "rb") as fh:
             first = fh.read(PAGE)
@@ -170,10 +181,9 @@ def map_buffers(path: Path, scene, draws) -> dict[str, np.ndarray] | None:
         head = json.loads(first[len(MAGIC):].split(b"\n", 1)[0])
     except ValueError:
         return None
-    if head != {"version": VERSION, "vertices": nv, "indices": ni, "objects": scene.n_objects,
-                "order": _order_digest(draws)}:
+    if head != _head(scene, draws):
         return None
-    shapes = {"vertices": (nv, 4), "indices": (ni,), "objects": (nv,)}
+    shapes = {"vertices": (nv, 4), "indices": (ni,), "objects": (nv,), **({"colors": (nv,)} if colors else {})}
     return {k: np.memmap(path, dtype=np.uint32, mode="r", offset=lay[k][0], shape=shapes[k])
             if lay[k][1] else np.zeros(shapes[k], dtype=np.uint32) for k in shapes}
 

@@ -34,7 +34,11 @@ uniform mat4 mvp;
 layout(std430, binding = 0) readonly buffer Colors { float colors[]; };  // 3 per object
 in vec3 in_pos;
 in uint in_nrm;  // octahedral, 16 + 16 bits (pack_normals)
+#ifdef VERTEX_COLORS
+in uint in_rgba;  // the model's colour at this vertex, RGBA8
+#else
 in uint in_obj;
+#endif
 out vec3 v_nrm;
 out vec3 v_col;
 void main() {
@@ -44,8 +48,12 @@ void main() {
     float t = max(-n.z, 0.0);
     n.xy += vec2(n.x >= 0.0 ? -t : t, n.y >= 0.0 ? -t : t);
     v_nrm = n;
+#ifdef VERTEX_COLORS
+    v_col = unpackUnorm4x8(in_rgba).rgb;
+#else
     uint c = 3u * in_obj;
     v_col = vec3(colors[c], colors[c + 1u], colors[c + 2u]);
+#endif
 }
 """
 
@@ -161,23 +169,34 @@ class RegionRenderer:
     """Draws any subset of a scene's objects into any region of a ``size`` display.
 
     ``method`` picks how a region's pixels are made (see ``choose_method``); with ``scissor``
-    they are bit-identical to a one-rank render of the whole display.
+    they are bit-identical to a one-rank render of the whole display. ``colors``: the model's
+    own (per-object colours, or its vertex colours where it has them) or ``objects``, a colour
+    per object (``looks.palette``: what the balancer moves).
     """
 
-    def __init__(self, ctx, scene, size: tuple[int, int], method: str = "auto", shared: Path | None = None):
+    def __init__(self, ctx, scene, size: tuple[int, int], method: str = "auto", shared: Path | None = None,
+                 colors: str = "model"):
         import moderngl
 
+        from multigpu.scene.looks import COLOR_VIEWS, palette
+
+        if colors not in COLOR_VIEWS:
+            raise InputError.of("colors", f"must be one of {', '.join(COLOR_VIEWS)}, got '{colors}'")
         self.ctx = ctx
         self.size = W, H = size
         self.limits = gl_limits(ctx)
         self.method = choose_method(method, size, self.limits)
         self.origin = np.asarray(scene.origin, dtype=np.float64)
-        self.prog = ctx.program(vertex_shader=VERTEX, fragment_shader=FRAGMENT)
+        per_vertex = colors == "model" and scene.vertex_colors is not None
+        self.prog = ctx.program(vertex_shader=VERTEX.replace("#version 430", "#version 430\n#define VERTEX_COLORS")
+                                if per_vertex else VERTEX, fragment_shader=FRAGMENT)
         self.draws = DrawList(scene)
-        self.vbo, self.ibo, self.obo = self._buffers(scene, shared)
+        self.vbo, self.ibo, self.obo, self.rgba = self._buffers(scene, shared, per_vertex)
         self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
-        self.cbo = ctx.buffer(np.ascontiguousarray(scene.colors, dtype=np.float32).ravel())
+        object_colors = scene.colors if colors == "model" else palette(scene.n_objects)
+        self.cbo = ctx.buffer(np.ascontiguousarray(object_colors, dtype=np.float32).ravel())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 1u", "in_pos", "in_nrm"),
+                                                (self.rgba, "1u", "in_rgba") if per_vertex else
                                                 (self.obo, "1u", "in_obj")],
                                     index_buffer=self.ibo, index_element_size=4)
         self.indirect = ctx.buffer(reserve=20 * 1024)  # grows when a frame needs more commands
@@ -194,35 +213,36 @@ class RegionRenderer:
             self._framebuffer((W, H))
         self.depth_test = moderngl.DEPTH_TEST
 
-    def _buffers(self, scene, shared: Path | None):
-        """The vertex, index and vertex-id GL buffers: the host's shared buffers file itself
-        where the driver draws from host memory (``buffers.pinned``), else uploaded a block at
-        a time (from that file where there is one: already packed). ``self.storage`` says which."""
+    def _buffers(self, scene, shared: Path | None, per_vertex: bool):
+        """The vertex, index and vertex-id GL buffers, and the vertex colours' where they are
+        drawn (``per_vertex``; else None): the host's shared buffers file itself where the driver
+        draws from host memory (``buffers.pinned``), else uploaded a block at a time (from that
+        file where there is one: already packed). ``self.storage`` says which."""
         ctx, draws = self.ctx, self.draws
         maps = map_buffers(shared, scene, draws) if shared is not None else None
         self._maps = None
+        names = ("vertices", "indices", "objects", *(("colors",) if per_vertex else ()))
         if maps is None:
             self.storage = "uploaded" if shared is None else f"uploaded ({shared.name} does not fit this scene)"
         else:
             why = can_pin(ctx)
             if why is None:
-                bufs = [pinned(ctx, maps[k]) for k in ("vertices", "indices", "objects")]
+                bufs = [pinned(ctx, maps[k]) for k in names]
                 if all(b is not None for b in bufs):
                     self._maps, self.storage = maps, f"shared: {shared}"
-                    return bufs
+                    return (*bufs, None)[:4]
                 for b in bufs:
                     if b is not None:
                         b.release()
                 why = "the driver refused host memory"
             self.storage = f"uploaded from {shared.name} ({why})"
-            vbo = upload(ctx, maps["vertices"], 16)
-            ibo = upload(ctx, maps["indices"], 4)
-            return vbo, ibo, upload(ctx, maps["objects"], 4)
+            return (*(upload(ctx, maps[k], 16 if k == "vertices" else 4) for k in names), None)[:4]
         vbo = upload(ctx, scene.vertices, 16, pack_vertices)
         ibo = ctx.buffer(reserve=max(4, 4 * draws.total))
         for at, block in draws.index_blocks():
             ibo.write(block, offset=4 * at)
-        return vbo, ibo, ctx.buffer(draws.vertex_object)
+        rgba = upload(ctx, scene.vertex_colors, 4) if per_vertex else None
+        return vbo, ibo, ctx.buffer(draws.vertex_object), rgba
 
     def _framebuffer(self, need: tuple[int, int]) -> None:
         """Make the framebuffer at least ``need`` (grown by 1/4 to avoid re-allocating often)."""
@@ -396,8 +416,9 @@ class RegionRenderer:
                 for att in (*fbo.color_attachments, fbo.depth_attachment):
                     att.release()
                 fbo.release()
-        for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.vbo, self.prog):
-            obj.release()
+        for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.rgba, self.vbo, self.prog):
+            if obj is not None:
+                obj.release()
         self._maps = None  # the file's maps outlive the GL buffers drawing from them
 
 

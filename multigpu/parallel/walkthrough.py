@@ -153,7 +153,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:
                 ctx, device = create_context(cfg.device, local_rank=local, host_ranks=host_ranks)
-            renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum, shared)
+            renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum, shared, cfg.colors)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
             from multigpu import kernels
 

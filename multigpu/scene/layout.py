@@ -19,8 +19,9 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-#: 6: levels of detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
-FORMAT_VERSION = 6
+#: 7: the model's own colours and normals (vertex colours, materials, crease-angle normals); 6: levels of
+#: detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
+FORMAT_VERSION = 7
 
 
 @dataclass
@@ -32,7 +33,10 @@ class Scene:
     first_index, index_count, base_vertex : (N,) int64  per-object draw ranges
     bmin, bmax : (N, 3) float64  axis-aligned bounding boxes (world space)
     centers : (N, 3) float64, radii : (N,) float64  bounding spheres
-    colors : (N, 3) float32  per-object colour in [0, 1]
+    colors : (N, 3) float32  per-object colour in [0, 1]: the model's (its material's, or one neutral
+        grey where the file gives none); ``scene/looks.py``
+    vertex_colors : (V, 4) uint8 RGBA per vertex where the model's colours vary inside an object
+        (vertex colours, or materials mixed in one object); None: each object is ``colors``
     origin : (3,) float64  world position of vertex coordinate (0, 0, 0)
     meta : free-form facts (generator options, landmarks for camera paths, warnings)
     part_start : (N+1,) int64  object i's parts are rows part_start[i]:part_start[i+1] of:
@@ -67,6 +71,7 @@ class Scene:
     lod_first: np.ndarray | None = None
     lod_count: np.ndarray | None = None
     lod_error: np.ndarray | None = None
+    vertex_colors: np.ndarray | None = None
 
     @property
     def n_objects(self) -> int:
@@ -110,7 +115,7 @@ class Scene:
         return 1 if self.lod_count is None else int(self.lod_count.shape[1])
 
     def _arrays(self, parts: bool = True, lods: bool = True) -> dict[str, np.ndarray]:
-        names = ("vertices", "indices", *self.PER_OBJECT, "origin", *(self.PARTS if parts else ()),
+        names = ("vertices", "indices", "vertex_colors", *self.PER_OBJECT, "origin", *(self.PARTS if parts else ()),
                  *(self.LODS if lods else ()))
         return {k: getattr(self, k) for k in names if getattr(self, k) is not None}
 
@@ -148,6 +153,8 @@ class Scene:
         frame loop once the GL buffers hold them: bounds, draw ranges, colours and meta stay.
         Dropping the last reference to a mapped buffer unmaps it, so its pages leave the rank."""
         empty = {"vertices": np.empty((0, 6), dtype=np.float32), "indices": np.empty(0, dtype=np.uint32)}
+        if self.vertex_colors is not None:
+            empty["vertex_colors"] = np.empty((0, 4), dtype=np.uint8)
         return Scene(**{**self._arrays(), **empty}, name=self.name, meta=self.meta)
 
     def world_positions(self) -> np.ndarray:
@@ -184,7 +191,7 @@ class Scene:
 
 
 #: the buffers ``Scene.load`` maps from the file (the bulk of a scene; read only after loading)
-MAPPED = ("vertices", "indices")
+MAPPED = ("vertices", "indices", "vertex_colors")
 
 
 def _map_members(path: Path, names) -> dict[str, np.ndarray]:

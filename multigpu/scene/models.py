@@ -34,6 +34,7 @@ import numpy as np
 
 from multigpu.errors import InputError, check_file
 from multigpu.scene import lod as scene_lod
+from multigpu.scene import looks
 from multigpu.scene import parts as scene_parts
 from multigpu.scene.blocks import blocks, per_object
 from multigpu.scene.labels import face_labels
@@ -225,10 +226,13 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     _check_complete(path, declared, len(verts), len(faces))
     _check_indices_and_range(verts, faces, path)
     faces = _narrow(faces, len(verts))
+    (rgba, colors_from), normals = looks.mesh_colors(mesh), looks.mesh_normals(mesh)
     del mesh, loaded  # trimesh's int64 faces go: the model is held once, as verts and faces
     faces = _clean_faces(verts, faces, path, warnings)
     split = "components" if split == "auto" else split
-    return _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings, {"split": split})
+    look = Look(rgba, normals, None, {"colors": colors_from, "materials": int(colors_from == "material")})
+    return _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings, {"split": split},
+                        look)
 
 
 def _narrow(faces: np.ndarray, n_verts: int) -> np.ndarray:
@@ -331,37 +335,45 @@ def _degenerate(verts, faces) -> np.ndarray:
     return out
 
 
-def _normals(verts, face_blocks) -> np.ndarray:
-    """Area-weighted vertex normals, summed over ``face_blocks`` ((b, 3) faces each, in
-    order: the sums' rounding follows it)."""
-    vn = np.zeros_like(verts)
-    for f in face_blocks:
-        tri = verts[f]
-        fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        for k in range(3):  # corners
-            np.add.at(vn, f[:, k], fn)
-    norm = np.linalg.norm(vn, axis=1, keepdims=True)
-    vn /= np.where(norm > 0, norm, 1)
-    vn[norm[:, 0] == 0] = [0, 0, 1]
-    return vn
+@dataclass
+class Look:
+    """What a model file says of its look, aligned with its vertices: ``rgba`` (V, 4) uint8 or
+    None, ``normals`` (V, 3) or None (then crease-angle normals are computed), ``groups`` (F,):
+    the file's mesh of each face (faces of different meshes are never smooth across), and what
+    ``scene info`` reports (``meta``)."""
+
+    rgba: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    groups: np.ndarray | None = None
+    meta: dict | None = None
 
 
-def _colors(n: int, seed: int = 7) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    return (0.35 + 0.6 * rng.random((n, 3))).astype(np.float32)
-
-
-def _from_labels(verts, faces, labels, path, warnings, meta) -> Scene:
+def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None = None) -> Scene:
     """One object per label: faces in label order, one shared vertex buffer (base vertex 0).
-    Every pass over the faces goes a block at a time, in label order through ``order`` (no
-    sorted copy of the faces): besides the model's own arrays, what is held is a label and an
-    order entry per face and the scene being built."""
+    Normals are the file's, else crease-angle ones (``looks.crease_normals``: a vertex on a sharp
+    edge is split); colours the file's (``looks``), else one neutral grey. Every pass over the
+    faces goes a block at a time, in label order through ``order`` (no sorted copy of the faces)."""
+    look = look or Look()
+    rgba, normals = look.rgba, look.normals
+    looked = dict(look.meta or {"colors": "none", "materials": 0})
+    if normals is None:
+        source, normals, faces = looks.crease_normals(verts, faces, look.groups)
+        looked["normals"] = (f"computed: smooth below a {looks.CREASE:g} degree crease "
+                             f"({len(source) - len(verts):+d} vertices on sharp edges)")
+        verts = verts[source]
+        rgba = rgba[source] if rgba is not None else None
+    else:
+        looked["normals"] = "from the file"
     order = np.argsort(labels, kind="stable")
     n = int(labels.max()) + 1
     counts = np.bincount(labels, minlength=n)
     first = np.concatenate([[0], np.cumsum(counts)[:-1]]) * 3
     sorted_blocks = lambda: ((s, e, faces[order[s:e]], labels[order[s:e]]) for s, e in blocks(len(faces)))
-    normals = _normals(verts, (f for _, _, f, _ in sorted_blocks()))
+    if rgba is None:
+        colors, vertex_colors = np.tile(np.array(looks.NEUTRAL, dtype=np.float32), (n, 1)), None
+    else:
+        colors, vertex_colors = looks.split_colors(rgba, faces, labels, n)
+    looked["vertex_colors"] = vertex_colors is not None
     used = np.zeros(len(verts), dtype=bool)  # compact the vertex buffer to the vertices faces use
     for s, e in blocks(len(faces)):
         used[faces[s:e]] = True
@@ -389,8 +401,9 @@ def _from_labels(verts, faces, labels, path, warnings, meta) -> Scene:
     return Scene(vertices=vertices,
                  indices=indices, first_index=first.astype(np.int64),
                  index_count=(counts * 3).astype(np.int64), base_vertex=np.zeros(n, dtype=np.int64),
-                 bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=_colors(n), origin=origin,
-                 name=Path(path).stem, meta={**meta, "source": str(path), "warnings": warnings,
+                 bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=colors, origin=origin,
+                 vertex_colors=None if vertex_colors is None else np.ascontiguousarray(vertex_colors[used]),
+                 name=Path(path).stem, meta={**meta, "source": str(path), "warnings": warnings, "look": looked,
                                               **guess_up(Path(path).suffix.lower(), bmin, bmax)})
 
 
@@ -415,6 +428,9 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     big = int(sizes.sum()) >= 2**31
     verts = np.empty((int(sizes.sum()), 3), dtype=np.float64)
     faces = np.empty((int(n_faces.sum()), 3), dtype=np.int64 if big else np.int32)
+    rgba = np.empty((len(verts), 4), dtype=np.uint8)
+    normals = np.empty((len(verts), 3), dtype=np.float64)
+    any_rgba, all_normals, materials, kinds = False, True, set(), set()
     v = f = 0
     for i in range(n_meshes):  # meshes, not frames: each is let go once copied (one copy held)
         m, meshes[i] = meshes[i], None
@@ -423,10 +439,21 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
             raise InputError.of("model", f"{path}: a face uses a vertex index outside its mesh (corrupt file)")
         verts[v:v + len(m.vertices)] = m.vertices
         faces[f:f + len(mf)] = mf + v
+        colors, kind = looks.mesh_colors(m)
+        kinds.add(kind)
+        if kind == "material":
+            materials.add(id(m.visual.material))
+        any_rgba |= colors is not None
+        rgba[v:v + len(m.vertices)] = colors if colors is not None else np.rint(np.array([*looks.NEUTRAL, 1.0]) * 255)
+        nrm = looks.mesh_normals(m) if all_normals else None
+        all_normals &= nrm is not None
+        if nrm is not None:
+            normals[v:v + len(m.vertices)] = nrm
         v, f = v + len(m.vertices), f + len(mf)
         del m, mf
     meshes.clear()
     labels = np.repeat(np.arange(n_meshes), n_faces)
+    look_meta = {"colors": ", ".join(sorted(k for k in kinds if k != "none")) or "none", "materials": len(materials)}
     _check_indices_and_range(verts, faces, path)
     bad_v = ~np.isfinite(verts).all(axis=1)
     bad_obj = np.zeros(n_meshes, dtype=bool)
@@ -441,8 +468,9 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     if degenerate.any():
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
         faces, labels = faces[~degenerate], labels[~degenerate]
+    look = Look(rgba if any_rgba else None, normals if all_normals else None, labels, look_meta)
     if split != "auto":
         objects = face_labels(verts, faces, split, merge_below)
-        return _from_labels(verts, faces, objects, path, warnings, {"split": split})
+        return _from_labels(verts, faces, objects, path, warnings, {"split": split}, look)
     labels = np.unique(labels, return_inverse=True)[1].ravel()
-    return _from_labels(verts, faces, labels, path, warnings, {"split": "nodes"})
+    return _from_labels(verts, faces, labels, path, warnings, {"split": "nodes"}, look)
