@@ -2,7 +2,8 @@
 primitives, one node per part. Deterministic; run ``python models/make_pump.py`` to remake it.
 
 It is the kind of model users bring (a CAD assembly exported to glTF): compact, a few big
-parts (base, casing, motor) among many small ones (bolts, flanges, pipe segments).
+parts (base, casing, motor) among many small ones (bolts, flanges, pipe segments), each part
+of one of five materials (``MATERIALS``: glTF ``baseColorFactor``).
 """
 
 from __future__ import annotations
@@ -12,8 +13,25 @@ from pathlib import Path
 import numpy as np
 import trimesh
 from trimesh.transformations import rotation_matrix, translation_matrix
+from trimesh.visual import TextureVisuals
+from trimesh.visual.material import PBRMaterial
 
 HERE = Path(__file__).resolve().parent
+#: the parts' materials (glTF baseColorFactor, RGBA 0-255): a grey cast casing and base, an
+#: orange motor, blue pipework, steel bolts, a red gauge
+MATERIALS = {"cast": [150, 152, 158, 255], "motor": [226, 110, 24, 255], "pipe": [40, 86, 180, 255],
+             "steel": [200, 200, 196, 255], "gauge": [200, 30, 30, 255]}
+
+
+def material_of(name: str) -> str:
+    """The material a part is made of, by its name."""
+    if name.startswith(("motor", "fan_cover", "fin_", "coupling")):
+        return "motor"
+    if name.startswith(("pipe_", "inlet", "outlet", "flange_")) and "bolt" not in name:
+        return "pipe"
+    if "bolt" in name:
+        return "steel"
+    return "gauge" if name == "gauge" else "cast"
 
 
 def _at(mesh: trimesh.Trimesh, xyz, rot=None) -> trimesh.Trimesh:
@@ -60,7 +78,10 @@ def parts() -> dict[str, trimesh.Trimesh]:
 
 def main() -> Path:
     scene = trimesh.Scene()
+    materials = {k: PBRMaterial(name=k, baseColorFactor=v, metallicFactor=0.0, roughnessFactor=0.8)
+                 for k, v in MATERIALS.items()}
     for name, mesh in parts().items():
+        mesh.visual = TextureVisuals(material=materials[material_of(name)])
         scene.add_geometry(mesh, node_name=name, geom_name=name)
     out = HERE / "pump.glb"
     out.write_bytes(scene.export(file_type="glb"))

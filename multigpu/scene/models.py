@@ -441,8 +441,8 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
         faces[f:f + len(mf)] = mf + v
         colors, kind = looks.mesh_colors(m)
         kinds.add(kind)
-        if kind == "material":
-            materials.add(id(m.visual.material))
+        if kind == "material":  # a material by name and colour (a loader may copy it per mesh)
+            materials.add((getattr(m.visual.material, "name", None), tuple(colors[0])))
         any_rgba |= colors is not None
         rgba[v:v + len(m.vertices)] = colors if colors is not None else np.rint(np.array([*looks.NEUTRAL, 1.0]) * 255)
         nrm = looks.mesh_normals(m) if all_normals else None
