@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from multigpu.core.canvas import Canvas
 from multigpu.errors import InputError
@@ -152,6 +152,9 @@ class WalkConfig:
             raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
         from multigpu.core.inflight import MOST
 
+        lods = self.lod_error > 0 or self.target_fps is not None
+        if self.scene.lods != lods:  # levels of detail built, cached and held only where the run can draw them
+            object.__setattr__(self, "scene", replace(self.scene, lods=lods))
         if self.latency is None:
             object.__setattr__(self, "latency", 0 if self.present == "window" else 1)
         if not 0 <= self.latency <= MOST:

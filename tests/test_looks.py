@@ -169,3 +169,26 @@ def test_the_model_is_drawn_in_its_colours_and_the_palette_is_a_view(tmp_path, c
     assert red.sum() > 100 and blue.sum() > 100, (red.sum(), blue.sum())
     assert np.nonzero(red)[1].mean() < np.nonzero(blue)[1].mean()  # red on the left, blue on the right
     assert (images["model"] != images["objects"]).any()
+
+
+def test_levels_of_detail_keep_a_colour_border():
+    """A flat grid, red left and blue right, simplified to 8 triangles: without its colours the
+    simplifier spans the border with big triangles (the whole plane mixed); weighing them keeps
+    the border, so only a thin strip along it mixes the two."""
+    from multigpu.scene.lod import simplify
+
+    n = 40
+    xs, ys = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    pos = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(n * n)]).astype(np.float32)
+    a = (np.arange(n - 1)[None, :] + n * np.arange(n - 1)[:, None]).ravel()
+    idx = np.column_stack([a, a + 1, a + n + 1, a, a + n + 1, a + n]).astype(np.uint32).ravel()
+    col = np.where(pos[:, :1] > 0.5, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]).astype(np.float32)
+
+    def mixed_area(colors):
+        tri = simplify(pos, idx, 8, False, colors)[0].reshape(-1, 3)
+        mixed = np.ptp(col[tri][:, :, 2], axis=1) > 0
+        p = pos[tri]
+        return (np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)[mixed] / 2).sum()
+
+    assert mixed_area(None) > 0.5
+    assert mixed_area(col) < 0.1

@@ -16,7 +16,11 @@ simplifier's absolute error (world units: how far the simplified surface may lie
 original). Borders are locked where objects were cut from
 one surface (``--split grid``, clusters: ``cut_from_one``); whole objects (the plant's open pipes,
 whose every vertex lies on a border) simplify freely. Built once, stored in the scene cache beside the
-parts; the GL index buffer holds every level (``core/drawlist.py``).
+parts; the GL index buffer holds every level (``core/drawlist.py``). A scene with vertex
+colours is simplified with them weighed (``meshopt_simplifyWithAttributes``, ``COLOR_WEIGHT``), so
+a colour border stays where the model has it instead of being smeared across coarser triangles;
+borders between materials, and sharp edges, are already seams (vertices split there), which the
+simplifier keeps.
 """
 
 from __future__ import annotations
@@ -35,6 +39,8 @@ MIN_TRIS = 16
 THREADED_TRIS = 1024
 #: a level must drop at least this share of the previous level's triangles to be kept
 MIN_DROP = 0.25
+#: a full colour change (1 in each of R, G, B) weighs as an error of this share of the object's size
+COLOR_WEIGHT = 0.5
 
 
 def cut_from_one(scene: Scene) -> bool:
@@ -44,18 +50,50 @@ def cut_from_one(scene: Scene) -> bool:
     return str(objects.get("split", "")).startswith("grid") or int(objects.get("cluster", 0) or 0) > 0
 
 
-def simplify(positions: np.ndarray, indices: np.ndarray, target_tris: int, lock: bool) -> tuple[np.ndarray, float]:
+def simplify(positions: np.ndarray, indices: np.ndarray, target_tris: int, lock: bool,
+             colors: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """One simplified index list of a mesh (``positions`` (V, 3) float32, ``indices`` (3T,) uint32
     relative to them) aiming at ``target_tris`` triangles, and its absolute error (world units);
-    ``lock``: its border vertices stay."""
+    ``lock``: its border vertices stay; ``colors`` (V, 3) float32 in [0, 1]: weighed with the
+    positions (``COLOR_WEIGHT`` of the mesh's size per unit of colour)."""
     import meshoptimizer as mo
 
     dst = np.empty_like(indices)
     err = np.zeros(1, dtype=np.float32)
     options = mo.SIMPLIFY_ERROR_ABSOLUTE | (mo.SIMPLIFY_LOCK_BORDER if lock else 0)
-    n = mo.simplify(dst, indices, positions, target_index_count=3 * max(int(target_tris), 1), target_error=1e30,
-                    options=options, result_error=err)
+    target = 3 * max(int(target_tris), 1)
+    if colors is None:
+        n = mo.simplify(dst, indices, positions, target_index_count=target, target_error=1e30, options=options,
+                        result_error=err)
+    else:
+        size = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
+        weights = np.full(3, COLOR_WEIGHT * max(size, 1e-12), dtype=np.float32)
+        n = _with_attributes(dst, indices, positions, np.ascontiguousarray(colors, dtype=np.float32), weights,
+                             target, options, err)
     return dst[:n].copy(), float(err[0])
+
+
+def _with_attributes(dst, indices, positions, attributes, weights, target: int, options: int, err) -> int:
+    """``meshopt_simplifyWithAttributes`` through the binding's library with its C signature
+    declared (meshoptimizer 0.2.30a0's Python wrapper declares none: its size_t and float
+    arguments would not be passed as such)."""
+    import ctypes
+
+    from meshoptimizer._loader import lib
+
+    f = lib.meshopt_simplifyWithAttributes
+    if f.restype is not ctypes.c_size_t:
+        P = ctypes.POINTER
+        f.argtypes = [P(ctypes.c_uint), P(ctypes.c_uint), ctypes.c_size_t, P(ctypes.c_float), ctypes.c_size_t,
+                      ctypes.c_size_t, P(ctypes.c_float), ctypes.c_size_t, P(ctypes.c_float), ctypes.c_size_t,
+                      P(ctypes.c_ubyte), ctypes.c_size_t, ctypes.c_float, ctypes.c_uint, P(ctypes.c_float)]
+        f.restype = ctypes.c_size_t
+    fp = lambda a, t: a.ctypes.data_as(ctypes.POINTER(t))
+    indices, positions = np.ascontiguousarray(indices, np.uint32), np.ascontiguousarray(positions, np.float32)
+    return int(f(fp(dst, ctypes.c_uint), fp(indices, ctypes.c_uint), indices.size, fp(positions, ctypes.c_float),
+                 len(positions), 12, fp(attributes, ctypes.c_float), 4 * attributes.shape[1],
+                 fp(weights, ctypes.c_float), len(weights), ctypes.POINTER(ctypes.c_ubyte)(), target, 1e30, options,
+                 fp(err, ctypes.c_float)))
 
 
 def coarsest(count: np.ndarray) -> np.ndarray:
@@ -72,9 +110,11 @@ def _chain(scene: Scene, i: int, levels: int, ratio: float, lock: bool) -> list[
     lo, hi = int(local.min()), int(local.max()) + 1
     base = int(scene.base_vertex[i])
     verts = np.ascontiguousarray(scene.vertices[base + lo:base + hi, :3], dtype=np.float32)
+    colors = (None if scene.vertex_colors is None
+              else np.asarray(scene.vertex_colors[base + lo:base + hi, :3], dtype=np.float32) / 255.0)
     last, prev, prev_err, out = local - np.uint32(lo), c // 3, 0.0, []
     for lv in range(1, levels):  # levels, not objects
-        got, err = simplify(verts, last, int(c // 3 * ratio ** lv), lock)  # from the level before
+        got, err = simplify(verts, last, int(c // 3 * ratio ** lv), lock, colors)  # from the level before
         t = got.size // 3
         if t == 0 or t > prev * (1 - MIN_DROP):
             break

@@ -62,6 +62,7 @@ class SceneSpec:
     cluster: int | None = None  # cut objects above N triangles into clusters (0: never; None: auto)
     ranks: int = 4  # the wall the scene is prepared for (automatic clustering)
     up: str | None = None  # x|y|z|-x|-y|-z, None: format convention / heuristic
+    lods: bool = True  # build (and cache, and hold) levels of detail: only where the run can draw them
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
@@ -104,11 +105,13 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
             known = ", ".join(sorted(FORMATS))
             raise InputError.of("model", f"{src}: unsupported extension '{src.suffix}' (use {known})")
         st = src.stat()
-        key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, cluster, wall)
+        key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, cluster, wall,
+                   *(() if spec.lods else ("no levels of detail",)))
         name = f"{src.stem}-{key}.npz"
         make = lambda: load_model(src, spec.split, spec.merge_below)
     else:
-        key = _key(spec.scene, spec.triangles, spec.copies, spec.seed, cluster, wall)
+        key = _key(spec.scene, spec.triangles, spec.copies, spec.seed, cluster, wall,
+                   *(() if spec.lods else ("no levels of detail",)))
         name = f"{spec.scene}-{key}.npz"
         make = lambda: BUILTIN[spec.scene](spec)
 
@@ -127,7 +130,8 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
             scene = split_objects(scene, size)
         scene.meta["objects"] = {"split": scene.meta.get("split", spec.split), "modelled": modelled,
                                  "objects": scene.n_objects, "cluster": int(size), "why": why}
-        return scene_lod.with_lods(with_parts(scene))  # parts for culling, then levels of detail
+        scene = with_parts(scene)  # parts for culling, then levels of detail where the run can use them
+        return scene_lod.with_lods(scene) if spec.lods else scene
     path = cache_dir() / name
     scene, cached = None, False
     if use_cache and path.is_file():

@@ -68,8 +68,9 @@ def scene_flags(triangles: int) -> list[str]:
     return ["--triangles", str(triangles), "--copies", str(copies)]
 
 
-def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: float = 1800) -> dict:
-    """Peak PSS per rank and summed, for one walkthrough of ``triangles`` on ``ranks`` ranks."""
+def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: float = 1800, extra=()) -> dict:
+    """Peak PSS per rank and summed, for one walkthrough of ``triangles`` on ``ranks`` ranks
+    (``extra``: more walkthrough flags, e.g. ``--lod-error 1``: levels of detail held)."""
     from multigpu.parallel.mpirun import find_launcher
 
     rows, cols = (1, ranks) if ranks < 4 else (2, ranks // 2)
@@ -77,7 +78,7 @@ def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: fl
     env = launcher.environ({"MULTIGPU_CACHE": cache})
     out = tempfile.mkdtemp(prefix="mem-")
     args = ["walkthrough", *scene_flags(triangles), "--frames", str(frames), "--grid", f"{rows}x{cols}",
-            "--tile", "256x256", "--mosaic-every", "0", "--no-progress", "--out", out]
+            "--tile", "256x256", "--mosaic-every", "0", "--no-progress", "--out", out, *extra]
     proc = subprocess.Popen(launcher.command(ranks, args, env=env), env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     peak_each: dict[int, int] = {}
