@@ -382,6 +382,10 @@ def _scene_info(a) -> int:
               if look["colors"] != "none" else "colours    none in the file: one neutral grey (--colors objects: "
                                                "a colour per object)")
         print(f"normals    {look['normals']}")
+        a = look.get("alpha") or {}
+        if a.get("mask") or a.get("blend_drawn_opaque"):
+            print(f"alpha      MASK: {a['mask']} parts, {a['masked_faces']} faces below the cutoff left out; "
+                  f"BLEND: {a['blend_drawn_opaque']} parts drawn opaque")
     per_tri = scene.nbytes / max(scene.n_triangles, 1)
     lods = scene.meta.get("lods")
     if lods:

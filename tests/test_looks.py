@@ -192,3 +192,20 @@ def test_levels_of_detail_keep_a_colour_border():
 
     assert mixed_area(None) > 0.5
     assert mixed_area(col) < 0.1
+
+
+def test_gltf_alpha_mask_leaves_out_what_its_cutoff_hides_and_blend_is_drawn_opaque(tmp_path):
+    s = trimesh.Scene()
+    for name, col, mode, pos in (("shown", [200, 40, 30, 200], "MASK", 0), ("hidden", [30, 60, 220, 60], "MASK", 2),
+                                 ("glass", [30, 200, 60, 80], "BLEND", 4)):
+        b = trimesh.creation.box()
+        b.apply_translation([pos, 0, 0])
+        b.visual = TextureVisuals(material=PBRMaterial(baseColorFactor=col, alphaMode=mode, alphaCutoff=0.5))
+        s.add_geometry(b, node_name=name, geom_name=name)
+    (tmp_path / "a.glb").write_bytes(s.export(file_type="glb"))
+    scene = load_model(tmp_path / "a.glb")
+    assert scene.n_triangles == 24  # the box at alpha 60/255 < 0.5 is left out; the BLEND one stays
+    a = scene.meta["look"]["alpha"]
+    assert a == {"blend_drawn_opaque": 1, "mask": 2, "masked_faces": 12}
+    assert any("alpha cutoff" in w for w in scene.meta["warnings"])
+    assert scene.bmax.max(axis=0)[0] > 4  # the glass box is there

@@ -66,6 +66,17 @@ def _material_rgba(material) -> np.ndarray | None:
     return None
 
 
+def mesh_alpha(mesh) -> tuple[str, float]:
+    """A mesh's glTF ``alphaMode`` (``OPAQUE``, ``MASK``, ``BLEND``) and ``alphaCutoff`` (0.5 by
+    the specification where unset). MASK: the faces whose corners all lie below the cutoff are
+    left out (exact for a material's one alpha; a face's corners decide where vertex alphas
+    vary); BLEND: drawn opaque (``scene info`` says so)."""
+    material = getattr(getattr(mesh, "visual", None), "material", None)
+    mode = str(getattr(material, "alphaMode", None) or "OPAQUE").upper()
+    cutoff = getattr(material, "alphaCutoff", None)
+    return mode, 0.5 if cutoff is None else float(cutoff)
+
+
 def mesh_normals(mesh) -> np.ndarray | None:
     """The normals the file gave a trimesh mesh, (V, 3), or None (none given: trimesh has not
     computed any; its cache holds the file's, transformed with the mesh)."""

@@ -435,6 +435,8 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     rgba = np.empty((len(verts), 4), dtype=np.uint8)
     normals = np.empty((len(verts), 3), dtype=np.float64)
     any_rgba, all_normals, materials, kinds = False, True, set(), set()
+    masked = np.zeros(len(faces), dtype=bool)  # faces a MASK material's alpha cutoff hides
+    alpha = {"BLEND": 0, "MASK": 0}  # meshes of each glTF alpha mode
     v = f = 0
     for i in range(n_meshes):  # meshes, not frames: each is let go once copied (one copy held)
         m, meshes[i] = meshes[i], None
@@ -449,6 +451,11 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
             materials.add((getattr(m.visual.material, "name", None), tuple(colors[0])))
         any_rgba |= colors is not None
         rgba[v:v + len(m.vertices)] = colors if colors is not None else np.rint(np.array([*looks.NEUTRAL, 1.0]) * 255)
+        mode, cutoff = looks.mesh_alpha(m)
+        if mode in alpha:
+            alpha[mode] += 1
+        if mode == "MASK" and colors is not None:  # a face shows where any corner's alpha reaches the cutoff
+            masked[f:f + len(mf)] = colors[mf][:, :, 3].max(axis=1) < np.rint(255 * cutoff)
         nrm = looks.mesh_normals(m) if all_normals else None
         all_normals &= nrm is not None
         if nrm is not None:
@@ -457,7 +464,15 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
         del m, mf
     meshes.clear()
     labels = np.repeat(np.arange(n_meshes), n_faces)
-    look_meta = {"colors": ", ".join(sorted(k for k in kinds if k != "none")) or "none", "materials": len(materials)}
+    look_meta = {"colors": ", ".join(sorted(k for k in kinds if k != "none")) or "none", "materials": len(materials),
+                 "alpha": {"blend_drawn_opaque": alpha["BLEND"], "mask": alpha["MASK"],
+                           "masked_faces": int(masked.sum())}}
+    if masked.all():
+        raise InputError.of("model", f"{path}: every face lies below its MASK material's alpha cutoff "
+                                     "(nothing to draw)")
+    if masked.any():
+        warnings.append(f"left out {int(masked.sum())} faces below their MASK material's alpha cutoff")
+        faces, labels = faces[~masked], labels[~masked]
     _check_indices_and_range(verts, faces, path)
     bad_v = ~np.isfinite(verts).all(axis=1)
     bad_obj = np.zeros(n_meshes, dtype=bool)
