@@ -131,26 +131,28 @@ def check_ranks(wall: Wall, ranks: int) -> None:
 
 
 def hosts_of(wall: Wall, ranks: int) -> list[tuple[str, int]]:
-    """The hosts the file places the ranks on, as [(host, ranks)] in rank order (ranks fill the
-    hosts in order, as both MPIs place them); empty where it names none. A host's ranks must be
-    consecutive, and once one entry names a host every entry does."""
+    """The hosts the file places the ranks on, as [(host, processes)], hosts in the order the
+    file first names them; empty where it names none. Any tile may be on any host: MPI fills the
+    hosts with processes in order, and ``tile_order`` says which tile each process drives. Once
+    one entry names a host every entry does."""
     if not wall.hosts:
         return []
-    where = f"--wall {wall.file}"
     missing = [r for r in range(ranks) if r not in wall.hosts]
     if missing:
-        raise InputError(f"{where}: rank {missing[0]} names no host, but others do (name every rank's host)")
-    out: list[tuple[str, int]] = []
-    for r in range(ranks):  # ranks, not objects
-        h = wall.hosts[r]
-        if out and out[-1][0] == h:
-            out[-1] = (h, out[-1][1] + 1)
-        elif any(h == seen for seen, _ in out):
-            raise InputError(f"{where}: host {h}'s ranks are not consecutive (rank {r}): ranks fill the hosts in "
-                             "order, so number each host's tiles one after another")
-        else:
-            out.append((h, 1))
-    return out
+        raise InputError(f"--wall {wall.file}: rank {missing[0]} names no host, but others do (name every rank's host)")
+    order = list(dict.fromkeys(wall.hosts[r] for r in range(ranks)))
+    return [(h, sum(wall.hosts[r] == h for r in range(ranks))) for h in order]
+
+
+def tile_order(wall: Wall, ranks: int) -> list[int]:
+    """The tile (rank label) each MPI process drives, in process order: each host's tiles
+    together, hosts in ``hosts_of``'s order, a host's tiles in label order. The identity where
+    every host's tiles are consecutive (or the file names no hosts): a PC per row of a 2x2 wall
+    (tiles 0 and 2 on one, 1 and 3 on the other) gives [0, 2, 1, 3]."""
+    if not wall.hosts:
+        return list(range(ranks))
+    first = {h: i for i, (h, _) in enumerate(hosts_of(wall, ranks))}
+    return sorted(range(ranks), key=lambda r: (first[wall.hosts[r]], r))
 
 
 def windows(wall: Wall, grid, tile, mullion) -> list[tuple[str, str, int, int, int, int]]:
@@ -250,8 +252,11 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
 
     c = Canvas(grid, tile, mullion)
     W, H = c.size
+    order = tile_order(wall, grid[0] * grid[1])
     lines = [f"{wall.file}: {grid[0]}x{grid[1]} wall of {tile[0]}x{tile[1]} tiles, mullions {mullion[0]}x{mullion[1]}",
              f"canvas {W}x{H} pixels ({c.visible[0]}x{c.visible[1]} visible)",
+             *([f"MPI processes drive the tiles {', '.join(map(str, order))} in turn (each host's tiles together)"]
+               if order != sorted(order) else []),
              f"{'rank':>4} {'row':>3} {'col':>3}  {'host':<12} {'display':<10} {'window at':<12} "
              "canvas pixels [x0, y0) top-left"]
     for k, (x0, y0, x1, y1) in enumerate(c.tiles()):  # K tiles

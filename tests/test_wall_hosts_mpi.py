@@ -116,3 +116,55 @@ def test_a_host_without_its_x_server_is_one_line_and_exit_2(tmp_path, two_pcs, m
     assert not windows(xa)  # no window left open on host a
     left = [p for n in "ab" for p in hosts.processes(n) if "Xvfb" not in open(f"/proc/{p}/cmdline").read()]
     assert not left, left
+
+
+@pytest.fixture
+def two_pcs_rows(tmp_path):
+    """Hosts a and b, each an X server as wide as a row of two tiles."""
+    need_tools()
+    with SimHosts(["a", "b"], tmp_path / "hosts") as hosts:
+        servers = []
+        try:
+            for name in ("a", "b"):
+                enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
+                try:
+                    servers.append(start_xvfb((2 * TILE[0], TILE[1]), prefix=enter))
+                except RuntimeError as exc:
+                    pytest.skip(str(exc))
+            yield hosts, [name for _, name in servers]
+        finally:
+            for proc, _ in servers:
+                stop_xvfb(proc)
+
+
+def test_a_pc_per_row_shows_its_row_of_the_mosaic(tmp_path, two_pcs_rows, mpiexec_env):
+    """A 2x2 wall cabled by rows: tiles 0 and 2 (the top row) on host a, 1 and 3 on host b. The
+    launcher places two processes on each host and they drive their host's tiles; each host's
+    screen equals its row of the mosaic, bit for bit."""
+    hosts, (xa, xb) = two_pcs_rows
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "2x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
+        {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
+        {"rank": 1, "host": "b", "display": xb, "position": [0, 0]},
+        {"rank": 2, "host": "a", "display": xa, "position": [TILE[0], 0]},
+        {"rank": 3, "host": "b", "display": xb, "position": [TILE[0], 0]}]}))
+    out = tmp_path / "rows"
+    proc = start_launcher(["-n", "4", "walkthrough", *SMALL, "--path", str(_still(tmp_path)), "--wall", str(wall),
+                           "--present", "window", "--mosaic-every", "100", "--no-overlay", "--out", str(out)],
+                          {**hosts.env, **mpiexec_env})
+    try:
+        shown = lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > 41
+        wait_for(lambda: shown() and len(windows(xa)) == 2 and len(windows(xb)) == 2, timeout=180)
+        shots = screenshot(xa), screenshot(xb)
+        wm_close(xa, windows(xa)[0])
+        _, err = end_launcher(proc)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert [r["host"] for r in s["config"]["ranks"]] == ["a", "b", "a", "b"]  # by tile: rows on their hosts
+    mosaic = read_png(out / "mosaic" / "frame_00000.png")
+    assert (shots[0] == mosaic[:TILE[1]]).all() and (shots[1] == mosaic[TILE[1]:]).all()
+    left = [p for n in "ab" for p in hosts.processes(n) if "Xvfb" not in open(f"/proc/{p}/cmdline").read()]
+    assert not left, left

@@ -5,6 +5,8 @@ Pure parsing (no MPI): a list of (host, slots), ranks filling the hosts in order
 A hostfile holds one host per line as ``host``, ``host:N`` (MPICH's form) or ``host slots=N``
 (Open MPI's), ``#`` starts a comment; so a user's existing hostfile of either MPI works with
 either. The launcher (``mpirun.Launcher``) writes the list in its MPI's own syntax.
+``tile_comm`` renumbers the started processes by the tile each drives (a wall file's hosts in
+any order): a split of the communicator it is given, the module's one MPI step.
 """
 
 from __future__ import annotations
@@ -136,3 +138,21 @@ def probe(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = PROBE_
                       "password (MULTIGPU_RSH names another shell)")
     if failed:
         raise InputError(failed)
+
+
+def tile_comm(world, wall_path: str | None):
+    """The job's communicator with each process's rank the tile it drives: where a wall file puts
+    a host's tiles apart (a PC per row), MPI's processes, filled into the hosts in order, are
+    renumbered by ``wall.tile_order`` (one split at start; every process reads the same file).
+    The world itself where nothing is renumbered, or where the file cannot be read (the
+    configuration's check then reports it, once)."""
+    from multigpu.errors import InputError
+    from multigpu.wall import load_wall, tile_order
+
+    try:
+        order = tile_order(load_wall(wall_path), world.Get_size()) if wall_path else None
+    except InputError:
+        order = None
+    if order is None or order == sorted(order):
+        return world
+    return world.Split(0, order[world.Get_rank()])

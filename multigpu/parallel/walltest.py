@@ -97,9 +97,10 @@ def main(path: str, frames: int | None) -> int:
     """The CLI's ``wall test`` under MPI: one line and exit 2 for bad input on every rank."""
     from mpi4py import MPI
 
+    from multigpu.parallel.hosts import tile_comm
     from multigpu.parallel.job import collective_exit
 
-    comm = MPI.COMM_WORLD
+    comm = tile_comm(MPI.COMM_WORLD, path)
     try:
         got = run(path, comm, frames)
     except InputError as exc:
