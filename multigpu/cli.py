@@ -90,6 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
     wc.add_argument("file", help="wall file (JSON: grid, tile, mullion, displays)")
     wc.add_argument("--grid-only", action="store_true", help="print only ROWSxCOLS (for launch scripts)")
     wc.add_argument("--hosts-only", action="store_true", help="print only the hosts as H:N,... (for launch scripts)")
+    wc.add_argument("--offline", action="store_true",
+                    help="check the file alone: no host name look-up, no X screen asked (a wall written elsewhere)")
     wt = wsub.add_parser("test", help="show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)")
     wt.add_argument("file", help="wall file (JSON)")
     wt.add_argument("--frames", type=int, default=None, help="stop after N frames (default: at Escape)")
@@ -419,7 +421,7 @@ def _path_make(a) -> int:
 def _wall_check(a) -> int:
     from multigpu.wall import check_command
 
-    print(check_command(a.file, a.grid_only, a.hosts_only))
+    print(check_command(a.file, a.grid_only, a.hosts_only, a.offline))
     return 0
 
 

@@ -94,6 +94,7 @@ class WalkConfig:
     displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
+    gpus: tuple = ()  # per rank label: its EGL device (wall file "gpu"), or None for --device / the default
     record: str | None = None  # write every frame's camera here, in the format --path reads
     monitor: tuple[int, int] | None = None  # rank 0's operator view at this place (MONITOR_BESIDE: beside the wall)
     # frames in flight (core/inflight.py; 0: the strict order). None: by measurement (docs/USAGE.md, "Frames in

@@ -225,7 +225,7 @@ def _output_args(w: argparse.ArgumentParser, d: dict) -> None:
 def walk_config(a):
     """The walkthrough's flags as a validated configuration (no MPI: testable in one process)."""
     from multigpu.config import WalkConfig, parse_pair, parse_vec3
-    from multigpu.wall import Wall, check_ranks, load_wall
+    from multigpu.wall import Wall, bezel_mullion, check_ranks, load_wall
 
     for name in ("hosts", "hostfile"):
         if getattr(a, name, None) is not None:
@@ -236,13 +236,16 @@ def walk_config(a):
     grid = pick("--grid", a.grid, parse_pair, wall.grid or WalkConfig.grid)
     check_ranks(wall, grid[0] * grid[1])
     ranks = range(grid[0] * grid[1])
+    tile = pick("--tile", a.tile, parse_pair, wall.tile or WalkConfig.tile)
     return WalkConfig(scene=spec(a), path=a.path, path_kind=a.path_kind, frames=a.frames,
-                      grid=grid, tile=pick("--tile", a.tile, parse_pair, wall.tile or WalkConfig.tile),
-                      mullion=pick("--mullion", a.mullion, parse_mullion, wall.mullion or WalkConfig.mullion),
+                      grid=grid, tile=tile,
+                      mullion=pick("--mullion", a.mullion, parse_mullion,
+                                   wall.mullion or bezel_mullion(wall, tile) or WalkConfig.mullion),
                       present=a.present, wall=a.wall,
                       displays=tuple(wall.displays.get(r) for r in ranks) if wall.displays else (),
                       positions=tuple(wall.positions.get(r) for r in ranks) if wall.positions else (),
                       fullscreen=tuple(r in wall.fullscreen for r in ranks) if wall.fullscreen else (),
+                      gpus=tuple(wall.gpus.get(r) for r in ranks) if wall.gpus else (),
                       strips=a.strips,
                       balance=a.balance, bounds=a.bounds, out=a.out, mosaic_every=a.mosaic_every,
                       overlay=not a.no_overlay, video=a.video, device=a.device, subfrustum=a.subfrustum,

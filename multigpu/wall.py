@@ -25,8 +25,9 @@ from pathlib import Path
 
 from multigpu.errors import InputError
 
-KEYS = {"grid", "tile", "mullion", "displays", "comment"}
-DISPLAY_KEYS = {"rank", "host", "display", "position", "fullscreen"}
+#: the wall file's JSON Schema (shipped beside the example walls: examples/walls/), which
+#: ``load_wall`` checks a file against before reading it
+SCHEMA = Path(__file__).resolve().parent / "data" / "wall.schema.json"
 #: a host name as both MPI launchers take it
 HOST = re.compile(r"^[A-Za-z0-9_.\-\[\]]+$")
 
@@ -43,6 +44,8 @@ class Wall:
     positions: dict[int, tuple[int, int]] = field(default_factory=dict)
     hosts: dict[int, str] = field(default_factory=dict)
     fullscreen: frozenset = frozenset()  # ranks whose window fills its display's monitor
+    gpus: dict[int, int] = field(default_factory=dict)  # rank -> GPU (EGL device, or X screen with windows)
+    bezel: dict | None = None  # the file's bezel (millimetres), where it gives one instead of mullion pixels
 
 
 def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
@@ -59,8 +62,44 @@ def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
     return got
 
 
+def schema() -> dict:
+    return json.loads(SCHEMA.read_text())
+
+
+def _schema_error(doc, where: str) -> str | None:
+    """The first thing (in document order) the file gets wrong by the schema, as one line naming
+    the entry and the key, in the words of the schema's own descriptions; None where it is valid."""
+    from jsonschema import Draft202012Validator
+
+    sch = schema()
+    errors = sorted(Draft202012Validator(sch).iter_errors(doc), key=lambda e: [str(p) for p in e.absolute_path])
+    if not errors:
+        return None
+    e = errors[0]
+    path = list(e.absolute_path)
+    node = sch
+    for step in path:  # the schema of the value at fault, for its description
+        node = node.get("items", {}) if isinstance(step, int) else node.get("properties", {}).get(step, {})
+    at = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+    entry = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path[:2]).lstrip(".") if path[:1] == [
+        "displays"] and len(path) > 1 else ""
+    prefix = f"{where}: {entry}: " if entry else f"{where}: "
+    if e.validator == "additionalProperties":
+        known = sorted(k for k in node.get("properties", {}) if k not in ("$schema", "comment"))
+        extra = sorted(set(e.instance) - set(node.get("properties", {})))
+        return f"{prefix}unknown key '{extra[0]}' (known: {', '.join(known)})"
+    if e.validator == "required":
+        missing = next(k for k in e.validator_value if k not in e.instance)
+        text = node.get("properties", {}).get(missing, {}).get("description", f"needs \"{missing}\"")
+        return f"{prefix}{text}" if text.startswith("needs") else f"{prefix}needs \"{missing}\": {text}"
+    text = node.get("description") or e.message
+    got = f", got {json.dumps(e.instance)}" if len(json.dumps(e.instance)) < 80 else ""
+    return f"{prefix}{text}{got}" if at else f"{prefix}{text}"
+
+
 def load_wall(path: str) -> Wall:
-    """Read and check a wall file; every error is one line naming the file and the entry."""
+    """Read and check a wall file (its JSON Schema, then what a schema cannot say); every error is
+    one line naming the file, the entry and the key."""
     where = f"--wall {path}"
     try:
         doc = json.loads(Path(path).read_text())
@@ -72,49 +111,48 @@ def load_wall(path: str) -> Wall:
         raise InputError(f"{where}: not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
     if not isinstance(doc, dict):
         raise InputError(f"{where}: the top level must be a JSON object with grid, tile, mullion, displays")
-    unknown = sorted(set(doc) - KEYS)
-    if unknown:
-        raise InputError(f"{where}: unknown key '{unknown[0]}' (known: {', '.join(sorted(KEYS - {'comment'}))})")
+    wrong = _schema_error(doc, where)
+    if wrong:
+        raise InputError(wrong)
     try:
         grid = _pair(doc["grid"], "grid") if "grid" in doc else None
         tile = _pair(doc["tile"], "tile") if "tile" in doc else None
         mullion = _pair(doc["mullion"], "mullion", zero=True) if "mullion" in doc else None
     except ValueError as exc:
         raise InputError(f"{where}: {exc}") from None
-    displays, positions, hosts, full = {}, {}, {}, set()
-    entries = doc.get("displays", [])
-    if not isinstance(entries, list):
-        raise InputError(f"{where}: displays must be a list of {{rank, display, position}} entries")
-    for i, e in enumerate(entries):  # one entry per display, at most a few dozen
-        at = f"{where}: displays[{i}]"
-        if not isinstance(e, dict) or type(e.get("rank")) is not int or e["rank"] < 0:
-            raise InputError(f"{at}: needs \"rank\": a rank label >= 0")
-        bad = sorted(set(e) - DISPLAY_KEYS)
-        if bad:
-            raise InputError(f"{at}: unknown key '{bad[0]}' (known: rank, host, display, position, fullscreen)")
+    if "mullion" in doc and "bezel" in doc:
+        raise InputError(f"{where}: give mullion (pixels) or bezel (millimetres), not both")
+    displays, positions, hosts, full, gpus = {}, {}, {}, set(), {}
+    for i, e in enumerate(doc.get("displays", [])):  # one entry per display, at most a few dozen
         r = e["rank"]
         if r in displays:
-            raise InputError(f"{at}: rank {r} appears twice")
-        d = e.get("display")
-        if d is not None and (not isinstance(d, str) or not re.fullmatch(r"[\w.\-]*:\d+(\.\d+)?", d)):
-            raise InputError(f"{at}: display must be an X display name like ':0' or ':0.1', got {json.dumps(d)}")
-        displays[r] = d
-        if "fullscreen" in e:
-            if not isinstance(e["fullscreen"], bool):
-                raise InputError(f"{at}: fullscreen must be true or false, got {json.dumps(e['fullscreen'])}")
-            if e["fullscreen"]:
-                full.add(r)
+            raise InputError(f"{where}: displays[{i}]: rank {r} appears twice")
+        displays[r] = e.get("display")
+        if e.get("fullscreen"):
+            full.add(r)
         if "host" in e:
-            h = e["host"]
-            if not isinstance(h, str) or not HOST.match(h):
-                raise InputError(f"{at}: host must be a host name or address, got {json.dumps(h)}")
-            hosts[r] = h
+            hosts[r] = e["host"]
         if "position" in e:
-            p = e["position"]
-            if not (isinstance(p, list) and len(p) == 2 and all(type(v) is int for v in p)):
-                raise InputError(f"{at}: position must be [x, y] in pixels, got {json.dumps(p)}")
-            positions[r] = (p[0], p[1])
-    return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full))
+            positions[r] = tuple(e["position"])
+        if "gpu" in e:
+            gpus[r] = e["gpu"]
+    return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"))
+
+
+def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:
+    """The mullion in pixels a wall file's ``bezel`` gives for ``tile``-pixel monitors: the
+    millimetres between two monitors' pixels over the pixel pitch (the data sheet's, or the
+    active area over the tile), rounded; None where the file gives no bezel."""
+    b = wall.bezel
+    if not b:
+        return None
+    two = lambda v: (float(v), float(v)) if isinstance(v, (int, float)) else (float(v[0]), float(v[1]))
+    gap = two(b["bezel_to_bezel_mm"])
+    pitch = two(b["pixel_pitch_mm"]) if "pixel_pitch_mm" in b else (b["panel_mm"][0] / tile[0],
+                                                                     b["panel_mm"][1] / tile[1])
+    if min(pitch) <= 0:
+        raise InputError(f"--wall {wall.file}: bezel: the pixel pitch must be > 0 mm")
+    return round(gap[0] / pitch[0]), round(gap[1] / pitch[1])
 
 
 def check_ranks(wall: Wall, ranks: int) -> None:
@@ -257,7 +295,7 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
              f"canvas {W}x{H} pixels ({c.visible[0]}x{c.visible[1]} visible)",
              *([f"MPI processes drive the tiles {', '.join(map(str, order))} in turn (each host's tiles together)"]
                if order != sorted(order) else []),
-             f"{'rank':>4} {'row':>3} {'col':>3}  {'host':<12} {'display':<10} {'window at':<12} "
+             f"{'rank':>4} {'row':>3} {'col':>3}  {'host':<12} {'display':<10} {'gpu':>3}  {'window at':<12} "
              "canvas pixels [x0, y0) top-left"]
     for k, (x0, y0, x1, y1) in enumerate(c.tiles()):  # K tiles
         row, col = k % grid[0], k // grid[0]
@@ -265,18 +303,24 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         pos = wall.positions.get(k, (int(x0), int(top)))
         disp = wall.displays.get(k) or "$DISPLAY"
         host = wall.hosts.get(k, "-")
-        lines.append(f"{k:>4} {row:>3} {col:>3}  {host:<12} {disp:<10} {f'{pos[0]},{pos[1]}':<12} [{x0}, {top})")
+        gpu = wall.gpus.get(k, "-")
+        lines.append(f"{k:>4} {row:>3} {col:>3}  {host:<12} {disp:<10} {gpu:>3}  {f'{pos[0]},{pos[1]}':<12} "
+                     f"[{x0}, {top})")
     return "\n".join(lines)
 
 
-def check_command(path: str, grid_only: bool = False, hosts_only: bool = False) -> str:
+def check_command(path: str, grid_only: bool = False, hosts_only: bool = False,
+                  offline: bool = False) -> str:
     """``multigpu wall check``: the file checked with a run's own limits and for what people get
     wrong (an InputError naming the first problem, and the others), then its layout and picture
-    (or only ROWSxCOLS, or only the hosts as H:N,..., for launch scripts)."""
+    (or only ROWSxCOLS, or only the hosts as H:N,..., for launch scripts). ``offline``: no host
+    look-up and no X screen asked (a file written for another site, or checked in CI)."""
     from multigpu.config import WalkConfig
 
     wall = load_wall(path)
-    grid, tile, mullion = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile, wall.mullion or (0, 0)
+    grid, tile = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile
+    derived = bezel_mullion(wall, tile)
+    mullion = wall.mullion or derived or (0, 0)
     check_ranks(wall, grid[0] * grid[1])
     hosts = hosts_of(wall, grid[0] * grid[1])
     WalkConfig(grid=grid, tile=tile, mullion=mullion)
@@ -284,8 +328,11 @@ def check_command(path: str, grid_only: bool = False, hosts_only: bool = False) 
         return f"{grid[0]}x{grid[1]}"
     if hosts_only:
         return ",".join(f"{h}:{n}" for h, n in hosts)
-    found = problems(wall, grid, tile, mullion, screen_size)
+    found = problems(wall, grid, tile, mullion, None if offline else screen_size,
+                     (lambda host: None) if offline else None)
     if found:
         more = f" (and {len(found) - 1} more: {'; '.join(found[1:])})" if len(found) > 1 else ""
         raise InputError(f"--wall {path}: {found[0]}{more}")
-    return "\n".join([describe(wall, grid, tile, mullion), *picture(wall, grid)])
+    bezel = ([f"mullion {mullion[0]}x{mullion[1]} pixels from the bezel: {json.dumps(wall.bezel)}"]
+             if derived else [])
+    return "\n".join([describe(wall, grid, tile, mullion), *bezel, *picture(wall, grid)])

@@ -163,7 +163,7 @@ def test_wall_check_prints_the_layout(tmp_path, capsys):
     assert main(["wall", "check", path]) == 0
     out = capsys.readouterr().out
     assert "canvas 3880x2200 pixels (3840x2160 visible)" in out
-    assert "   3   1   1  -            $DISPLAY   1960,1120" in out
+    assert "   3   1   1  -            $DISPLAY     -  1960,1120" in out
     assert "|    rank 0    |    rank 2    |" in out and "ranks count down each column" in out
     assert main(["wall", "check", path, "--grid-only"]) == 0
     assert capsys.readouterr().out.strip() == "2x2"

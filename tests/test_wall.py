@@ -3,6 +3,7 @@
 
 import json
 import re
+from pathlib import Path
 
 import pytest
 
@@ -129,3 +130,60 @@ def test_fullscreen_ranks_fill_their_screens_and_the_tile_must_match(tmp_path):
     doc["displays"][1]["fullscreen"] = "yes"
     with pytest.raises(InputError, match="fullscreen must be true or false"):
         load_wall(_wall(tmp_path, doc))
+
+
+EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples" / "walls").glob("*.json"))
+
+
+@pytest.mark.parametrize("path", [p for p in EXAMPLES if p.name != "wall.schema.json"], ids=lambda p: p.name)
+def test_the_example_walls_pass_wall_check(path, capsys):
+    """Every shipped example passes ``wall check --offline`` (no host look-up, no X asked) and
+    names its own schema, which is the one the code checks against."""
+    from multigpu.cli import main
+    from multigpu.wall import SCHEMA
+
+    assert main(["wall", "check", "--offline", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "2x2 wall of 1920x1080 tiles" in out
+    assert (path.parent / json.loads(path.read_text())["$schema"]).resolve() == SCHEMA.resolve()
+
+
+def test_the_schema_is_a_valid_json_schema():
+    from jsonschema import Draft202012Validator
+
+    from multigpu.wall import schema
+
+    Draft202012Validator.check_schema(schema())
+
+
+@pytest.mark.parametrize("doc,needle", [
+    ({"grid": "2by2"}, "grid must be 'ROWSxCOLS' or [ROWS, COLS] with integers >= 1, got \"2by2\""),
+    ({"displays": [{"rank": 0}, {"rank": 1, "host": "a b"}]}, "displays[1]: host must be a host name or address"),
+    ({"displays": [{"rank": 0, "gpu": -1}]}, "displays[0]: gpu must be an EGL device index >= 0"),
+    ({"displays": [{"rank": -2}]}, "displays[0]: needs \"rank\": a rank label >= 0"),
+    ({"bezel": {"bezel_to_bezel_mm": 3}}, "bezel must be {\"bezel_to_bezel_mm\""),
+    ({"bezel": {"bezel_to_bezel_mm": 3, "pixel_pitch_mm": 0.5}, "mullion": "4x4"}, "mullion (pixels) or bezel"),
+])
+def test_a_wrong_wall_file_names_the_entry_and_the_key(tmp_path, doc, needle):
+    with pytest.raises(InputError) as e:
+        load_wall(_wall(tmp_path, doc))
+    assert needle in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_bezels_in_millimetres_become_mullion_pixels(tmp_path):
+    from multigpu.wall import bezel_mullion
+
+    by_pitch = load_wall(_wall(tmp_path, {"bezel": {"bezel_to_bezel_mm": [3.5, 7.0], "pixel_pitch_mm": 0.5}}))
+    assert bezel_mullion(by_pitch, (1920, 1080)) == (7, 14)
+    by_panel = load_wall(_wall(tmp_path, {"bezel": {"bezel_to_bezel_mm": 6, "panel_mm": [960, 540]}}))
+    assert bezel_mullion(by_panel, (1920, 1080)) == (12, 12)  # 0.5 mm pixels
+    assert bezel_mullion(load_wall(_wall(tmp_path, {"grid": "1x2"})), (10, 10)) is None
+
+
+def test_a_gpu_per_rank_reaches_the_configuration(tmp_path):
+    from multigpu.cli import build_parser
+    from multigpu.flags import walk_config
+
+    path = _wall(tmp_path, {"grid": "1x2", "displays": [{"rank": 0, "gpu": 1}, {"rank": 1}]})
+    cfg = walk_config(build_parser().parse_args(["walkthrough", "--wall", path]))
+    assert cfg.gpus == (1, None)

@@ -152,7 +152,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             if presenter.context is not None:  # render in the window's context
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:
-                ctx, device = create_context(cfg.device, local_rank=local, host_ranks=host_ranks)
+                mine = cfg.gpus[rank] if cfg.gpus and cfg.gpus[rank] is not None else cfg.device
+                ctx, device = create_context(mine, local_rank=local, host_ranks=host_ranks)
             renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum, shared, cfg.colors)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
             from multigpu import kernels
