@@ -109,10 +109,7 @@ class WalkConfig:
     colors: str = "model"  # the model's own colours, or "objects": a colour per object (scene/looks.py)
 
     def __post_init__(self):
-        from multigpu.scene.looks import COLOR_VIEWS
-
-        if self.colors not in COLOR_VIEWS:
-            raise InputError(f"--colors must be one of {', '.join(COLOR_VIEWS)}, got '{self.colors}'")
+        self._scene_as_drawn()
         if self.frames is not None and self.frames < 1:
             raise InputError(f"--frames must be >= 1, got {self.frames}")
         if self.strips < 2:
@@ -153,9 +150,6 @@ class WalkConfig:
             raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
         from multigpu.core.inflight import MOST
 
-        lods = self.lod_error > 0 or self.target_fps is not None
-        if self.scene.lods != lods:  # levels of detail built, cached and held only where the run can draw them
-            object.__setattr__(self, "scene", replace(self.scene, lods=lods))
         if self.latency is None:
             object.__setattr__(self, "latency", 0 if self.present == "window" else 1)
         if not 0 <= self.latency <= MOST:
@@ -191,6 +185,17 @@ class WalkConfig:
                 raise InputError(f"--bin-size {self.bin_size}: {bins} bins on a {self.size[0]}x{self.size[1]} wall "
                                  "(at most 65536: every bin is a draw per frame)")
 
+    def _scene_as_drawn(self) -> None:
+        """The colour view checked, and the scene prepared with levels of detail only where the
+        run can draw them (``--lod-error``, ``--target-fps``): built, cached and held for nothing
+        otherwise."""
+        from multigpu.scene.looks import COLOR_VIEWS
+
+        if self.colors not in COLOR_VIEWS:
+            raise InputError(f"--colors must be one of {', '.join(COLOR_VIEWS)}, got '{self.colors}'")
+        lods = self.lod_error > 0 or self.target_fps is not None
+        if self.scene.lods != lods:
+            object.__setattr__(self, "scene", replace(self.scene, lods=lods))
     def _check_quality(self) -> None:
         """Speed for accuracy's flags: a frame rate above 0, a scale the renderer makes, a bound >= 0."""
         if self.target_fps is not None and not (self.target_fps > 0 and math.isfinite(self.target_fps)):

@@ -132,7 +132,8 @@ def test_depth_ties_go_to_the_first_drawn_and_empty_parts_are_fine(tmp_path):
     path.write_text(json.dumps({"version": 1, "cameras": [
         {"position": [1.5, 1.5, 5.0], "target": [1.5, 1.5, 0.0], "up": [0, 1, 0], "fov": 60, "near": 0.1,
          "far": 20}] * 2}))
-    scene = ["--model", str(model), "--cluster", "0", "--up", "z", "--path", str(path), "--no-progress"]
+    scene = ["--model", str(model), "--cluster", "0", "--up", "z", "--path", str(path), "--no-progress",
+             "--colors", "objects"]  # a colour per object: which square won is visible
     ref = walk(tmp_path, "one", (1, 1), (60, 30), ["--frames", "2"], scene)
     want = read_png(ref / "mosaic" / "frame_00000.png")
     # the overlap (the middle of the screen) shows one of the two colours, not the background
@@ -182,7 +183,7 @@ def test_hybrid_depth_ties_go_to_the_region(tmp_path):
         {"position": [2.0, 2.0, 5.0], "target": [2.0, 2.0, 0.0], "up": [0, 1, 0], "fov": 60, "near": 0.1,
          "far": 20}] * 2}))
     scene = ["--model", str(model), "--split", "components", "--merge-below", "0", "--cluster", "0", "--up", "z",
-             "--path", str(path), "--no-progress"]
+             "--path", str(path), "--no-progress", "--colors", "objects"]  # the slab and squares told apart
     want = read_png(walk(tmp_path, "one", (1, 1), (60, 40), ["--frames", "2"], scene) / "mosaic" / "frame_00000.png")
     assert len({tuple(c) for c in want.reshape(-1, 3)}) >= 3  # background, the slab and the squares on it
     for grid, tile in (((1, 2), (30, 40)), ((2, 2), (30, 20))):

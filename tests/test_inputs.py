@@ -181,7 +181,7 @@ def test_a_recorded_path_that_cannot_be_written_is_the_runs_failure(tmp_path, mo
 
     from multigpu.parallel.outdir import OutputDir
     from multigpu.parallel.record import RunRecord
-    from multigpu.scene.paths import PathAppender
+    from multigpu.scene.pathfile import PathAppender
 
     def full(self, data, frames):
         raise OSError(errno.ENOSPC, "No space left on device")

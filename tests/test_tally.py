@@ -176,7 +176,8 @@ def test_quantiles_past_exact_are_within_the_bin_width_and_zero_stays_zero():
 
 
 def test_a_recorded_path_is_appended_and_valid_after_every_append(tmp_path):
-    from multigpu.scene.paths import PathAppender, load_path
+    from multigpu.scene.pathfile import PathAppender
+    from multigpu.scene.paths import load_path
 
     rng = np.random.default_rng(0)
     cams = np.column_stack([rng.normal(size=(25, 3)), rng.normal(size=(25, 3)) + 5, np.tile([0, 0, 1.0], (25, 1)),
@@ -191,7 +192,8 @@ def test_a_recorded_path_is_appended_and_valid_after_every_append(tmp_path):
 
 
 def test_a_failed_append_leaves_the_cameras_before_it(tmp_path, monkeypatch):
-    from multigpu.scene import paths
+    from multigpu.scene import pathfile as paths
+    from multigpu.scene.paths import load_path
 
     cams = np.tile([0, 0, 5.0, 0, 0, 0, 0, 1, 0, 60, 0.1, 100], (3, 1))
     w = paths.PathAppender(tmp_path / "p.json")
@@ -212,6 +214,6 @@ def test_a_failed_append_leaves_the_cameras_before_it(tmp_path, monkeypatch):
     with pytest.raises(OSError):
         w.append(cams[2:])
     monkeypatch.setattr(paths.os, "pwrite", real)
-    assert len(paths.load_path(tmp_path / "p.json")) == 2 and w.frames == 2
+    assert len(load_path(tmp_path / "p.json")) == 2 and w.frames == 2
     w.append(cams[2:])
-    assert len(paths.load_path(tmp_path / "p.json")) == 3
+    assert len(load_path(tmp_path / "p.json")) == 3

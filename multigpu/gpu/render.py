@@ -24,50 +24,10 @@ from multigpu.core.camera import model_view, region_clip
 from multigpu.core.drawlist import DrawList
 from multigpu.errors import InputError
 from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
+from multigpu.gpu.shaders import FRAGMENT, vertex_shader
 
 EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL drivers "
             "(Debian/Ubuntu: sudo apt install libegl1 libgl1-mesa-dri) or an NVIDIA driver with EGL")
-
-VERTEX = """
-#version 430
-uniform mat4 mvp;
-layout(std430, binding = 0) readonly buffer Colors { float colors[]; };  // 3 per object
-in vec3 in_pos;
-in uint in_nrm;  // octahedral, 16 + 16 bits (pack_normals)
-#ifdef VERTEX_COLORS
-in uint in_rgba;  // the model's colour at this vertex, RGBA8
-#else
-in uint in_obj;
-#endif
-out vec3 v_nrm;
-out vec3 v_col;
-void main() {
-    gl_Position = mvp * vec4(in_pos, 1.0);
-    vec2 f = vec2(float(in_nrm & 0xFFFFu), float(in_nrm >> 16)) / 65535.0 * 2.0 - 1.0;
-    vec3 n = vec3(f, 1.0 - abs(f.x) - abs(f.y));
-    float t = max(-n.z, 0.0);
-    n.xy += vec2(n.x >= 0.0 ? -t : t, n.y >= 0.0 ? -t : t);
-    v_nrm = n;
-#ifdef VERTEX_COLORS
-    v_col = unpackUnorm4x8(in_rgba).rgb;
-#else
-    uint c = 3u * in_obj;
-    v_col = vec3(colors[c], colors[c + 1u], colors[c + 2u]);
-#endif
-}
-"""
-
-FRAGMENT = """
-#version 430
-uniform vec3 light;
-in vec3 v_nrm;
-in vec3 v_col;
-out vec4 f_color;
-void main() {
-    float d = abs(dot(normalize(v_nrm), light));
-    f_color = vec4(v_col * (0.25 + 0.75 * d), 1.0);
-}
-"""
 
 BACKGROUND = (0.08, 0.09, 0.12)
 
@@ -188,8 +148,7 @@ class RegionRenderer:
         self.method = choose_method(method, size, self.limits)
         self.origin = np.asarray(scene.origin, dtype=np.float64)
         per_vertex = colors == "model" and scene.vertex_colors is not None
-        self.prog = ctx.program(vertex_shader=VERTEX.replace("#version 430", "#version 430\n#define VERTEX_COLORS")
-                                if per_vertex else VERTEX, fragment_shader=FRAGMENT)
+        self.prog = ctx.program(vertex_shader=vertex_shader(per_vertex), fragment_shader=FRAGMENT)
         self.draws = DrawList(scene)
         self.vbo, self.ibo, self.obo, self.rgba = self._buffers(scene, shared, per_vertex)
         self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables

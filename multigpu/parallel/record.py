@@ -40,7 +40,7 @@ class RunRecord:
         self.record_to = Path(record) if record else None
         self.path = None
         if self.record_to is not None:
-            from multigpu.scene.paths import PathAppender
+            from multigpu.scene.pathfile import PathAppender
 
             self.path = PathAppender(self.record_to)
         self.cameras: list = []  # (12,) position, target, up, fov, near, far of the frames not yet in the path file

@@ -1,0 +1,65 @@
+"""A camera path file written as a flight goes (``--record``): appended to, never rewritten, in
+the format ``paths.load_path`` reads (``{"version": 1, "cameras": [...]}``)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+
+class PathAppender:
+    """A path file written as a flight goes (``--record``): each ``append`` adds cameras at the
+    end, so a write costs what it adds however long the flight (a whole rewrite grew with it).
+
+    The file is valid JSON after every append (``{"version": 1, "cameras": [...]}``): the new
+    cameras and the closing brackets go in one write over the last closing brackets; a write
+    that fails part way is undone (truncated back, brackets restored) and raised.
+    """
+
+    TAIL = b"\n]}\n"
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.fd = None  # opened at the first camera: a flight of no frames leaves no file
+        self.frames = 0
+        self.end = 0  # where the closing brackets start
+
+    def append(self, cams: np.ndarray) -> None:
+        """``cams``: (F, 12) rows of position, target, up, fov, near, far."""
+        if len(cams) == 0:
+            return
+        text = ",\n".join(json.dumps({"position": c[0:3].tolist(), "target": c[3:6].tolist(), "up": c[6:9].tolist(),
+                                      "fov": float(c[9]), "near": float(c[10]), "far": float(c[11])}) for c in cams)
+        if self.fd is not None:
+            return self._write((",\n" + text).encode(), len(cams))
+        self.fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            self._write(('{"version": 1, "cameras": [\n' + text).encode(), len(cams))
+        except OSError:  # not even the first cameras: no file rather than an empty path
+            self.close()
+            self.path.unlink(missing_ok=True)
+            raise
+
+    def _write(self, data: bytes, frames: int) -> None:
+        data += self.TAIL
+        try:
+            done = 0
+            while done < len(data):
+                done += os.pwrite(self.fd, data[done:], self.end + done)
+        except OSError:
+            try:
+                os.ftruncate(self.fd, self.end)
+                os.pwrite(self.fd, self.TAIL, self.end)
+            except OSError:
+                pass
+            raise
+        self.end += len(data) - len(self.TAIL)
+        self.frames += frames
+
+    def close(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
