@@ -36,14 +36,13 @@ def mpiexec_env(request):
     return {"MULTIGPU_MPIEXEC": path}
 
 
-@pytest.fixture
-def two_pcs(tmp_path):
-    """Hosts a and b, each running its own Xvfb (started inside the host)."""
+def _pcs(tmp_path, sizes):
+    """Hosts a and b, each running its own Xvfb of the given size (started inside the host)."""
     need_tools()
     with SimHosts(["a", "b"], tmp_path / "hosts") as hosts:
         servers = []
         try:
-            for name, size in (("a", TILE), ("b", (80, 100))):
+            for name, size in zip("ab", sizes):
                 enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
                 try:
                     servers.append(start_xvfb(size, prefix=enter))
@@ -53,6 +52,18 @@ def two_pcs(tmp_path):
         finally:
             for proc, _ in servers:
                 stop_xvfb(proc)
+
+
+@pytest.fixture
+def two_pcs(tmp_path):
+    """Hosts a and b, a tile's screen and a bigger one."""
+    yield from _pcs(tmp_path, (TILE, (80, 100)))
+
+
+@pytest.fixture
+def two_pcs_rows(tmp_path):
+    """Hosts a and b, each an X server as wide as a row of two tiles."""
+    yield from _pcs(tmp_path, ((2 * TILE[0], TILE[1]),) * 2)
 
 
 def _still(tmp_path):
@@ -116,25 +127,6 @@ def test_a_host_without_its_x_server_is_one_line_and_exit_2(tmp_path, two_pcs, m
     assert not windows(xa)  # no window left open on host a
     left = [p for n in "ab" for p in hosts.processes(n) if "Xvfb" not in open(f"/proc/{p}/cmdline").read()]
     assert not left, left
-
-
-@pytest.fixture
-def two_pcs_rows(tmp_path):
-    """Hosts a and b, each an X server as wide as a row of two tiles."""
-    need_tools()
-    with SimHosts(["a", "b"], tmp_path / "hosts") as hosts:
-        servers = []
-        try:
-            for name in ("a", "b"):
-                enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
-                try:
-                    servers.append(start_xvfb((2 * TILE[0], TILE[1]), prefix=enter))
-                except RuntimeError as exc:
-                    pytest.skip(str(exc))
-            yield hosts, [name for _, name in servers]
-        finally:
-            for proc, _ in servers:
-                stop_xvfb(proc)
 
 
 def test_a_pc_per_row_shows_its_row_of_the_mosaic(tmp_path, two_pcs_rows, mpiexec_env):

@@ -24,14 +24,9 @@ import numpy as np
 
 def _rss(pid: int) -> int:
     """Bytes of ``pid``'s resident set (0 when gone)."""
-    try:
-        with open(f"/proc/{pid}/status") as fh:
-            for line in fh:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 0
+    from multigpu.studies.memory_bench import proc_kib
+
+    return proc_kib(pid, "status", "VmRSS:") * 1024
 
 
 def _rank0(root: int) -> int | None:

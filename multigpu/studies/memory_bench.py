@@ -21,16 +21,21 @@ from pathlib import Path
 from multigpu.errors import InputError
 
 
-def _pss(pid: int) -> int:
-    """Bytes of ``pid``'s proportional set size (0 when gone)."""
+def proc_kib(pid: int, name: str, key: str) -> int:
+    """The kiB figure on the ``key`` line of ``/proc/PID/NAME`` (0 when the process is gone)."""
     try:
-        with open(f"/proc/{pid}/smaps_rollup") as fh:
+        with open(f"/proc/{pid}/{name}") as fh:
             for line in fh:
-                if line.startswith("Pss:"):
-                    return int(line.split()[1]) * 1024
+                if line.startswith(key):
+                    return int(line.split()[1])
     except OSError:
         pass
     return 0
+
+
+def _pss(pid: int) -> int:
+    """Bytes of ``pid``'s proportional set size (0 when gone)."""
+    return proc_kib(pid, "smaps_rollup", "Pss:") * 1024
 
 
 def _ranks(root: int) -> list[int]:
