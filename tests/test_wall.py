@@ -159,7 +159,7 @@ def test_the_schema_is_a_valid_json_schema():
 @pytest.mark.parametrize("doc,needle", [
     ({"grid": "2by2"}, "grid must be 'ROWSxCOLS' or [ROWS, COLS] with integers >= 1, got \"2by2\""),
     ({"displays": [{"rank": 0}, {"rank": 1, "host": "a b"}]}, "displays[1]: host must be a host name or address"),
-    ({"displays": [{"rank": 0, "gpu": -1}]}, "displays[0]: gpu must be an EGL device index >= 0"),
+    ({"displays": [{"rank": 0, "gpu": -1}]}, "displays[0]: gpu must be a GPU index >= 0"),
     ({"displays": [{"rank": -2}]}, "displays[0]: needs \"rank\": a rank label >= 0"),
     ({"bezel": {"bezel_to_bezel_mm": 3}}, "bezel must be {\"bezel_to_bezel_mm\""),
     ({"bezel": {"bezel_to_bezel_mm": 3, "pixel_pitch_mm": 0.5}, "mullion": "4x4"}, "mullion (pixels) or bezel"),
@@ -187,3 +187,6 @@ def test_a_gpu_per_rank_reaches_the_configuration(tmp_path):
     path = _wall(tmp_path, {"grid": "1x2", "displays": [{"rank": 0, "gpu": 1}, {"rank": 1}]})
     cfg = walk_config(build_parser().parse_args(["walkthrough", "--wall", path]))
     assert cfg.gpus == (1, None)
+    from multigpu.parallel.walkthrough import screen_of
+
+    assert screen_of(":0", 1) == ":0.1" and screen_of(":0.2", 1) == ":0.2" and screen_of(":3", None) == ":3"

@@ -196,10 +196,22 @@ def _presenter(cfg: WalkConfig, rank: int):
     x0, _, x1, y1 = (int(v) for v in cfg.canvas.tiles()[rank])
     place = (x0, cfg.canvas.size[1] - y1)  # top-left of the tile on a screen holding the canvas
     pos = cfg.positions[rank] if cfg.positions and cfg.positions[rank] is not None else place
-    display = cfg.displays[rank] if cfg.displays else None
+    display = screen_of(cfg.displays[rank] if cfg.displays else None, cfg.gpus[rank] if cfg.gpus else None)
     where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"
     full = bool(cfg.fullscreen and cfg.fullscreen[rank])
     return make_presenter(cfg.present, rank, cfg.tile, pos, display, where, full)
+
+
+def screen_of(display: str | None, gpu: int | None) -> str | None:
+    """The X display a window opens on: a wall file's ``gpu`` picks the screen (``:0`` with gpu 1:
+    ``:0.1``) where the display names none; a display naming its screen keeps it."""
+    import os
+    import re
+
+    if gpu is None:
+        return display
+    base = display if display is not None else os.environ.get("DISPLAY", ":0")
+    return base if re.search(r":\d+\.\d+$", base) else f"{base}.{gpu}"
 
 
 def _monitor(cfg: WalkConfig, presenter):
