@@ -209,3 +209,19 @@ def test_gltf_alpha_mask_leaves_out_what_its_cutoff_hides_and_blend_is_drawn_opa
     assert a == {"blend_drawn_opaque": 1, "mask": 2, "masked_faces": 12}
     assert any("alpha cutoff" in w for w in scene.meta["warnings"])
     assert scene.bmax.max(axis=0)[0] > 4  # the glass box is there
+
+
+def test_a_texture_is_named_as_not_drawn_and_its_material_colour_stands_in(tmp_path):
+    from PIL import Image
+
+    b = trimesh.creation.box()
+    checker = Image.fromarray((np.indices((8, 8)).sum(0) % 2 * 255).astype(np.uint8)).convert("RGB")
+    b.visual = TextureVisuals(uv=np.zeros((len(b.vertices), 2)),
+                              material=PBRMaterial(baseColorTexture=checker, baseColorFactor=ORANGE))
+    s = trimesh.Scene()
+    s.add_geometry(b, node_name="t", geom_name="t")
+    s.add_geometry(trimesh.creation.icosphere(), node_name="u", geom_name="u")
+    (tmp_path / "t.glb").write_bytes(s.export(file_type="glb"))
+    scene = load_model(tmp_path / "t.glb")
+    assert any("colour texture, not drawn yet" in w for w in scene.meta["warnings"])
+    assert tuple(ORANGE[:3]) in {tuple(np.rint(c * 255).astype(int)) for c in scene.colors}

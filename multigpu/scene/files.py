@@ -82,6 +82,8 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     _check_indices_and_range(verts, faces, path)
     faces = _narrow(faces, len(verts))
     (rgba, colors_from), normals = looks.mesh_colors(mesh), looks.mesh_normals(mesh)
+    if looks.has_texture(mesh):
+        warnings.append("the model carries a colour texture, not drawn yet: its material's colour stands in")
     del mesh, loaded  # trimesh's int64 faces go: the model is held once, as verts and faces
     faces = _clean_faces(verts, faces, path, warnings)
     split = "components" if split == "auto" else split
@@ -285,7 +287,7 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     faces = np.empty((int(n_faces.sum()), 3), dtype=np.int64 if big else np.int32)
     rgba = np.empty((len(verts), 4), dtype=np.uint8)
     normals = np.empty((len(verts), 3), dtype=np.float64)
-    any_rgba, all_normals, materials, kinds = False, True, set(), set()
+    any_rgba, all_normals, materials, kinds, textured = False, True, set(), set(), 0
     masked = np.zeros(len(faces), dtype=bool)  # faces a MASK material's alpha cutoff hides
     alpha = {"BLEND": 0, "MASK": 0}  # meshes of each glTF alpha mode
     v = f = 0
@@ -298,6 +300,7 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
         faces[f:f + len(mf)] = mf + v
         colors, kind = looks.mesh_colors(m)
         kinds.add(kind)
+        textured += looks.has_texture(m)
         if kind == "material":  # a material by name and colour (a loader may copy it per mesh)
             materials.add((getattr(m.visual.material, "name", None), tuple(colors[0])))
         any_rgba |= colors is not None
@@ -318,6 +321,8 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     look_meta = {"colors": ", ".join(sorted(k for k in kinds if k != "none")) or "none", "materials": len(materials),
                  "alpha": {"blend_drawn_opaque": alpha["BLEND"], "mask": alpha["MASK"],
                            "masked_faces": int(masked.sum())}}
+    if textured:
+        warnings.append(f"{textured} parts carry a colour texture, not drawn yet: their material's colour stands in")
     if masked.all():
         raise InputError.of("model", f"{path}: every face lies below its MASK material's alpha cutoff "
                                      "(nothing to draw)")
