@@ -146,7 +146,7 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
                         "tiles swapped in step")
     g.add_argument("--monitor", nargs="?", const="beside", metavar="X,Y",
                    help="an operator view on rank 0's display: the whole wall shrunk, the partition over it, live "
-                        "(at X,Y; without a value: right of the wall)")
+                        "(at X,Y; without a value: the wall file's monitor position, else right of the wall)")
     g.add_argument("--device", type=int, metavar="I",
                    help="EGL device index (default: local rank modulo device count)")
     g.add_argument("--subfrustum", default=d["subfrustum"], metavar=_one_of(list(METHODS)),
@@ -254,7 +254,8 @@ def walk_config(a):
                       decomposition=a.decomposition, bin_size=a.bin_size, bin_pattern=a.bin_pattern,
                       db_ranges=a.db_ranges,
                       liveness=a.liveness, progress=not a.no_progress, record=a.record, timeline=a.timeline,
-                      monitor=_monitor(a.monitor), target_fps=a.target_fps, render_scale=a.render_scale,
+                      monitor=wall.monitor if a.monitor == "beside" and wall.monitor else _monitor(a.monitor),
+                      target_fps=a.target_fps, render_scale=a.render_scale,
                       lod_error=a.lod_error, colors=a.colors)
 
 

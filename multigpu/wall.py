@@ -46,6 +46,7 @@ class Wall:
     fullscreen: frozenset = frozenset()  # ranks whose window fills its display's monitor
     gpus: dict[int, int] = field(default_factory=dict)  # rank -> GPU (EGL device, or X screen with windows)
     bezel: dict | None = None  # the file's bezel (millimetres), where it gives one instead of mullion pixels
+    monitor: tuple[int, int] | None = None  # where --monitor opens the operator's view on rank 0's display
 
 
 def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
@@ -136,7 +137,8 @@ def load_wall(path: str) -> Wall:
             positions[r] = tuple(e["position"])
         if "gpu" in e:
             gpus[r] = e["gpu"]
-    return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"))
+    monitor = tuple(doc["monitor"]["position"]) if "monitor" in doc else None
+    return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor)
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:

@@ -190,3 +190,16 @@ def test_a_gpu_per_rank_reaches_the_configuration(tmp_path):
     from multigpu.parallel.walkthrough import screen_of
 
     assert screen_of(":0", 1) == ":0.1" and screen_of(":0.2", 1) == ":0.2" and screen_of(":3", None) == ":3"
+
+
+def test_the_wall_file_places_the_operators_view(tmp_path):
+    """``--monitor`` without a value opens where the wall file's monitor says; a flag value wins."""
+    from multigpu.cli import build_parser
+    from multigpu.flags import walk_config
+
+    path = _wall(tmp_path, {"grid": "1x2", "monitor": {"position": [100, 800]}})
+    parse = lambda *extra: walk_config(build_parser().parse_args(["walkthrough", "--wall", path, "--present", "window",
+                                                                  *extra]))
+    assert parse("--monitor").monitor == (100, 800)
+    assert parse("--monitor", "5,6").monitor == (5, 6)
+    assert parse().monitor is None  # the file places the view; the flag asks for it
