@@ -384,6 +384,10 @@ def _scene_info(a) -> int:
         print(f"colours    {look['colors']} ({look['materials']} materials; {per_vertex})"
               if look["colors"] != "none" else "colours    none in the file: one neutral grey (--colors objects: "
                                                "a colour per object)")
+        tex = look.get("textures") or {"count": 0}
+        if tex["count"]:
+            print(f"textures   {tex['count']} (a texture array of {tex['width']}x{tex['height']} layers, "
+                  f"{tex['width'] * tex['height'] * tex['count']:,} pixels, {tex['mib']:.2f} MiB)")
         print(f"normals    {look['normals']}")
         a = look.get("alpha") or {}
         if a.get("mask") or a.get("blend_drawn_opaque"):

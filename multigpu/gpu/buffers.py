@@ -29,8 +29,9 @@ import numpy as np
 from multigpu.errors import InputError
 
 #: the file's layout and the packing it holds (2: levels of detail in the index buffer; 3: wide objects
-#: drawn last; 4: the model's vertex colours, where it has them); a change makes a new name
-VERSION = 4
+#: drawn last; 4: the model's vertex colours, where it has them; 5: its texture coordinates, where it has
+#: textures); a change makes a new name
+VERSION = 5
 MAGIC = b"MULTIGPU-GL-BUFFERS\n"
 PAGE = mmap.PAGESIZE
 #: bytes per block when a buffer is uploaded or written
@@ -113,12 +114,15 @@ def _order_digest(draws) -> str:
     return hashlib.sha1(np.ascontiguousarray(draws.order, dtype=np.int64).tobytes()).hexdigest()
 
 
-def _layout(n_vertices: int, n_indices: int, colors: bool = False) -> dict[str, tuple[int, int]]:
+def _layout(n_vertices: int, n_indices: int, colors: bool = False, texcoords: bool = False
+            ) -> dict[str, tuple[int, int]]:
     """Byte offset and length of each array in the file, every one starting on a page (``colors``:
-    each vertex's RGBA8 as one uint32, only where the scene has vertex colours)."""
+    each vertex's RGBA8 as one uint32, only where the scene has vertex colours; ``texcoords``:
+    each vertex's UV and texture layer, 3 float32, only where it has textures)."""
     out, at = {}, PAGE  # the first page: magic and header
     for name, nbytes in (("vertices", 16 * n_vertices), ("indices", 4 * n_indices), ("objects", 4 * n_vertices),
-                         ("colors", 4 * n_vertices if colors else 0)):
+                         ("colors", 4 * n_vertices if colors else 0),
+                         ("texcoords", 12 * n_vertices if texcoords else 0)):
         out[name] = (at, nbytes)
         at += -(-nbytes // PAGE) * PAGE
     out["end"] = (at, 0)
@@ -129,8 +133,8 @@ def write_buffers(path: Path, scene, draws) -> None:
     """Write ``scene``'s GL buffers (``draws``' order) to ``path``, atomically: a temporary
     file beside it, then a rename, so a reader never sees it half-written and two writers
     (ranks of two hosts sharing the directory) leave one whole file."""
-    nv, ni, colors = scene.vertices.shape[0], draws.total, scene.vertex_colors is not None
-    lay = _layout(nv, ni, colors)
+    nv, ni, colors, uv = scene.vertices.shape[0], draws.total, scene.vertex_colors is not None, _textured(scene)
+    lay = _layout(nv, ni, colors, uv)
     head = json.dumps(_head(scene, draws)).encode()
     if len(MAGIC) + len(head) + 1 > PAGE:
         raise ValueError("buffers file header too long")
@@ -151,6 +155,10 @@ def write_buffers(path: Path, scene, draws) -> None:
             if colors:
                 fh.seek(lay["colors"][0])
                 fh.write(np.ascontiguousarray(scene.vertex_colors, dtype=np.uint8).tobytes())
+            if uv:
+                fh.seek(lay["texcoords"][0])
+                for s, part in _blocks(scene.texcoords, 12):
+                    fh.write(np.ascontiguousarray(part, dtype=np.float32).tobytes())
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -159,16 +167,22 @@ def write_buffers(path: Path, scene, draws) -> None:
 def _head(scene, draws) -> dict:
     """The header a buffers file of ``scene`` in ``draws``' order holds."""
     return {"version": VERSION, "vertices": scene.vertices.shape[0], "indices": draws.total,
-            "objects": scene.n_objects, "colors": scene.vertex_colors is not None, "order": _order_digest(draws)}
+            "objects": scene.n_objects, "colors": scene.vertex_colors is not None, "texcoords": _textured(scene),
+            "order": _order_digest(draws)}
+
+
+def _textured(scene) -> bool:
+    return getattr(scene, "texcoords", None) is not None
 
 
 def map_buffers(path: Path, scene, draws) -> dict[str, np.ndarray] | None:
     """Read-only maps of the buffers file at ``path`` for ``scene`` drawn in ``draws``' order:
     ``vertices`` (V, 4) uint32, ``indices`` (I,) uint32, ``objects`` (V,) uint32 and, where the
-    scene has vertex colours, ``colors`` (V,) uint32 (RGBA8); None when the file is missing or
-    was written for another scene, order or version."""
-    nv, ni, colors = scene.vertices.shape[0], draws.total, scene.vertex_colors is not None
-    lay = _layout(nv, ni, colors)
+    scene has vertex colours, ``colors`` (V,) uint32 (RGBA8), and where it has textures,
+    ``texcoords`` (V, 3) float32; None when the file is missing or was written for another scene,
+    order or version."""
+    nv, ni, colors, uv = scene.vertices.shape[0], draws.total, scene.vertex_colors is not None, _textured(scene)
+    lay = _layout(nv, ni, colors, uv)
     try:
         with open(path, "rb") as fh:
             first = fh.read(PAGE)
@@ -183,9 +197,11 @@ def map_buffers(path: Path, scene, draws) -> dict[str, np.ndarray] | None:
         return None
     if head != _head(scene, draws):
         return None
-    shapes = {"vertices": (nv, 4), "indices": (ni,), "objects": (nv,), **({"colors": (nv,)} if colors else {})}
-    return {k: np.memmap(path, dtype=np.uint32, mode="r", offset=lay[k][0], shape=shapes[k])
-            if lay[k][1] else np.zeros(shapes[k], dtype=np.uint32) for k in shapes}
+    shapes = {"vertices": (nv, 4), "indices": (ni,), "objects": (nv,), **({"colors": (nv,)} if colors else {}),
+              **({"texcoords": (nv, 3)} if uv else {})}
+    dtype = lambda k: np.float32 if k == "texcoords" else np.uint32
+    return {k: np.memmap(path, dtype=dtype(k), mode="r", offset=lay[k][0], shape=shapes[k])
+            if lay[k][1] else np.zeros(shapes[k], dtype=dtype(k)) for k in shapes}
 
 
 def ensure_buffers(cache: str | os.PathLike | None, scene) -> Path | None:

@@ -24,7 +24,7 @@ from multigpu.core.camera import model_view, region_clip
 from multigpu.core.drawlist import DrawList
 from multigpu.errors import InputError
 from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
-from multigpu.gpu.shaders import FRAGMENT, vertex_shader
+from multigpu.gpu.shaders import fragment_shader, vertex_shader
 
 EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL drivers "
             "(Debian/Ubuntu: sudo apt install libegl1 libgl1-mesa-dri) or an NVIDIA driver with EGL")
@@ -148,16 +148,22 @@ class RegionRenderer:
         self.method = choose_method(method, size, self.limits)
         self.origin = np.asarray(scene.origin, dtype=np.float64)
         per_vertex = colors == "model" and scene.vertex_colors is not None
-        self.prog = ctx.program(vertex_shader=vertex_shader(per_vertex), fragment_shader=FRAGMENT)
+        textured = colors == "model" and scene.texcoords is not None and scene.textures is not None
+        self.prog = ctx.program(vertex_shader=vertex_shader(per_vertex, textured),
+                                fragment_shader=fragment_shader(textured))
         self.draws = DrawList(scene)
-        self.vbo, self.ibo, self.obo, self.rgba = self._buffers(scene, shared, per_vertex)
+        bufs = self._buffers(scene, shared, per_vertex, textured)
+        self.vbo, self.ibo, self.obo = bufs["vertices"], bufs["indices"], bufs["objects"]
+        self.rgba, self.uvl = bufs.get("colors"), bufs.get("texcoords")
         self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
         object_colors = scene.colors if colors == "model" else palette(scene.n_objects)
         self.cbo = ctx.buffer(np.ascontiguousarray(object_colors, dtype=np.float32).ravel())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 1u", "in_pos", "in_nrm"),
                                                 (self.rgba, "1u", "in_rgba") if per_vertex else
-                                                (self.obo, "1u", "in_obj")],
+                                                (self.obo, "1u", "in_obj"),
+                                                *([(self.uvl, "3f", "in_uvl")] if textured else [])],
                                     index_buffer=self.ibo, index_element_size=4)
+        self.texture, self.samplers, self.layers = self._textures(scene) if textured else (None, [], None)
         self.indirect = ctx.buffer(reserve=20 * 1024)  # grows when a frame needs more commands
         self.last_commands = 0  # draw commands of the last frame (runs of visible objects)
         self.fbo = None
@@ -172,15 +178,17 @@ class RegionRenderer:
             self._framebuffer((W, H))
         self.depth_test = moderngl.DEPTH_TEST
 
-    def _buffers(self, scene, shared: Path | None, per_vertex: bool):
-        """The vertex, index and vertex-id GL buffers, and the vertex colours' where they are
-        drawn (``per_vertex``; else None): the host's shared buffers file itself where the driver
-        draws from host memory (``buffers.pinned``), else uploaded a block at a time (from that
-        file where there is one: already packed). ``self.storage`` says which."""
+    def _buffers(self, scene, shared: Path | None, per_vertex: bool, textured: bool) -> dict:
+        """The vertex, index and vertex-id GL buffers, the vertex colours' where they are drawn
+        (``per_vertex``) and the texture coordinates' (``textured``), by name: the host's shared
+        buffers file itself where the driver draws from host memory (``buffers.pinned``), else
+        uploaded a block at a time (from that file where there is one: already packed).
+        ``self.storage`` says which."""
         ctx, draws = self.ctx, self.draws
         maps = map_buffers(shared, scene, draws) if shared is not None else None
         self._maps = None
-        names = ("vertices", "indices", "objects", *(("colors",) if per_vertex else ()))
+        names = ("vertices", "indices", "objects", *(("colors",) if per_vertex else ()),
+                 *(("texcoords",) if textured else ()))
         if maps is None:
             self.storage = "uploaded" if shared is None else f"uploaded ({shared.name} does not fit this scene)"
         else:
@@ -189,19 +197,38 @@ class RegionRenderer:
                 bufs = [pinned(ctx, maps[k]) for k in names]
                 if all(b is not None for b in bufs):
                     self._maps, self.storage = maps, f"shared: {shared}"
-                    return (*bufs, None)[:4]
+                    return dict(zip(names, bufs))
                 for b in bufs:
                     if b is not None:
                         b.release()
                 why = "the driver refused host memory"
             self.storage = f"uploaded from {shared.name} ({why})"
-            return (*(upload(ctx, maps[k], 16 if k == "vertices" else 4) for k in names), None)[:4]
-        vbo = upload(ctx, scene.vertices, 16, pack_vertices)
+            return {k: upload(ctx, maps[k], 16 if k == "vertices" else 12 if k == "texcoords" else 4) for k in names}
         ibo = ctx.buffer(reserve=max(4, 4 * draws.total))
         for at, block in draws.index_blocks():
             ibo.write(block, offset=4 * at)
-        rgba = upload(ctx, scene.vertex_colors, 4) if per_vertex else None
-        return vbo, ibo, ctx.buffer(draws.vertex_object), rgba
+        out = {"vertices": upload(ctx, scene.vertices, 16, pack_vertices), "indices": ibo,
+               "objects": ctx.buffer(draws.vertex_object)}
+        if per_vertex:
+            out["colors"] = upload(ctx, scene.vertex_colors, 4)
+        if textured:
+            out["texcoords"] = upload(ctx, scene.texcoords, 12)
+        return out
+
+    def _textures(self, scene):
+        """The model's texture array (mipmapped), a sampler of it per filter (units 0: linear,
+        1: nearest; wrap is the shader's) and its layers' modes (storage buffer 1)."""
+        import moderngl
+
+        ctx = self.ctx
+        t, h, w, _ = scene.textures.shape
+        tex = ctx.texture_array((w, h, t), 4, np.ascontiguousarray(scene.textures, dtype=np.uint8))
+        tex.build_mipmaps()
+        samplers = [ctx.sampler(repeat_x=True, repeat_y=True, filter=f, texture=tex)
+                    for f in ((moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR),
+                              (moderngl.NEAREST_MIPMAP_NEAREST, moderngl.NEAREST))]
+        self.prog["tex_linear"].value, self.prog["tex_nearest"].value = 0, 1
+        return tex, samplers, ctx.buffer(np.ascontiguousarray(scene.texture_modes, dtype=np.float32))
 
     def _framebuffer(self, need: tuple[int, int]) -> None:
         """Make the framebuffer at least ``need`` (grown by 1/4 to avoid re-allocating often)."""
@@ -259,6 +286,10 @@ class RegionRenderer:
         self.indirect.write(cmds)
         self.prog["light"].value = tuple(float(v) for v in light)
         self.cbo.bind_to_storage_buffer(0)
+        if self.texture is not None:
+            self.layers.bind_to_storage_buffer(1)
+            for unit, sampler in enumerate(self.samplers):
+                sampler.use(unit)
 
     def render(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, region, mask: np.ndarray | None,
                depth: bool = False, seen: np.ndarray | None = None):
@@ -375,7 +406,8 @@ class RegionRenderer:
                 for att in (*fbo.color_attachments, fbo.depth_attachment):
                     att.release()
                 fbo.release()
-        for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.rgba, self.vbo, self.prog):
+        for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.rgba, self.uvl, self.vbo,
+                    *self.samplers, self.texture, self.layers, self.prog):
             if obj is not None:
                 obj.release()
         self._maps = None  # the file's maps outlive the GL buffers drawing from them

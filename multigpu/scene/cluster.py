@@ -123,5 +123,5 @@ def cut(scene: Scene, max_tris: int) -> tuple[Scene, np.ndarray]:
     return Scene(vertices=scene.vertices, indices=local, first_index=starts * 3,
                  index_count=new_counts.astype(np.int64) * 3, base_vertex=base, bmin=bmin, bmax=bmax,
                  centers=centers, radii=radii, colors=scene.colors[parent], origin=scene.origin, name=scene.name,
-                 vertex_colors=scene.vertex_colors,
+                 **{k: getattr(scene, k) for k in Scene.PER_VERTEX},
                  meta={**scene.meta, "cluster": int(max_tris), "modelled_objects": scene.n_objects}), n_clusters

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError
-from multigpu.scene import looks
+from multigpu.scene import looks, textures
 from multigpu.scene.blocks import blocks, per_object
 from multigpu.scene.labels import face_labels
 from multigpu.scene.layout import Scene
@@ -82,12 +82,14 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     _check_indices_and_range(verts, faces, path)
     faces = _narrow(faces, len(verts))
     (rgba, colors_from), normals = looks.mesh_colors(mesh), looks.mesh_normals(mesh)
-    if looks.has_texture(mesh):
-        warnings.append("the model carries a colour texture, not drawn yet: its material's colour stands in")
+    layers = _layers(path, warnings)
+    uv, image = textures.mesh_texture(mesh)
+    texcoords = None if uv is None else _with_layer(uv, layers.layer(image, _material_name(mesh), _cutoff(mesh)))
     del mesh, loaded  # trimesh's int64 faces go: the model is held once, as verts and faces
     faces = _clean_faces(verts, faces, path, warnings)
     split = "components" if split == "auto" else split
-    look = Look(rgba, normals, None, {"colors": colors_from, "materials": int(colors_from == "material")})
+    look = Look(rgba, normals, None, {"colors": colors_from, "materials": int(colors_from == "material")},
+                texcoords, layers.pack(warnings))
     return _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings, {"split": split},
                         look)
 
@@ -192,6 +194,32 @@ def _degenerate(verts, faces) -> np.ndarray:
     return out
 
 
+def _layers(path: Path, warnings: list[str]) -> textures.Layers:
+    """The model's texture layers, to be filled mesh by mesh, with its glTF samplers; a warning
+    per image file it names that cannot be read (the material's colour stands in)."""
+    doc = textures.gltf_json(path) if path.suffix.lower() in (".gltf", ".glb") else None
+    for image in textures.missing_images(path, doc):
+        warnings.append(f"texture {image}: missing or unreadable: its material's colour stands in")
+    return textures.Layers(textures.gltf_samplers(doc))
+
+
+def _material_name(mesh) -> str | None:
+    return getattr(getattr(getattr(mesh, "visual", None), "material", None), "name", None)
+
+
+def _cutoff(mesh) -> float:
+    """The alpha below which a textured MASK material's fragments are left out (0: none)."""
+    mode, cutoff = looks.mesh_alpha(mesh)
+    return cutoff if mode == "MASK" else 0.0
+
+
+def _with_layer(uv: np.ndarray, layer: int) -> np.ndarray | None:
+    """(V, 3) float32 UV and texture layer per vertex (None: the layer could not be had)."""
+    if layer < 0:
+        return None
+    return np.concatenate([uv, np.full((len(uv), 1), layer, dtype=np.float32)], axis=1)
+
+
 @dataclass
 class Look:
     """What a model file says of its look, aligned with its vertices: ``rgba`` (V, 4) uint8 or
@@ -203,6 +231,8 @@ class Look:
     normals: np.ndarray | None = None
     groups: np.ndarray | None = None
     meta: dict | None = None
+    texcoords: np.ndarray | None = None  # (V, 3) UV and layer (-1: untextured), ``textures.mesh_texture``
+    textures: tuple[np.ndarray, np.ndarray] | None = None  # (layers, modes): ``textures.Layers.pack``
 
 
 def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None = None) -> Scene:
@@ -211,14 +241,16 @@ def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None =
     edge is split); colours the file's (``looks``), else one neutral grey. Every pass over the
     faces goes a block at a time, in label order through ``order`` (no sorted copy of the faces)."""
     look = look or Look()
-    rgba, normals = look.rgba, look.normals
+    rgba, normals, uvl = look.rgba, look.normals, look.texcoords
     looked = dict(look.meta or {"colors": "none", "materials": 0})
+    looked["textures"] = textures.texture_info(None if look.textures is None else look.textures[0])
     if normals is None:
         source, normals, faces = looks.crease_normals(verts, faces, look.groups)
         looked["normals"] = (f"computed: smooth below a {looks.CREASE:g} degree crease "
                              f"({len(source) - len(verts):+d} vertices on sharp edges)")
         verts = verts[source]
         rgba = rgba[source] if rgba is not None else None
+        uvl = uvl[source] if uvl is not None else None
     else:
         looked["normals"] = "from the file"
     order = np.argsort(labels, kind="stable")
@@ -260,6 +292,9 @@ def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None =
                  index_count=(counts * 3).astype(np.int64), base_vertex=np.zeros(n, dtype=np.int64),
                  bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=colors, origin=origin,
                  vertex_colors=None if vertex_colors is None else np.ascontiguousarray(vertex_colors[used]),
+                 texcoords=None if uvl is None else np.ascontiguousarray(uvl[used], dtype=np.float32),
+                 textures=None if uvl is None else look.textures[0],
+                 texture_modes=None if uvl is None else look.textures[1],
                  name=Path(path).stem, meta={**meta, "source": str(path), "warnings": warnings, "look": looked,
                                               **guess_up(Path(path).suffix.lower(), bmin, bmax)})
 
@@ -287,7 +322,8 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     faces = np.empty((int(n_faces.sum()), 3), dtype=np.int64 if big else np.int32)
     rgba = np.empty((len(verts), 4), dtype=np.uint8)
     normals = np.empty((len(verts), 3), dtype=np.float64)
-    any_rgba, all_normals, materials, kinds, textured = False, True, set(), set(), 0
+    any_rgba, all_normals, materials, kinds = False, True, set(), set()
+    layers, uvl = _layers(path, warnings), None
     masked = np.zeros(len(faces), dtype=bool)  # faces a MASK material's alpha cutoff hides
     alpha = {"BLEND": 0, "MASK": 0}  # meshes of each glTF alpha mode
     v = f = 0
@@ -300,7 +336,13 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
         faces[f:f + len(mf)] = mf + v
         colors, kind = looks.mesh_colors(m)
         kinds.add(kind)
-        textured += looks.has_texture(m)
+        uv, image = textures.mesh_texture(m)
+        layer = -1 if uv is None else layers.layer(image, _material_name(m), _cutoff(m))
+        if layer >= 0:
+            if uvl is None:
+                uvl = np.zeros((len(verts), 3), dtype=np.float32)
+                uvl[:, 2] = -1.0
+            uvl[v:v + len(m.vertices), :2], uvl[v:v + len(m.vertices), 2] = uv, layer
         if kind == "material":  # a material by name and colour (a loader may copy it per mesh)
             materials.add((getattr(m.visual.material, "name", None), tuple(colors[0])))
         any_rgba |= colors is not None
@@ -321,8 +363,9 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     look_meta = {"colors": ", ".join(sorted(k for k in kinds if k != "none")) or "none", "materials": len(materials),
                  "alpha": {"blend_drawn_opaque": alpha["BLEND"], "mask": alpha["MASK"],
                            "masked_faces": int(masked.sum())}}
-    if textured:
-        warnings.append(f"{textured} parts carry a colour texture, not drawn yet: their material's colour stands in")
+    if layers.dropped:
+        warnings.append(f"more than {textures.MAX_LAYERS} distinct textures: {layers.dropped} parts past them "
+                        "show their material's colour")
     if masked.all():
         raise InputError.of("model", f"{path}: every face lies below its MASK material's alpha cutoff "
                                      "(nothing to draw)")
@@ -343,7 +386,8 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     if degenerate.any():
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
         faces, labels = faces[~degenerate], labels[~degenerate]
-    look = Look(rgba if any_rgba else None, normals if all_normals else None, labels, look_meta)
+    look = Look(rgba if any_rgba else None, normals if all_normals else None, labels, look_meta, uvl,
+                layers.pack(warnings) if uvl is not None else None)
     if split != "auto":
         objects = face_labels(verts, faces, split, merge_below)
         return _from_labels(verts, faces, objects, path, warnings, {"split": split}, look)

@@ -21,7 +21,7 @@ from multigpu.errors import InputError
 
 #: 7: the model's own colours and normals (vertex colours, materials, crease-angle normals); 6: levels of
 #: detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
-FORMAT_VERSION = 7
+FORMAT_VERSION = 8
 
 
 @dataclass
@@ -37,6 +37,10 @@ class Scene:
         grey where the file gives none); ``scene/looks.py``
     vertex_colors : (V, 4) uint8 RGBA per vertex where the model's colours vary inside an object
         (vertex colours, or materials mixed in one object); None: each object is ``colors``
+    texcoords : (V, 3) float32  a textured model's UV (v down the image) and texture layer per
+        vertex (-1: untextured); textures : (T, H, W, 4) uint8  its colour textures, one layer each;
+        texture_modes : (T, 4) float32  each layer's wrap s, wrap t, nearest, alpha cutoff
+        (``scene/textures.py``); None: no textures
     origin : (3,) float64  world position of vertex coordinate (0, 0, 0)
     meta : free-form facts (generator options, landmarks for camera paths, warnings)
     part_start : (N+1,) int64  object i's parts are rows part_start[i]:part_start[i+1] of:
@@ -72,6 +76,9 @@ class Scene:
     lod_count: np.ndarray | None = None
     lod_error: np.ndarray | None = None
     vertex_colors: np.ndarray | None = None
+    texcoords: np.ndarray | None = None
+    textures: np.ndarray | None = None
+    texture_modes: np.ndarray | None = None
 
     @property
     def n_objects(self) -> int:
@@ -99,6 +106,9 @@ class Scene:
     #: the arrays with one row per object (``objects`` picks rows of these)
     PER_OBJECT = ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors")
 
+    #: a model's look beyond its objects' colours (None where it has none)
+    PER_VERTEX = ("vertex_colors", "texcoords", "textures", "texture_modes")
+
     #: the parts' arrays (``part_start`` indexes the others)
     PARTS = ("part_start", "part_count", "part_bmin", "part_bmax")
     #: the levels of detail's arrays (one row per object, a column per level)
@@ -115,7 +125,7 @@ class Scene:
         return 1 if self.lod_count is None else int(self.lod_count.shape[1])
 
     def _arrays(self, parts: bool = True, lods: bool = True) -> dict[str, np.ndarray]:
-        names = ("vertices", "indices", "vertex_colors", *self.PER_OBJECT, "origin", *(self.PARTS if parts else ()),
+        names = ("vertices", "indices", *self.PER_VERTEX, *self.PER_OBJECT, "origin", *(self.PARTS if parts else ()),
                  *(self.LODS if lods else ()))
         return {k: getattr(self, k) for k in names if getattr(self, k) is not None}
 
@@ -153,8 +163,10 @@ class Scene:
         frame loop once the GL buffers hold them: bounds, draw ranges, colours and meta stay.
         Dropping the last reference to a mapped buffer unmaps it, so its pages leave the rank."""
         empty = {"vertices": np.empty((0, 6), dtype=np.float32), "indices": np.empty(0, dtype=np.uint32)}
-        if self.vertex_colors is not None:
-            empty["vertex_colors"] = np.empty((0, 4), dtype=np.uint8)
+        for k in ("vertex_colors", "texcoords", "textures"):
+            a = getattr(self, k)
+            if a is not None:
+                empty[k] = np.empty((0, *a.shape[1:]), dtype=a.dtype)
         return Scene(**{**self._arrays(), **empty}, name=self.name, meta=self.meta)
 
     def world_positions(self) -> np.ndarray:
@@ -191,7 +203,7 @@ class Scene:
 
 
 #: the buffers ``Scene.load`` maps from the file (the bulk of a scene; read only after loading)
-MAPPED = ("vertices", "indices", "vertex_colors")
+MAPPED = ("vertices", "indices", "vertex_colors", "texcoords", "textures")
 
 
 def _map_members(path: Path, names) -> dict[str, np.ndarray]:

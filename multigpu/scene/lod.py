@@ -18,7 +18,8 @@ one surface (``--split grid``, clusters: ``cut_from_one``); whole objects (the p
 whose every vertex lies on a border) simplify freely. Built once, stored in the scene cache beside the
 parts; the GL index buffer holds every level (``core/drawlist.py``). A scene with vertex
 colours is simplified with them weighed (``meshopt_simplifyWithAttributes``, ``COLOR_WEIGHT``), so
-a colour border stays where the model has it instead of being smeared across coarser triangles;
+a colour border stays where the model has it instead of being smeared across coarser triangles
+(texture coordinates likewise, ``UV_WEIGHT``: the image does not slide over the surface); UV seams,
 borders between materials, and sharp edges, are already seams (vertices split there), which the
 simplifier keeps.
 """
@@ -41,6 +42,8 @@ THREADED_TRIS = 1024
 MIN_DROP = 0.25
 #: a full colour change (1 in each of R, G, B) weighs as an error of this share of the object's size
 COLOR_WEIGHT = 0.5
+#: a texture coordinate moved by the whole image weighs as an error of this share of the object's size
+UV_WEIGHT = 0.5
 
 
 def cut_from_one(scene: Scene) -> bool:
@@ -51,11 +54,12 @@ def cut_from_one(scene: Scene) -> bool:
 
 
 def simplify(positions: np.ndarray, indices: np.ndarray, target_tris: int, lock: bool,
-             colors: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+             colors: np.ndarray | None = None, weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """One simplified index list of a mesh (``positions`` (V, 3) float32, ``indices`` (3T,) uint32
     relative to them) aiming at ``target_tris`` triangles, and its absolute error (world units);
-    ``lock``: its border vertices stay; ``colors`` (V, 3) float32 in [0, 1]: weighed with the
-    positions (``COLOR_WEIGHT`` of the mesh's size per unit of colour)."""
+    ``lock``: its border vertices stay; ``colors`` (V, k) float32 attributes (colours in [0, 1],
+    texture coordinates): weighed with the positions, ``weights`` (k,) of the mesh's size per unit
+    of each (default ``COLOR_WEIGHT``)."""
     import meshoptimizer as mo
 
     dst = np.empty_like(indices)
@@ -67,7 +71,8 @@ def simplify(positions: np.ndarray, indices: np.ndarray, target_tris: int, lock:
                         result_error=err)
     else:
         size = float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
-        weights = np.full(3, COLOR_WEIGHT * max(size, 1e-12), dtype=np.float32)
+        share = np.full(colors.shape[1], COLOR_WEIGHT) if weights is None else np.asarray(weights)
+        weights = (share * max(size, 1e-12)).astype(np.float32)
         n = _with_attributes(dst, indices, positions, np.ascontiguousarray(colors, dtype=np.float32), weights,
                              target, options, err)
     return dst[:n].copy(), float(err[0])
@@ -96,6 +101,21 @@ def _with_attributes(dst, indices, positions, attributes, weights, target: int, 
                  fp(err, ctypes.c_float)))
 
 
+def _attributes(scene: Scene, lo: int, hi: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Vertices ``lo:hi``'s attributes the simplifier weighs and their weights: vertex colours
+    (``COLOR_WEIGHT``) and texture coordinates (``UV_WEIGHT``), where the scene has them."""
+    cols, weights = [], []
+    if scene.vertex_colors is not None:
+        cols.append(np.asarray(scene.vertex_colors[lo:hi, :3], dtype=np.float32) / 255.0)
+        weights += [COLOR_WEIGHT] * 3
+    if scene.texcoords is not None:
+        cols.append(np.asarray(scene.texcoords[lo:hi, :2], dtype=np.float32))
+        weights += [UV_WEIGHT] * 2
+    if not cols:
+        return None, None
+    return np.ascontiguousarray(np.concatenate(cols, axis=1)), np.asarray(weights)
+
+
 def coarsest(count: np.ndarray) -> np.ndarray:
     """(N,) index count of each object's coarsest level (of ``lod_count`` (N, L))."""
     last = (count > 0).sum(axis=1) - 1
@@ -110,11 +130,10 @@ def _chain(scene: Scene, i: int, levels: int, ratio: float, lock: bool) -> list[
     lo, hi = int(local.min()), int(local.max()) + 1
     base = int(scene.base_vertex[i])
     verts = np.ascontiguousarray(scene.vertices[base + lo:base + hi, :3], dtype=np.float32)
-    colors = (None if scene.vertex_colors is None
-              else np.asarray(scene.vertex_colors[base + lo:base + hi, :3], dtype=np.float32) / 255.0)
+    colors, weights = _attributes(scene, base + lo, base + hi)
     last, prev, prev_err, out = local - np.uint32(lo), c // 3, 0.0, []
     for lv in range(1, levels):  # levels, not objects
-        got, err = simplify(verts, last, int(c // 3 * ratio ** lv), lock, colors)  # from the level before
+        got, err = simplify(verts, last, int(c // 3 * ratio ** lv), lock, colors, weights)  # from the level before
         t = got.size // 3
         if t == 0 or t > prev * (1 - MIN_DROP):
             break

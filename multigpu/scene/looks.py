@@ -52,17 +52,12 @@ def mesh_colors(mesh) -> tuple[np.ndarray | None, str]:
     return np.tile(rgba, (n, 1)), "material"
 
 
-def has_texture(mesh) -> bool:
-    """Whether a mesh's material carries a colour texture (glTF ``baseColorTexture``, OBJ
-    ``map_Kd``): not drawn yet, so the loader warns that the material's colour stands in."""
-    material = getattr(getattr(mesh, "visual", None), "material", None)
-    return any(getattr(material, n, None) is not None for n in ("baseColorTexture", "image"))
-
-
 def _material_rgba(material) -> np.ndarray | None:
     """A material's base colour as (4,) uint8 (glTF PBR ``baseColorFactor``, OBJ ``Kd``), or None."""
     if material is None:
         return None
+    if getattr(material, "baseColorTexture", None) is not None and getattr(material, "baseColorFactor", None) is None:
+        return np.full(4, 255, dtype=np.uint8)  # glTF: the texture alone (a factor of one)
     for name in ("baseColorFactor", "main_color", "diffuse"):
         c = getattr(material, name, None)
         if c is not None:

@@ -18,7 +18,7 @@ the format's usual convention: +Y for OBJ and PLY (Blender/Maya exports, scanned
 STL and OFF (CAD, 3-D printing). ``meta['up_source']`` says which rule decided.
 
 Loaded and generated scenes are cached as ``.npz`` in ``$MULTIGPU_CACHE`` (default
-``~/.cache/multigpu``), keyed by source path, size, mtime and options.
+``~/.cache/multigpu``), keyed by source path, size, mtime (the texture images' too) and options.
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from multigpu.scene import lod as scene_lod
 from multigpu.scene import parts as scene_parts
 from multigpu.scene.files import FORMATS, axis_name, axis_vector, load_model
 from multigpu.scene.layout import FORMAT_VERSION, Scene
+from multigpu.scene.textures import image_files
 
 __all__ = ["BUILTIN", "FORMATS", "SceneSpec", "axis_name", "axis_vector", "cache_dir", "load_model", "load_scene"]
 
@@ -97,7 +98,8 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
             known = ", ".join(sorted(FORMATS))
             raise InputError.of("model", f"{src}: unsupported extension '{src.suffix}' (use {known})")
         st = src.stat()
-        key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, cluster, wall,
+        images = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in image_files(src) if p.is_file())
+        key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, cluster, wall, images,
                    *(() if spec.lods else ("no levels of detail",)))
         name = f"{src.stem}-{key}.npz"
         make = lambda: load_model(src, spec.split, spec.merge_below)
