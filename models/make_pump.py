@@ -2,8 +2,9 @@
 primitives, one node per part. Deterministic; run ``python models/make_pump.py`` to remake it.
 
 It is the kind of model users bring (a CAD assembly exported to glTF): compact, a few big
-parts (base, casing, motor) among many small ones (bolts, flanges, pipe segments), each part
-of one of five materials (``MATERIALS``: glTF ``baseColorFactor``).
+parts (base, casing, motor) among many small ones (bolts, flanges, pipe segments), each part but
+the base of one of five materials (``MATERIALS``: glTF ``baseColorFactor``); the base plate is a steel
+tread plate (a small repeated texture, ``tread``: glTF ``baseColorTexture``).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+from PIL import Image
 from trimesh.transformations import rotation_matrix, translation_matrix
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
@@ -32,6 +34,17 @@ def material_of(name: str) -> str:
     if "bolt" in name:
         return "steel"
     return "gauge" if name == "gauge" else "cast"
+
+
+def tread(size: int = 32) -> Image.Image:
+    """A steel tread plate's pattern: raised diagonal bars on a grey plate, ``size`` pixels square,
+    repeating at its edges (the base's texture, wrapped several times across it)."""
+    y, x = np.indices((size, size)) / size
+    bar = lambda u, v: (np.abs(u - 0.5) < 0.32) & (np.abs(v - 0.5) < 0.07)
+    a, b = (x + y) % 1.0, (x - y) % 1.0
+    raised = bar((x * 2) % 1.0, ((x + y) * 2) % 1.0) | bar((y * 2) % 1.0, (b * 2) % 1.0)
+    grey = np.where(raised, 235, 170) - (a * 10).astype(int)
+    return Image.fromarray(np.repeat(grey[..., None], 3, axis=2).astype(np.uint8), "RGB")
 
 
 def _at(mesh: trimesh.Trimesh, xyz, rot=None) -> trimesh.Trimesh:
@@ -81,7 +94,12 @@ def main() -> Path:
     materials = {k: PBRMaterial(name=k, baseColorFactor=v, metallicFactor=0.0, roughnessFactor=0.8)
                  for k, v in MATERIALS.items()}
     for name, mesh in parts().items():
-        mesh.visual = TextureVisuals(material=materials[material_of(name)])
+        if name == "base":  # the tread plate repeats every 0.2 m across the base (REPEAT: glTF's default)
+            plate = PBRMaterial(name="tread", baseColorTexture=tread(), baseColorFactor=[255, 255, 255, 255],
+                                metallicFactor=0.0, roughnessFactor=0.8)
+            mesh.visual = TextureVisuals(uv=mesh.vertices[:, [0, 2]] / 0.2, material=plate)
+        else:
+            mesh.visual = TextureVisuals(material=materials[material_of(name)])
         scene.add_geometry(mesh, node_name=name, geom_name=name)
     out = HERE / "pump.glb"
     out.write_bytes(scene.export(file_type="glb"))

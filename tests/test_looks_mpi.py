@@ -1,4 +1,4 @@
-"""A model in its own colours (materials and vertex colours, crease-angle normals) composes on
+"""A model in its own colours (materials, vertex colours and a texture; crease-angle normals) composes on
 a 2x2 wall bit for bit as one rank renders it, for every decomposition and with render scale
 and levels of detail (each job under a hard timeout)."""
 
@@ -28,7 +28,7 @@ def walk(out, model, grid, tile, extra=()):
 
 @pytest.fixture(scope="module")
 def model(tmp_path_factory):
-    return boxes_glb(tmp_path_factory.mktemp("looks") / "look.glb")
+    return boxes_glb(tmp_path_factory.mktemp("looks") / "look.glb", textured=True)
 
 
 @pytest.mark.parametrize("name", list(VARIANTS))
