@@ -73,16 +73,19 @@ def scene_flags(triangles: int) -> list[str]:
     return ["--triangles", str(triangles), "--copies", str(copies)]
 
 
-def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: float = 1800, extra=()) -> dict:
+def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: float = 1800, extra=(),
+            scene: list[str] | None = None) -> dict:
     """Peak PSS per rank and summed, for one walkthrough of ``triangles`` on ``ranks`` ranks
-    (``extra``: more walkthrough flags, e.g. ``--lod-error 1``: levels of detail held)."""
+    (``extra``: more walkthrough flags, e.g. ``--lod-error 1``: levels of detail held; ``scene``:
+    the scene's flags, e.g. ``--model FILE``, instead of the plant of ``triangles``), with the
+    run's scene load time and median emulated frame (per-rank CPU time) from its summary."""
     from multigpu.parallel.mpirun import find_launcher
 
     rows, cols = (1, ranks) if ranks < 4 else (2, ranks // 2)
     launcher = find_launcher()
     env = launcher.environ({"MULTIGPU_CACHE": cache})
     out = tempfile.mkdtemp(prefix="mem-")
-    args = ["walkthrough", *scene_flags(triangles), "--frames", str(frames), "--grid", f"{rows}x{cols}",
+    args = ["walkthrough", *(scene_flags(triangles) if scene is None else scene), "--frames", str(frames), "--grid", f"{rows}x{cols}",
             "--tile", "256x256", "--mosaic-every", "0", "--no-progress", "--out", out, *extra]
     proc = subprocess.Popen(launcher.command(ranks, args, env=env), env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
@@ -110,13 +113,14 @@ def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: fl
         if proc.poll() is None:
             os.killpg(proc.pid, 9)
         summary = Path(out) / "summary.json"
-        triangles_got = json.loads(summary.read_text())["config"]["scene"]["triangles"] if summary.exists() else 0
+        got = json.loads(summary.read_text()) if summary.exists() else {"config": {"scene": {}}}
         subprocess.run(["rm", "-rf", out], check=False)
     if proc.returncode != 0:
         raise RuntimeError(f"bench memory: the {ranks}-rank run of {triangles} triangles failed: "
                            f"{err.strip().splitlines()[-1] if err.strip() else proc.returncode}")
-    return {"ranks": ranks, "triangles_target": triangles, "triangles": triangles_got,
-            "seconds": round(time.perf_counter() - t0, 1),
+    return {"ranks": ranks, "triangles_target": triangles, "triangles": got["config"]["scene"].get("triangles", 0),
+            "seconds": round(time.perf_counter() - t0, 1), "load_seconds": got["config"]["scene"].get("load_seconds"),
+            "frame_ms_median": got.get("emulated_frame_ms_median"),
             "peak_pss_rank_max": max(peak_each.values(), default=0), "peak_pss_host": peak_sum}
 
 

@@ -31,6 +31,7 @@ BENCHES = {
     "memory": ("memory_bench:bench_memory", "memory per rank and per host"),
     "memory-steps": ("memory_bench:bench_memory_steps", "memory step by step through setup"),
     "model-load": ("memory_bench:bench_model_load", "loading a model file: time and peak memory"),
+    "textures": ("texture_bench:bench_textures", "a textured model against the same untextured: time, memory"),
     "longrun": ("longrun_bench:bench_longrun", "100,000 frames: frame time and memory over the run"),
     "gpu": ("gpu_bench:bench_gpu", "1, 4 and 16 ranks, hybrid at 4x4 (for a host with a GPU)"),
     "latency": (None, "frames in flight: wall time, input to photon"),

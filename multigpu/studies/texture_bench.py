@@ -1,0 +1,73 @@
+"""``multigpu bench textures``: what a colour texture costs: load time, frame time and memory.
+
+One scanned-style model (``scene/scan.py``: 10^6 even triangles in one closed surface; 2x10^5
+with ``--quick``) written twice as GLB: in one material colour, and with a 2048x2048 colour
+texture (512x512 with ``--quick``) on planar UVs. Each runs a 2x2 headless walkthrough (4 ranks,
+``--split grid:8``) twice: the first builds the scene cache (the load time a user waits once),
+the second maps it. Every rank's proportional set size is sampled as it runs (``memory_bench``);
+the frame is the run's median emulated frame (per-rank CPU time). Untextured and textured
+alternate so the machine's drift falls on both.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+#: the cases: name -> textured
+CASES = {"material colour": False, "2k texture": True}
+
+
+def write_models(folder: Path, triangles: int, side: int) -> dict[str, Path]:
+    """The scan as two GLB files, untextured and textured (``side`` pixels square)."""
+    import numpy as np
+    import trimesh
+    from PIL import Image
+    from trimesh.visual import TextureVisuals
+    from trimesh.visual.material import PBRMaterial
+
+    from multigpu.scene.scan import scan_mesh
+
+    verts, faces = scan_mesh(triangles)
+    out = {}
+    for name, textured in CASES.items():
+        mesh = trimesh.Trimesh(verts, faces, process=False)
+        if textured:
+            y, x = np.indices((side, side)) / side
+            rgb = np.stack([0.5 + 0.5 * np.sin(40 * x), 0.5 + 0.5 * np.sin(40 * y), 0.5 + 0.5 * np.sin(25 * (x + y))],
+                           axis=2)
+            image = Image.fromarray((rgb * 255).astype(np.uint8), "RGB")
+            mesh.visual = TextureVisuals(uv=(verts[:, :2] - verts[:, :2].min(0)) / np.ptp(verts[:, :2], 0),
+                                         material=PBRMaterial(baseColorTexture=image))
+        else:
+            mesh.visual = TextureVisuals(material=PBRMaterial(baseColorFactor=[200, 180, 160, 255]))
+        out[name] = folder / f"scan_{'textured' if textured else 'plain'}.glb"
+        out[name].write_bytes(trimesh.Scene(mesh).export(file_type="glb"))
+    return out
+
+
+def bench_textures(quick: bool) -> list[dict]:
+    """Load time, median frame and peak memory of the untextured and the textured scan, first
+    run (the cache built) and cached, on 4 ranks."""
+    from multigpu.errors import InputError
+    from multigpu.studies.memory_bench import measure
+
+    if not os.path.exists("/proc/self/smaps_rollup"):
+        raise InputError("bench textures needs Linux's /proc/PID/smaps_rollup")
+    triangles, side = (200_000, 512) if quick else (1_000_000, 2048)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        models = write_models(Path(tmp), triangles, side)
+        caches = {name: os.path.join(tmp, f"cache-{i}") for i, name in enumerate(CASES)}
+        print(f"scan of {triangles:,} triangles; texture {side}x{side}; 4 ranks, 2x2 tiles of 256x256")
+        print(f"{'model':<16} {'run':>6} {'load s':>7} {'frame ms':>9} {'peak PSS/rank MiB':>18} "
+              f"{'peak PSS/host MiB':>18}", flush=True)
+        for run in ("first", "cached"):
+            for name, path in models.items():  # alternated: drift falls on both
+                d = measure(4, triangles, caches[name], frames=60, scene=["--model", str(path), "--split", "grid:8"])
+                d = {**d, "model": name, "run": run, "texture_side": side if CASES[name] else 0}
+                rows.append(d)
+                print(f"{name:<16} {run:>6} {d['load_seconds']:7.2f} {d['frame_ms_median']:9.2f} "
+                      f"{d['peak_pss_rank_max'] / 2**20:18.0f} {d['peak_pss_host'] / 2**20:18.0f}", flush=True)
+    return rows
