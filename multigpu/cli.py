@@ -386,8 +386,8 @@ def _scene_info(a) -> int:
                                                "a colour per object)")
         tex = look.get("textures") or {"count": 0}
         if tex["count"]:
-            print(f"textures   {tex['count']} (a texture array of {tex['width']}x{tex['height']} layers, "
-                  f"{tex['width'] * tex['height'] * tex['count']:,} pixels, {tex['mib']:.2f} MiB)")
+            print(f"textures   {tex['count']} ({tex['pixels']:,} pixels, the largest {tex['largest'][0]}x"
+                  f"{tex['largest'][1]}; {tex['mib']:.2f} MiB with their mip levels)")
         print(f"normals    {look['normals']}")
         a = look.get("alpha") or {}
         if a.get("mask") or a.get("blend_drawn_opaque"):

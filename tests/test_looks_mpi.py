@@ -1,10 +1,12 @@
 """A model in its own colours (materials, vertex colours and a texture; crease-angle normals) composes on
 a 2x2 wall bit for bit as one rank renders it, for every decomposition and with render scale
-and levels of detail (each job under a hard timeout)."""
+and levels of detail, and across mullions (each job under a hard timeout)."""
 
 import pytest
 from mpirun import read_png, run_mpi
 from test_looks import boxes_glb
+
+from multigpu.core.canvas import Canvas
 
 pytestmark = pytest.mark.mpi
 FRAMES = 3
@@ -39,3 +41,14 @@ def test_a_coloured_model_composes_as_one_rank_renders_it(tmp_path, model, name)
         assert (g == w).all(), f"frame {f}: {(g != w).any(axis=2).sum()} pixels differ"
     colours = {tuple(p) for p in ref[0].reshape(-1, 3)}
     assert len(colours) > 50  # the model's colours and shading, not one flat colour
+
+
+def test_a_coloured_model_composes_across_mullions(tmp_path, model):
+    """With bezels: the canvas rendered by one rank, its mullion pixels black, is the wall's mosaic."""
+    c = Canvas((2, 2), (48, 40), (6, 4))
+    ref = [img.copy() for img in walk(tmp_path / "ref", model, (1, 1), c.size)]
+    for img in ref:
+        img[c.hidden()] = 0
+    got = walk(tmp_path / "wall", model, (2, 2), (48, 40), ["--mullion", "6x4"])
+    for f, (g, w) in enumerate(zip(got, ref)):
+        assert g.shape == w.shape and (g == w).all(), f"frame {f}: {(g != w).any(axis=2).sum()} pixels differ"

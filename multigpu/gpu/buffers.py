@@ -114,15 +114,16 @@ def _order_digest(draws) -> str:
     return hashlib.sha1(np.ascontiguousarray(draws.order, dtype=np.int64).tobytes()).hexdigest()
 
 
-def _layout(n_vertices: int, n_indices: int, colors: bool = False, texcoords: bool = False
+def _layout(n_vertices: int, n_indices: int, colors: bool = False, texcoords: bool = False, texels: int = 0
             ) -> dict[str, tuple[int, int]]:
     """Byte offset and length of each array in the file, every one starting on a page (``colors``:
     each vertex's RGBA8 as one uint32, only where the scene has vertex colours; ``texcoords``:
-    each vertex's UV and texture layer, 3 float32, only where it has textures)."""
+    each vertex's UV and texture layer, 3 float32, and ``texels`` its textures' pool, RGBA8
+    words, only where it has textures)."""
     out, at = {}, PAGE  # the first page: magic and header
     for name, nbytes in (("vertices", 16 * n_vertices), ("indices", 4 * n_indices), ("objects", 4 * n_vertices),
                          ("colors", 4 * n_vertices if colors else 0),
-                         ("texcoords", 12 * n_vertices if texcoords else 0)):
+                         ("texcoords", 12 * n_vertices if texcoords else 0), ("texels", 4 * texels)):
         out[name] = (at, nbytes)
         at += -(-nbytes // PAGE) * PAGE
     out["end"] = (at, 0)
@@ -134,7 +135,7 @@ def write_buffers(path: Path, scene, draws) -> None:
     file beside it, then a rename, so a reader never sees it half-written and two writers
     (ranks of two hosts sharing the directory) leave one whole file."""
     nv, ni, colors, uv = scene.vertices.shape[0], draws.total, scene.vertex_colors is not None, _textured(scene)
-    lay = _layout(nv, ni, colors, uv)
+    lay = _layout(nv, ni, colors, uv, _n_texels(scene))
     head = json.dumps(_head(scene, draws)).encode()
     if len(MAGIC) + len(head) + 1 > PAGE:
         raise ValueError("buffers file header too long")
@@ -159,6 +160,9 @@ def write_buffers(path: Path, scene, draws) -> None:
                 fh.seek(lay["texcoords"][0])
                 for s, part in _blocks(scene.texcoords, 12):
                     fh.write(np.ascontiguousarray(part, dtype=np.float32).tobytes())
+                fh.seek(lay["texels"][0])
+                for s, part in _blocks(scene.texels, 4):
+                    fh.write(np.ascontiguousarray(part, dtype=np.uint32).tobytes())
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -168,21 +172,25 @@ def _head(scene, draws) -> dict:
     """The header a buffers file of ``scene`` in ``draws``' order holds."""
     return {"version": VERSION, "vertices": scene.vertices.shape[0], "indices": draws.total,
             "objects": scene.n_objects, "colors": scene.vertex_colors is not None, "texcoords": _textured(scene),
-            "order": _order_digest(draws)}
+            "texels": _n_texels(scene), "order": _order_digest(draws)}
 
 
 def _textured(scene) -> bool:
     return getattr(scene, "texcoords", None) is not None
 
 
+def _n_texels(scene) -> int:
+    return int(scene.texels.shape[0]) if _textured(scene) else 0
+
+
 def map_buffers(path: Path, scene, draws) -> dict[str, np.ndarray] | None:
     """Read-only maps of the buffers file at ``path`` for ``scene`` drawn in ``draws``' order:
     ``vertices`` (V, 4) uint32, ``indices`` (I,) uint32, ``objects`` (V,) uint32 and, where the
     scene has vertex colours, ``colors`` (V,) uint32 (RGBA8), and where it has textures,
-    ``texcoords`` (V, 3) float32; None when the file is missing or was written for another scene,
-    order or version."""
+    ``texcoords`` (V, 3) float32 and ``texels`` (N,) uint32; None when the file is missing or was
+    written for another scene, order or version."""
     nv, ni, colors, uv = scene.vertices.shape[0], draws.total, scene.vertex_colors is not None, _textured(scene)
-    lay = _layout(nv, ni, colors, uv)
+    lay = _layout(nv, ni, colors, uv, _n_texels(scene))
     try:
         with open(path, "rb") as fh:
             first = fh.read(PAGE)
@@ -198,7 +206,7 @@ def map_buffers(path: Path, scene, draws) -> dict[str, np.ndarray] | None:
     if head != _head(scene, draws):
         return None
     shapes = {"vertices": (nv, 4), "indices": (ni,), "objects": (nv,), **({"colors": (nv,)} if colors else {}),
-              **({"texcoords": (nv, 3)} if uv else {})}
+              **({"texcoords": (nv, 3), "texels": (_n_texels(scene),)} if uv else {})}
     dtype = lambda k: np.float32 if k == "texcoords" else np.uint32
     return {k: np.memmap(path, dtype=dtype(k), mode="r", offset=lay[k][0], shape=shapes[k])
             if lay[k][1] else np.zeros(shapes[k], dtype=dtype(k)) for k in shapes}

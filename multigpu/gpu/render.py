@@ -32,6 +32,18 @@ EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL dri
 BACKGROUND = (0.08, 0.09, 0.12)
 
 
+def texture_path() -> str:
+    """How textures are drawn (``MULTIGPU_TEXTURES``): ``pool`` (default: the texel pool, from the
+    host's buffers file where the driver draws from host memory, so one copy per host) or
+    ``array`` (a hardware texture array per rank, for A/B measurements: ``bench textures``)."""
+    from multigpu.gpu.shaders import TEXTURE_PATHS
+
+    how = os.environ.get("MULTIGPU_TEXTURES", "pool")
+    if how not in TEXTURE_PATHS:
+        raise InputError(f"MULTIGPU_TEXTURES must be one of {', '.join(TEXTURE_PATHS)}, got '{how}'")
+    return how
+
+
 class EglUnavailable(RuntimeError):
     """No headless EGL context could be made on this machine."""
 
@@ -148,13 +160,15 @@ class RegionRenderer:
         self.method = choose_method(method, size, self.limits)
         self.origin = np.asarray(scene.origin, dtype=np.float64)
         per_vertex = colors == "model" and scene.vertex_colors is not None
-        textured = colors == "model" and scene.texcoords is not None and scene.textures is not None
+        textured = colors == "model" and scene.texcoords is not None and scene.texels is not None
+        self.texture_path = texture_path() if textured else None
         self.prog = ctx.program(vertex_shader=vertex_shader(per_vertex, textured),
-                                fragment_shader=fragment_shader(textured))
+                                fragment_shader=fragment_shader(textured, self.texture_path))
         self.draws = DrawList(scene)
-        bufs = self._buffers(scene, shared, per_vertex, textured)
+        bufs = self._buffers(scene, shared, per_vertex, textured, self.texture_path == "pool")
         self.vbo, self.ibo, self.obo = bufs["vertices"], bufs["indices"], bufs["objects"]
-        self.rgba, self.uvl = bufs.get("colors"), bufs.get("texcoords")
+        self.rgba, self.uvl, self.texels = bufs.get("colors"), bufs.get("texcoords"), bufs.get("texels")
+        self._texel_bytes = 4 * int(scene.texels.shape[0]) if textured else 0
         self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
         object_colors = scene.colors if colors == "model" else palette(scene.n_objects)
         self.cbo = ctx.buffer(np.ascontiguousarray(object_colors, dtype=np.float32).ravel())
@@ -178,9 +192,10 @@ class RegionRenderer:
             self._framebuffer((W, H))
         self.depth_test = moderngl.DEPTH_TEST
 
-    def _buffers(self, scene, shared: Path | None, per_vertex: bool, textured: bool) -> dict:
+    def _buffers(self, scene, shared: Path | None, per_vertex: bool, textured: bool, pool: bool) -> dict:
         """The vertex, index and vertex-id GL buffers, the vertex colours' where they are drawn
-        (``per_vertex``) and the texture coordinates' (``textured``), by name: the host's shared
+        (``per_vertex``), the texture coordinates' (``textured``) and the texel pool's (``pool``),
+        by name: the host's shared
         buffers file itself where the driver draws from host memory (``buffers.pinned``), else
         uploaded a block at a time (from that file where there is one: already packed).
         ``self.storage`` says which."""
@@ -188,7 +203,7 @@ class RegionRenderer:
         maps = map_buffers(shared, scene, draws) if shared is not None else None
         self._maps = None
         names = ("vertices", "indices", "objects", *(("colors",) if per_vertex else ()),
-                 *(("texcoords",) if textured else ()))
+                 *(("texcoords",) if textured else ()), *(("texels",) if pool else ()))
         if maps is None:
             self.storage = "uploaded" if shared is None else f"uploaded ({shared.name} does not fit this scene)"
         else:
@@ -213,22 +228,34 @@ class RegionRenderer:
             out["colors"] = upload(ctx, scene.vertex_colors, 4)
         if textured:
             out["texcoords"] = upload(ctx, scene.texcoords, 12)
+        if pool:
+            out["texels"] = upload(ctx, scene.texels, 4)
         return out
 
     def _textures(self, scene):
-        """The model's texture array (mipmapped), a sampler of it per filter (units 0: linear,
-        1: nearest; wrap is the shader's) and its layers' modes (storage buffer 1)."""
+        """What the shader samples besides the texel pool: the layers' modes (storage buffer 1)
+        and their level table (2); or, on the array path, a texture array of every layer's top
+        level resampled to the largest (mipmapped by the GL) and a sampler of it per filter
+        (units 0: linear, 1: nearest)."""
+        ctx = self.ctx
+        modes = ctx.buffer(np.ascontiguousarray(scene.texture_modes, dtype=np.float32))
+        if self.texture_path == "pool":
+            return ctx.buffer(np.ascontiguousarray(scene.texture_levels, dtype=np.int32)), [], modes
         import moderngl
 
-        ctx = self.ctx
-        t, h, w, _ = scene.textures.shape
-        tex = ctx.texture_array((w, h, t), 4, np.ascontiguousarray(scene.textures, dtype=np.uint8))
+        from multigpu.scene.textures import LEVEL_ROWS, layer_image, resized
+
+        top = np.asarray(scene.texture_levels)[::LEVEL_ROWS]
+        w, h = int(top[:, 1].max()), int(top[:, 2].max())
+        images = [layer_image(scene.texels, scene.texture_levels, t) for t in range(len(top))]
+        data = np.stack([im if im.shape[:2] == (h, w) else resized(im, w, h) for im in images])
+        tex = ctx.texture_array((w, h, len(images)), 4, data)
         tex.build_mipmaps()
         samplers = [ctx.sampler(repeat_x=True, repeat_y=True, filter=f, texture=tex)
                     for f in ((moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR),
                               (moderngl.NEAREST_MIPMAP_NEAREST, moderngl.NEAREST))]
         self.prog["tex_linear"].value, self.prog["tex_nearest"].value = 0, 1
-        return tex, samplers, ctx.buffer(np.ascontiguousarray(scene.texture_modes, dtype=np.float32))
+        return tex, samplers, modes
 
     def _framebuffer(self, need: tuple[int, int]) -> None:
         """Make the framebuffer at least ``need`` (grown by 1/4 to avoid re-allocating often)."""
@@ -288,6 +315,9 @@ class RegionRenderer:
         self.cbo.bind_to_storage_buffer(0)
         if self.texture is not None:
             self.layers.bind_to_storage_buffer(1)
+            if self.texels is not None:  # the pool: its level table and texels (a pinned buffer's
+                self.texture.bind_to_storage_buffer(2)  # size is the file's, not the one moderngl knows)
+                self.texels.bind_to_storage_buffer(3, size=self._texel_bytes)
             for unit, sampler in enumerate(self.samplers):
                 sampler.use(unit)
 
@@ -406,7 +436,7 @@ class RegionRenderer:
                 for att in (*fbo.color_attachments, fbo.depth_attachment):
                     att.release()
                 fbo.release()
-        for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.rgba, self.uvl, self.vbo,
+        for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.rgba, self.uvl, self.texels, self.vbo,
                     *self.samplers, self.texture, self.layers, self.prog):
             if obj is not None:
                 obj.release()

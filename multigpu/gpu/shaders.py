@@ -2,11 +2,15 @@
 colour (its object's, from a storage buffer indexed by the vertex's object id, or the model's
 own per-vertex RGBA8 where ``VERTEX_COLORS`` is defined), and a headlight-lit fragment shader.
 
-``TEXTURED``: the colour is multiplied by the vertex's texture layer (``scene/textures.py``),
-sampled with that layer's wrap (repeat is the sampler's; clamp and mirror are folded here, with
-the unfolded UV's derivatives so the mip level does not jump at a fold) and filter (one sampler
-of the array per filter); a texel under a MASK layer's cutoff is left out. The derivatives come
-from the whole canvas's 2x2 pixel quads, so a region's pixels are those a one-rank render draws.
+``TEXTURED``: the colour is multiplied by the vertex's texture layer (``scene/textures.py``), with
+that layer's wrap and filter; a texel under a MASK layer's cutoff is left out. From the texel
+pool (``TEXEL_POOL``, the default): the layer's mip chain read from a storage buffer, wrapped per
+texel (repeat, clamp to edge, mirrored repeat, exactly as GL does) and filtered here (nearest, or
+bilinear within a level and linear between levels, the level chosen from the UV's screen
+derivatives as GL's isotropic rule does). From a texture array (``MULTIGPU_TEXTURES=array``):
+the hardware's filter, one sampler per filter, repeat the sampler's and clamp and mirror folded
+into the UV. The derivatives come from the whole canvas's 2x2 pixel quads, so a region's pixels
+are those a one-rank render draws.
 """
 
 from __future__ import annotations
@@ -55,16 +59,64 @@ uniform vec3 light;
 in vec3 v_nrm;
 in vec3 v_col;
 #ifdef TEXTURED
-uniform sampler2DArray tex_linear;
-uniform sampler2DArray tex_nearest;
 layout(std430, binding = 1) readonly buffer Layers { vec4 layers[]; };  // wrap s, wrap t, nearest, cutoff
 in vec2 v_uv;
 flat in int v_layer;
+#ifdef TEXEL_POOL
+layout(std430, binding = 2) readonly buffer Levels { ivec4 levels[]; };  // 16 a layer: first, w, h, count
+layout(std430, binding = 3) readonly buffer Texels { uint texels[]; };  // RGBA8
+float reduce(float u, float wrap) {  // into one period: [0, 1], [0, 1) or [0, 2)
+    if (wrap == 1.0) return clamp(u, 0.0, 1.0);
+    if (wrap == 2.0) return u - 2.0 * floor(0.5 * u);
+    return fract(u);
+}
+int wrap_index(int i, int n, float wrap) {  // i in [-1, 2n] (a reduced UV's): no integer division
+    if (wrap == 1.0) return clamp(i, 0, n - 1);
+    if (wrap == 2.0) { int j = i < 0 ? i + 2 * n : (i >= 2 * n ? i - 2 * n : i); return j < n ? j : 2 * n - 1 - j; }
+    return i < 0 ? i + n : (i >= n ? i - n : i);
+}
+vec4 texel(ivec4 lv, ivec2 i, vec4 mode) {
+    return unpackUnorm4x8(texels[lv.x + wrap_index(i.y, lv.z, mode.y) * lv.y + wrap_index(i.x, lv.y, mode.x)]);
+}
+vec4 bilinear(ivec4 lv, vec2 uv, vec4 mode) {
+    vec2 p = uv * vec2(lv.yz) - 0.5;
+    vec2 f = fract(p);
+    ivec2 i = ivec2(floor(p));
+    return mix(mix(texel(lv, i, mode), texel(lv, i + ivec2(1, 0), mode), f.x),
+               mix(texel(lv, i + ivec2(0, 1), mode), texel(lv, i + ivec2(1, 1), mode), f.x), f.y);
+}
+vec4 sample_layer(int layer, vec2 uv, vec2 dx, vec2 dy) {
+    vec4 mode = layers[layer];
+    ivec4 top = levels[16 * layer];
+    vec2 size = vec2(top.yz);
+    float rho = max(length(dx * size), length(dy * size));
+    float lod = clamp(log2(max(rho, 1e-30)), 0.0, float(top.w - 1));
+    uv = vec2(reduce(uv.x, mode.x), reduce(uv.y, mode.y));
+    if (mode.z > 0.5) {  // nearest, nearest mipmap nearest
+        ivec4 lv = levels[16 * layer + (rho > 1.0 ? int(floor(lod + 0.5)) : 0)];
+        return texel(lv, ivec2(floor(uv * vec2(lv.yz))), mode);
+    }
+    if (rho <= 1.0) return bilinear(top, uv, mode);  // magnified
+    int l0 = int(floor(lod));
+    int l1 = min(l0 + 1, top.w - 1);
+    return mix(bilinear(levels[16 * layer + l0], uv, mode), bilinear(levels[16 * layer + l1], uv, mode),
+               lod - float(l0));
+}
+#else
+uniform sampler2DArray tex_linear;
+uniform sampler2DArray tex_nearest;
 float fold(float u, float wrap, float texel) {
     if (wrap == 1.0) return clamp(u, 0.5 * texel, 1.0 - 0.5 * texel);
     if (wrap == 2.0) return 1.0 - abs(mod(u, 2.0) - 1.0);
     return u;
 }
+vec4 sample_layer(int layer, vec2 uv, vec2 dx, vec2 dy) {
+    vec4 mode = layers[layer];
+    vec2 texel = 1.0 / vec2(textureSize(tex_linear, 0).xy);
+    vec3 at = vec3(fold(uv.x, mode.x, texel.x), fold(uv.y, mode.y, texel.y), float(layer));
+    return mode.z > 0.5 ? textureGrad(tex_nearest, at, dx, dy) : textureGrad(tex_linear, at, dx, dy);
+}
+#endif
 #endif
 out vec4 f_color;
 void main() {
@@ -72,11 +124,8 @@ void main() {
 #ifdef TEXTURED
     vec2 dx = dFdx(v_uv), dy = dFdy(v_uv);  // in uniform control flow: every pixel of a quad
     if (v_layer >= 0) {
-        vec4 mode = layers[v_layer];
-        vec2 texel = 1.0 / vec2(textureSize(tex_linear, 0).xy);
-        vec3 at = vec3(fold(v_uv.x, mode.x, texel.x), fold(v_uv.y, mode.y, texel.y), float(v_layer));
-        vec4 t = mode.z > 0.5 ? textureGrad(tex_nearest, at, dx, dy) : textureGrad(tex_linear, at, dx, dy);
-        if (t.a < mode.w) discard;
+        vec4 t = sample_layer(v_layer, v_uv, dx, dy);
+        if (t.a < layers[v_layer].w) discard;
         col *= t.rgb;
     }
 #endif
@@ -90,12 +139,17 @@ def _defined(source: str, names: list[str]) -> str:
     return source.replace("#version 430", "\n".join(["#version 430", *(f"#define {n}" for n in names)]))
 
 
+#: how textures are drawn: from the texel pool (a storage buffer) or a hardware texture array
+TEXTURE_PATHS = ("pool", "array")
+
+
 def vertex_shader(per_vertex_colors: bool, textured: bool = False) -> str:
     """The vertex shader, reading the model's per-vertex colours or its objects' colours, and
     its texture coordinates where it is ``textured``."""
     return _defined(VERTEX, ["VERTEX_COLORS"] * per_vertex_colors + ["TEXTURED"] * textured)
 
 
-def fragment_shader(textured: bool = False) -> str:
-    """The fragment shader, with the model's textures where it is ``textured``."""
-    return _defined(FRAGMENT, ["TEXTURED"] * textured)
+def fragment_shader(textured: bool = False, path: str = "pool") -> str:
+    """The fragment shader, with the model's textures where it is ``textured``, drawn from
+    ``path`` (``TEXTURE_PATHS``)."""
+    return _defined(FRAGMENT, ["TEXTURED"] * textured + ["TEXEL_POOL"] * (textured and path == "pool"))

@@ -232,7 +232,7 @@ class Look:
     groups: np.ndarray | None = None
     meta: dict | None = None
     texcoords: np.ndarray | None = None  # (V, 3) UV and layer (-1: untextured), ``textures.mesh_texture``
-    textures: tuple[np.ndarray, np.ndarray] | None = None  # (layers, modes): ``textures.Layers.pack``
+    textures: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # ``textures.Layers.pack``
 
 
 def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None = None) -> Scene:
@@ -243,7 +243,7 @@ def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None =
     look = look or Look()
     rgba, normals, uvl = look.rgba, look.normals, look.texcoords
     looked = dict(look.meta or {"colors": "none", "materials": 0})
-    looked["textures"] = textures.texture_info(None if look.textures is None else look.textures[0])
+    looked["textures"] = textures.texture_info(look.textures)
     if normals is None:
         source, normals, faces = looks.crease_normals(verts, faces, look.groups)
         looked["normals"] = (f"computed: smooth below a {looks.CREASE:g} degree crease "
@@ -293,8 +293,7 @@ def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None =
                  bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=colors, origin=origin,
                  vertex_colors=None if vertex_colors is None else np.ascontiguousarray(vertex_colors[used]),
                  texcoords=None if uvl is None else np.ascontiguousarray(uvl[used], dtype=np.float32),
-                 textures=None if uvl is None else look.textures[0],
-                 texture_modes=None if uvl is None else look.textures[1],
+                 **({} if uvl is None else dict(zip(("texels", "texture_levels", "texture_modes"), look.textures))),
                  name=Path(path).stem, meta={**meta, "source": str(path), "warnings": warnings, "look": looked,
                                               **guess_up(Path(path).suffix.lower(), bmin, bmax)})
 

@@ -38,7 +38,8 @@ class Scene:
     vertex_colors : (V, 4) uint8 RGBA per vertex where the model's colours vary inside an object
         (vertex colours, or materials mixed in one object); None: each object is ``colors``
     texcoords : (V, 3) float32  a textured model's UV (v down the image) and texture layer per
-        vertex (-1: untextured); textures : (T, H, W, 4) uint8  its colour textures, one layer each;
+        vertex (-1: untextured); texels : (N,) uint32  its colour textures' mip chains, RGBA8;
+        texture_levels : (T * 16, 4) int32  each layer's levels: first texel, width, height, count;
         texture_modes : (T, 4) float32  each layer's wrap s, wrap t, nearest, alpha cutoff
         (``scene/textures.py``); None: no textures
     origin : (3,) float64  world position of vertex coordinate (0, 0, 0)
@@ -77,7 +78,8 @@ class Scene:
     lod_error: np.ndarray | None = None
     vertex_colors: np.ndarray | None = None
     texcoords: np.ndarray | None = None
-    textures: np.ndarray | None = None
+    texels: np.ndarray | None = None
+    texture_levels: np.ndarray | None = None
     texture_modes: np.ndarray | None = None
 
     @property
@@ -107,7 +109,7 @@ class Scene:
     PER_OBJECT = ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors")
 
     #: a model's look beyond its objects' colours (None where it has none)
-    PER_VERTEX = ("vertex_colors", "texcoords", "textures", "texture_modes")
+    PER_VERTEX = ("vertex_colors", "texcoords", "texels", "texture_levels", "texture_modes")
 
     #: the parts' arrays (``part_start`` indexes the others)
     PARTS = ("part_start", "part_count", "part_bmin", "part_bmax")
@@ -163,7 +165,7 @@ class Scene:
         frame loop once the GL buffers hold them: bounds, draw ranges, colours and meta stay.
         Dropping the last reference to a mapped buffer unmaps it, so its pages leave the rank."""
         empty = {"vertices": np.empty((0, 6), dtype=np.float32), "indices": np.empty(0, dtype=np.uint32)}
-        for k in ("vertex_colors", "texcoords", "textures"):
+        for k in ("vertex_colors", "texcoords", "texels"):
             a = getattr(self, k)
             if a is not None:
                 empty[k] = np.empty((0, *a.shape[1:]), dtype=a.dtype)
@@ -203,7 +205,7 @@ class Scene:
 
 
 #: the buffers ``Scene.load`` maps from the file (the bulk of a scene; read only after loading)
-MAPPED = ("vertices", "indices", "vertex_colors", "texcoords", "textures")
+MAPPED = ("vertices", "indices", "vertex_colors", "texcoords", "texels")
 
 
 def _map_members(path: Path, names) -> dict[str, np.ndarray]:

@@ -7,13 +7,17 @@ and matched to a mesh by its material's name (a file whose textures share one sa
 match). The texture multiplies the material's colour (glTF's base colour factor, MTL's ``Kd``, as
 both specifications say).
 
-The images become the layers of one texture array (``pack``): every layer the size of the
-largest (smaller ones resampled up; a side above ``MAX_SIDE`` is downscaled, with a warning),
-so the frame stays one multi-draw call and each layer keeps its own wrap and filter (done in the
-fragment shader: ``gpu/shaders.py``), which an atlas could not (a wrapped UV would reach its
-neighbour's tiles). Identical images under one sampler are one layer. A missing or unreadable
-image gets one warning naming the file, and its material's colour stands in. Pure numpy and
-Pillow: no GL, no MPI.
+The images become one *texel pool* (``pack``): every layer's mip chain (each level a box filter
+of the one before, down to 1x1) as RGBA8 words in one flat array, with a table of where each
+level starts and its size (``LEVEL_ROWS`` rows a layer). Layers keep their own sizes (a side above
+``MAX_SIDE`` is downscaled, with a warning). The renderer reads the pool from a storage buffer
+and filters in the fragment shader (``gpu/shaders.py``), wrap and filter per layer, so the frame
+stays one multi-draw call, and the pool lies in the host's buffers file like the vertices: one
+copy per host where the driver draws from host memory. ``MULTIGPU_TEXTURES=array`` draws through
+a hardware texture array instead (every layer resampled to the largest; wrap folded in the
+shader): ``multigpu bench textures`` measures both. Identical images under one sampler are one
+layer. A missing or unreadable image gets one warning naming the file, and its material's colour
+stands in. Pure numpy and Pillow: no GL, no MPI.
 """
 
 from __future__ import annotations
@@ -36,6 +40,8 @@ WRAP = {10497: 0, 33071: 1, 33648: 2}
 NEAREST = 9728
 #: a layer's sampler where the file gives none: repeat, linear (glTF's defaults)
 DEFAULT = (0, 0, 0)
+#: rows of the level table per layer (enough for 2**15 pixels a side)
+LEVEL_ROWS = 16
 
 
 def gltf_json(path: Path) -> dict | None:
@@ -169,33 +175,65 @@ class Layers:
             self.modes.append((*mode, cutoff))
         return self.keys[key]
 
-    def pack(self, warnings: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
-        """``(textures (T, H, W, 4) uint8, modes (T, 4) float32)``: wrap s, wrap t, nearest,
-        alpha cutoff per layer; None without textures."""
+    def pack(self, warnings: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(texels (N,) uint32, levels (T * LEVEL_ROWS, 4) int32, modes (T, 4) float32)``: every
+        layer's mip chain as RGBA8 words; each (layer, level) row's first texel, width, height and
+        (in every row) the layer's level count; wrap s, wrap t, nearest, alpha cutoff per layer.
+        None without textures."""
         if not self.images:
             return None
-        h = max(im.shape[0] for im in self.images)
-        w = max(im.shape[1] for im in self.images)
-        if max(h, w) > MAX_SIDE:
-            k = MAX_SIDE / max(h, w)
-            warnings.append(f"a {w}x{h} texture is over {MAX_SIDE} pixels a side: downscaled to "
-                            f"{max(1, round(w * k))}x{max(1, round(h * k))}")
-            h, w = max(1, round(h * k)), max(1, round(w * k))
-        out = np.empty((len(self.images), h, w, 4), dtype=np.uint8)
-        for i, im in enumerate(self.images):  # textures, a handful
-            out[i] = im if im.shape[:2] == (h, w) else _resized(im, w, h)
-        return out, np.asarray(self.modes, dtype=np.float32).reshape(-1, 4)
+        chains = []
+        for im in self.images:  # textures, a handful
+            h, w = im.shape[:2]
+            if max(h, w) > MAX_SIDE:
+                k = MAX_SIDE / max(h, w)
+                nw, nh = max(1, round(w * k)), max(1, round(h * k))
+                warnings.append(f"a {w}x{h} texture is over {MAX_SIDE} pixels a side: downscaled to {nw}x{nh}")
+                im = resized(im, nw, nh)
+            chains.append(mip_chain(im))
+        total = sum(lv.shape[0] * lv.shape[1] for chain in chains for lv in chain)
+        texels = np.empty(total, dtype=np.uint32)
+        levels = np.zeros((len(chains) * LEVEL_ROWS, 4), dtype=np.int32)
+        at = 0
+        for t, chain in enumerate(chains):
+            for lv, im in enumerate(chain):  # levels, a dozen
+                h, w = im.shape[:2]
+                texels[at:at + h * w] = np.ascontiguousarray(im).view(np.uint32).ravel()
+                levels[t * LEVEL_ROWS + lv] = (at, w, h, len(chain))
+                at += h * w
+        return texels, levels, np.asarray(self.modes, dtype=np.float32).reshape(-1, 4)
 
 
-def _resized(rgba: np.ndarray, w: int, h: int) -> np.ndarray:
+def mip_chain(rgba: np.ndarray) -> list[np.ndarray]:
+    """``rgba`` (H, W, 4) and each half-size level below it (a box filter, sides rounded down,
+    at least 1) down to 1x1."""
+    from PIL import Image
+
+    chain = [rgba]
+    while chain[-1].shape[0] > 1 or chain[-1].shape[1] > 1:
+        h, w = chain[-1].shape[:2]
+        img = Image.fromarray(chain[-1], "RGBA").resize((max(1, w // 2), max(1, h // 2)), Image.Resampling.BOX)
+        chain.append(np.asarray(img))
+    return chain
+
+
+def layer_image(texels: np.ndarray, levels: np.ndarray, layer: int, level: int = 0) -> np.ndarray:
+    """One level of one layer of a texel pool as (H, W, 4) uint8 (a view)."""
+    at, w, h, _ = (int(v) for v in levels[layer * LEVEL_ROWS + level])
+    return np.asarray(texels[at:at + w * h]).view(np.uint8).reshape(h, w, 4)
+
+
+def resized(rgba: np.ndarray, w: int, h: int) -> np.ndarray:
     from PIL import Image
 
     return np.asarray(Image.fromarray(rgba, "RGBA").resize((w, h), Image.Resampling.BILINEAR))
 
 
-def texture_info(textures: np.ndarray | None) -> dict:
-    """What ``scene info`` says of a scene's textures."""
-    if textures is None or len(textures) == 0:
+def texture_info(packed: tuple | None) -> dict:
+    """What ``scene info`` says of a scene's textures (``Layers.pack``'s result)."""
+    if packed is None:
         return {"count": 0}
-    t, h, w, _ = textures.shape
-    return {"count": int(t), "width": int(w), "height": int(h), "mib": float(textures.nbytes / 2**20)}
+    texels, levels, _ = packed
+    top = levels[::LEVEL_ROWS]
+    return {"count": int(len(top)), "pixels": int((top[:, 1].astype(np.int64) * top[:, 2]).sum()),
+            "largest": [int(top[:, 1].max()), int(top[:, 2].max())], "mib": float(texels.nbytes / 2**20)}

@@ -57,11 +57,16 @@ def _cpu_ms(fn):
     return r, (time.process_time() - t) * 1e3
 
 
-def _world(s: Sizes):
+#: the shipped model with materials and a repeated texture (mipmapped: its texels' derivatives
+#: come from the framebuffer's pixel quads, which the viewport and offaxis methods shift)
+PUMP = Path(__file__).resolve().parents[2] / "models" / "pump.glb"
+
+
+def _world(s: Sizes, model: Path | None = None):
     from multigpu.scene.models import SceneSpec, load_scene
     from multigpu.scene.paths import walkthrough
 
-    scene, _ = load_scene(SceneSpec(triangles=s.triangles))
+    scene, _ = load_scene(SceneSpec(triangles=s.triangles) if model is None else SceneSpec(model=str(model)))
     path = walkthrough(scene, frames=1200)
     frames = np.linspace(0, len(path) - 1, s.frames + 2).astype(int)[1:-1]  # skip the overview ends
     return scene, path, frames
@@ -86,13 +91,24 @@ def _compose(renderer, view, proj, light, part, size, depth: bool):
 # ---------------------------------------------------------------- 1. sub-frustum methods
 
 def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
-    from multigpu.core.camera import frame_matrices
-    from multigpu.gpu.render import RegionRenderer, choose_method, gl_limits
+    from multigpu.gpu.render import gl_limits
 
-    scene, path, frames = _world(s)
     limits = gl_limits(ctx)
-    grids = [(1, 2), (2, 2), (1, 3)]
     rows = []
+    worlds = [("plant", _world(s), [(1, 2), (2, 2), (1, 3)])]
+    if PUMP.is_file():  # a source checkout: the shipped model, textured
+        worlds.append(("pump, textured", _world(s, PUMP), [(2, 2)]))
+    for name, (scene, path, frames), grids in worlds:
+        _subfrustum_rows(s, ctx, scene, path, frames, grids, name, rows)
+    write_csv(out / "subfrustum.csv", rows)
+    return _subfrustum_page(ctx, limits, rows, worlds[0][1][0].n_triangles, len(worlds[0][1][2]))
+
+
+def _subfrustum_rows(s: Sizes, ctx, scene, path, frames, grids, name: str, rows: list) -> None:
+    """Each grid's rows of the sub-frustum table for one scene, appended to ``rows``."""
+    from multigpu.core.camera import frame_matrices
+    from multigpu.gpu.render import RegionRenderer
+
     for grid in grids:
         size = (grid[1] * s.tile, grid[0] * s.tile)
         ref = RegionRenderer(ctx, scene, size, "scissor")
@@ -115,7 +131,7 @@ def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
         base = np.median(acc["scissor"]["sum"])
         for m, r in methods.items():
             a = acc[m]
-            rows.append({"grid": f"{grid[0]}x{grid[1]}", "display": f"{size[0]}x{size[1]}", "method": m,
+            rows.append({"scene": name, "grid": f"{grid[0]}x{grid[1]}", "display": f"{size[0]}x{size[1]}", "method": m,
                          "frames": len(frames), "mismatch_px": a["px"],
                          "mismatch_share": a["px"] / (len(frames) * size[0] * size[1]),
                          "max_color_diff": a["dc"], "max_depth_diff": a["dz"],
@@ -123,19 +139,25 @@ def table_subfrustum(s: Sizes, ctx, out: Path) -> str:
                          "vs_scissor": float(np.median(a["sum"]) / base), "fbo_mib": r.framebuffer_bytes / 2**20})
             r.release()
         ref.release()
-    write_csv(out / "subfrustum.csv", rows)
+
+
+def _subfrustum_page(ctx, limits: dict, rows: list, plant_triangles: int, n_frames: int) -> str:
+    from multigpu.gpu.render import choose_method
+
     vw, vh = limits["viewport"]
     rb = limits["renderbuffer"]
     big = (2 * rb, 1024)
     methods = ("auto", "scissor", "viewport", "offaxis")
     beyond = ", ".join(f"{m}: {_try_method(choose_method, m, big, limits)}" for m in methods)
     return "\n".join([
-        f"The default plant ({scene.n_triangles} triangles), {len(frames)} walkthrough frames, balanced with "
+        f"The default plant ({plant_triangles} triangles) and the shipped pump (`models/pump.glb`: material "
+        f"colours, a mipmapped texture repeated across its base), {n_frames} walkthrough frames, balanced with "
         "`strips`; each rank's region rendered with its own draw list and composed, against a one-rank render "
         "of the whole display (`scissor` over the full display). Depth is window depth in [0, 1]. Render time "
         "is process CPU time summed over the ranks' regions (median frame); `slowest rank` is the emulated "
         "parallel rendering time.", "",
-        md_table(rows, [("grid", "Grid", ""), ("display", "Display", ""), ("method", "Method", ""),
+        md_table(rows, [("scene", "Scene", ""), ("grid", "Grid", ""), ("display", "Display", ""),
+                        ("method", "Method", ""),
                    ("mismatch_px", "Mismatching px", ""), ("mismatch_share", "Share", ".2e"),
                    ("max_color_diff", "Max colour diff", ""), ("max_depth_diff", "Max depth diff", ".2e"),
                    ("render_cpu_ms", "Render CPU ms (sum)", ".2f"), ("slowest_rank_ms", "Slowest rank ms", ".2f"),

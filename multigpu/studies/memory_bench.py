@@ -74,18 +74,20 @@ def scene_flags(triangles: int) -> list[str]:
 
 
 def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: float = 1800, extra=(),
-            scene: list[str] | None = None) -> dict:
+            scene: list[str] | None = None, env: dict | None = None) -> dict:
     """Peak PSS per rank and summed, for one walkthrough of ``triangles`` on ``ranks`` ranks
     (``extra``: more walkthrough flags, e.g. ``--lod-error 1``: levels of detail held; ``scene``:
-    the scene's flags, e.g. ``--model FILE``, instead of the plant of ``triangles``), with the
+    the scene's flags, e.g. ``--model FILE``, instead of the plant of ``triangles``; ``env``: more
+    environment for the job), with the
     run's scene load time and median emulated frame (per-rank CPU time) from its summary."""
     from multigpu.parallel.mpirun import find_launcher
 
     rows, cols = (1, ranks) if ranks < 4 else (2, ranks // 2)
     launcher = find_launcher()
-    env = launcher.environ({"MULTIGPU_CACHE": cache})
+    env = launcher.environ({"MULTIGPU_CACHE": cache, **(env or {})})
     out = tempfile.mkdtemp(prefix="mem-")
-    args = ["walkthrough", *(scene_flags(triangles) if scene is None else scene), "--frames", str(frames), "--grid", f"{rows}x{cols}",
+    args = ["walkthrough", *(scene_flags(triangles) if scene is None else scene), "--frames", str(frames),
+            "--grid", f"{rows}x{cols}",
             "--tile", "256x256", "--mosaic-every", "0", "--no-progress", "--out", out, *extra]
     proc = subprocess.Popen(launcher.command(ranks, args, env=env), env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)

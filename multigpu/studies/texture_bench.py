@@ -2,11 +2,12 @@
 
 One scanned-style model (``scene/scan.py``: 10^6 even triangles in one closed surface; 2x10^5
 with ``--quick``) written twice as GLB: in one material colour, and with a 2048x2048 colour
-texture (512x512 with ``--quick``) on planar UVs. Each runs a 2x2 headless walkthrough (4 ranks,
-``--split grid:8``) twice: the first builds the scene cache (the load time a user waits once),
-the second maps it. Every rank's proportional set size is sampled as it runs (``memory_bench``);
-the frame is the run's median emulated frame (per-rank CPU time). Untextured and textured
-alternate so the machine's drift falls on both.
+texture (512x512 with ``--quick``) on planar UVs; the textured one is drawn from the texel pool
+(the default: one copy per host) and from a texture array per rank (``MULTIGPU_TEXTURES=array``).
+Each runs a 2x2 headless walkthrough (4 ranks, ``--split grid:8``) twice: the first builds the
+scene cache (the load time a user waits once), the second maps it. Every rank's proportional set
+size is sampled as it runs (``memory_bench``); the frame is the run's median emulated frame
+(per-rank CPU time). The cases alternate so the machine's drift falls on each.
 """
 
 from __future__ import annotations
@@ -15,12 +16,15 @@ import os
 import tempfile
 from pathlib import Path
 
-#: the cases: name -> textured
-CASES = {"material colour": False, "2k texture": True}
+#: the models: name -> textured
+MODELS = {"plain": False, "textured": True}
+#: the cases: name -> (model, texture path)
+CASES = {"material colour": ("plain", "pool"), "texture, pool": ("textured", "pool"),
+         "texture, array": ("textured", "array")}
 
 
 def write_models(folder: Path, triangles: int, side: int) -> dict[str, Path]:
-    """The scan as two GLB files, untextured and textured (``side`` pixels square)."""
+    """The scan as two GLB files, plain and textured (``side`` pixels square), by ``MODELS`` name."""
     import numpy as np
     import trimesh
     from PIL import Image
@@ -31,7 +35,7 @@ def write_models(folder: Path, triangles: int, side: int) -> dict[str, Path]:
 
     verts, faces = scan_mesh(triangles)
     out = {}
-    for name, textured in CASES.items():
+    for name, textured in MODELS.items():
         mesh = trimesh.Trimesh(verts, faces, process=False)
         if textured:
             y, x = np.indices((side, side)) / side
@@ -42,7 +46,7 @@ def write_models(folder: Path, triangles: int, side: int) -> dict[str, Path]:
                                          material=PBRMaterial(baseColorTexture=image))
         else:
             mesh.visual = TextureVisuals(material=PBRMaterial(baseColorFactor=[200, 180, 160, 255]))
-        out[name] = folder / f"scan_{'textured' if textured else 'plain'}.glb"
+        out[name] = folder / f"scan_{name}.glb"
         out[name].write_bytes(trimesh.Scene(mesh).export(file_type="glb"))
     return out
 
@@ -64,9 +68,10 @@ def bench_textures(quick: bool) -> list[dict]:
         print(f"{'model':<16} {'run':>6} {'load s':>7} {'frame ms':>9} {'peak PSS/rank MiB':>18} "
               f"{'peak PSS/host MiB':>18}", flush=True)
         for run in ("first", "cached"):
-            for name, path in models.items():  # alternated: drift falls on both
-                d = measure(4, triangles, caches[name], frames=60, scene=["--model", str(path), "--split", "grid:8"])
-                d = {**d, "model": name, "run": run, "texture_side": side if CASES[name] else 0}
+            for name, (model, how) in CASES.items():  # alternated: drift falls on each
+                d = measure(4, triangles, caches[name], frames=60, env={"MULTIGPU_TEXTURES": how},
+                            scene=["--model", str(models[model]), "--split", "grid:8"])
+                d = {**d, "model": name, "run": run, "texture_side": side if MODELS[model] else 0}
                 rows.append(d)
                 print(f"{name:<16} {run:>6} {d['load_seconds']:7.2f} {d['frame_ms_median']:9.2f} "
                       f"{d['peak_pss_rank_max'] / 2**20:18.0f} {d['peak_pss_host'] / 2**20:18.0f}", flush=True)
