@@ -1,4 +1,4 @@
-"""Headless GL rendering of one rank's screen region (moderngl on EGL). The only GL module.
+"""Headless GL rendering of one rank's screen region (moderngl on EGL; textures: ``texturing.py``).
 
 One context per rank, the whole scene uploaded once. A frame is ONE ``render_indirect`` call
 over the draw commands of the objects in the rank's T' mask (one command per run of visible
@@ -23,6 +23,7 @@ import numpy as np
 from multigpu.core.camera import model_view, region_clip
 from multigpu.core.drawlist import DrawList
 from multigpu.errors import InputError
+from multigpu.gpu import texturing
 from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
 from multigpu.gpu.shaders import fragment_shader, vertex_shader
 
@@ -30,18 +31,6 @@ EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL dri
             "(Debian/Ubuntu: sudo apt install libegl1 libgl1-mesa-dri) or an NVIDIA driver with EGL")
 
 BACKGROUND = (0.08, 0.09, 0.12)
-
-
-def texture_path() -> str:
-    """How textures are drawn (``MULTIGPU_TEXTURES``): ``pool`` (default: the texel pool, from the
-    host's buffers file where the driver draws from host memory, so one copy per host) or
-    ``array`` (a hardware texture array per rank, for A/B measurements: ``bench textures``)."""
-    from multigpu.gpu.shaders import TEXTURE_PATHS
-
-    how = os.environ.get("MULTIGPU_TEXTURES", "pool")
-    if how not in TEXTURE_PATHS:
-        raise InputError(f"MULTIGPU_TEXTURES must be one of {', '.join(TEXTURE_PATHS)}, got '{how}'")
-    return how
 
 
 class EglUnavailable(RuntimeError):
@@ -161,7 +150,7 @@ class RegionRenderer:
         self.origin = np.asarray(scene.origin, dtype=np.float64)
         per_vertex = colors == "model" and scene.vertex_colors is not None
         textured = colors == "model" and scene.texcoords is not None and scene.texels is not None
-        self.texture_path = texture_path() if textured else None
+        self.texture_path = texturing.texture_path() if textured else None
         self.prog = ctx.program(vertex_shader=vertex_shader(per_vertex, textured),
                                 fragment_shader=fragment_shader(textured, self.texture_path))
         self.draws = DrawList(scene)
@@ -177,7 +166,8 @@ class RegionRenderer:
                                                 (self.obo, "1u", "in_obj"),
                                                 *([(self.uvl, "3f", "in_uvl")] if textured else [])],
                                     index_buffer=self.ibo, index_element_size=4)
-        self.texture, self.samplers, self.layers = self._textures(scene) if textured else (None, [], None)
+        self.texture, self.samplers, self.layers = (texturing.make(ctx, self.prog, scene, self.texture_path)
+                                                    if textured else (None, [], None))
         self.indirect = ctx.buffer(reserve=20 * 1024)  # grows when a frame needs more commands
         self.last_commands = 0  # draw commands of the last frame (runs of visible objects)
         self.fbo = None
@@ -231,31 +221,6 @@ class RegionRenderer:
         if pool:
             out["texels"] = upload(ctx, scene.texels, 4)
         return out
-
-    def _textures(self, scene):
-        """What the shader samples besides the texel pool: the layers' modes (storage buffer 1)
-        and their level table (2); or, on the array path, a texture array of every layer's top
-        level resampled to the largest (mipmapped by the GL) and a sampler of it per filter
-        (units 0: linear, 1: nearest)."""
-        ctx = self.ctx
-        modes = ctx.buffer(np.ascontiguousarray(scene.texture_modes, dtype=np.float32))
-        if self.texture_path == "pool":
-            return ctx.buffer(np.ascontiguousarray(scene.texture_levels, dtype=np.int32)), [], modes
-        import moderngl
-
-        from multigpu.scene.textures import LEVEL_ROWS, layer_image, resized
-
-        top = np.asarray(scene.texture_levels)[::LEVEL_ROWS]
-        w, h = int(top[:, 1].max()), int(top[:, 2].max())
-        images = [layer_image(scene.texels, scene.texture_levels, t) for t in range(len(top))]
-        data = np.stack([im if im.shape[:2] == (h, w) else resized(im, w, h) for im in images])
-        tex = ctx.texture_array((w, h, len(images)), 4, data)
-        tex.build_mipmaps()
-        samplers = [ctx.sampler(repeat_x=True, repeat_y=True, filter=f, texture=tex)
-                    for f in ((moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR),
-                              (moderngl.NEAREST_MIPMAP_NEAREST, moderngl.NEAREST))]
-        self.prog["tex_linear"].value, self.prog["tex_nearest"].value = 0, 1
-        return tex, samplers, modes
 
     def _framebuffer(self, need: tuple[int, int]) -> None:
         """Make the framebuffer at least ``need`` (grown by 1/4 to avoid re-allocating often)."""

@@ -213,6 +213,19 @@ def _cutoff(mesh) -> float:
     return cutoff if mode == "MASK" else 0.0
 
 
+def _put_texture(mesh, layers: textures.Layers, uvl: np.ndarray | None, at: int, n: int) -> np.ndarray | None:
+    """A textured ``mesh``'s UVs and layer into rows ``at:`` of the model's (``n``, 3) ``uvl``,
+    made (untextured: layer -1) at the first textured mesh; ``uvl`` as it is otherwise."""
+    uv, image = textures.mesh_texture(mesh)
+    layer = -1 if uv is None else layers.layer(image, _material_name(mesh), _cutoff(mesh))
+    if layer >= 0:
+        if uvl is None:
+            uvl = np.zeros((n, 3), dtype=np.float32)
+            uvl[:, 2] = -1.0
+        uvl[at:at + len(uv), :2], uvl[at:at + len(uv), 2] = uv, layer
+    return uvl
+
+
 def _with_layer(uv: np.ndarray, layer: int) -> np.ndarray | None:
     """(V, 3) float32 UV and texture layer per vertex (None: the layer could not be had)."""
     if layer < 0:
@@ -335,13 +348,7 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
         faces[f:f + len(mf)] = mf + v
         colors, kind = looks.mesh_colors(m)
         kinds.add(kind)
-        uv, image = textures.mesh_texture(m)
-        layer = -1 if uv is None else layers.layer(image, _material_name(m), _cutoff(m))
-        if layer >= 0:
-            if uvl is None:
-                uvl = np.zeros((len(verts), 3), dtype=np.float32)
-                uvl[:, 2] = -1.0
-            uvl[v:v + len(m.vertices), :2], uvl[v:v + len(m.vertices), 2] = uv, layer
+        uvl = _put_texture(m, layers, uvl, v, len(verts))
         if kind == "material":  # a material by name and colour (a loader may copy it per mesh)
             materials.add((getattr(m.visual.material, "name", None), tuple(colors[0])))
         any_rgba |= colors is not None
