@@ -107,6 +107,11 @@ class WalkConfig:
     lod_error: float = 0.0  # level-of-detail bound in wall pixels (0: every object as modelled)
     timeline: bool = False  # timeline.json: every rank's phases over the run's last TIMELINE_FRAMES frames
     colors: str = "model"  # the model's own colours, or "objects": a colour per object (scene/looks.py)
+    # recovery by relaunch (parallel/recovery.py): restarts allowed within its WINDOW (None: 3 with windows, an
+    # unattended wall heals; 0 headless, where a failure should end a measurement), and the path frame a restart
+    # resumes at, continuing the run in --out
+    recover: int | None = None
+    resume_at: int = 0
 
     def __post_init__(self):
         self._scene_as_drawn()
@@ -159,6 +164,11 @@ class WalkConfig:
             raise InputError(f"--device must be >= 0, got {self.device}")
         if not (self.timeout > 0 and math.isfinite(self.timeout)):
             raise InputError(f"--timeout must be > 0 seconds, got {self.timeout}")
+        if self.recover is None:
+            object.__setattr__(self, "recover", 3 if self.present == "window" else 0)
+        if not 0 <= self.recover <= 100 or self.resume_at < 0:
+            raise InputError(f"--recover must be 0..100 restarts and --resume-at >= 0, got {self.recover}, "
+                             f"{self.resume_at}")
         if not (self.liveness >= 0 and math.isfinite(self.liveness)):
             raise InputError(f"--liveness must be >= 0 seconds (0: off), got {self.liveness}")
         if self.present not in PRESENTERS:

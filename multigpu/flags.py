@@ -217,6 +217,13 @@ def _output_args(w: argparse.ArgumentParser, d: dict) -> None:
     r.add_argument("--liveness", type=float, default=d["liveness"], metavar="S",
                    help="seconds without a heartbeat before a rank counts as stopped and the job ends (0: off)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("--recover", type=int, metavar="N",
+                   help="restart the job after a failure (a rank or host that dies or freezes), resuming at the "
+                        "first frame not shown, at most N times in 10 minutes; the launcher's (default: 3 with "
+                        "--present window, 0 headless)")
+    r.add_argument("--resume-at", type=int, default=0, metavar="F",
+                   help="start at frame F of the camera path, continuing the run already in --out (the "
+                        "launcher's restart after a failure)")
     h = w.add_argument_group("hosts (the launcher's: launch/walkthrough, python -m multigpu.parallel.mpirun)")
     h.add_argument("--hosts", metavar="H:N,...", help="place the ranks on these hosts in order, N each (e.g. a:2,b:2)")
     h.add_argument("--hostfile", metavar="FILE", help="hosts one per line: HOST, HOST:N or HOST slots=N")
@@ -256,7 +263,7 @@ def walk_config(a):
                       liveness=a.liveness, progress=not a.no_progress, record=a.record, timeline=a.timeline,
                       monitor=wall.monitor if a.monitor == "beside" and wall.monitor else _monitor(a.monitor),
                       target_fps=a.target_fps, render_scale=a.render_scale,
-                      lod_error=a.lod_error, colors=a.colors)
+                      lod_error=a.lod_error, colors=a.colors, recover=a.recover, resume_at=a.resume_at)
 
 
 def _monitor(text: str | None) -> tuple[int, int] | None:

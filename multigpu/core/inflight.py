@@ -24,13 +24,14 @@ def read_lag(latency: int) -> int:
     return 1 if latency >= 2 else 0
 
 
-def step(k: int, last: int | None, latency: int) -> tuple[int | None, int | None, int | None] | None:
+def step(k: int, last: int | None, latency: int, first: int = 0) -> tuple[int | None, int | None, int | None] | None:
     """The frames step ``k`` submits, sends and delivers (None: none), ``last`` the last frame
-    to submit (None: no end yet); None once the last frame has been delivered."""
+    to submit (None: no end yet), ``first`` the first (a resumed run's); None once the last
+    frame has been delivered."""
     if last is not None and k - latency > last:
         return None
 
     def frame(f: int) -> int | None:
-        return f if f >= 0 and (last is None or f <= last) else None
+        return f if f >= first and (last is None or f <= last) else None
 
     return frame(k), frame(k - read_lag(latency)), frame(k - latency)

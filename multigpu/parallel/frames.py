@@ -30,6 +30,7 @@ from multigpu.parallel.mosaic import stitch
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.projection import make_projection
 from multigpu.parallel.record import RunRecord, config_doc, run_title
+from multigpu.parallel.recovery import restarts
 from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
 from multigpu.parallel.rows import Rows
 from multigpu.parallel.shared import SharedPieces
@@ -103,7 +104,7 @@ class Frames:
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
         self.interactive = cfg.path == INTERACTIVE
         self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
-        self.done = 0
+        self.done = cfg.resume_at  # frames of the path shown (a resumed run's start after them)
         self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
         self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
         self.timeline = deque(maxlen=TIMELINE_FRAMES) if cfg.timeline else None  # (frame, phase spans)
@@ -140,7 +141,7 @@ class Frames:
         self.record = None
         if self.rank == 0:
             self.record = RunRecord(out, self.K, self.n_frames, doc, self.planner.report, cfg.video,
-                                    cfg.progress, cfg.overlay, cfg.record)
+                                    cfg.progress, cfg.overlay, cfg.record, cfg.resume_at)
 
     def _relay(self, partition):
         """``--partition broadcast``: rank 0 computes the partition, every rank receives it."""
@@ -223,7 +224,7 @@ class Frames:
                 "load_balancing_waited_ms": t.waited_ms(*BALANCE_PHASES, "input"),
                 "rendering_waited_ms": t.waited_ms(*RENDER_PHASES), "synchronization_waited_ms": t.waited_ms("sync"),
                 "frame_exchange_waited_ms": t.waited_ms("exchange"),
-                "display_waited_ms": t.waited_ms("display", "swap_wait")}
+                "display_waited_ms": t.waited_ms("display", "swap_wait"), "restarts": restarts()}
 
     def _heartbeat_cpu(self) -> float:
         """CPU ms of this rank's heartbeat thread since the last frame's row."""
@@ -378,8 +379,8 @@ class Frames:
         after the same frame: the last one submitted, once it is shown."""
         flight: dict[int, InFlight] = {}
         last = None if self.n_frames is None else self.n_frames - 1
-        for k in itertools.count():
-            stages = step(k, last, self.latency)
+        for k in itertools.count(self.cfg.resume_at):
+            stages = step(k, last, self.latency, self.cfg.resume_at)
             if stages is None:
                 return
             submit, send, deliver = stages

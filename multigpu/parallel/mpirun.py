@@ -20,6 +20,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -240,7 +241,9 @@ def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec"
     signal stopped it (Open MPI's mpiexec itself returns 1 there), 1 any failure (MPICH's
     mpiexec returns 255 when a host dies, Open MPI's 9 or 1). If the runtime
     killed rank 0 before it closed its record (a host died), summary.json is rewritten from
-    the whole frames in timings.csv and one line says so."""
+    the whole frames in timings.csv and one line says so. After a failure nothing of the job is
+    left: its process session is killed and its shared-memory segments swept (``segments``)."""
+    started = time.time()
     proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=_die_with_parent)
     got: list[int] = []
 
@@ -257,9 +260,16 @@ def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec"
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # what is left of the job's session (a rank the runtime missed)
+        except (ProcessLookupError, PermissionError):
+            pass
     code = 128 - code if code < 0 else code
     if code in (0, 2):
         return code
+    from multigpu.parallel.segments import sweep
+
+    sweep(started)  # the shared-memory segments of ranks that never finished
     summary = _read_summary(out)
     if got and summary is not None and str(summary.get("stopped_by", "")).startswith("signal "):
         return 128 + got[0]
@@ -300,6 +310,7 @@ def main(argv: list[str] | None = None) -> int:
         hosts = wall_hosts(rest, ranks, hosts)
         launcher = find_launcher()
         cmd = launcher.command(ranks, rest, hosts=hosts)
+        bound = restart_bound(rest)
         if hosts and not help_only(rest):
             from multigpu.parallel.hosts import probe
 
@@ -307,7 +318,78 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2
+    if bound and not help_only(rest):
+        return recovering(launcher, ranks, rest, hosts, bound)
     return supervise(cmd, launcher.environ(), out_dir(rest), Path(launcher.path).name)
+
+
+def restart_bound(argv: list[str]) -> int:
+    """The restarts a walkthrough's command line allows (``--recover``; by default 3 with
+    ``--present window``, 0 headless: ``WalkConfig.recover``); 0 for other commands."""
+    if not argv or argv[0] != "walkthrough":
+        return 0
+    value = _flag_value(argv, "--recover")
+    if value is None:
+        return 3 if _flag_value(argv, "--present") == "window" else 0
+    try:
+        return max(0, int(value))
+    except ValueError:
+        return 0  # the walkthrough refuses it in one line
+
+
+def recovering(launcher: Launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
+    """``supervise`` the job, and after a failure (exit 1) start it again at the first frame not
+    shown (``recovery``), at most ``bound`` times within ``recovery.WINDOW``: then give up (one
+    line, ``recovery.GAVE_UP``). Bad input, a signal, a finished run: their own code, as ever."""
+    import collections
+    import json
+
+    from multigpu.parallel import recovery
+
+    out, name = out_dir(argv), Path(launcher.path).name
+    restarts: collections.deque = collections.deque()
+    history: list[dict] = []
+    env, args = launcher.environ(), argv
+    try:
+        while True:
+            code = supervise(launcher.command(ranks, args, hosts=hosts, env=env), env, out, name)
+            if code != 1 or out is None:
+                return code
+            summary = _read_summary(out) or {}
+            reason = str(summary.get("stopped_by") or f"{name} exited {code}")
+            now = time.monotonic()
+            while restarts and now - restarts[0] > recovery.WINDOW:
+                restarts.popleft()
+            if len(restarts) >= bound:
+                print(f"multigpu: giving up: {len(restarts) + 1} failures within {recovery.WINDOW / 60:.0f} minutes "
+                      f"(--recover {bound}), the last: {reason}; {out}/ keeps every frame shown",
+                      file=sys.stderr, flush=True)
+                return recovery.GAVE_UP
+            restarts.append(now)
+            history = [h if "seconds" in h else {**h, "seconds": None}  # a restart that failed before a frame
+                       for h in summary.get("recoveries", history)]
+            at = recovery.resume_point(out, ranks, recovery.recorded_frames(_flag_value(argv, "--record")))
+            history = recovery.failure(out, at, reason, history)
+            print(f"multigpu: recovering ({len(restarts)} of at most {bound} restarts in "
+                  f"{recovery.WINDOW / 60:.0f} minutes): {reason}; restarting the wall at frame {at}",
+                  file=sys.stderr, flush=True)
+            env = launcher.environ({recovery.ENV: json.dumps(history)})
+            args = [*_without(argv, "--resume-at"), "--resume-at", str(at)]
+    except KeyboardInterrupt:  # Ctrl-C between two jobs: nothing is running
+        return 130
+
+
+def _without(argv: list[str], flag: str) -> list[str]:
+    """``argv`` without ``flag`` and its value (``--flag V`` or ``--flag=V``)."""
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+        elif a == flag:
+            skip = True
+        elif not a.startswith(flag + "="):
+            out.append(a)
+    return out
 
 
 if __name__ == "__main__":

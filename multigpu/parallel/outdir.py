@@ -8,7 +8,8 @@ Contract (``--out DIR``, README "Outputs"):
   the holder dies, so a killed run never leaves the directory locked.
 * A run replaces the previous run's outputs in DIR: once its inputs are agreed valid (never
   for a run refused at the door), it removes exactly the files a run writes
-  (``timings.csv``, ``summary.json``, ``mosaic.mp4``, ``mosaic/frame_*.png``, stray temp files)
+  (``timings.csv``, ``summary.json``, ``mosaic.mp4`` and a restarted run's ``mosaic-rN.mp4``,
+  ``mosaic/frame_*.png``, stray temp files)
   and leaves anything else in DIR alone. Old mosaics never mix with new ones.
 * A run refused at the door leaves no directory behind that it created.
 * Files are written whole or not at all: CSV rows frame by frame (``report.TimingWriter``),
@@ -68,7 +69,7 @@ class OutputDir:
     def clear_previous(self) -> None:
         """Remove the files an earlier run wrote here (see the module doc), nothing else."""
         victims = [self.path / f for f in RUN_FILES]
-        victims += sorted((self.path / "mosaic").glob("frame_*.png"))
+        victims += sorted((self.path / "mosaic").glob("frame_*.png")) + sorted(self.path.glob("mosaic-r*.mp4"))
         for pattern in TEMP_GLOBS:
             victims += sorted(self.path.glob(pattern)) + sorted((self.path / "mosaic").glob(pattern))
         for v in victims:

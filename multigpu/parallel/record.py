@@ -22,8 +22,9 @@ from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
 from multigpu.parallel.mosaic import save_png
 from multigpu.parallel.outdir import OutputDir
+from multigpu.parallel.recovery import Recovery
 from multigpu.parallel.report import COLUMNS, TimingWriter, table, write_json
-from multigpu.parallel.tally import RunningSummary, summarize_file
+from multigpu.parallel.tally import RunningSummary, summarize_file, tally_file
 from multigpu.scene.models import axis_name
 
 
@@ -31,7 +32,7 @@ class RunRecord:
     """What a run leaves in ``--out``; ``config`` and ``report`` go into summary.json."""
 
     def __init__(self, out: OutputDir, ranks: int, n_frames: int, config: dict, report, video: bool,
-                 progress: bool, overlay_mosaics: bool, record: str | None = None):
+                 progress: bool, overlay_mosaics: bool, record: str | None = None, resume_at: int = 0):
         self.out, self.K, self.n_frames = out, ranks, n_frames
         self.config, self.report = config, report
         self.overlay = overlay_mosaics
@@ -45,19 +46,27 @@ class RunRecord:
             self.path = PathAppender(self.record_to)
         self.cameras: list = []  # (12,) position, target, up, fov, near, far of the frames not yet in the path file
         self.failed: WriteFailed | None = None  # the first output that could not be written
-        self.done = 0
-        out.clear_previous()
-        self.writer = TimingWriter(out.path / "timings.csv")
+        self.done = resume_at
+        self.recovery = Recovery.resumed(out.path, resume_at)  # a restarted run goes on with the same files
+        if not resume_at:
+            out.clear_previous()
+        elif self.path is not None:
+            self.path.resume(resume_at)
+        self.writer = TimingWriter(out.path / "timings.csv", resume=bool(resume_at))
+        if resume_at:  # the rows before the failure count in the summary as if the run had not stopped
+            tally_file(out.path / "timings.csv", self.tally, ranks)
         self.video = self.bar = None
         self.summary(complete=False)
         if video:
             import imageio.v2 as imageio
 
-            self.video = imageio.get_writer(str(out.path / "mosaic.mp4"), fps=30, macro_block_size=1)
+            name = f"mosaic-r{len(self.recovery.done)}.mp4" if resume_at else "mosaic.mp4"  # an mp4 cannot be resumed
+            self.video = imageio.get_writer(str(out.path / name), fps=30, macro_block_size=1)
         if progress:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=n_frames, unit="frame", desc=f"{ranks} ranks", dynamic_ncols=True, mininterval=1.0)
+            self.bar = tqdm(total=n_frames, initial=resume_at, unit="frame", desc=f"{ranks} ranks", dynamic_ncols=True,
+                            mininterval=1.0)
 
     @property
     def recorded(self) -> int:
@@ -83,6 +92,7 @@ class RunRecord:
     def rows(self, f: int, rows: np.ndarray) -> None:
         """Frame ``f``'s (K, len(COLUMNS)) rows: to the CSV first, then the tally."""
         self.writer.write(rows)
+        self.recovery.shown(f)
         self.batch.append(rows[np.argsort(rows[:, COLUMNS.index("rank")], kind="stable")])
         self.done = f + 1
         if self.bar is not None:
@@ -109,7 +119,7 @@ class RunRecord:
             self.batch.clear()
         summary = self.tally.result()
         doc = {"complete": complete, "frames_written": self.done, "config": self.config,
-               "decomposition": self.report(), **summary}
+               "decomposition": self.report(), **summary, **self.recovery.doc()}
         if stopped_by:
             doc["stopped_by"] = stopped_by
         write_json(self.out.path / "summary.json", doc)

@@ -55,7 +55,7 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms",
            "latency_ms", "load_balancing_waited_ms", "rendering_waited_ms", "synchronization_waited_ms",
            "frame_exchange_waited_ms", "display_waited_ms", "render_scale", "lod_error_px", "choosing_cpu_ms",
-           "balance"]
+           "balance", "restarts"]
 #: the load balancing CPU time's four phases (learn, project, choose, plan), adding up to it
 BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
@@ -66,7 +66,7 @@ BALANCE_NAMES = (*STRATEGIES, *(d for d in DECOMPOSITIONS if d != "screen"))
 #: a frame holds a frame-rate target when its period lies within this share of the target's
 TARGET_BAND = 0.10
 INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes",
-               "planned_triangles"}
+               "planned_triangles", "restarts"}
 
 
 class TimingWriter:
@@ -75,13 +75,16 @@ class TimingWriter:
     Each frame's K rows are one ``write`` on an unbuffered file; if it fails part way (disk
     full, file size limit) the file is truncated back to the last whole frame and the error
     raised, so ``read_timings`` always parses what is there and a crash loses nothing done.
+    ``resume``: a restarted run goes on at the end of the file (``recovery.resume_point``
+    trimmed it to whole frames).
     """
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, resume: bool = False):
         self.path = Path(path)
-        self.fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        self.size = 0
-        self._append((",".join(COLUMNS) + "\n").encode())
+        self.fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | (0 if resume else os.O_TRUNC), 0o644)
+        self.size = os.fstat(self.fd).st_size if resume else 0
+        if self.size == 0:
+            self._append((",".join(COLUMNS) + "\n").encode())
 
     def write(self, rows: np.ndarray) -> None:
         text = "".join(",".join(_cell(c, v) for c, v in zip(COLUMNS, row)) + "\n" for row in rows)  # K rows

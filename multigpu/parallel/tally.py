@@ -212,13 +212,18 @@ def summarize(rows: np.ndarray, ranks: int, hosts: list | None = None, target: t
 
 
 def summarize_file(path: Path, ranks: int, hosts: list | None = None, target: tuple | None = None) -> dict:
-    """The summary of a timings.csv, read ``BATCH`` frames at a time (rows reach it a whole frame
-    at a time, so every chunk of ``ranks * BATCH`` rows holds whole frames)."""
+    """The summary of a timings.csv (``tally_file``)."""
+    tally = RunningSummary(ranks, hosts, target)
+    tally_file(path, tally, ranks)
+    return tally.result()
+
+
+def tally_file(path: Path, tally: RunningSummary, ranks: int) -> None:
+    """A timings.csv's rows into ``tally``, read ``BATCH`` frames at a time (rows reach it a whole
+    frame at a time, so every chunk of ``ranks * BATCH`` rows holds whole frames)."""
     from multigpu.parallel.report import parse_rows
 
-    tally = RunningSummary(ranks, hosts, target)
     with open(path) as f:
         next(f, None)  # the header
         while lines := list(itertools.islice(f, ranks * BATCH)):
             tally.add(whole_frames(parse_rows(lines), ranks))
-    return tally.result()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import socket
+from pathlib import Path
 
 import numpy as np
 
@@ -35,7 +36,11 @@ from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
 def make_path(cfg: WalkConfig, scene) -> CameraPath:
     """The path file's cameras, or a generated path (``--path interactive``: where the
-    hand-flown camera starts)."""
+    hand-flown camera starts; a restarted flight with ``--record`` starts where it was)."""
+    if cfg.path == INTERACTIVE and cfg.resume_at and cfg.record and Path(cfg.record).is_file():
+        flown = load_path(cfg.record)
+        return CameraPath(*(a[-1:] for a in (flown.position, flown.target, flown.up, flown.fov, flown.near,
+                                             flown.far))).translated(cfg.offset)
     if cfg.path and cfg.path != INTERACTIVE:
         path = load_path(cfg.path)
         if cfg.frames is not None:

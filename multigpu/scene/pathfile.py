@@ -59,6 +59,17 @@ class PathAppender:
         self.end += len(data) - len(self.TAIL)
         self.frames += frames
 
+    def resume(self, frames: int) -> None:
+        """Go on with the flight already in the file (a restarted run), its first ``frames``
+        cameras kept (rewritten once; nothing kept where the file is missing or unreadable)."""
+        try:
+            cams = json.loads(self.path.read_text())["cameras"][:frames]
+            rows = np.array([[*c["position"], *c["target"], *c["up"], c["fov"], c["near"], c["far"]] for c in cams],
+                            dtype=np.float64).reshape(-1, 12)
+        except (OSError, ValueError, KeyError, TypeError):
+            return
+        self.append(rows)
+
     def close(self) -> None:
         if self.fd is not None:
             os.close(self.fd)
