@@ -265,7 +265,7 @@ def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec"
         except (ProcessLookupError, PermissionError):
             pass
     code = 128 - code if code < 0 else code
-    if code in (0, 2):
+    if code == 0 or (code == 2 and not got):  # a signal during setup ends the ranks as they are: its own code
         return code
     from multigpu.parallel.segments import sweep
 

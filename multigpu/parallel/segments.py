@@ -20,13 +20,14 @@ PATTERNS = ("mpich_shm_*", "vader_segment.*", "sm_segment.*")
 SHM = Path("/dev/shm")
 
 
-def _mapped() -> set[str]:
-    """Every /dev/shm file some process maps now."""
+def _mapped(where: Path) -> set[str]:
+    """Every file in ``where`` some process maps now."""
     out: set[str] = set()
+    prefix = f"{where}/"
     for maps in glob.glob("/proc/[0-9]*/maps"):
         try:
             with open(maps) as fh:
-                out.update(line.split(None, 5)[-1].strip() for line in fh if "/dev/shm/" in line)
+                out.update(line.split(None, 5)[-1].strip() for line in fh if prefix in line)
         except OSError:
             continue
     return out
@@ -48,7 +49,7 @@ def sweep(since: float, where: Path = SHM) -> list[str]:
                 candidates.append(p)
     if not candidates:
         return []
-    busy = _mapped()
+    busy = _mapped(where)
     gone = []
     for p in candidates:
         if str(p) not in busy:

@@ -1,0 +1,90 @@
+"""Recovery by relaunch, its pure parts (parallel/recovery.py, parallel/segments.py, the
+launcher's command-line handling): where a run resumes, the summary's recoveries, the sweep of
+left-over shared-memory segments. In one process, no MPI."""
+
+import json
+import os
+import time
+
+import numpy as np
+
+from multigpu.parallel import recovery
+from multigpu.parallel.mpirun import _without, restart_bound
+from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings
+from multigpu.parallel.segments import sweep
+
+
+def timings(out, frames: int, ranks: int, extra: str = ""):
+    """A timings.csv of ``frames`` whole frames of ``ranks`` rows, then ``extra`` bytes."""
+    out.mkdir(exist_ok=True)
+    w = TimingWriter(out / "timings.csv")
+    for f in range(frames):
+        rows = np.zeros((ranks, len(COLUMNS)))
+        rows[:, COLUMNS.index("frame")], rows[:, COLUMNS.index("rank")] = f, np.arange(ranks)
+        w.write(rows)
+    w.close()
+    with open(out / "timings.csv", "a") as fh:
+        fh.write(extra)
+
+
+def test_a_run_resumes_after_its_last_whole_frame(tmp_path):
+    timings(tmp_path, 7, 3)
+    whole = (tmp_path / "timings.csv").read_bytes()
+    partial = whole.splitlines(keepends=True)[1]  # a row of frame 0, as if frame 7 were half-written
+    (tmp_path / "timings.csv").write_bytes(whole + partial.replace(b"0,", b"7,", 1) + b"7,1,0,0")
+    assert recovery.resume_point(tmp_path, 3) == 7
+    assert (tmp_path / "timings.csv").read_bytes() == whole  # the half-written frame is gone
+    assert recovery.resume_point(tmp_path, 3, recorded=5) == 5  # a --record flight of 5 frames
+    assert read_timings(tmp_path / "timings.csv")[:, 0].max() == 4
+
+
+def test_the_tail_is_enough_for_a_long_run_and_an_empty_one_resumes_at_zero(tmp_path, monkeypatch):
+    monkeypatch.setattr(recovery, "TAIL", 2000)  # far less than the file: only its end is read
+    timings(tmp_path, 400, 2)
+    assert recovery.resume_point(tmp_path, 2) == 400
+    assert recovery.resume_point(tmp_path, 2, recorded=10) == 10  # not in the tail: the whole file is read
+    (tmp_path / "e").mkdir()
+    timings(tmp_path / "e", 0, 2)
+    assert recovery.resume_point(tmp_path / "e", 2) == 0
+    assert recovery.resume_point(tmp_path / "missing", 2) == 0
+
+
+def test_the_summary_counts_each_recovery_and_its_dark_time(tmp_path, monkeypatch):
+    timings(tmp_path, 3, 1)
+    history = recovery.failure(tmp_path, 3, "rank 1 died", [])
+    assert history[0]["resumed_at"] == 3 and history[0]["last_shown"] == 2 and history[0]["frames_lost"] == 0
+    history[0]["last_shown_at"] = time.time() - 2.0
+    monkeypatch.setenv(recovery.ENV, json.dumps(history))
+    r = recovery.Recovery.resumed(tmp_path, 3)
+    assert r.doc()["recovery_count"] == 1 and r.doc()["recovery_seconds_max"] is None  # not back yet
+    r.shown(3)
+    doc = r.doc()
+    assert 1.9 < doc["recoveries"][0]["seconds"] < 5 and doc["recovery_seconds_max"] == doc["recoveries"][0]["seconds"]
+    assert recovery.Recovery.resumed(tmp_path, 0).doc() == {}  # a run that never failed says nothing
+
+
+def test_restarts_are_on_with_windows_and_off_headless():
+    assert restart_bound(["walkthrough", "--present", "window"]) == 3
+    assert restart_bound(["walkthrough"]) == 0
+    assert restart_bound(["walkthrough", "--present", "window", "--recover", "0"]) == 0
+    assert restart_bound(["walkthrough", "--recover=5"]) == 5
+    assert restart_bound(["wall", "test", "w.json"]) == 0
+    assert _without(["a", "--resume-at", "5", "b", "--resume-at=7"], "--resume-at") == ["a", "b"]
+
+
+def test_the_sweep_removes_unmapped_segments_of_the_job_only(tmp_path):
+    start = time.time()
+    old = tmp_path / "mpich_shm_old_0"
+    old.write_bytes(b"x")
+    os.utime(old, (start - 3600, start - 3600))  # an earlier job's: not ours to judge
+    left = tmp_path / "mpich_shm_left_0"
+    left.write_bytes(b"x")
+    other = tmp_path / "notes.txt"
+    other.write_text("x")
+    mapped = tmp_path / "vader_segment.busy"
+    mapped.write_bytes(b"\0" * 4096)
+    import mmap
+
+    with open(mapped, "r+b") as fh, mmap.mmap(fh.fileno(), 4096):  # a live job's segment
+        assert sweep(start, tmp_path) == ["mpich_shm_left_0"]
+    assert old.exists() and other.exists() and mapped.exists() and not left.exists()

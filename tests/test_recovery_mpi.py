@@ -1,0 +1,133 @@
+"""``--recover`` under mpiexec, MPICH and Open MPI: a rank killed (SIGKILL) or frozen (SIGSTOP)
+mid-run, and the wall comes back at the first frame not shown, the run one run (every frame
+once in timings.csv, the restart marked, the summary counting it, mosaics whole); failures that
+repeat are bounded (exit 3, one line); Ctrl-C during a recovery ends everything (exit 130).
+Nothing is left behind: no rank process, no new shared-memory segment. Each launcher runs in
+its own process group under a hard timeout, killed by id."""
+
+import json
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+from mpirun import SMALL, end_launcher, read_png, start_launcher
+
+from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
+from multigpu.parallel.report import read_timings
+
+pytestmark = pytest.mark.mpi
+FRAMES = 400
+
+
+@pytest.fixture(params=["default", "openmpi"], scope="module")
+def mpiexec(request):
+    if request.param == "default":
+        return find_launcher().path
+    path = openmpi_on_path()
+    if path is None:
+        pytest.skip("no Open MPI mpiexec here (Debian: apt install openmpi-bin)")
+    if os.path.realpath(launcher_for(path).path) == os.path.realpath(find_launcher().path):
+        pytest.skip("the default mpiexec is Open MPI already")
+    return path
+
+
+def ranks_of(out: Path) -> list[int]:
+    """Pids of the rank processes writing ``out``."""
+    pids = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                argv = Path(f"/proc/{d}/cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            if b"mpi4py" in argv and str(out).encode() in argv:
+                pids.append(int(d))
+    return sorted(pids)
+
+
+def segments() -> set[str]:
+    shm = Path("/dev/shm")
+    return {p.name for p in shm.glob("mpich_shm_*")} | {p.name for p in shm.glob("vader_segment.*")}
+
+
+def rows_written(out: Path) -> int:
+    try:
+        return (out / "timings.csv").read_text().count("\n") - 1
+    except OSError:
+        return 0
+
+
+def launch(tmp_path, mpiexec, extra=(), env=None):
+    out = tmp_path / "o"
+    args = ["-n", "2", "walkthrough", *SMALL, "--grid", "1x2", "--tile", "64x48", "--frames", str(FRAMES),
+            "--mosaic-every", "50", "--out", str(out), "--recover", "2", *extra]
+    proc = start_launcher(args, {"LP_NUM_THREADS": "1", "MULTIGPU_MPIEXEC": mpiexec, **(env or {})})
+    return proc, out
+
+
+def wait_rows(proc, out: Path, rows: int, timeout: float = 90) -> None:
+    t = time.monotonic()
+    while rows_written(out) < rows:
+        assert proc.poll() is None and time.monotonic() - t < timeout, end_launcher(proc, 5)[1][-3000:]
+        time.sleep(0.1)
+
+
+@pytest.mark.parametrize("how", ["SIGKILL", "SIGSTOP"])
+def test_a_killed_or_frozen_rank_and_the_wall_comes_back(tmp_path, mpiexec, how):
+    before = segments()
+    proc, out = launch(tmp_path, mpiexec, ["--liveness", "3"])
+    try:
+        wait_rows(proc, out, 2 * 60)
+        victim = ranks_of(out)[-1]
+        os.kill(victim, getattr(signal, how))
+        _, err = end_launcher(proc, 150)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-3000:]
+    assert err.count("multigpu: recovering (1 of at most 2") == 1 and err.count("multigpu: recovered:") == 1, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is True and s["frames"] == FRAMES and s["recovery_count"] == 1
+    r = s["recoveries"][0]
+    assert r["resumed_at"] == r["last_shown"] + 1 and 0 < r["seconds"] < 60, r
+    rows = read_timings(out / "timings.csv")
+    frames = rows[:, 0].reshape(-1, 2)
+    assert (frames[:, 0] == frames[:, 1]).all() and (frames[:, 0] == range(FRAMES)).all()  # every frame, once
+    restarts = rows[:, -1].reshape(-1, 2)[:, 0]
+    assert (restarts[:r["resumed_at"]] == 0).all() and (restarts[r["resumed_at"]:] == 1).all()
+    for f in range(0, FRAMES, 50):
+        assert read_png(out / "mosaic" / f"frame_{f:05d}.png").shape == (48, 128, 3)
+    assert not ranks_of(out), "a rank outlived the run"
+    assert not (segments() - before), "a failed job's shared-memory segment was left"
+
+
+def test_failures_that_repeat_are_bounded(tmp_path, mpiexec):
+    proc, out = launch(tmp_path, mpiexec, env={"MULTIGPU_FAULT": "1:20"})  # every start fails at frame 20
+    _, err = end_launcher(proc, 150)
+    assert proc.returncode == 3, err[-3000:]
+    assert err.count("multigpu: recovering") == 2 and err.count("multigpu: giving up: 3 failures") == 1, err[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert 15 <= s["frames"] <= 20 and s["complete"] is False  # the frames before the fault, each once
+    assert not ranks_of(out)
+
+
+def test_ctrl_c_during_a_recovery_ends_everything(tmp_path, mpiexec):
+    proc, out = launch(tmp_path, mpiexec, ["--frames", "100000"])
+    try:
+        wait_rows(proc, out, 2 * 30)
+        old = ranks_of(out)
+        os.kill(old[-1], signal.SIGKILL)
+        t = time.monotonic()
+        while not (set(ranks_of(out)) - set(old)):  # the restarted job's ranks, starting up
+            assert proc.poll() is None and time.monotonic() - t < 60, end_launcher(proc, 5)[1][-3000:]
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the launcher and its job
+        _, err = end_launcher(proc, 60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err[-3000:]
+    assert "multigpu: recovering (1 of" in err
+    assert not ranks_of(out)
