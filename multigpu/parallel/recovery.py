@@ -16,9 +16,10 @@ answering: every rank stops, rank 0 keeps every whole frame) and the launcher
 
 Each recovery is one line on the console and an entry of ``summary.json``'s ``recoveries``:
 what failed, the last frame shown before, the frame resumed at, and ``seconds``: from the last
-frame shown before the failure to the first frame shown after (the wall's dark time: detection,
-teardown, start, load, first frame). The launcher hands the recoveries so far to the restarted
-job in ``MULTIGPU_RECOVERIES`` (``Recovery``, rank 0's side). No MPI here.
+frame shown before the failure to the first frame shown after (the wall's dark time), with
+``steps`` (``STEPS``: detection and teardown, launch, imports, scene, GL, first frame). The
+launcher hands the recoveries so far to the restarted job in ``MULTIGPU_RECOVERIES``
+(``Recovery``, rank 0's side). No MPI here.
 """
 
 from __future__ import annotations
@@ -37,6 +38,17 @@ GAVE_UP = 3
 ENV = "MULTIGPU_RECOVERIES"
 #: bytes of timings.csv's end read to find the last whole frame
 TAIL = 1 << 20
+#: when rank 0 reached each step of its setup (epoch seconds; ``mark``): a restart's breakdown
+STARTUP: dict[str, float] = {}
+#: a recovery's steps, each from the one before: the failed job ended (the failure detected, the
+#: runtime's teardown), the new mpiexec started its ranks, their imports, the scene (cached),
+#: the GL context and buffers, the first frame shown
+STEPS = ("ended", "launched", "imported", "scene", "gl", "shown")
+
+
+def mark(step: str) -> None:
+    """Rank 0 reached ``step`` of its setup (``imported``, ``scene``, ``gl``)."""
+    STARTUP.setdefault(step, time.time())
 
 
 def restarts() -> int:
@@ -122,11 +134,21 @@ class Recovery:
         """Frame ``f`` is written: the first after a restart ends that recovery (one line)."""
         if self.pending is None:
             return
+        from multigpu import STARTED
+
         p, self.pending = self.pending, None
-        p["seconds"] = round(time.time() - p["last_shown_at"], 3)
+        now = time.time()
+        p["seconds"] = round(now - p["last_shown_at"], 3)
+        at = {"ended": p.get("ended_at"), "launched": STARTED, **STARTUP, "shown": now}
+        steps, before = {}, p["last_shown_at"]
+        for name in STEPS:  # the steps this job saw, each from the one before
+            if at.get(name) is not None:
+                steps[name], before = round(at[name] - before, 3), at[name]
+        p["steps"] = steps
         self.done.append(p)
         print(f"multigpu: recovered: the wall is back at frame {f}, {p['seconds']:.1f} s after the last frame "
-              f"before the failure ({p['reason']})", file=sys.stderr, flush=True)
+              f"before the failure ({p['reason']}; " + ", ".join(f"{k} {v:.2f}" for k, v in steps.items()) + " s)",
+              file=sys.stderr, flush=True)
 
     def doc(self) -> dict:
         """summary.json's recovery fields (none for a run that never failed)."""
@@ -147,4 +169,4 @@ def failure(out: Path, resume_at: int, reason: str, history: list[dict]) -> list
     except OSError:
         shown_at = time.time()
     return [*history, {"reason": reason, "last_shown": resume_at - 1, "resumed_at": resume_at,
-                       "last_shown_at": shown_at, "frames_lost": 0}]
+                       "last_shown_at": shown_at, "ended_at": time.time(), "frames_lost": 0}]

@@ -30,6 +30,7 @@ from multigpu.parallel.exchange import agree, allgather_text
 from multigpu.parallel.fault import fault
 from multigpu.parallel.frames import Frames
 from multigpu.parallel.outdir import OutputDir
+from multigpu.parallel.recovery import mark
 from multigpu.scene.models import load_scene
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
@@ -125,6 +126,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
     error = None
     scene = path = out = shared = None
     if rank == 0:
+        mark("imported")  # a restarted job's steps (parallel/recovery.py)
         try:
             out = OutputDir(cfg.out)
             if cfg.video:
@@ -132,6 +134,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             if cfg.record:
                 check_record(cfg.record)
             scene, path, load_info = load_world(cfg)
+            mark("scene")
             _check_path(cfg, scene, path)
             shared = ensure_buffers(load_info.get("cache"), scene)  # once, before the others map it
         except InputError as exc:
@@ -161,6 +164,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 ctx, device = create_context(mine, local_rank=local, host_ranks=host_ranks)
             renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum, shared, cfg.colors)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
+            if rank == 0:
+                mark("gl")
             from multigpu import kernels
 
             load_info = {**load_info, "kernel_seconds": kernels.warm()}  # compiled here, never in a frame

@@ -33,6 +33,7 @@ BENCHES = {
     "model-load": ("memory_bench:bench_model_load", "loading a model file: time and peak memory"),
     "textures": ("texture_bench:bench_textures", "a textured model against the same untextured: time, memory"),
     "longrun": ("longrun_bench:bench_longrun", "100,000 frames: frame time and memory over the run"),
+    "recovery": ("recovery_bench:bench_recovery", "a rank killed: how long the wall is dark, step by step"),
     "gpu": ("gpu_bench:bench_gpu", "1, 4 and 16 ranks, hybrid at 4x4 (for a host with a GPU)"),
     "latency": (None, "frames in flight: wall time, input to photon"),
     "timeline": (None, "every rank's phases at --latency 0 and 1, plotted"),

@@ -1,0 +1,86 @@
+"""``multigpu bench recovery``: how long the wall is dark when a rank dies, and where the time goes.
+
+The default plant on a 2x2 wall of 256x256 tiles (4 ranks) runs under the launcher with
+``--recover 1``, the caches warm (a first run builds the scene cache, its buffers file and the
+compiled kernels); a rank is killed (SIGKILL) after 150 frames and the launcher brings the wall
+back at the first frame not shown. Each round's ``summary.json`` holds the recovery's
+``seconds`` (from the last frame shown before the kill to the first after) and its ``steps``
+(``parallel/recovery.py``: the failure detected and the job torn down, the new ranks launched,
+their imports, the scene, the GL context and buffers, the first frame), all wall time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.parallel.recovery import STEPS
+
+#: frames before the kill, and in all
+KILL_AFTER, FRAMES = 150, 400
+
+
+def _ranks(out: str) -> list[int]:
+    pids = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                argv = Path(f"/proc/{d}/cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            if b"mpi4py" in argv and out.encode() in argv:
+                pids.append(int(d))
+    return sorted(pids)
+
+
+def one_round(cache: str, tmp: str, k: int, kill: bool = True) -> dict:
+    """One run, killed once after ``KILL_AFTER`` frames (``kill``); its summary."""
+    out = os.path.join(tmp, f"run-{k}")
+    args = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "4", "walkthrough", "--frames", str(FRAMES),
+            "--mosaic-every", "0", "--no-progress", "--out", out, "--recover", "1"]
+    env = {**os.environ, "MULTIGPU_CACHE": cache}
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        csv, t = Path(out) / "timings.csv", time.monotonic()
+        while kill and not (csv.exists() and csv.read_text().count("\n") > 1 + 4 * KILL_AFTER):
+            if proc.poll() is not None or time.monotonic() - t > 600:
+                raise RuntimeError(f"bench recovery: the run ended early: {proc.communicate()[1][-500:]}")
+            time.sleep(0.05)
+        if kill:
+            os.kill(_ranks(out)[-1], signal.SIGKILL)
+        _, err = proc.communicate(timeout=600)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    if proc.returncode != 0:
+        raise RuntimeError(f"bench recovery: exit {proc.returncode}: {err.strip().splitlines()[-1:]}")
+    return json.loads((Path(out) / "summary.json").read_text())
+
+
+def bench_recovery(quick: bool) -> list[dict]:
+    """The dark time of a recovery and its steps, per round and their medians."""
+    rounds = 2 if quick else 5
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        cache = os.path.join(tmp, "cache")
+        one_round(cache, tmp, -1, kill=False)  # the caches warm: scene, buffers file, compiled kernels
+        print(f"bench recovery: default plant, 2x2 wall of 256x256 tiles (4 ranks), a rank killed after "
+              f"{KILL_AFTER} frames; wall seconds")
+        print(f"{'round':>5} {'dark s':>7} " + " ".join(f"{s:>9}" for s in STEPS), flush=True)
+        for k in range(rounds):
+            r = one_round(cache, tmp, k)["recoveries"][0]
+            rows.append({"round": k, "seconds": r["seconds"], **r["steps"]})
+            print(f"{k:5d} {r['seconds']:7.2f} " + " ".join(f"{r['steps'].get(s, float('nan')):9.2f}" for s in STEPS),
+                  flush=True)
+    med = {s: float(np.median([r.get(s, np.nan) for r in rows])) for s in ("seconds", *STEPS)}
+    print(f"{'median':>5} {med['seconds']:7.2f} " + " ".join(f"{med[s]:9.2f}" for s in STEPS), flush=True)
+    return rows
