@@ -88,3 +88,12 @@ def test_the_sweep_removes_unmapped_segments_of_the_job_only(tmp_path):
     with open(mapped, "r+b") as fh, mmap.mmap(fh.fileno(), 4096):  # a live job's segment
         assert sweep(start, tmp_path) == ["mpich_shm_left_0"]
     assert old.exists() and other.exists() and mapped.exists() and not left.exists()
+
+
+def test_the_statistics_panel_tells_the_operator_of_a_restart():
+    from multigpu.display.hud import stats_panel
+
+    args = (60.0, "auto", np.ones((4, 3)), np.full(4, 100.0), "path")
+    plain, told = stats_panel(*args), stats_panel(*args, restarts=2)
+    orange = lambda img: ((img[..., 0] > 200) & (img[..., 1] > 120) & (img[..., 1] < 200) & (img[..., 2] < 100)).sum()
+    assert told.shape[0] > plain.shape[0] and orange(told[plain.shape[0] - 4:]) > 20  # its own last line

@@ -50,16 +50,17 @@ def overlay(img: np.ndarray, rects, alpha: float = 0.18, origin=(0, 0), scale: i
 
 
 def stats_panel(fps: float, balance: str, phases: np.ndarray, triangles: np.ndarray, mode: str,
-                width: int = 220, quality: str = "") -> np.ndarray:
+                width: int = 220, quality: str = "", restarts: int = 0) -> np.ndarray:
     """The statistics panel as an RGB image: a line of FPS, strategy and mode (and ``quality``:
     the frame's render scale and LOD bound where below full), a line of
     imbalance, then one bar per rank with its balancing, rendering and exchange milliseconds
-    (``phases``, (K, 3)) stacked to scale, and the scale."""
+    (``phases``, (K, 3)) stacked to scale, and the scale; after a recovery (``restarts``) a last
+    line says how often the wall was restarted."""
     from PIL import Image, ImageDraw, ImageFont
 
     K = len(phases)
     bar, pad, line = 7, 4, 12
-    height = pad * 2 + line * 3 + K * (bar + 2)
+    height = pad * 2 + line * (3 + bool(restarts)) + K * (bar + 2)
     img = Image.new("RGB", (width, height), (16, 16, 24))
     draw = ImageDraw.Draw(img)
     font = ImageFont.load_default()
@@ -81,6 +82,8 @@ def stats_panel(fps: float, balance: str, phases: np.ndarray, triangles: np.ndar
             x += w
         y += bar + 2
     draw.text((pad, y), f"bar = {top:.1f} ms: balance render exchange", fill=(170, 170, 170), font=font)
+    if restarts:
+        draw.text((pad, y + line), f"recovered: restarted {restarts}x", fill=(255, 170, 60), font=font)
     return np.asarray(img)
 
 

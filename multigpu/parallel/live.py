@@ -92,7 +92,7 @@ class Live:
         scale, lod = float(get("render_scale")[0]), float(get("lod_error_px")[0])
         quality = f"  x{scale:.2f} {lod:.1f}px" if 0 < scale < 1.0 or lod > 0 else ""  # render scale, LOD bound
         return stats_panel(self.fps, self.balances[control.balance], phases, get("triangles"), mode,
-                           width=min(220, self.cfg.tile[0]), quality=quality)
+                           width=min(220, self.cfg.tile[0]), quality=quality, restarts=int(get("restarts")[0]))
 
     def tile(self, back: np.ndarray, work: Work, control: Control, rows: np.ndarray) -> np.ndarray:
         """What this rank's window shows: the composed tile, with the overlays that are on.
