@@ -268,10 +268,11 @@ def _ranks_list(text: str) -> list[int]:
 def _walkthrough(a) -> int:
     from mpi4py import MPI
 
+    from multigpu.flags import dark_tiles
     from multigpu.parallel.hosts import tile_comm
     from multigpu.parallel.job import Interrupted, Job, collective_exit, teardown_barrier
 
-    comm = tile_comm(MPI.COMM_WORLD, getattr(a, "wall", None))
+    comm = tile_comm(MPI.COMM_WORLD, getattr(a, "wall", None), dark_tiles(a))
     job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else 30.0)
     job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:

@@ -112,6 +112,7 @@ class WalkConfig:
     # resumes at, continuing the run in --out
     recover: int | None = None
     resume_at: int = 0
+    dark: tuple[int, ...] = ()  # tiles whose PC is gone: black, drawn by nobody; their ranks stand in elsewhere
 
     def __post_init__(self):
         self._scene_as_drawn()
@@ -169,6 +170,8 @@ class WalkConfig:
         if not 0 <= self.recover <= 100 or self.resume_at < 0:
             raise InputError(f"--recover must be 0..100 restarts and --resume-at >= 0, got {self.recover}, "
                              f"{self.resume_at}")
+        if any(not 0 <= k < self.ranks for k in self.dark) or len(set(self.dark)) >= self.ranks:
+            raise InputError(f"--dark-tiles must name some of the tiles 0..{self.ranks - 1}, got {list(self.dark)}")
         if not (self.liveness >= 0 and math.isfinite(self.liveness)):
             raise InputError(f"--liveness must be >= 0 seconds (0: off), got {self.liveness}")
         if self.present not in PRESENTERS:
@@ -229,4 +232,4 @@ class WalkConfig:
     @property
     def canvas(self) -> Canvas:
         """The wall with its mullions: the camera's frustum, the renderers' framebuffer, the mosaic."""
-        return Canvas(self.grid, self.tile, self.mullion)
+        return Canvas(self.grid, self.tile, self.mullion, self.dark)

@@ -221,6 +221,9 @@ def _output_args(w: argparse.ArgumentParser, d: dict) -> None:
                    help="restart the job after a failure (a rank or host that dies or freezes), resuming at the "
                         "first frame not shown, at most N times in 10 minutes; the launcher's (default: 3 with "
                         "--present window, 0 headless)")
+    r.add_argument("--dark-tiles", metavar="K,...", default="",
+                   help="tiles whose PC is gone: shown black, the rest of the wall shared among every rank (the "
+                        "launcher's restart without a host that does not answer)")
     r.add_argument("--resume-at", type=int, default=0, metavar="F",
                    help="start at frame F of the camera path, continuing the run already in --out (the "
                         "launcher's restart after a failure)")
@@ -263,7 +266,24 @@ def walk_config(a):
                       liveness=a.liveness, progress=not a.no_progress, record=a.record, timeline=a.timeline,
                       monitor=wall.monitor if a.monitor == "beside" and wall.monitor else _monitor(a.monitor),
                       target_fps=a.target_fps, render_scale=a.render_scale,
-                      lod_error=a.lod_error, colors=a.colors, recover=a.recover, resume_at=a.resume_at)
+                      lod_error=a.lod_error, colors=a.colors, recover=a.recover, resume_at=a.resume_at,
+                      dark=_labels(a.dark_tiles))
+
+
+def dark_tiles(a) -> tuple[int, ...]:
+    """``--dark-tiles`` as tile labels, () where unreadable (the configuration's check says so)."""
+    try:
+        return _labels(getattr(a, "dark_tiles", "") or "")
+    except InputError:
+        return ()
+
+
+def _labels(text: str) -> tuple[int, ...]:
+    """``--dark-tiles 2,3`` as tile labels."""
+    try:
+        return tuple(sorted({int(v) for v in text.split(",") if v.strip()}))
+    except ValueError:
+        raise InputError(f"--dark-tiles must be tile numbers separated by commas, got '{text}'") from None
 
 
 def _monitor(text: str | None) -> tuple[int, int] | None:

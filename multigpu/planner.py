@@ -33,7 +33,7 @@ class Planner:
     def __init__(self, cfg, scene, rank: int | None = None):
         self.cfg, self.scene, self.rank = cfg, scene, rank
         self.canvas = cfg.canvas
-        self._bezels = self.canvas.bezels  # without bezels the visible space is the canvas: no calls per frame
+        self._bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
         screen = cfg.decomposition == "screen"
         # what an operator cycles through: every strategy of the screen decomposition, else just that one
         self.balances = list(STRATEGIES) if screen else [cfg.decomposition]

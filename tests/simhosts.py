@@ -24,6 +24,7 @@ RSH = """#!/bin/sh
 # remote shell onto a simulated host: rsh [-options] HOST COMMAND... (the command runs there in sh, as over ssh)
 while [ "${1#-}" != "$1" ]; do shift; done
 host=$1; shift
+if [ -e "%s/$host.down" ]; then echo "ssh: connect to host $host port 22: No route to host" >&2; exit 255; fi
 exec nsenter --target "$(cat "%s/$host.pid")" --uts --mount -- sh -c "$*"
 """
 
@@ -37,7 +38,8 @@ def _uts(pid: int) -> str | None:
 
 class SimHosts:
     """``with SimHosts(["a", "b"], tmp) as h``: hosts a and b; ``h.rsh`` is the remote shell,
-    ``h.kill(name)`` kills every process on one host."""
+    ``h.kill(name)`` kills every process on one host, ``h.down(name)`` also makes its remote
+    shell fail until ``h.up(name)``."""
 
     def __init__(self, names: list[str], where: Path):
         self.names, self.dir = list(names), Path(where)
@@ -73,7 +75,7 @@ class SimHosts:
         self.env = {"MULTIGPU_RSH": str(self.dir / "rsh"), "UCX_NET_DEVICES": "lo",
                     "OMPI_MCA_btl_tcp_if_include": "lo", "OMPI_MCA_oob_tcp_if_include": "lo"}
         self.rsh = self.dir / "rsh"
-        self.rsh.write_text(RSH % self.dir)
+        self.rsh.write_text(RSH % (self.dir, self.dir))
         self.rsh.chmod(0o755)
         return self
 
@@ -99,6 +101,15 @@ class SimHosts:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+    def down(self, name: str) -> None:
+        """Host ``name`` fails and stays down: its processes killed, its remote shell refused."""
+        (self.dir / f"{name}.down").touch()
+        self.kill(name)
+
+    def up(self, name: str) -> None:
+        """Host ``name`` answers its remote shell again."""
+        (self.dir / f"{name}.down").unlink(missing_ok=True)
 
     def __exit__(self, *exc) -> None:
         for name in self.pids:

@@ -9,7 +9,8 @@ import time
 import numpy as np
 
 from multigpu.parallel import recovery
-from multigpu.parallel.mpirun import _without, restart_bound
+from multigpu.parallel.mpirun import restart_bound
+from multigpu.parallel.relaunch import _without
 from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings
 from multigpu.parallel.segments import sweep
 
@@ -51,7 +52,7 @@ def test_the_tail_is_enough_for_a_long_run_and_an_empty_one_resumes_at_zero(tmp_
 
 def test_the_summary_counts_each_recovery_and_its_dark_time(tmp_path, monkeypatch):
     timings(tmp_path, 3, 1)
-    history = recovery.failure(tmp_path, 3, "rank 1 died", [])
+    history = recovery.failure(tmp_path, 3, "rank 1 died", [], recovery.last_shown_at(tmp_path))
     assert history[0]["resumed_at"] == 3 and history[0]["last_shown"] == 2 and history[0]["frames_lost"] == 0
     history[0]["last_shown_at"] = time.time() - 2.0
     monkeypatch.setenv(recovery.ENV, json.dumps(history))

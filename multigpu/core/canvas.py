@@ -13,7 +13,12 @@ Two pixel spaces, both origin bottom-left, rects half-open ``[x0, y0, x1, y1)``:
 (conservatively: an object keeps every visible pixel it may cover; one wholly behind a bezel
 becomes invisible). ``to_canvas`` cuts a frame's work at the tile borders and moves each part
 onto the canvas, so hidden pixels are never rendered. With zero mullions both are identities
-and are skipped. Pure numpy.
+and are skipped.
+
+**Dark tiles** (``dark``: the labels of tiles whose PC is gone, ``parallel/recovery.py``) hide
+like mullions: an object that reaches no live tile is invisible, the parts of a plan on dark
+tiles are cut away, and the mosaic shows them black; the balancers, planning loads of visible
+objects, share the live tiles among all the ranks. Pure numpy.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ class Canvas:
     grid: tuple[int, int]
     tile: tuple[int, int]
     mullion: tuple[int, int] = (0, 0)
+    dark: tuple[int, ...] = ()  # tile labels shown black, drawn by nobody
 
     @property
     def visible(self) -> tuple[int, int]:
@@ -55,6 +61,11 @@ class Canvas:
         """Whether any pixels hide behind bezels (asked every frame: computed once)."""
         return any(self.mullion)
 
+    @cached_property
+    def cuts(self) -> bool:
+        """Whether plans need ``to_visible`` and ``to_canvas``: bezels or dark tiles."""
+        return self.bezels or bool(self.dark)
+
     def tiles(self) -> np.ndarray:
         """(K, 4) canvas rect of every rank label's tile (column-major labels, row 0 on top)."""
         rows, cols = self.grid
@@ -69,17 +80,37 @@ class Canvas:
         return np.stack([col * self.mullion[0], (rows - 1 - row) * self.mullion[1]], axis=1).astype(np.int64)
 
     def hidden(self) -> np.ndarray:
-        """(H, W) bool of the canvas, top row first (as a PNG): the pixels behind bezels."""
+        """(H, W) bool of the canvas, top row first (as a PNG): the pixels behind bezels and on
+        dark tiles."""
         W, H = self.size
         mask = np.ones((H, W), dtype=bool)
-        for x0, y0, x1, y1 in self.tiles():  # K tiles
-            mask[H - y1:H - y0, x0:x1] = False
+        for k, (x0, y0, x1, y1) in enumerate(self.tiles()):  # K tiles
+            mask[H - y1:H - y0, x0:x1] = k in self.dark
         return mask
+
+    def _live_visible(self) -> np.ndarray:
+        """(L, 4) normalized visible rects of the live tiles."""
+        (VW, VH), live = self.visible, [k for k in range(self.grid[0] * self.grid[1]) if k not in self.dark]
+        return tile_regions(self.grid[0], self.grid[1], *self.tile)[live] / np.array([VW, VH, VW, VH], dtype=float)
 
     def to_visible(self, rects: np.ndarray) -> np.ndarray:
         """(N, 4) normalized canvas rects -> normalized visible rects (NaN: no visible pixel)."""
-        if not self.bezels:
-            return rects
+        if self.dark:
+            return self._on_live(self._squeezed(rects) if self.bezels else np.asarray(rects, dtype=np.float64))
+        return self._squeezed(rects) if self.bezels else rects
+
+    def _on_live(self, v: np.ndarray) -> np.ndarray:
+        """Visible rects ``v`` with NaN for those that meet no live tile."""
+        live = self._live_visible()
+        with np.errstate(invalid="ignore"):
+            meet = ((np.minimum(v[:, None, 2:], live[None, :, 2:]) > np.maximum(v[:, None, :2], live[None, :, :2]))
+                    .all(axis=-1).any(axis=1))
+        out = v.copy()
+        out[~meet] = np.nan
+        return out
+
+    def _squeezed(self, rects: np.ndarray) -> np.ndarray:
+        """The mullions closed up: canvas rects -> visible rects."""
         r = np.asarray(rects, dtype=np.float64)
         (W, H), (VW, VH) = self.size, self.visible
         (rows, cols), (tw, th), (mx, my) = self.grid, self.tile, self.mullion
@@ -100,8 +131,8 @@ class Canvas:
         """``work`` planned in the visible space, cut at the tile borders and moved onto the
         canvas. A cut part draws only the objects whose visible span touches it, and the loads
         count what is drawn (a rank whose masks the plan left out keeps its planned load).
-        ``vrects`` are this frame's normalized visible object rects."""
-        if not self.bezels:
+        ``vrects`` are this frame's normalized visible object rects. Parts on dark tiles go."""
+        if not self.cuts:
             return work
         vtiles = tile_regions(self.grid[0], self.grid[1], *self.tile)
         shift = self._shift()
@@ -112,7 +143,10 @@ class Canvas:
             R = np.asarray(work.rects[k], dtype=np.int64).reshape(-1, 4)
             lo = np.maximum(R[:, None, :2], vtiles[None, :, :2])
             hi = np.minimum(R[:, None, 2:], vtiles[None, :, 2:])
-            p, t = np.nonzero((hi > lo).all(axis=-1))  # (piece, tile) that meet, by piece
+            meet = (hi > lo).all(axis=-1)
+            if self.dark:
+                meet[:, list(self.dark)] = False
+            p, t = np.nonzero(meet)  # (piece, tile) that meet, by piece
             cut = np.concatenate([lo[p, t], hi[p, t]], axis=1)
             rects.append(cut + np.tile(shift[t], 2))
             if front is not None:  # the cuts of the front pieces come first

@@ -240,8 +240,8 @@ class Frames:
             return
         wait_all([self.comm.Igather(self.back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
         if self.rank == 0:
-            self._write(self.record.image, f, stitch(self.gathered, self.tiles, self.canvas.size), work.rects,
-                        mosaic_due)
+            self._write(self.record.image, f, stitch(self.gathered, self.tiles, self.canvas.size, self.canvas.dark),
+                        work.rects, mosaic_due)
 
     def _write(self, write, *args) -> None:
         """Rank 0's outputs: the first write that fails is kept (``record.failed``) and stops every

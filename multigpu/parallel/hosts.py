@@ -108,6 +108,14 @@ def probe(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = PROBE_
     launchers will use: ``rsh``, or ssh in batch mode), all asked at once; the first that does
     not is one InputError naming the host, the shell and what it said, before any rank starts
     (the MPI launchers' own reports name neither)."""
+    failed = unreachable(hosts, rsh, timeout)
+    if failed:
+        raise InputError(next(iter(failed.values())))
+
+
+def unreachable(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = PROBE_TIMEOUT) -> dict[str, str]:
+    """The hosts (not this machine) that do not answer ``RSH HOST true``, all asked at once, each
+    with one line saying what went wrong."""
     import shlex
     import subprocess
 
@@ -121,7 +129,7 @@ def probe(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = PROBE_
                                                 start_new_session=True)))
         except OSError as exc:
             raise InputError(f"remote shell {shlex.join(shell)}: cannot run it ({exc.strerror or exc})") from None
-    failed = None
+    failed = {}
     for h, proc in running:  # hosts, not ranks
         try:
             _, err = proc.communicate(timeout=timeout)
@@ -130,22 +138,23 @@ def probe(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = PROBE_
             proc.kill()
             _, err = proc.communicate()
             code = None
-        if failed is None and code != 0:
+        if code != 0:
             said = (err or "").strip().splitlines()
             what = f"no answer within {timeout:g} s" if code is None else f"exit {code}"
-            failed = (f"host {h}: the remote shell '{shlex.join(shell)} {h} true' failed ({what}"
-                      + (f": {said[-1]}" if said else "") + "); check that it reaches the host without a "
-                      "password (MULTIGPU_RSH names another shell)")
-    if failed:
-        raise InputError(failed)
+            failed[h] = (f"host {h}: the remote shell '{shlex.join(shell)} {h} true' failed ({what}"
+                         + (f": {said[-1]}" if said else "") + "); check that it reaches the host without a "
+                         "password (MULTIGPU_RSH names another shell)")
+    return failed
 
 
-def tile_comm(world, wall_path: str | None):
+def tile_comm(world, wall_path: str | None, dark: tuple[int, ...] = ()):
     """The job's communicator with each process's rank the tile it drives: where a wall file puts
     a host's tiles apart (a PC per row), MPI's processes, filled into the hosts in order, are
     renumbered by ``wall.tile_order`` (one split at start; every process reads the same file).
-    The world itself where nothing is renumbered, or where the file cannot be read (the
-    configuration's check then reports it, once)."""
+    Without a PC that is gone (``dark``: its tiles), the launcher starts its processes last, on
+    the last host that answers (``survivors``): they take the dark tiles. The world itself
+    where nothing is renumbered, or where the file cannot be read (the configuration's check
+    then reports it, once)."""
     from multigpu.errors import InputError
     from multigpu.wall import load_wall, tile_order
 
@@ -153,6 +162,19 @@ def tile_comm(world, wall_path: str | None):
         order = tile_order(load_wall(wall_path), world.Get_size()) if wall_path else None
     except InputError:
         order = None
+    if dark:
+        base = order or list(range(world.Get_size()))
+        order = [t for t in base if t not in dark] + [t for t in base if t in dark]
     if order is None or order == sorted(order):
         return world
     return world.Split(0, order[world.Get_rank()])
+
+
+def survivors(hosts: list[tuple[str, int]], gone: set[str]) -> list[tuple[str, int]]:
+    """The placement without the ``gone`` hosts: the others in order, the last of them also
+    running the gone hosts' processes (they stand in for the dark tiles: ``tile_comm``)."""
+    kept = [(h, n) for h, n in hosts if h not in gone]
+    if not kept:
+        return []
+    extra = sum(n for h, n in hosts if h in gone)
+    return [*kept[:-1], (kept[-1][0], kept[-1][1] + extra)]

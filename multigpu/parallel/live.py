@@ -123,7 +123,8 @@ class Live:
             self.pending = [self.mcomm.Isend(self.small, dest=0, tag=1)]
             return None
         if self.last_rects is not None:  # the last frame, whole
-            img = overlay(stitch(self.small_tiles, self.small_rects, self.monitor_size), self.last_rects, scale=s)
+            img = overlay(stitch(self.small_tiles, self.small_rects, self.monitor_size, self.cfg.canvas.dark),
+                          self.last_rects, scale=s)
             shown = img[::-1]
             if control.stats:
                 shown = paste(shown, self._panel(control, rows))

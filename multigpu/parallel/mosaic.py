@@ -11,12 +11,14 @@ import numpy as np
 from multigpu.errors import WriteFailed
 
 
-def stitch(tiles: np.ndarray, tile_rects: np.ndarray, size) -> np.ndarray:
-    """(K, th, tw, 3) bottom-up tiles -> (H, W, 3) image, top row first (for PNG)."""
+def stitch(tiles: np.ndarray, tile_rects: np.ndarray, size, dark=()) -> np.ndarray:
+    """(K, th, tw, 3) bottom-up tiles -> (H, W, 3) image, top row first (for PNG); ``dark``
+    tiles (their PC gone) stay black."""
     W, H = size
     img = np.zeros((H, W, 3), dtype=np.uint8)
     for k, (x0, y0, x1, y1) in enumerate(tile_rects):  # K tiles
-        img[y0:y1, x0:x1] = tiles[k]
+        if k not in dark:
+            img[y0:y1, x0:x1] = tiles[k]
     return img[::-1]
 
 

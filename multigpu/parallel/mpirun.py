@@ -235,16 +235,19 @@ def _die_with_parent() -> None:
         pass
 
 
-def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec") -> int:
+def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec", started_job=None) -> int:
     """Run the launcher, pass it SIGINT/SIGTERM/SIGHUP exactly once each, and return the
     documented exit code whichever MPI runs the job: 0 done, 2 bad input, 128 + signal when a
     signal stopped it (Open MPI's mpiexec itself returns 1 there), 1 any failure (MPICH's
     mpiexec returns 255 when a host dies, Open MPI's 9 or 1). If the runtime
     killed rank 0 before it closed its record (a host died), summary.json is rewritten from
     the whole frames in timings.csv and one line says so. After a failure nothing of the job is
-    left: its process session is killed and its shared-memory segments swept (``segments``)."""
+    left: its process session is killed and its shared-memory segments swept (``segments``).
+    ``started_job``: called with the launcher's process once it runs (``relaunch``'s watch)."""
     started = time.time()
     proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=_die_with_parent)
+    if started_job is not None:
+        started_job(proc)
     got: list[int] = []
 
     def forward(signum, _frame):
@@ -319,6 +322,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2
     if bound and not help_only(rest):
+        from multigpu.parallel.relaunch import recovering
+
         return recovering(launcher, ranks, rest, hosts, bound)
     return supervise(cmd, launcher.environ(), out_dir(rest), Path(launcher.path).name)
 
@@ -335,61 +340,6 @@ def restart_bound(argv: list[str]) -> int:
         return max(0, int(value))
     except ValueError:
         return 0  # the walkthrough refuses it in one line
-
-
-def recovering(launcher: Launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
-    """``supervise`` the job, and after a failure (exit 1) start it again at the first frame not
-    shown (``recovery``), at most ``bound`` times within ``recovery.WINDOW``: then give up (one
-    line, ``recovery.GAVE_UP``). Bad input, a signal, a finished run: their own code, as ever."""
-    import collections
-    import json
-
-    from multigpu.parallel import recovery
-
-    out, name = out_dir(argv), Path(launcher.path).name
-    restarts: collections.deque = collections.deque()
-    history: list[dict] = []
-    env, args = launcher.environ(), argv
-    try:
-        while True:
-            code = supervise(launcher.command(ranks, args, hosts=hosts, env=env), env, out, name)
-            if code != 1 or out is None:
-                return code
-            summary = _read_summary(out) or {}
-            reason = str(summary.get("stopped_by") or f"{name} exited {code}")
-            now = time.monotonic()
-            while restarts and now - restarts[0] > recovery.WINDOW:
-                restarts.popleft()
-            if len(restarts) >= bound:
-                print(f"multigpu: giving up: {len(restarts) + 1} failures within {recovery.WINDOW / 60:.0f} minutes "
-                      f"(--recover {bound}), the last: {reason}; {out}/ keeps every frame shown",
-                      file=sys.stderr, flush=True)
-                return recovery.GAVE_UP
-            restarts.append(now)
-            history = [h if "seconds" in h else {**h, "seconds": None}  # a restart that failed before a frame
-                       for h in summary.get("recoveries", history)]
-            at = recovery.resume_point(out, ranks, recovery.recorded_frames(_flag_value(argv, "--record")))
-            history = recovery.failure(out, at, reason, history)
-            print(f"multigpu: recovering ({len(restarts)} of at most {bound} restarts in "
-                  f"{recovery.WINDOW / 60:.0f} minutes): {reason}; restarting the wall at frame {at}",
-                  file=sys.stderr, flush=True)
-            env = launcher.environ({recovery.ENV: json.dumps(history)})
-            args = [*_without(argv, "--resume-at"), "--resume-at", str(at)]
-    except KeyboardInterrupt:  # Ctrl-C between two jobs: nothing is running
-        return 130
-
-
-def _without(argv: list[str], flag: str) -> list[str]:
-    """``argv`` without ``flag`` and its value (``--flag V`` or ``--flag=V``)."""
-    out, skip = [], False
-    for a in argv:
-        if skip:
-            skip = False
-        elif a == flag:
-            skip = True
-        elif not a.startswith(flag + "="):
-            out.append(a)
-    return out
 
 
 if __name__ == "__main__":

@@ -210,6 +210,7 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
             "path": cfg.path or cfg.path_kind, "egl_device": placement[0]["egl_device"], "present": cfg.present,
             "ranks": placement, "hosts": len({p["host"] for p in placement}),
             "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,
+            "dark": list(cfg.dark),
             "monitor": cfg.monitor is not None,
             "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
             "kernel": {"compiled": jit.available(),

@@ -160,13 +160,18 @@ class Recovery:
                 "recovery_seconds_max": max(secs) if secs else None}
 
 
-def failure(out: Path, resume_at: int, reason: str, history: list[dict]) -> list[dict]:
-    """The recoveries so far with this one added: what failed, the last frame shown (and when:
-    ``timings.csv``'s last write), the frame resumed at, and the path frames it skips (none:
-    the path resumes at the first frame not shown)."""
+def last_shown_at(out: Path) -> float:
+    """When the run in ``out`` last showed a frame: ``timings.csv``'s last write (read before
+    ``resume_point`` trims it)."""
     try:
-        shown_at = os.stat(Path(out) / "timings.csv").st_mtime
+        return os.stat(Path(out) / "timings.csv").st_mtime
     except OSError:
-        shown_at = time.time()
+        return time.time()
+
+
+def failure(out: Path, resume_at: int, reason: str, history: list[dict], shown_at: float) -> list[dict]:
+    """The recoveries so far with this one added: what failed, the last frame shown (and when:
+    ``shown_at``), the frame resumed at, and the path frames it skips (none: the path resumes at
+    the first frame not shown)."""
     return [*history, {"reason": reason, "last_shown": resume_at - 1, "resumed_at": resume_at,
                        "last_shown_at": shown_at, "ended_at": time.time(), "frames_lost": 0}]

@@ -160,7 +160,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             if presenter.context is not None:  # render in the window's context
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:
-                mine = cfg.gpus[rank] if cfg.gpus and cfg.gpus[rank] is not None else cfg.device
+                own = cfg.gpus and cfg.gpus[rank] is not None and rank not in cfg.dark  # a stand-in: any GPU
+                mine = cfg.gpus[rank] if own else cfg.device
                 ctx, device = create_context(mine, local_rank=local, host_ranks=host_ranks)
             renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum, shared, cfg.colors)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
@@ -200,7 +201,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
 
 
 def _presenter(cfg: WalkConfig, rank: int):
-    """This rank's presenter: headless, or a window at its tile's place (or the wall file's)."""
+    """This rank's presenter: headless, or a window at its tile's place (or the wall file's);
+    headless where its tile is dark (it stands in for a PC that is gone)."""
     from multigpu.display import make_presenter
 
     x0, _, x1, y1 = (int(v) for v in cfg.canvas.tiles()[rank])
@@ -209,7 +211,7 @@ def _presenter(cfg: WalkConfig, rank: int):
     display = screen_of(cfg.displays[rank] if cfg.displays else None, cfg.gpus[rank] if cfg.gpus else None)
     where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"
     full = bool(cfg.fullscreen and cfg.fullscreen[rank])
-    return make_presenter(cfg.present, rank, cfg.tile, pos, display, where, full)
+    return make_presenter("headless" if rank in cfg.dark else cfg.present, rank, cfg.tile, pos, display, where, full)
 
 
 def screen_of(display: str | None, gpu: int | None) -> str | None:

@@ -1,0 +1,134 @@
+"""The launcher's side of ``--recover``: supervise the job, and start it again after a failure.
+
+After a failure (exit 1) the job restarts at the first frame not shown (``recovery``), at most
+``bound`` times within ``recovery.WINDOW`` (then one line and ``recovery.GAVE_UP``). On several
+hosts each restart first asks every host to answer (``hosts.unreachable``): a host that does
+not is left out, its tiles dark (``--dark-tiles``: black, drawn by nobody) and its processes
+started last on the last host that answers (``hosts.survivors``), so the wall goes on with the
+others sharing the live tiles. While a host is out it is asked again every ``REJOIN`` seconds;
+once it answers the job is stopped after its frame (SIGTERM) and started again with it, at the
+next frame: a rejoin is not a failure. Bad input, a signal, a finished run: their own code.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import os
+import shutil
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from multigpu.parallel import recovery
+from multigpu.parallel.hosts import survivors, unreachable
+from multigpu.parallel.mpirun import Launcher, _flag_value, _read_summary, out_dir, supervise
+
+#: seconds between asking a host that is out whether it answers again (MULTIGPU_REJOIN_EVERY)
+REJOIN = float(os.environ.get("MULTIGPU_REJOIN_EVERY", "30"))
+
+
+def recovering(launcher: Launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
+    """Run the job under ``supervise`` until it ends for good (module doc); its exit code."""
+    out, name = out_dir(argv), Path(launcher.path).name
+    rsh = shutil.which(os.environ["MULTIGPU_RSH"]) if os.environ.get("MULTIGPU_RSH") else None
+    restarts: collections.deque = collections.deque()
+    history: list[dict] = []
+    env, args, place, gone = launcher.environ(), argv, hosts, set()
+    try:
+        while True:
+            rejoin = threading.Event()
+            watch = (lambda proc: _watch(proc, hosts, gone, rsh, rejoin)) if gone else None
+            code = supervise(launcher.command(ranks, args, hosts=place, env=env), env, out, name, watch)
+            if out is None or (code != 1 and not rejoin.is_set()):
+                return code
+            summary = _read_summary(out) or {}
+            if rejoin.is_set():  # a host that was out answers: it takes its tiles back
+                gone, reason = set(), None
+                print(f"multigpu: {', '.join(sorted(_names(hosts)))}: every host answers; restarting the wall with "
+                      "all of them", file=sys.stderr, flush=True)
+            else:
+                reason = str(summary.get("stopped_by") or f"{name} exited {code}")
+                now = time.monotonic()
+                while restarts and now - restarts[0] > recovery.WINDOW:
+                    restarts.popleft()
+                if len(restarts) >= bound:
+                    print(f"multigpu: giving up: {len(restarts) + 1} failures within {recovery.WINDOW / 60:.0f} "
+                          f"minutes (--recover {bound}), the last: {reason}; {out}/ keeps every frame shown",
+                          file=sys.stderr, flush=True)
+                    return recovery.GAVE_UP
+                restarts.append(now)
+                gone = set(unreachable(hosts, rsh)) if hosts else set()
+            place, dark = _placement(hosts, gone, argv, ranks)
+            if hosts and not place:
+                print("multigpu: giving up: no host answers", file=sys.stderr, flush=True)
+                return recovery.GAVE_UP
+            history = [h if "seconds" in h else {**h, "seconds": None}  # a restart that failed before a frame
+                       for h in summary.get("recoveries", history)]
+            shown_at = recovery.last_shown_at(out)
+            at = recovery.resume_point(out, ranks, recovery.recorded_frames(_flag_value(argv, "--record")))
+            if reason is not None:
+                history = recovery.failure(out, at, reason, history, shown_at)
+                without = f" without {', '.join(sorted(gone))} (tiles {','.join(map(str, dark))} dark)" if gone else ""
+                print(f"multigpu: recovering ({len(restarts)} of at most {bound} restarts in "
+                      f"{recovery.WINDOW / 60:.0f} minutes): {reason}; restarting the wall{without} at frame {at}",
+                      file=sys.stderr, flush=True)
+            env = launcher.environ({recovery.ENV: json.dumps(history)})
+            args = [*_without(_without(argv, "--resume-at"), "--dark-tiles"), "--resume-at", str(at),
+                    *(["--dark-tiles", ",".join(map(str, dark))] if dark else [])]
+    except KeyboardInterrupt:  # Ctrl-C between two jobs: nothing is running
+        return 130
+
+
+def _names(hosts) -> set[str]:
+    return {h for h, _ in hosts or []}
+
+
+def _placement(hosts, gone: set[str], argv: list[str], ranks: int) -> tuple[list | None, list[int]]:
+    """Where the job's processes go without the ``gone`` hosts, and the tiles those drove."""
+    if not gone:
+        return hosts, []
+    from multigpu.wall import load_wall, tile_order
+
+    wall = _flag_value(argv, "--wall")
+    base = (tile_order(load_wall(wall), ranks) if wall else None) or list(range(ranks))
+    dark, at = [], 0
+    for h, n in hosts:  # hosts, a handful
+        if h in gone:
+            dark += base[at:at + n]
+        at += n
+    return survivors(hosts, gone), sorted(dark)
+
+
+def _watch(proc, hosts, gone: set[str], rsh: str | None, rejoin: threading.Event) -> None:
+    """While the job runs without ``gone``, ask them every ``REJOIN`` seconds; once every one
+    answers, stop the job after its frame (it is started again with them)."""
+    asked = [(h, n) for h, n in hosts if h in gone]
+
+    def ask():
+        while proc.poll() is None:
+            time.sleep(REJOIN)
+            if proc.poll() is None and not unreachable(asked, rsh):
+                rejoin.set()
+                try:
+                    os.killpg(proc.pid, signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+                return
+
+    threading.Thread(target=ask, daemon=True).start()
+
+
+def _without(argv: list[str], flag: str) -> list[str]:
+    """``argv`` without ``flag`` and its value (``--flag V`` or ``--flag=V``)."""
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+        elif a == flag:
+            skip = True
+        elif not a.startswith(flag + "="):
+            out.append(a)
+    return out
