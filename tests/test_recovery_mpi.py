@@ -131,3 +131,40 @@ def test_ctrl_c_during_a_recovery_ends_everything(tmp_path, mpiexec):
     assert proc.returncode == 130, err[-3000:]
     assert "multigpu: recovering (1 of" in err
     assert not ranks_of(out)
+
+
+def test_an_x_server_that_dies_and_comes_back(tmp_path):
+    """Windows on two X servers; one dies mid-run: restarts fail while it is gone, and once it
+    is back (as a display manager restarts it) the wall comes back whole (windowed runs recover
+    by default)."""
+    from xserver import Xvfb, need_tools
+
+    need_tools()
+    out, frames = tmp_path / "o", 600
+    with Xvfb((64, 48)) as a:
+        b = Xvfb((64, 48))
+        try:
+            wall = tmp_path / "wall.json"
+            wall.write_text(json.dumps({"grid": "1x2", "tile": "64x48", "displays": [
+                {"rank": 0, "display": a.screen(0), "position": [0, 0]},
+                {"rank": 1, "display": b.screen(0), "position": [0, 0]}]}))
+            args = ["-n", "2", "walkthrough", *SMALL, "--wall", str(wall), "--present", "window", "--frames",
+                    str(frames), "--mosaic-every", "100", "--no-overlay", "--out", str(out), "--liveness", "5"]
+            proc = start_launcher(args, {"LP_NUM_THREADS": "1"})
+            try:
+                wait_rows(proc, out, 2 * 60)
+                name = b.name
+                b.stop()
+                time.sleep(1.5)  # restarts fail meanwhile: its display is gone
+                b = Xvfb((64, 48), display=name)
+                _, err = end_launcher(proc, 180)
+            finally:
+                if proc.poll() is None:
+                    os.killpg(proc.pid, signal.SIGKILL)
+        finally:
+            b.stop()
+    assert proc.returncode == 0, err[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] and s["frames"] == frames and s["recovery_count"] >= 1, err[-3000:]
+    frames_seen = read_timings(out / "timings.csv")[:, 0].reshape(-1, 2)[:, 0]
+    assert (frames_seen == range(frames)).all()

@@ -28,10 +28,10 @@ def need_tools() -> None:
 class Xvfb:
     """An Xvfb server with ``screens`` (W, H) screens; ``name`` is its display, e.g. ':5'."""
 
-    def __init__(self, *screens: tuple[int, int]):
+    def __init__(self, *screens: tuple[int, int], display: str | None = None):
         need_tools()
         try:
-            self.proc, self.name = start_xvfb(*screens)
+            self.proc, self.name = start_xvfb(*screens, display=display)
         except RuntimeError as exc:
             pytest.skip(str(exc))
 

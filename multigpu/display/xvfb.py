@@ -8,13 +8,15 @@ import subprocess
 import time
 
 
-def start_xvfb(*screens: tuple[int, int], wait: float = 20.0, prefix: tuple[str, ...] = ()) -> tuple[subprocess.Popen,
-                                                                                                    str]:
+def start_xvfb(*screens: tuple[int, int], wait: float = 20.0, prefix: tuple[str, ...] = (),
+               display: str | None = None) -> tuple[subprocess.Popen, str]:
     """Start Xvfb with ``screens`` (W, H) in its own session; its process and display name
-    (``:N``, picked by Xvfb). RuntimeError if it does not come up within ``wait`` seconds.
-    ``prefix``: a command that runs it elsewhere (a simulated host's ``nsenter ... --``)."""
+    (``:N``, picked by Xvfb, or ``display``: a server started again where one died). RuntimeError
+    if it does not come up within ``wait`` seconds. ``prefix``: a command that runs it elsewhere
+    (a simulated host's ``nsenter ... --``)."""
     read, write = os.pipe()
-    args = [*prefix, "Xvfb", "-displayfd", str(write), "-nolisten", "tcp", "-noreset"]
+    args = [*prefix, "Xvfb", *((display,) if display else ()), "-displayfd", str(write), "-nolisten", "tcp",
+            "-noreset"]
     for i, (w, h) in enumerate(screens):
         args += ["-screen", str(i), f"{w}x{h}x24"]
     proc = subprocess.Popen(args, pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,

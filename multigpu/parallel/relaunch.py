@@ -1,7 +1,8 @@
 """The launcher's side of ``--recover``: supervise the job, and start it again after a failure.
 
-After a failure (exit 1) the job restarts at the first frame not shown (``recovery``), at most
-``bound`` times within ``recovery.WINDOW`` (then one line and ``recovery.GAVE_UP``). On several
+After a failure (exit 1; or exit 2 from a restarted job: what it needs is gone, an X server that
+died) the job restarts at the first frame not shown (``recovery``), at most ``bound`` times
+within ``recovery.WINDOW`` (then one line and ``recovery.GAVE_UP``). On several
 hosts each restart first asks every host to answer (``hosts.unreachable``): a host that does
 not is left out, its tiles dark (``--dark-tiles``: black, drawn by nobody) and its processes
 started last on the last host that answers (``hosts.survivors``), so the wall goes on with the
@@ -42,7 +43,8 @@ def recovering(launcher: Launcher, ranks: int, argv: list[str], hosts, bound: in
             rejoin = threading.Event()
             watch = (lambda proc: _watch(proc, hosts, gone, rsh, rejoin)) if gone else None
             code = supervise(launcher.command(ranks, args, hosts=place, env=env), env, out, name, watch)
-            if out is None or (code != 1 and not rejoin.is_set()):
+            refused = code == 2 and bool(restarts)  # a restart refused at the door: what it needs is gone (an X server)
+            if out is None or (code != 1 and not refused and not rejoin.is_set()):
                 return code
             summary = _read_summary(out) or {}
             if rejoin.is_set():  # a host that was out answers: it takes its tiles back
@@ -50,7 +52,8 @@ def recovering(launcher: Launcher, ranks: int, argv: list[str], hosts, bound: in
                 print(f"multigpu: {', '.join(sorted(_names(hosts)))}: every host answers; restarting the wall with "
                       "all of them", file=sys.stderr, flush=True)
             else:
-                reason = str(summary.get("stopped_by") or f"{name} exited {code}")
+                reason = ("the restarted job could not start (its error above)" if refused
+                          else str(summary.get("stopped_by") or f"{name} exited {code}"))
                 now = time.monotonic()
                 while restarts and now - restarts[0] > recovery.WINDOW:
                     restarts.popleft()
