@@ -165,13 +165,7 @@ class WalkConfig:
             raise InputError(f"--device must be >= 0, got {self.device}")
         if not (self.timeout > 0 and math.isfinite(self.timeout)):
             raise InputError(f"--timeout must be > 0 seconds, got {self.timeout}")
-        if self.recover is None:
-            object.__setattr__(self, "recover", 3 if self.present == "window" else 0)
-        if not 0 <= self.recover <= 100 or self.resume_at < 0:
-            raise InputError(f"--recover must be 0..100 restarts and --resume-at >= 0, got {self.recover}, "
-                             f"{self.resume_at}")
-        if any(not 0 <= k < self.ranks for k in self.dark) or len(set(self.dark)) >= self.ranks:
-            raise InputError(f"--dark-tiles must name some of the tiles 0..{self.ranks - 1}, got {list(self.dark)}")
+        self._check_recovery()
         if not (self.liveness >= 0 and math.isfinite(self.liveness)):
             raise InputError(f"--liveness must be >= 0 seconds (0: off), got {self.liveness}")
         if self.present not in PRESENTERS:
@@ -209,6 +203,16 @@ class WalkConfig:
         lods = self.lod_error > 0 or self.target_fps is not None
         if self.scene.lods != lods:
             object.__setattr__(self, "scene", replace(self.scene, lods=lods))
+    def _check_recovery(self) -> None:
+        """``--recover`` (its default by ``--present``), ``--resume-at`` and ``--dark-tiles``."""
+        if self.recover is None:
+            object.__setattr__(self, "recover", 3 if self.present == "window" else 0)
+        if not 0 <= self.recover <= 100 or self.resume_at < 0:
+            raise InputError(f"--recover must be 0..100 restarts and --resume-at >= 0, got {self.recover}, "
+                             f"{self.resume_at}")
+        if any(not 0 <= k < self.ranks for k in self.dark) or len(set(self.dark)) >= self.ranks:
+            raise InputError(f"--dark-tiles must name some of the tiles 0..{self.ranks - 1}, got {list(self.dark)}")
+
     def _check_quality(self) -> None:
         """Speed for accuracy's flags: a frame rate above 0, a scale the renderer makes, a bound >= 0."""
         if self.target_fps is not None and not (self.target_fps > 0 and math.isfinite(self.target_fps)):
