@@ -25,14 +25,15 @@ from pathlib import Path
 
 from multigpu.parallel import recovery
 from multigpu.parallel.hosts import survivors, unreachable
-from multigpu.parallel.mpirun import Launcher, _flag_value, _read_summary, out_dir, supervise
+from multigpu.parallel.supervise import flag_value, out_dir, read_summary, supervise
 
 #: seconds between asking a host that is out whether it answers again (MULTIGPU_REJOIN_EVERY)
 REJOIN = float(os.environ.get("MULTIGPU_REJOIN_EVERY", "30"))
 
 
-def recovering(launcher: Launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
-    """Run the job under ``supervise`` until it ends for good (module doc); its exit code."""
+def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
+    """Run the job of ``launcher`` (``mpirun.Launcher``) under ``supervise`` until it ends for
+    good (module doc); its exit code."""
     out, name = out_dir(argv), Path(launcher.path).name
     rsh = shutil.which(os.environ["MULTIGPU_RSH"]) if os.environ.get("MULTIGPU_RSH") else None
     restarts: collections.deque = collections.deque()
@@ -46,7 +47,7 @@ def recovering(launcher: Launcher, ranks: int, argv: list[str], hosts, bound: in
             refused = code == 2 and bool(restarts)  # a restart refused at the door: what it needs is gone (an X server)
             if out is None or (code != 1 and not refused and not rejoin.is_set()):
                 return code
-            summary = _read_summary(out) or {}
+            summary = read_summary(out) or {}
             if rejoin.is_set():  # a host that was out answers: it takes its tiles back
                 gone, reason = set(), None
                 print(f"multigpu: {', '.join(sorted(_names(hosts)))}: every host answers; restarting the wall with "
@@ -71,7 +72,7 @@ def recovering(launcher: Launcher, ranks: int, argv: list[str], hosts, bound: in
             history = [h if "seconds" in h else {**h, "seconds": None}  # a restart that failed before a frame
                        for h in summary.get("recoveries", history)]
             shown_at = recovery.last_shown_at(out)
-            at = recovery.resume_point(out, ranks, recovery.recorded_frames(_flag_value(argv, "--record")))
+            at = recovery.resume_point(out, ranks, recovery.recorded_frames(flag_value(argv, "--record")))
             if reason is not None:
                 history = recovery.failure(out, at, reason, history, shown_at)
                 without = f" without {', '.join(sorted(gone))} (tiles {','.join(map(str, dark))} dark)" if gone else ""
@@ -95,7 +96,7 @@ def _placement(hosts, gone: set[str], argv: list[str], ranks: int) -> tuple[list
         return hosts, []
     from multigpu.wall import load_wall, tile_order
 
-    wall = _flag_value(argv, "--wall")
+    wall = flag_value(argv, "--wall")
     base = (tile_order(load_wall(wall), ranks) if wall else None) or list(range(ranks))
     dark, at = [], 0
     for h, n in hosts:  # hosts, a handful

@@ -123,22 +123,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                          f"(start it with mpiexec -n {cfg.ranks})")
     wait = setup_timeout(cfg)
     # -- setup: rank 0 takes the output directory and builds the scene cache first
-    error = None
-    scene = path = out = shared = None
-    if rank == 0:
-        mark("imported")  # a restarted job's steps (parallel/recovery.py)
-        try:
-            out = OutputDir(cfg.out)
-            if cfg.video:
-                _check_video()
-            if cfg.record:
-                check_record(cfg.record)
-            scene, path, load_info = load_world(cfg)
-            mark("scene")
-            _check_path(cfg, scene, path)
-            shared = ensure_buffers(load_info.get("cache"), scene)  # once, before the others map it
-        except InputError as exc:
-            error = as_flags(exc)
+    error, out, scene, path, load_info, shared = _first(cfg) if rank == 0 else (None,) * 6
     presenter = renderer = monitor = None
     try:
         fault(rank, "setup")
@@ -198,6 +183,26 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         _close(renderer, presenter, monitor)
         if out is not None:
             out.release()
+
+
+def _first(cfg: WalkConfig) -> tuple:
+    """Rank 0's setup before the others': ``(error, out, scene, path, load_info, buffers file)``
+    (``error``: the bad input's line; the output directory is then released)."""
+    mark("imported")  # a restarted job's steps (parallel/recovery.py)
+    out = scene = path = load_info = shared = None
+    try:
+        out = OutputDir(cfg.out)
+        if cfg.video:
+            _check_video()
+        if cfg.record:
+            check_record(cfg.record)
+        scene, path, load_info = load_world(cfg)
+        mark("scene")
+        _check_path(cfg, scene, path)
+        shared = ensure_buffers(load_info.get("cache"), scene)  # once, before the others map it
+    except InputError as exc:
+        return as_flags(exc), out, scene, path, load_info, shared
+    return None, out, scene, path, load_info, shared
 
 
 def _presenter(cfg: WalkConfig, rank: int):

@@ -1,0 +1,108 @@
+"""The launcher's hold on a job: run ``mpiexec`` in its own session, pass signals on once, map
+what it returns to the documented exit codes, and leave nothing behind after a failure. Also
+what the launcher reads of a walkthrough's command line (its ``--out``, a flag's value)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+def out_dir(argv: list[str]) -> Path | None:
+    """The ``--out`` directory of a ``walkthrough`` command line (its default ``out``), else None."""
+    if not argv or argv[0] != "walkthrough":
+        return None
+    out = "out"
+    for i, a in enumerate(argv):
+        if a == "--out" and i + 1 < len(argv):
+            out = argv[i + 1]
+        elif a.startswith("--out="):
+            out = a.split("=", 1)[1]
+    return Path(out)
+
+
+def flag_value(argv: list[str], flag: str) -> str | None:
+    """The value of ``flag`` in a command line (``--flag V`` or ``--flag=V``; the last wins)."""
+    value = None
+    for i, a in enumerate(argv):
+        if a == flag and i + 1 < len(argv):
+            value = argv[i + 1]
+        elif a.startswith(flag + "="):
+            value = a.split("=", 1)[1]
+    return value
+
+
+def _die_with_parent() -> None:
+    """In the launcher's child: be sent SIGKILL if this wrapper dies (Linux), so a wrapper
+    killed whole by its caller never leaves a job behind in the launcher's own session."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec", started_job=None) -> int:
+    """Run the launcher, pass it SIGINT/SIGTERM/SIGHUP exactly once each, and return the
+    documented exit code whichever MPI runs the job: 0 done, 2 bad input, 128 + signal when a
+    signal stopped it (Open MPI's mpiexec itself returns 1 there), 1 any failure (MPICH's
+    mpiexec returns 255 when a host dies, Open MPI's 9 or 1). If the runtime
+    killed rank 0 before it closed its record (a host died), summary.json is rewritten from
+    the whole frames in timings.csv and one line says so. After a failure nothing of the job is
+    left: its process session is killed and its shared-memory segments swept (``segments``).
+    ``started_job``: called with the launcher's process once it runs (``relaunch``'s watch)."""
+    started = time.time()
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=_die_with_parent)
+    if started_job is not None:
+        started_job(proc)
+    got: list[int] = []
+
+    def forward(signum, _frame):
+        got.append(signum)
+        try:
+            os.killpg(proc.pid, signum)  # the launcher and every local rank, as a terminal's Ctrl-C
+        except ProcessLookupError:
+            pass
+
+    old = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    try:
+        code = proc.wait()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # what is left of the job's session (a rank the runtime missed)
+        except (ProcessLookupError, PermissionError):
+            pass
+    code = 128 - code if code < 0 else code
+    if code == 0 or (code == 2 and not got):  # a signal during setup ends the ranks as they are: its own code
+        return code
+    from multigpu.parallel.segments import sweep
+
+    sweep(started)  # the shared-memory segments of ranks that never finished
+    summary = read_summary(out)
+    if got and summary is not None and str(summary.get("stopped_by", "")).startswith("signal "):
+        return 128 + got[0]
+    if out is not None:
+        from multigpu.parallel.record import salvage
+
+        frames = salvage(out, f"the job ended abnormally ({name} exited {code}: a rank or its host died)")
+        if frames is not None:
+            print(f"multigpu: the job ended without rank 0 closing its record ({name} exited {code}: a rank or "
+                  f"its host died); {out}/summary.json rewritten from the {frames} whole frames in timings.csv",
+                  file=sys.stderr, flush=True)
+    return 128 + got[0] if got else 1
+
+
+def read_summary(out: Path | None) -> dict | None:
+    import json
+
+    try:
+        return json.loads((out / "summary.json").read_text()) if out is not None else None
+    except (OSError, ValueError):
+        return None
