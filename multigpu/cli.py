@@ -95,6 +95,11 @@ def build_parser() -> argparse.ArgumentParser:
     wt = wsub.add_parser("test", help="show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)")
     wt.add_argument("file", help="wall file (JSON)")
     wt.add_argument("--frames", type=int, default=None, help="stop after N frames (default: at Escape)")
+    mv = sub.add_parser("monitor-view", help="the operator's view on a PC of its own (started by the launcher "
+                                             "from the wall file's monitor.host)")
+    mv.add_argument("--display", help="X display (default $DISPLAY)")
+    mv.add_argument("--position", default="0x0", help="window position XxY on that display (default 0x0)")
+    mv.add_argument("--port", type=int, default=0, help="TCP port to listen on (default: any, printed)")
     t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
     t.add_argument("grid")
 
@@ -144,17 +149,6 @@ def _bench_args(b: argparse.ArgumentParser) -> None:
     scene_args(b)  # bench floor's worker: the scene it renders
 
 
-def _bench_floor(args) -> int:
-    """``bench floor`` with its sizes checked at the door."""
-    from multigpu.studies.floor import bench_floor
-
-    if args.tile < 1 or (args.display is not None and args.display < args.tile):
-        raise InputError(f"bench floor: --tile must be >= 1 and --display >= the tile, got --tile {args.tile} "
-                         f"--display {args.display}")
-    bench_floor(args.quick, args.frames, _ranks_list(args.ranks), args.tile, args.display)
-    return 0
-
-
 def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
@@ -194,39 +188,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "bench":
             from multigpu.studies import bench
 
-            if args.what == "floor" and args.worker:  # the MPI side, started by bench floor
-                from multigpu.flags import spec
-                from multigpu.parallel import floor
+            return bench.run_args(args)
+        if args.cmd == "monitor-view":
+            from multigpu.config import parse_pair
+            from multigpu.display.remote import serve
 
-                floor.main(spec(args), args.path_kind, args.frames or 120, args.tile, args.display)
-                return 0
-            if args.what == "latency":
-                from multigpu.studies.latency import bench_latency
-
-                bench_latency(args.quick, out=args.out if args.out != "out/peer" else "out/latency",
-                              rounds=args.rounds)
-                return 0
-            if args.what == "simplify":
-                from multigpu.studies.simplify import bench_simplify
-
-                bench_simplify(args.model, args.quick, out=args.out if args.out != "out/peer" else "out/simplify")
-                return 0
-            if args.what == "timeline":
-                from multigpu.studies.timeline import bench_timeline
-
-                bench_timeline(args.quick)
-                return 0
-            if args.what == "peer":
-                from multigpu.studies.peer import bench_peer
-
-                if not args.model:
-                    raise InputError("bench peer: --model FILE is needed (the model both renderers draw)")
-                bench_peer(args.model, args.split, tuple(_ranks_list(args.ranks)), args.frames or 150,
-                           rounds=args.rounds, out=args.out)
-                return 0
-            if args.what == "floor":
-                return _bench_floor(args)
-            return bench.main(args.what, quick=args.quick)
+            serve(args.display, parse_pair(args.position, "--position"), args.port)
     except InputError as exc:
         print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr)
         return 2
@@ -252,17 +219,6 @@ def _depth(a) -> int:
           f"model o(d) = 1 + 1/2 + ... + 1/d: {s['model_o']:.2f}")
     print(f"images and depth.json in {a.out}/")
     return 0
-
-
-def _ranks_list(text: str) -> list[int]:
-    """``--ranks 4,9,16`` as numbers of at least 1, or a one-line error."""
-    try:
-        got = [int(v) for v in str(text).split(",")]
-    except ValueError:
-        got = []
-    if not got or min(got) < 1:
-        raise InputError(f"--ranks must be rank counts of at least 1, e.g. 4,9,16; got '{text}'")
-    return got
 
 
 def _walkthrough(a) -> int:

@@ -46,7 +46,8 @@ class Wall:
     fullscreen: frozenset = frozenset()  # ranks whose window fills its display's monitor
     gpus: dict[int, int] = field(default_factory=dict)  # rank -> GPU (EGL device, or X screen with windows)
     bezel: dict | None = None  # the file's bezel (millimetres), where it gives one instead of mullion pixels
-    monitor: tuple[int, int] | None = None  # where --monitor opens the operator's view on rank 0's display
+    monitor: tuple[int, int] | None = None  # where --monitor opens the operator's view (rank 0's display or its own)
+    monitor_on: dict = field(default_factory=dict)  # the view's own PC: "host", "display", "address" (the file's)
 
 
 def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
@@ -138,7 +139,9 @@ def load_wall(path: str) -> Wall:
         if "gpu" in e:
             gpus[r] = e["gpu"]
     monitor = tuple(doc["monitor"]["position"]) if "monitor" in doc else None
-    return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor)
+    on = {k: v for k, v in doc.get("monitor", {}).items() if k in ("host", "display", "address")}
+    return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
+                on)
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:
@@ -308,6 +311,11 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         gpu = wall.gpus.get(k, "-")
         lines.append(f"{k:>4} {row:>3} {col:>3}  {host:<12} {disp:<10} {gpu:>3}  {f'{pos[0]},{pos[1]}':<12} "
                      f"[{x0}, {top})")
+    if wall.monitor is not None:
+        on = wall.monitor_on
+        where = (f"on host {on['host']}, display {on.get('display', '$DISPLAY')} (reached at "
+                 f"{on.get('address', on['host'])})" if "host" in on else "on rank 0's display")
+        lines.append(f"--monitor: the operator's view at {wall.monitor[0]},{wall.monitor[1]} {where}")
     return "\n".join(lines)
 
 

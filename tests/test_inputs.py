@@ -303,7 +303,7 @@ def test_bench_floor_sizes_are_checked_in_one_line(capsys):
 
 
 def test_bench_floor_ranks_are_counts_or_one_line():
-    from multigpu.cli import _ranks_list
+    from multigpu.studies.bench import ranks_list as _ranks_list
 
     assert _ranks_list("4,9,16") == [4, 9, 16] and _ranks_list("4") == [4]
     for bad in ("x", "", "4,0", "4,,9"):

@@ -160,3 +160,55 @@ def test_a_pc_per_row_shows_its_row_of_the_mosaic(tmp_path, two_pcs_rows, mpiexe
     assert (shots[0] == mosaic[:TILE[1]]).all() and (shots[1] == mosaic[TILE[1]:]).all()
     left = [p for n in "ab" for p in hosts.processes(n) if "Xvfb" not in open(f"/proc/{p}/cmdline").read()]
     assert not left, left
+
+
+def test_the_operators_view_on_a_pc_of_its_own(tmp_path, mpiexec_env):
+    """The wall on host a, the operator's view (``--monitor``) on the desk PC with its own X
+    server, as the wall file says: it shows the wall, its keys reach the run (B: the next
+    strategy on every rank), and Escape there ends the run."""
+    from multigpu.display.xvfb import start_xvfb, stop_xvfb
+    from multigpu.parallel.report import BALANCE_NAMES, read_timings
+
+    need_tools()
+    with SimHosts(["a", "desk"], tmp_path / "hosts") as hosts:
+        servers = []
+        try:
+            for name, size in (("a", (2 * TILE[0], TILE[1])), ("desk", (320, 240))):
+                enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
+                try:
+                    servers.append(start_xvfb(size, prefix=enter))
+                except RuntimeError as exc:
+                    pytest.skip(str(exc))
+            xa, xd = (name for _, name in servers)
+            wall = tmp_path / "wall.json"
+            wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
+                {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
+                {"rank": 1, "host": "a", "display": xa, "position": [TILE[0], 0]}],
+                "monitor": {"position": [10, 20], "host": "desk", "display": xd, "address": "127.0.0.1"}}))
+            out = tmp_path / "wall"
+            proc = start_launcher(["-n", "2", "walkthrough", *SMALL, "--path", str(_still(tmp_path)), "--wall",
+                                   str(wall), "--present", "window", "--monitor", "--mosaic-every", "100",
+                                   "--no-overlay", "--out", str(out), "--recover", "0"], {**hosts.env, **mpiexec_env})
+            try:
+                view = wait_for(lambda: windows(xd, "multigpu monitor"), timeout=120)[0]
+                wait_for(lambda: screenshot(xd)[20:20 + TILE[1] // 2, 10:10 + TILE[0]].max() > 0, timeout=60)
+                shot = screenshot(xd)
+                for step in (["mousemove", "--window", view, "5", "5"], ["keydown", "--window", view, "b"],
+                             ["keyup", "--window", view, "b"]):  # as escape() in xserver.py: the key to the window
+                    subprocess.run(["xdotool", *step], timeout=10, check=True, env={**os.environ, "DISPLAY": xd})
+                wait_for(lambda: len(set(read_timings(out / "timings.csv")[:, -2])) > 1, timeout=60)
+                subprocess.run(["xdotool", "keydown", "--window", view, "Escape"], timeout=10, check=True,
+                               env={**os.environ, "DISPLAY": xd})
+                _, err = end_launcher(proc)
+            finally:
+                if proc.poll() is None:
+                    os.killpg(proc.pid, signal.SIGKILL)
+        finally:
+            for p, _ in servers:
+                stop_xvfb(p)
+    assert proc.returncode == 0, err[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["stopped_by"] == "escape key (the monitor)", s["stopped_by"]
+    balances = {BALANCE_NAMES[int(b)] for b in read_timings(out / "timings.csv")[:, -2]}
+    assert len(balances) >= 2  # B on the desk switched every rank's strategy
+    assert shot[20:20 + TILE[1] // 2, 10:10 + TILE[0]].mean() > 5  # the wall, shrunk, on the desk's screen

@@ -225,11 +225,22 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2
-    if bound and not help_only(rest):
-        from multigpu.parallel.relaunch import recovering
+    from multigpu.parallel import operator
 
-        return recovering(launcher, ranks, rest, hosts, bound)
-    return supervise(cmd, launcher.environ(), out_dir(rest), Path(launcher.path).name)
+    view = None
+    try:
+        on = None if help_only(rest) else operator.own_pc(rest)
+        view = operator.start_view(on) if on else None  # the operator's view on a PC of its own
+        if bound and not help_only(rest):
+            from multigpu.parallel.relaunch import recovering
+
+            return recovering(launcher, ranks, rest, hosts, bound)
+        return supervise(cmd, launcher.environ(), out_dir(rest), Path(launcher.path).name)
+    except InputError as exc:
+        print(f"multigpu: error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        operator.stop_view(view)
 
 
 def restart_bound(argv: list[str]) -> int:

@@ -13,6 +13,7 @@ after the current frame.
 from __future__ import annotations
 
 import json
+import os
 import socket
 from pathlib import Path
 
@@ -232,9 +233,15 @@ def screen_of(display: str | None, gpu: int | None) -> str | None:
 
 
 def _monitor(cfg: WalkConfig, presenter):
-    """Rank 0's operator view on its display, at ``--monitor X,Y`` (default: right of the wall)."""
+    """Rank 0's operator view on its display, at ``--monitor X,Y`` (default: right of the wall),
+    or on a PC of its own (the launcher started it there: ``parallel/operator.py``)."""
     from multigpu.display import Monitor
     from multigpu.parallel.live import monitor_size
+
+    if os.environ.get("MULTIGPU_MONITOR"):
+        from multigpu.display.remote import RemoteMonitor
+
+        return RemoteMonitor(os.environ["MULTIGPU_MONITOR"])
 
     where = cfg.monitor if cfg.monitor != MONITOR_BESIDE else (cfg.canvas.size[0], 0)
     return Monitor(monitor_size(cfg.canvas.size, cfg.canvas.tiles(), cfg.tile), where, presenter)

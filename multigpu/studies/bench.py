@@ -176,6 +176,66 @@ def bench_render(quick: bool) -> list[dict]:
     return rows
 
 
+def run_args(args) -> int:
+    """``multigpu bench NAME ...``: the benchmark ``args.what`` with the command line's arguments
+    (those that take only ``--quick`` through ``main``)."""
+    if args.what == "floor" and args.worker:  # the MPI side, started by bench floor
+        from multigpu.flags import spec
+        from multigpu.parallel import floor
+
+        floor.main(spec(args), args.path_kind, args.frames or 120, args.tile, args.display)
+        return 0
+    if args.what == "latency":
+        from multigpu.studies.latency import bench_latency
+
+        bench_latency(args.quick, out=args.out if args.out != "out/peer" else "out/latency",
+                      rounds=args.rounds)
+        return 0
+    if args.what == "simplify":
+        from multigpu.studies.simplify import bench_simplify
+
+        bench_simplify(args.model, args.quick, out=args.out if args.out != "out/peer" else "out/simplify")
+        return 0
+    if args.what == "timeline":
+        from multigpu.studies.timeline import bench_timeline
+
+        bench_timeline(args.quick)
+        return 0
+    if args.what == "peer":
+        from multigpu.studies.peer import bench_peer
+
+        if not args.model:
+            raise InputError("bench peer: --model FILE is needed (the model both renderers draw)")
+        bench_peer(args.model, args.split, tuple(ranks_list(args.ranks)), args.frames or 150,
+                   rounds=args.rounds, out=args.out)
+        return 0
+    if args.what == "floor":
+        return _bench_floor(args)
+    return main(args.what, quick=args.quick)
+
+
+def _bench_floor(args) -> int:
+    """``bench floor`` with its sizes checked at the door."""
+    from multigpu.studies.floor import bench_floor
+
+    if args.tile < 1 or (args.display is not None and args.display < args.tile):
+        raise InputError(f"bench floor: --tile must be >= 1 and --display >= the tile, got --tile {args.tile} "
+                         f"--display {args.display}")
+    bench_floor(args.quick, args.frames, ranks_list(args.ranks), args.tile, args.display)
+    return 0
+
+
+def ranks_list(text: str) -> list[int]:
+    """``--ranks 4,9,16`` as numbers of at least 1, or a one-line error."""
+    try:
+        got = [int(v) for v in str(text).split(",")]
+    except ValueError:
+        got = []
+    if not got or min(got) < 1:
+        raise InputError(f"--ranks must be rank counts of at least 1, e.g. 4,9,16; got '{text}'")
+    return got
+
+
 def main(what: str, quick: bool = False) -> int:
     """Run the benchmark ``what`` (``registry.BENCHES``: those that take only ``quick``)."""
     from multigpu.studies.registry import BENCHES, load
