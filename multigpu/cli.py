@@ -128,6 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The ``bench`` subcommand's parser."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices["bench"]
+
+
 def _bench_args(b: argparse.ArgumentParser) -> None:
     """The ``bench`` subcommand's arguments."""
     from multigpu.studies.registry import BENCHES
@@ -150,6 +156,14 @@ def _bench_args(b: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if len(argv) == 3 and argv[0] == "bench" and argv[2] in ("-h", "--help"):  # that benchmark's own flags
+        from multigpu.studies.bench import help_for
+        from multigpu.studies.registry import BENCHES
+
+        if argv[1] in BENCHES:
+            print(help_for(argv[1], _bench_parser(build_parser())), end="")
+            return 0
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors and --help: the same on every rank

@@ -309,3 +309,14 @@ def test_bench_floor_ranks_are_counts_or_one_line():
     for bad in ("x", "", "4,0", "4,,9"):
         with pytest.raises(InputError, match="--ranks must be rank counts"):
             _ranks_list(bad)
+
+
+def test_bench_name_help_shows_that_benchmarks_own_flags(capsys):
+    from multigpu.cli import main
+
+    assert main(["bench", "floor", "--help"]) == 0
+    floor = capsys.readouterr().out
+    assert "multigpu bench floor" in floor and "--tile" in floor and "--model" not in floor
+    assert main(["bench", "textures", "--help"]) == 0
+    tex = capsys.readouterr().out
+    assert "--quick" in tex and "--ranks" not in tex and "textured" in tex

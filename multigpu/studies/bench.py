@@ -176,6 +176,21 @@ def bench_render(quick: bool) -> list[dict]:
     return rows
 
 
+def help_for(name: str, bench) -> str:
+    """``multigpu bench NAME --help``: what the benchmark measures and the flags it reads (the
+    ``bench`` parser's own entries for them)."""
+    import argparse
+
+    from multigpu.studies.registry import BENCH_FLAGS, BENCHES
+
+    p = argparse.ArgumentParser(prog=f"multigpu bench {name}", description=BENCHES[name][1])
+    wanted = set(BENCH_FLAGS.get(name, ("--quick",)))
+    for action in bench._actions:  # a dozen
+        if wanted & set(action.option_strings):
+            p._add_action(action)
+    return p.format_help()
+
+
 def run_args(args) -> int:
     """``multigpu bench NAME ...``: the benchmark ``args.what`` with the command line's arguments
     (those that take only ``--quick`` through ``main``)."""

@@ -42,6 +42,15 @@ BENCHES = {
 }
 
 
+#: the flags of ``multigpu bench`` each benchmark reads (``bench NAME --help`` shows only those)
+BENCH_FLAGS = {
+    "floor": ("--quick", "--ranks", "--tile", "--display"),
+    "peer": ("--quick", "--model", "--split", "--ranks", "--rounds", "--out"),
+    "latency": ("--quick", "--rounds", "--out"),
+    "simplify": ("--quick", "--model", "--out"),
+}
+
+
 def load(where: str):
     """The function at ``"module:function"`` of ``multigpu.studies``."""
     module, name = where.split(":")
