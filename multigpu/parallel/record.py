@@ -226,5 +226,6 @@ def run_title(cfg, scene) -> str:
     else:
         what = f"db ({cfg.db_ranges} ranges)"
     W, H = cfg.canvas.size
+    (rows, cols), (tw, th) = cfg.grid, cfg.tile
     return (f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in {scene.n_objects} objects, "
-            f"{cfg.grid[0]}x{cfg.grid[1]} wall of {W}x{H}, {what}")
+            f"{rows}x{cols} wall ({rows} row(s) x {cols} column(s) of {tw}x{th} tiles, canvas {W}x{H}), {what}")
