@@ -42,6 +42,13 @@ DESCRIPTION = ("Render 3-D models on tiled display walls, one MPI rank per GPU a
                "'mpiexec -n 4 multigpu walkthrough' or launch/walkthrough; each command's --help has its flags.")
 
 
+#: what ``multigpu --help`` ends with
+EXAMPLES = """examples:
+  launch/walkthrough --model models/pump.glb        4 ranks, a 2x2 wall, headless: out/
+  launch/walkthrough --wall wall.json --present window --monitor --path interactive
+"""
+
+
 def _version() -> str:
     """The installed package's version (the source tree's when not installed)."""
     from importlib.metadata import PackageNotFoundError, version
@@ -53,7 +60,10 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = Parser(prog="multigpu", description=DESCRIPTION)
+    import textwrap
+
+    ap = Parser(prog="multigpu", description=textwrap.fill(DESCRIPTION, 79), epilog=EXAMPLES,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--version", action="version", version=f"multigpu {_version()}")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
