@@ -62,6 +62,11 @@ def test_the_summary_counts_each_recovery_and_its_dark_time(tmp_path, monkeypatc
     doc = r.doc()
     assert 1.9 < doc["recoveries"][0]["seconds"] < 5 and doc["recovery_seconds_max"] == doc["recoveries"][0]["seconds"]
     assert recovery.Recovery.resumed(tmp_path, 0).doc() == {}  # a run that never failed says nothing
+    again = [{**history[0], "seconds": None}, *recovery.failure(tmp_path, 3, "again", [], time.time() - 1.0)]
+    monkeypatch.setenv(recovery.ENV, json.dumps(again))  # a restart that failed before its first frame
+    r = recovery.Recovery.resumed(tmp_path, 3)
+    r.shown(3)
+    assert r.doc()["recovery_count"] == 2 and r.doc()["recovery_seconds_max"] == r.doc()["recoveries"][1]["seconds"]
 
 
 def test_restarts_are_on_with_windows_and_off_headless():

@@ -71,8 +71,8 @@ def test_cache_hit_returns_identical_arrays(tmp_path, monkeypatch):
     for s in (a, b):  # the builder's scene too: reloaded mapped from the file it saved
         for k in MAPPED:  # the bulk is a read-only map of the cache file, equal to a copy of it
             v = getattr(s, k)
-            if v is None:  # vertex colours: the plant has none
-                assert getattr(copy, k) is None and k == "vertex_colors"
+            if v is None:  # vertex colours, textures: the plant has none
+                assert getattr(copy, k) is None and k in Scene.PER_VERTEX
                 continue
             assert isinstance(v, np.memmap) and not v.flags.writeable and np.array_equal(v, getattr(copy, k))
 

@@ -155,7 +155,7 @@ class Recovery:
         done = self.done + ([self.pending] if self.pending else [])
         if not done:
             return {}
-        secs = [d["seconds"] for d in done if "seconds" in d]
+        secs = [d["seconds"] for d in done if d.get("seconds") is not None]  # None: it failed again first
         return {"recoveries": done, "recovery_count": len(done), "frames_lost": sum(d["frames_lost"] for d in done),
                 "recovery_seconds_max": max(secs) if secs else None}
 
