@@ -10,7 +10,7 @@ import numpy as np
 
 from multigpu.parallel import recovery
 from multigpu.parallel.mpirun import restart_bound
-from multigpu.parallel.relaunch import _without
+from multigpu.parallel.relaunch import _without, with_flight
 from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings
 from multigpu.parallel.segments import sweep
 
@@ -103,3 +103,27 @@ def test_the_statistics_panel_tells_the_operator_of_a_restart():
     plain, told = stats_panel(*args), stats_panel(*args, restarts=2)
     orange = lambda img: ((img[..., 0] > 200) & (img[..., 1] > 120) & (img[..., 1] < 200) & (img[..., 2] < 100)).sum()
     assert told.shape[0] > plain.shape[0] and orange(told[plain.shape[0] - 4:]) > 20  # its own last line
+
+
+def test_a_restarted_flight_starts_where_its_record_ends(tmp_path):
+    from multigpu.config import WalkConfig
+    from multigpu.parallel.walkthrough import make_path
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.pathfile import PathAppender
+
+    flight = tmp_path / "flight.json"
+    cams = np.array([[0, 0, 5 + i, 0, 0, 0, 0, 1, 0, 60, 0.1, 100] for i in range(3)], dtype=float)
+    PathAppender(flight).append(cams)
+    scene, _ = load_scene(SceneSpec(triangles=20_000))
+    cfg = WalkConfig(path="interactive", present="window", record=str(flight), resume_at=3, offset=(1.0, 0.0, 0.0))
+    start = make_path(cfg, scene).camera(0)
+    assert np.allclose(start.position, [1, 0, 7]) and np.allclose(start.target, [1, 0, 0])  # the last, moved
+    fresh = make_path(WalkConfig(path="interactive", present="window", record=str(flight)), scene).camera(0)
+    assert not np.allclose(fresh.position, [0, 0, 7])  # a new flight starts where its path kind starts
+
+
+def test_an_interactive_flight_that_can_restart_records_itself(tmp_path):
+    fly = ["walkthrough", "--path", "interactive", "--present", "window"]
+    assert with_flight(fly, tmp_path) == [*fly, "--record", str(tmp_path / "flight.json")]
+    assert with_flight([*fly, "--record", "mine.json"], tmp_path) == [*fly, "--record", "mine.json"]
+    assert with_flight(["walkthrough"], tmp_path) == ["walkthrough"]

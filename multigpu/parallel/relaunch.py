@@ -8,7 +8,9 @@ not is left out, its tiles dark (``--dark-tiles``: black, drawn by nobody) and i
 started last on the last host that answers (``hosts.survivors``), so the wall goes on with the
 others sharing the live tiles. While a host is out it is asked again every ``REJOIN`` seconds;
 once it answers the job is stopped after its frame (SIGTERM) and started again with it, at the
-next frame: a rejoin is not a failure. Bad input, a signal, a finished run: their own code.
+next frame: a rejoin is not a failure. An interactive flight records itself (``with_flight``)
+so that a restart goes on from its last camera. Bad input, a signal, a finished run: their own
+code.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
     """Run the job of ``launcher`` (``mpirun.Launcher``) under ``supervise`` until it ends for
     good (module doc); its exit code."""
     out, name = out_dir(argv), Path(launcher.path).name
+    argv = with_flight(argv, out)
     rsh = shutil.which(os.environ["MULTIGPU_RSH"]) if os.environ.get("MULTIGPU_RSH") else None
     restarts: collections.deque = collections.deque()
     history: list[dict] = []
@@ -84,6 +87,14 @@ def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
                     *(["--dark-tiles", ",".join(map(str, dark))] if dark else [])]
     except KeyboardInterrupt:  # Ctrl-C between two jobs: nothing is running
         return 130
+
+
+def with_flight(argv: list[str], out: Path | None) -> list[str]:
+    """An interactive flight that can be restarted records itself (``--record OUT/flight.json``,
+    unless it has a ``--record``), so a restart goes on from its last camera."""
+    if out is None or flag_value(argv, "--path") != "interactive" or flag_value(argv, "--record") is not None:
+        return argv
+    return [*argv, "--record", str(Path(out) / "flight.json")]
 
 
 def _names(hosts) -> set[str]:
