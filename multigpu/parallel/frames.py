@@ -8,8 +8,6 @@ Built by ``walkthrough.run`` once setup has been agreed on every rank; every wai
 from __future__ import annotations
 
 import itertools
-import json
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,31 +22,22 @@ from multigpu.core.work import Work, transfers
 from multigpu.errors import WriteFailed
 from multigpu.parallel.backends import Exchange, Projection
 from multigpu.parallel.composite import Messages
-from multigpu.parallel.exchange import agree, allgather_text, barrier, broadcast_partition, wait_all
+from multigpu.parallel.exchange import agree, barrier, broadcast_partition
 from multigpu.parallel.fault import FAULT_SPEC, fault
-from multigpu.parallel.mosaic import stitch
+from multigpu.parallel.framelog import FrameLog
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.projection import make_projection
 from multigpu.parallel.record import RunRecord, config_doc, run_title
-from multigpu.parallel.recovery import restarts
-from multigpu.parallel.report import BALANCE_NAMES, COLUMNS
+from multigpu.parallel.report import BALANCE_NAMES
 from multigpu.parallel.rows import Rows
 from multigpu.parallel.shared import SharedPieces
-from multigpu.parallel.stops import STOP_FLAG, STOPS, stopped_by_flags
+from multigpu.parallel.stops import STOP_FLAG, stopped_by_flags
 from multigpu.parallel.timer import Timer
 from multigpu.planner import Planner
 
-#: the phases a frame's balancing is timed in, in order (their sum is the Load Balancing
-#: column): learning from the last frame's measured times, projecting the object bounds,
-#: choosing the frame's quality (render scale, levels of detail), planning the partition
-BALANCE_PHASES = ("learn", "project", "choose", "plan")
-#: the phases of the Rendering column: the parts culled, the draw calls, the pixels read back
-RENDER_PHASES = ("cull", "render", "readback")
 #: the longest sleep between tests of the swap barrier (s): every rank swaps within about as much of the last
 #: one's arrival (the default 2 ms let the swap skew grow with frames in flight)
 SWAP_POLL = 1e-4
-#: the frames ``--timeline`` keeps: the run's last ones
-TIMELINE_FRAMES = 8
 
 
 @dataclass(slots=True)
@@ -76,7 +65,6 @@ class Frames:
     def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, presenter, out: OutputDir | None,
                  load_info, placement: list[dict], monitor=None):
         self.cfg, self.comm, self.job = cfg, comm, job
-        self._beat_cpu = job.thread_cpu
         self.scene, self.path, self.renderer, self.presenter = scene, path, renderer, presenter
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         tw, th = cfg.tile
@@ -100,14 +88,11 @@ class Frames:
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col
-        self.shown_at = None  # when this rank's last frame was shown (perf_counter): the frame period
-        self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
         self.interactive = cfg.path == INTERACTIVE
         self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
         self.done = cfg.resume_at  # frames of the path shown (a resumed run's start after them)
         self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
         self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
-        self.timeline = deque(maxlen=TIMELINE_FRAMES) if cfg.timeline else None  # (frame, phase spans)
         # the exchange backend: a node-shared segment where asked for and possible, else messages
         shared, why = None, None
         if cfg.exchange != "messages":
@@ -142,6 +127,7 @@ class Frames:
         if self.rank == 0:
             self.record = RunRecord(out, self.K, self.n_frames, doc, self.planner.report, cfg.video,
                                     cfg.progress, cfg.overlay, cfg.record, cfg.resume_at)
+        self.log = FrameLog(cfg, comm, job, self.record, self.col, self.n_frames, self.window)
 
     def _relay(self, partition):
         """``--partition broadcast``: rank 0 computes the partition, every rank receives it."""
@@ -197,61 +183,6 @@ class Frames:
                 if seen and not why:
                     return swapped, STOP_FLAG[f"{seen} (the monitor)"]
         return swapped, STOP_FLAG.get(why, 0)
-
-    def row_values(self, x: "InFlight", sent: tuple[int, int], swapped: float) -> dict:
-        """This rank's row of frame ``x`` by column name."""
-        t, work = x.t, x.work
-        box = work.bounds(self.rank)
-        now = t.end
-        period = t.total_ms if self.shown_at is None else (now - self.shown_at) * 1e3
-        self.shown_at = now
-        return {"frame": x.f, "rank": self.rank, "triangles": x.drawn, "planned_triangles": work.loads[self.rank],
-                "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
-                "load_balancing_ms": t.ms(*BALANCE_PHASES), "rendering_ms": t.ms(*RENDER_PHASES),
-                "synchronization_ms": t.ms("sync"), "frame_exchange_ms": t.ms("exchange"),
-                "display_ms": t.ms("display", "swap_wait"), "frame_ms": period, "latency_ms": t.total_ms,
-                "load_balancing_cpu_ms": t.cpu_ms(*BALANCE_PHASES), "rendering_cpu_ms": t.cpu_ms(*RENDER_PHASES),
-                "culling_cpu_ms": t.cpu_ms("cull"),
-                "learning_cpu_ms": t.cpu_ms("learn"), "projection_cpu_ms": t.cpu_ms("project"),
-                "planning_cpu_ms": t.cpu_ms("plan"),
-                "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
-                "bytes_sent": sent[0], "objects": x.objects, "pieces": len(work.rects[self.rank]),
-                "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
-                "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
-                "input_ms": t.ms("input"), "heartbeat_cpu_ms": self._heartbeat_cpu(),
-                "render_scale": x.quality.scale, "lod_error_px": x.quality.lod_px,
-                "choosing_cpu_ms": t.cpu_ms("choose"), "balance": x.balance,
-                "load_balancing_waited_ms": t.waited_ms(*BALANCE_PHASES, "input"),
-                "rendering_waited_ms": t.waited_ms(*RENDER_PHASES), "synchronization_waited_ms": t.waited_ms("sync"),
-                "frame_exchange_waited_ms": t.waited_ms("exchange"),
-                "display_waited_ms": t.waited_ms("display", "swap_wait"), "restarts": restarts()}
-
-    def _heartbeat_cpu(self) -> float:
-        """CPU ms of this rank's heartbeat thread since the last frame's row."""
-        spent, self._beat_cpu = (self.job.thread_cpu - self._beat_cpu) * 1e3, self.job.thread_cpu
-        return spent
-
-    def show(self, f: int, work: Work) -> None:
-        """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""
-        cfg = self.cfg
-        last = self.n_frames is not None and f == self.n_frames - 1
-        mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or last)
-        if not (mosaic_due or cfg.video):
-            return
-        wait_all([self.comm.Igather(self.back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
-        if self.rank == 0:
-            self._write(self.record.image, f, stitch(self.gathered, self.tiles, self.canvas.size, self.canvas.dark),
-                        work.rects, mosaic_due)
-
-    def _write(self, write, *args) -> None:
-        """Rank 0's outputs: the first write that fails is kept (``record.failed``) and stops every
-        rank after the next frame (its row's stop flag); nothing more is written after it, so
-        what is on disk stays whole and the summary matches the CSV."""
-        if self.record.failed is None:
-            try:
-                write(*args)
-            except WriteFailed as exc:
-                self.record.failed = exc
 
     def _camera(self, f: int, t: Timer):
         """The input phase of a window run (every rank the same camera and settings), then
@@ -335,27 +266,15 @@ class Frames:
         x.rendered = x.started = None
         swapped, stop = self.present(t, work, x.control, self.rows.allrows)
         # a signal, a window event or a failed write seen here stops every rank after the same frame
-        failed = self.record is not None and self.record.failed is not None
-        flag = float(self.job.signum or stop or (STOP_FLAG[STOPS[-5]] if failed else 0))
-        for landed in self.rows.post(x.f, self.row_values(x, sent, swapped), flag, x.recorded):
+        for landed in self.rows.post(x.f, self.log.row(x, sent, swapped), self.log.stop_flag(stop), x.recorded):
             self.landed(*landed)
-        self.show(x.f, work)
-        if self.timeline is not None:
-            self.timeline.append((x.f, t.spans))
+        self.log.show(x.f, work, self.back)
 
     def landed(self, f: int, every: np.ndarray, recorded) -> None:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
         self.learn.append((f, every[:, self.col["rendering_cpu_ms"]].copy()))
         self.fidelity.landed(f, float(every[:, self.col["frame_ms"]].mean()))  # a frame-rate target learns
-        if self.rank == 0:  # rows first: the summary always matches the CSV
-            rows = every[:, :len(COLUMNS)].copy()
-            if self.window:  # swap moments after the frame's first swap; the skew on every row
-                at = rows[:, self.col["swap_ms"]].copy()
-                rows[:, self.col["swap_ms"]] = (at - at.min()) * 1e3
-                rows[:, self.col["swap_skew_ms"]] = (at.max() - at.min()) * 1e3
-            if recorded is not None:  # the camera first: a rewritten path file never lags the rows
-                self.record.camera(recorded)
-            self._write(self.record.rows, f, rows)
+        self.log.landed(f, every, recorded)  # rank 0's records
         self.done = f + 1
         if every[:, -1].any():
             self.stopping = True
@@ -396,13 +315,6 @@ class Frames:
                     self.job.signum = self.job.signum or int(flags.max())
                 last = k if last is None else min(last, k)
 
-    def _write_timeline(self) -> None:
-        """``timeline.json`` (``--timeline``): every rank's phase spans of the last frames."""
-        mine = json.dumps([[f, [[n, a, b] for n, a, b in spans]] for f, spans in self.timeline])
-        every = allgather_text(self.comm, mine, self.cfg.timeout, "timeline", nbytes=1 << 18)
-        if self.rank == 0:
-            self._write(self.record.timeline, [json.loads(e) if e else [] for e in every], self.latency)
-
     def _keep_shown(self) -> None:
         """On a failure with frames in flight: the row of the last frame every rank showed, where
         every rank posted it (a moment at most; a peer that never did leaves it out)."""
@@ -436,8 +348,7 @@ class Frames:
             self.record.print_table(summary, self._title(complete, stopped_by))
         if failed:
             raise WriteFailed(failed)
-        if self.timeline is not None:
-            self._write_timeline()
+        self.log.write_timeline(self.latency)
         if self.rank != 0:
             return None
         self.record.print_table(summary, self._title(complete, stopped_by))

@@ -1,0 +1,137 @@
+"""What a frame leaves behind, apart from the frame loop: the rank's timing row, the stop flag it
+carries, rank 0's records of the landed rows, the mosaics, and the timeline.
+
+The row is built by column name from the frame's timer (``row``: the columns are
+``report.COLUMNS``; the phases that make each come from ``PHASE_COLUMNS``). The stop flag
+(``stop_flag``) says why every rank stops after this frame: a signal, a window event, a write that
+failed on rank 0. Rank 0 writes what every rank's rows say once they have landed (``record``:
+the swap moments relative to the first, the recorded camera first, then the rows) and the mosaics
+every rank gathers (``show``); a write that fails is kept (``write``) and stops the run after the
+next frame, nothing more written after it. ``--timeline`` keeps the last frames' phase spans.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+
+import numpy as np
+
+from multigpu.errors import WriteFailed
+from multigpu.parallel.exchange import allgather_text, wait_all
+from multigpu.parallel.mosaic import stitch
+from multigpu.parallel.recovery import restarts
+from multigpu.parallel.report import COLUMNS
+from multigpu.parallel.stops import STOP_FLAG, STOPS
+
+#: the phases a frame's balancing is timed in, in order (their sum is the Load Balancing
+#: column): learning from the last frame's measured times, projecting the object bounds,
+#: choosing the frame's quality (render scale, levels of detail), planning the partition
+BALANCE_PHASES = ("learn", "project", "choose", "plan")
+#: the phases of the Rendering column: the parts culled, the draw calls, the pixels read back
+RENDER_PHASES = ("cull", "render", "readback")
+#: the frames ``--timeline`` keeps: the run's last ones
+TIMELINE_FRAMES = 8
+
+
+class FrameLog:
+    """One rank's log of its frames; ``record`` (rank 0's ``RunRecord``, else None) is where
+    rows, mosaics and the timeline go."""
+
+    def __init__(self, cfg, comm, job, record, col: dict, n_frames: int | None, window: bool):
+        self.cfg, self.comm, self.job, self.record, self.col = cfg, comm, job, record, col
+        self.rank, self.K = comm.Get_rank(), comm.Get_size()
+        self.n_frames, self.window = n_frames, window
+        self.canvas = cfg.canvas
+        self.tiles = self.canvas.tiles()
+        tw, th = cfg.tile
+        self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
+        self.shown_at = None  # when this rank's last frame was shown (perf_counter): the frame period
+        self._beat_cpu = job.thread_cpu
+        self.timeline = deque(maxlen=TIMELINE_FRAMES) if cfg.timeline else None  # (frame, phase spans)
+
+    def row(self, x, sent: tuple[int, int], swapped: float) -> dict:
+        """This rank's row of frame ``x`` (``frames.InFlight``) by column name."""
+        t, work = x.t, x.work
+        box = work.bounds(self.rank)
+        now = t.end
+        period = t.total_ms if self.shown_at is None else (now - self.shown_at) * 1e3
+        self.shown_at = now
+        if self.timeline is not None:
+            self.timeline.append((x.f, t.spans))
+        return {"frame": x.f, "rank": self.rank, "triangles": x.drawn, "planned_triangles": work.loads[self.rank],
+                "x0": box[0], "y0": box[1], "x1": box[2], "y1": box[3],
+                "load_balancing_ms": t.ms(*BALANCE_PHASES), "rendering_ms": t.ms(*RENDER_PHASES),
+                "synchronization_ms": t.ms("sync"), "frame_exchange_ms": t.ms("exchange"),
+                "display_ms": t.ms("display", "swap_wait"), "frame_ms": period, "latency_ms": t.total_ms,
+                "load_balancing_cpu_ms": t.cpu_ms(*BALANCE_PHASES), "rendering_cpu_ms": t.cpu_ms(*RENDER_PHASES),
+                "culling_cpu_ms": t.cpu_ms("cull"),
+                "learning_cpu_ms": t.cpu_ms("learn"), "projection_cpu_ms": t.cpu_ms("project"),
+                "planning_cpu_ms": t.cpu_ms("plan"),
+                "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
+                "bytes_sent": sent[0], "objects": x.objects, "pieces": len(work.rects[self.rank]),
+                "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
+                "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
+                "input_ms": t.ms("input"), "heartbeat_cpu_ms": self._heartbeat_cpu(),
+                "render_scale": x.quality.scale, "lod_error_px": x.quality.lod_px,
+                "choosing_cpu_ms": t.cpu_ms("choose"), "balance": x.balance,
+                "load_balancing_waited_ms": t.waited_ms(*BALANCE_PHASES, "input"),
+                "rendering_waited_ms": t.waited_ms(*RENDER_PHASES), "synchronization_waited_ms": t.waited_ms("sync"),
+                "frame_exchange_waited_ms": t.waited_ms("exchange"),
+                "display_waited_ms": t.waited_ms("display", "swap_wait"), "restarts": restarts()}
+
+    def _heartbeat_cpu(self) -> float:
+        """CPU ms of this rank's heartbeat thread since the last frame's row."""
+        spent, self._beat_cpu = (self.job.thread_cpu - self._beat_cpu) * 1e3, self.job.thread_cpu
+        return spent
+
+    def stop_flag(self, window_event: int) -> float:
+        """The stop flag this rank's row carries: a signal it got, a window event (its
+        ``STOP_FLAG``), a write that failed on rank 0; 0: go on."""
+        failed = self.record is not None and self.record.failed is not None
+        return float(self.job.signum or window_event or (STOP_FLAG[STOPS[-5]] if failed else 0))
+
+    def landed(self, f: int, every: np.ndarray, recorded) -> None:
+        """Rank 0: every rank's landed row of frame ``f`` into the records (rows first: the
+        summary always matches the CSV; the camera before them: the path file never lags)."""
+        if self.rank != 0:
+            return
+        rows = every[:, :len(COLUMNS)].copy()
+        if self.window:  # swap moments after the frame's first swap; the skew on every row
+            at = rows[:, self.col["swap_ms"]].copy()
+            rows[:, self.col["swap_ms"]] = (at - at.min()) * 1e3
+            rows[:, self.col["swap_skew_ms"]] = (at.max() - at.min()) * 1e3
+        if recorded is not None:
+            self.record.camera(recorded)
+        self.write(self.record.rows, f, rows)
+
+    def show(self, f: int, work, back: np.ndarray) -> None:
+        """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""
+        cfg = self.cfg
+        last = self.n_frames is not None and f == self.n_frames - 1
+        mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or last)
+        if not (mosaic_due or cfg.video):
+            return
+        wait_all([self.comm.Igather(back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
+        if self.rank == 0:
+            self.write(self.record.image, f, stitch(self.gathered, self.tiles, self.canvas.size, self.canvas.dark),
+                       work.rects, mosaic_due)
+
+    def write(self, write, *args) -> None:
+        """Rank 0's outputs: the first write that fails is kept (``record.failed``) and stops every
+        rank after the next frame (its row's stop flag); nothing more is written after it, so
+        what is on disk stays whole and the summary matches the CSV."""
+        if self.record.failed is None:
+            try:
+                write(*args)
+            except WriteFailed as exc:
+                self.record.failed = exc
+
+    def write_timeline(self, latency: int) -> None:
+        """``timeline.json`` (``--timeline``): every rank's phase spans of the last frames."""
+        if self.timeline is None:
+            return
+        mine = json.dumps([[f, [[n, a, b] for n, a, b in spans]] for f, spans in self.timeline])
+        every = allgather_text(self.comm, mine, self.cfg.timeout, "timeline", nbytes=1 << 18)
+        if self.rank == 0:
+            self.write(self.record.timeline, [json.loads(e) if e else [] for e in every], latency)
