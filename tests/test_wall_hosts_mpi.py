@@ -212,3 +212,41 @@ def test_the_operators_view_on_a_pc_of_its_own(tmp_path, mpiexec_env):
     balances = {BALANCE_NAMES[int(b)] for b in read_timings(out / "timings.csv")[:, -2]}
     assert len(balances) >= 2  # B on the desk switched every rank's strategy
     assert shot[20:20 + TILE[1] // 2, 10:10 + TILE[0]].mean() > 5  # the wall, shrunk, on the desk's screen
+
+
+def test_a_hosts_x_server_that_dies_and_comes_back(tmp_path, two_pcs, mpiexec_env):
+    """Host b's X server dies mid-run under windows: the wall's restarts fail while it is gone
+    (each one counted), and once it is back on its display (as a display manager restarts it)
+    the launcher brings the whole wall back, every frame once in timings.csv."""
+    from multigpu.parallel.report import read_timings
+
+    hosts, (xa, xb) = two_pcs
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
+        {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
+        {"rank": 1, "host": "b", "display": xb, "position": [0, 0]}]}))
+    out, frames = tmp_path / "wall", 500
+    proc = start_launcher(["-n", "2", "walkthrough", *SMALL, "--wall", str(wall), "--present", "window",
+                           "--frames", str(frames), "--mosaic-every", "100", "--no-overlay", "--out", str(out),
+                           "--liveness", "5"], {**hosts.env, **mpiexec_env})
+    revived = None
+    try:
+        wait_for(lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > 81,
+                 timeout=120)
+        server = next(p for p in hosts.processes("b") if "Xvfb" in open(f"/proc/{p}/cmdline").read())
+        os.kill(server, signal.SIGKILL)
+        import time
+
+        time.sleep(1.5)  # restarts fail meanwhile
+        enter = ("nsenter", "--target", str(hosts.pids["b"]), "--uts", "--mount", "--")
+        revived = start_xvfb((80, 100), prefix=enter, display=xb)
+        _, err = end_launcher(proc, 240)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        if revived is not None:
+            stop_xvfb(revived[0])
+    assert proc.returncode == 0, err[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] and s["frames"] == frames and s["recovery_count"] >= 1, err[-3000:]
+    assert (read_timings(out / "timings.csv")[:, 0].reshape(-1, 2)[:, 0] == range(frames)).all()
