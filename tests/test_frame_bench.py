@@ -1,6 +1,7 @@
 """``multigpu bench frame``: one rank's per-frame phases, planned by the frame loop's own planner."""
 
 import numpy as np
+import pytest
 
 from multigpu.scene.models import SceneSpec, load_scene
 from multigpu.scene.paths import generate
@@ -10,7 +11,13 @@ from multigpu.studies.frame_bench import FEW, PHASES, bench_frame, frame_phases
 def test_bench_frame_times_every_phase_of_every_strategy_and_the_fixed_cost_of_a_few_objects(capsys):
     rows = bench_frame(quick=True)
     out = capsys.readouterr().out
-    assert "fixed" in out.splitlines()[2]  # the header names the column
+    header = out.splitlines()[2].split()
+    printed = {(line.split()[0], line.split()[2]): line.split() for line in out.splitlines()[3:] if line.strip()}
+    for r in rows:  # the table printed is the rows returned, column by column
+        got = dict(zip(header, printed[(r["scene"], r["strategy"])]))
+        assert int(got["objects"]) == r["objects"] and int(got["calls"]) == r["calls"]
+        for col in (*PHASES, "total", "balancing", "cold", "fixed"):
+            assert float(got[col]) == pytest.approx(r[col], abs=6e-4), (col, got[col], r[col])
     assert {r["scene"] for r in rows} == {"plant", "city"}
     assert {r["strategy"] for r in rows} == {"strips", "time", "cross", "cost", "adaptive", "none"}
     for r in rows:
