@@ -22,7 +22,7 @@ from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
 from multigpu.parallel.mosaic import save_png
 from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.recovery import Recovery
+from multigpu.parallel.recovery import Recovery, restarts
 from multigpu.parallel.report import COLUMNS, TimingWriter, table, write_json
 from multigpu.parallel.tally import RunningSummary, summarize_file, tally_file
 from multigpu.scene.models import axis_name
@@ -60,7 +60,7 @@ class RunRecord:
         if video:
             import imageio.v2 as imageio
 
-            name = f"mosaic-r{len(self.recovery.done)}.mp4" if resume_at else "mosaic.mp4"  # an mp4 cannot be resumed
+            name = f"mosaic-r{restarts()}.mp4" if resume_at else "mosaic.mp4"  # an mp4 cannot be resumed
             self.video = imageio.get_writer(str(out.path / name), fps=30, macro_block_size=1)
         if progress:
             from tqdm import tqdm
