@@ -77,7 +77,7 @@ def wait_rows(proc, out: Path, rows: int, timeout: float = 90) -> None:
 @pytest.mark.parametrize("how", ["SIGKILL", "SIGSTOP"])
 def test_a_killed_or_frozen_rank_and_the_wall_comes_back(tmp_path, mpiexec, how):
     before = segments()
-    proc, out = launch(tmp_path, mpiexec, ["--liveness", "3"])
+    proc, out = launch(tmp_path, mpiexec, ["--liveness", "3", "--video"])
     try:
         wait_rows(proc, out, 2 * 60)
         victim = ranks_of(out)[-1]
@@ -99,6 +99,7 @@ def test_a_killed_or_frozen_rank_and_the_wall_comes_back(tmp_path, mpiexec, how)
     assert (restarts[:r["resumed_at"]] == 0).all() and (restarts[r["resumed_at"]:] == 1).all()
     for f in range(0, FRAMES, 50):
         assert read_png(out / "mosaic" / f"frame_{f:05d}.png").shape == (48, 128, 3)
+    assert (out / "mosaic.mp4").stat().st_size > 0 and (out / "mosaic-r1.mp4").stat().st_size > 0  # a video each
     assert not ranks_of(out), "a rank outlived the run"
     assert not (segments() - before), "a failed job's shared-memory segment was left"
 
