@@ -41,3 +41,14 @@ def egl():
         return create_context()
     except EglUnavailable as exc:
         pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    """A headless GL context shared by a module's tests, or the tests skipped (EGL missing)."""
+    from multigpu.gpu.render import EglUnavailable, create_context
+
+    try:
+        return create_context()[0]
+    except EglUnavailable as exc:
+        pytest.skip(str(exc))

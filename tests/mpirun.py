@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multigpu.parallel.mpirun import JobTimeout, find_launcher, run_multigpu
+from multigpu.parallel.mpirun import JobTimeout, find_launcher, launcher_for, openmpi_on_path, run_multigpu
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--triangles", "20000", "--no-progress"]
@@ -61,3 +61,19 @@ def read_png(path: Path) -> np.ndarray:
     from PIL import Image
 
     return np.asarray(Image.open(path).convert("RGB"))
+
+
+def mpi_named(which: str):
+    """The launcher of ``which`` MPI (``mpich``: the default mpiexec, which must be MPICH;
+    ``openmpi``), or the test skipped with the reason it is not here."""
+    import pytest
+
+    if which == "mpich":
+        got = find_launcher()
+        if got.flavor != "mpich":
+            pytest.skip(f"the default mpiexec is {got.flavor}, not MPICH")
+        return got
+    path = openmpi_on_path()
+    if path is None:
+        pytest.skip("no Open MPI mpiexec here (Debian: apt install openmpi-bin)")
+    return launcher_for(path)

@@ -11,11 +11,10 @@ import sys
 import time
 
 import pytest
-from mpirun import ROOT, SMALL, read_png, run_mpi
+from mpirun import ROOT, SMALL, mpi_named, read_png, run_mpi
 from simhosts import SimHosts
 
 from multigpu.core.canvas import Canvas
-from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
 
 pytestmark = pytest.mark.mpi
 W, H, FRAMES = 96, 80, 3
@@ -46,15 +45,7 @@ def test_dark_tiles_are_black_and_the_rest_is_the_one_rank_render(tmp_path, extr
 
 @pytest.fixture(params=["mpich", "openmpi"])
 def launcher(request):
-    if request.param == "mpich":
-        got = find_launcher()
-        if got.flavor != "mpich":
-            pytest.skip(f"the default mpiexec is {got.flavor}, not MPICH")
-        return got
-    path = openmpi_on_path()
-    if path is None:
-        pytest.skip("no Open MPI mpiexec here (Debian: apt install openmpi-bin)")
-    return launcher_for(path)
+    return mpi_named(request.param)
 
 
 def test_a_host_that_stays_down_leaves_its_tiles_dark_until_it_answers(tmp_path, launcher):

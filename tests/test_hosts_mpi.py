@@ -10,11 +10,10 @@ import json
 
 import numpy as np
 import pytest
-from mpirun import SMALL, read_png, run_mpi
+from mpirun import SMALL, mpi_named, read_png, run_mpi
 from simhosts import SimHosts
 
 from multigpu.gpu.buffers import VERSION as GL_VERSION
-from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
 
 pytestmark = pytest.mark.mpi
 W, H = 96, 80
@@ -25,15 +24,7 @@ QUIET = ("UCX", "unexpected", "WARN", "Warning", "warning")  # nothing of the ki
 
 @pytest.fixture(params=["mpich", "openmpi"])
 def launcher(request):
-    if request.param == "mpich":
-        got = find_launcher()
-        if got.flavor != "mpich":
-            pytest.skip(f"the default mpiexec is {got.flavor}, not MPICH")
-        return got
-    path = openmpi_on_path()
-    if path is None:
-        pytest.skip("no Open MPI mpiexec here (Debian: apt install openmpi-bin)")
-    return launcher_for(path)
+    return mpi_named(request.param)
 
 
 @pytest.fixture

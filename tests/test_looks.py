@@ -148,16 +148,6 @@ def test_split_colors_keeps_one_colour_per_uniform_object():
     assert per_vertex is rgba and np.allclose(colors, [[0.5, 0, 0.5]])
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from multigpu.gpu.render import EglUnavailable, create_context
-
-    try:
-        return create_context()[0]
-    except EglUnavailable as exc:
-        pytest.skip(str(exc))
-
-
 def test_the_model_is_drawn_in_its_colours_and_the_palette_is_a_view(tmp_path, ctx):
     from multigpu.core.camera import look_at, perspective
     from multigpu.gpu.render import RegionRenderer

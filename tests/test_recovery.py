@@ -52,19 +52,19 @@ def test_the_tail_is_enough_for_a_long_run_and_an_empty_one_resumes_at_zero(tmp_
 
 def test_the_summary_counts_each_recovery_and_its_dark_time(tmp_path, monkeypatch):
     timings(tmp_path, 3, 1)
-    history = recovery.failure(tmp_path, 3, "rank 1 died", [], recovery.last_shown_at(tmp_path))
+    history = recovery.failure(3, "rank 1 died", [], recovery.last_shown_at(tmp_path))
     assert history[0]["resumed_at"] == 3 and history[0]["last_shown"] == 2 and history[0]["frames_lost"] == 0
     history[0]["last_shown_at"] = time.time() - 2.0
     monkeypatch.setenv(recovery.ENV, json.dumps(history))
-    r = recovery.Recovery.resumed(tmp_path, 3)
+    r = recovery.Recovery.resumed(3)
     assert r.doc()["recovery_count"] == 1 and r.doc()["recovery_seconds_max"] is None  # not back yet
     r.shown(3)
     doc = r.doc()
     assert 1.9 < doc["recoveries"][0]["seconds"] < 5 and doc["recovery_seconds_max"] == doc["recoveries"][0]["seconds"]
-    assert recovery.Recovery.resumed(tmp_path, 0).doc() == {}  # a run that never failed says nothing
-    again = [{**history[0], "seconds": None}, *recovery.failure(tmp_path, 3, "again", [], time.time() - 1.0)]
+    assert recovery.Recovery.resumed(0).doc() == {}  # a run that never failed says nothing
+    again = [{**history[0], "seconds": None}, *recovery.failure(3, "again", [], time.time() - 1.0)]
     monkeypatch.setenv(recovery.ENV, json.dumps(again))  # a restart that failed before its first frame
-    r = recovery.Recovery.resumed(tmp_path, 3)
+    r = recovery.Recovery.resumed(3)
     r.shown(3)
     assert r.doc()["recovery_count"] == 2 and r.doc()["recovery_seconds_max"] == r.doc()["recoveries"][1]["seconds"]
 

@@ -16,6 +16,7 @@ from mpirun import SMALL, end_launcher, read_png, start_launcher
 
 from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
 from multigpu.parallel.report import read_timings
+from multigpu.studies.recovery_bench import rank_pids as ranks_of
 
 pytestmark = pytest.mark.mpi
 FRAMES = 400
@@ -31,20 +32,6 @@ def mpiexec(request):
     if os.path.realpath(launcher_for(path).path) == os.path.realpath(find_launcher().path):
         pytest.skip("the default mpiexec is Open MPI already")
     return path
-
-
-def ranks_of(out: Path) -> list[int]:
-    """Pids of the rank processes writing ``out``."""
-    pids = []
-    for d in os.listdir("/proc"):
-        if d.isdigit():
-            try:
-                argv = Path(f"/proc/{d}/cmdline").read_bytes().split(b"\0")
-            except OSError:
-                continue
-            if b"mpi4py" in argv and str(out).encode() in argv:
-                pids.append(int(d))
-    return sorted(pids)
 
 
 def segments() -> set[str]:

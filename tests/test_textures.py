@@ -121,16 +121,6 @@ def test_textures_survive_the_scene_cache_and_levels_of_detail(tmp_path, monkeyp
     assert again.lod_count[0, 1] > 0  # simplified with its UVs weighed
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from multigpu.gpu.render import EglUnavailable, create_context
-
-    try:
-        return create_context()[0]
-    except EglUnavailable as exc:
-        pytest.skip(str(exc))
-
-
 @pytest.fixture(params=["pool", "array"])
 def texture_path(request, monkeypatch):
     """Each drawing test on both texture paths (``MULTIGPU_TEXTURES``)."""

@@ -12,12 +12,11 @@ import subprocess
 import sys
 
 import pytest
-from mpirun import ROOT, SMALL, end_launcher, read_png, start_launcher
+from mpirun import ROOT, SMALL, end_launcher, mpi_named, read_png, start_launcher
 from simhosts import SimHosts
 from xserver import need_tools, screenshot, wait_for, windows, wm_close
 
 from multigpu.display.xvfb import start_xvfb, stop_xvfb
-from multigpu.parallel.mpirun import find_launcher, openmpi_on_path
 
 pytestmark = pytest.mark.mpi
 TILE = (60, 96)
@@ -25,15 +24,7 @@ TILE = (60, 96)
 
 @pytest.fixture(params=["mpich", "openmpi"])
 def mpiexec_env(request):
-    if request.param == "mpich":
-        got = find_launcher()
-        if got.flavor != "mpich":
-            pytest.skip(f"the default mpiexec is {got.flavor}, not MPICH")
-        return {"MULTIGPU_MPIEXEC": got.path}
-    path = openmpi_on_path()
-    if path is None:
-        pytest.skip("no Open MPI mpiexec here (Debian: apt install openmpi-bin)")
-    return {"MULTIGPU_MPIEXEC": path}
+    return {"MULTIGPU_MPIEXEC": mpi_named(request.param).path}
 
 
 def _pcs(tmp_path, sizes):

@@ -47,7 +47,7 @@ class RunRecord:
         self.cameras: list = []  # (12,) position, target, up, fov, near, far of the frames not yet in the path file
         self.failed: WriteFailed | None = None  # the first output that could not be written
         self.done = resume_at
-        self.recovery = Recovery.resumed(out.path, resume_at)  # a restarted run goes on with the same files
+        self.recovery = Recovery.resumed(resume_at)  # a restarted run goes on with the same files
         if not resume_at:
             out.clear_previous()
         elif self.path is not None:

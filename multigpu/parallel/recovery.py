@@ -119,7 +119,7 @@ class Recovery:
         self.done, self.pending = done, pending
 
     @classmethod
-    def resumed(cls, out: Path, resume_at: int) -> "Recovery":
+    def resumed(cls, resume_at: int) -> "Recovery":
         """From ``MULTIGPU_RECOVERIES`` in a restarted job (``resume_at`` > 0), else none."""
         if not resume_at:
             return cls([], None)
@@ -169,7 +169,7 @@ def last_shown_at(out: Path) -> float:
         return time.time()
 
 
-def failure(out: Path, resume_at: int, reason: str, history: list[dict], shown_at: float) -> list[dict]:
+def failure(resume_at: int, reason: str, history: list[dict], shown_at: float) -> list[dict]:
     """The recoveries so far with this one added: what failed, the last frame shown (and when:
     ``shown_at``), the frame resumed at, and the path frames it skips (none: the path resumes at
     the first frame not shown)."""

@@ -77,7 +77,7 @@ def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
             shown_at = recovery.last_shown_at(out)
             at = recovery.resume_point(out, ranks, recovery.recorded_frames(flag_value(argv, "--record")))
             if reason is not None:
-                history = recovery.failure(out, at, reason, history, shown_at)
+                history = recovery.failure(at, reason, history, shown_at)
                 without = f" without {', '.join(sorted(gone))} (tiles {','.join(map(str, dark))} dark)" if gone else ""
                 print(f"multigpu: recovering ({len(restarts)} of at most {bound} restarts in "
                       f"{recovery.WINDOW / 60:.0f} minutes): {reason}; restarting the wall{without} at frame {at}",

@@ -28,7 +28,8 @@ from multigpu.parallel.recovery import STEPS
 KILL_AFTER, FRAMES = 150, 400
 
 
-def _ranks(out: str) -> list[int]:
+def rank_pids(out) -> list[int]:
+    """Pids of the rank processes (``python -m mpi4py ...``) writing the run in ``out``."""
     pids = []
     for d in os.listdir("/proc"):
         if d.isdigit():
@@ -36,7 +37,7 @@ def _ranks(out: str) -> list[int]:
                 argv = Path(f"/proc/{d}/cmdline").read_bytes().split(b"\0")
             except OSError:
                 continue
-            if b"mpi4py" in argv and out.encode() in argv:
+            if b"mpi4py" in argv and str(out).encode() in argv:
                 pids.append(int(d))
     return sorted(pids)
 
@@ -56,7 +57,7 @@ def one_round(cache: str, tmp: str, k: int, kill: bool = True) -> dict:
                 raise RuntimeError(f"bench recovery: the run ended early: {proc.communicate()[1][-500:]}")
             time.sleep(0.05)
         if kill:
-            os.kill(_ranks(out)[-1], signal.SIGKILL)
+            os.kill(rank_pids(out)[-1], signal.SIGKILL)
         _, err = proc.communicate(timeout=600)
     finally:
         if proc.poll() is None:
