@@ -17,7 +17,6 @@ from typing import Callable
 
 import numpy as np
 
-from multigpu.core.bounds import BoxProjector
 from multigpu.core.projectors import make_projector
 from multigpu.core.work import Work
 from multigpu.decompositions import make_decomposition
@@ -33,17 +32,16 @@ class Planner:
     def __init__(self, cfg, scene, rank: int | None = None):
         self.cfg, self.scene, self.rank = cfg, scene, rank
         self.canvas = cfg.canvas
-        self._bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
+        self.bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
         screen = cfg.decomposition == "screen"
         # what an operator cycles through: every strategy of the screen decomposition, else just that one
         self.balances = list(STRATEGIES) if screen else [cfg.decomposition]
         self.using = self.balances.index(cfg.balance) if screen else 0
         self._built: dict[int, object] = {}
         self._d = None  # the decomposition in use, once built (``use`` clears it): no lookups per frame
-        self._size = self.canvas.size
+        self.size = self.canvas.size
         self._planned: dict[int, tuple[object, Work]] = {}
         self.project = make_projector(scene, cfg.bounds)
-        self._slices: dict[tuple[int, int], BoxProjector] = {}  # ``frame_slice``'s projectors, by slice
         self.coverage = np.ones(scene.n_objects)  # per-object silhouette coverage, for strategies that use it
         # triangles per object, formed once (``scene.tris`` divides every object's index count:
         # ~12 us of CPU per frame with the caches cold)
@@ -71,34 +69,8 @@ class Planner:
         decomposition in use wants it. Compiled, matrices and rects come from one kernel call,
         into the projector's own arrays: valid through the next call, not longer."""
         d = self._d or self.decomposition
-        view, proj, light, rects = self.project.frame(camera, self._size, self.coverage if d.needs_coverage else None)
-        return view, proj, light, self.canvas.to_visible(rects) if self._bezels else rects
-
-    @property
-    def sliceable(self) -> bool:
-        """Whether this frame's projection can be made a slice at a time (``frame_slice``): box
-        bounds, and a decomposition that wants no coverage."""
-        d = self._d or self.decomposition
-        return isinstance(self.project, BoxProjector) and not d.needs_coverage
-
-    def frame_slice(self, camera, lo: int, hi: int, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(view, proj, light) of ``camera``, and the canvas rects of objects [lo, hi) into columns
-        lo:hi of ``out`` (4, N) float64: a host's ranks each project a slice into one shared
-        array (``parallel/projection.py``). A box's rect does not depend on the others, so the
-        slices make ``frame``'s rects bit for bit (tests/test_projection.py); ``rects_of``
-        reads them once every slice is in. Only where ``sliceable``."""
-        sub = self._slices.get((lo, hi))
-        if sub is None:
-            full, scene = self.project, self.scene
-            sub = self._slices[(lo, hi)] = BoxProjector(scene.bmin[lo:hi], scene.bmax[lo:hi], full.dtype,
-                                                        compiled=full.compiled)
-        view, proj, light, rects = sub.frame(camera, self._size)
-        out[:, lo:hi] = rects.T
-        return view, proj, light
-
-    def rects_of(self, out: np.ndarray) -> np.ndarray:
-        """The (N, 4) visible rects of a (4, N) array of canvas rects (``frame_slice``'s)."""
-        return self.canvas.to_visible(out.T) if self._bezels else out.T
+        view, proj, light, rects = self.project.frame(camera, self.size, self.coverage if d.needs_coverage else None)
+        return view, proj, light, self.canvas.to_visible(rects) if self.bezels else rects
 
     def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None,
              tris: np.ndarray | None = None) -> Work:
@@ -112,7 +84,7 @@ class Planner:
             work = d.from_partition(relay(lambda: d.partition(rects, tris, cov)), tris)
         else:
             work = d.plan(frame, rects, tris, self.coverage) if d.needs_coverage else d.plan(frame, rects, tris)
-        if self._bezels:
+        if self.bezels:
             work = self.canvas.to_canvas(work, rects, tris)
         planned = self._planned
         planned[frame] = (d, work)

@@ -9,31 +9,25 @@ import sys
 
 import numpy as np
 import pytest
+from threadcomm import World
 
 from multigpu.core.work import Work, transfers
+from multigpu.parallel.composite import Messages
 from multigpu.parallel.shared import SharedPieces, attach, reserve, room
-
-
-class _Comm:
-    def __init__(self, rank: int, size: int):
-        self.rank, self.size = rank, size
-
-    def Get_rank(self):  # noqa: N802
-        return self.rank
-
-    def Get_size(self):  # noqa: N802
-        return self.size
 
 
 def _cuts(n: int, size: int, rng) -> list[int]:
     return [0, *sorted(rng.choice(np.arange(1, size), n - 1, replace=False).tolist()), size]
 
 
+@pytest.mark.parametrize("backend", ["shared", "messages"])
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("with_depth", [False, True])
-def test_every_tile_composes_from_own_and_published_parts(seed, with_depth):
+def test_every_tile_composes_from_own_and_published_parts(seed, with_depth, backend):
     """Random pieces on a 2x2 wall (colour: a rank's pieces are cells of a random grid; depth:
-    overlapping rects): every rank's tile equals the tile painted straight from every piece."""
+    overlapping rects): every rank's tile equals the tile painted straight from every piece,
+    each rank's three calls (start, wait, finish) made in turn: a shared segment's parts, or
+    messages (``threadcomm``, one thread)."""
     rng = np.random.default_rng(seed)
     W, H, K = 64, 48, 4
     tiles = np.array([[0, 0, 32, 24], [32, 0, 64, 24], [0, 24, 32, 48], [32, 24, 64, 48]])
@@ -55,11 +49,13 @@ def test_every_tile_composes_from_own_and_published_parts(seed, with_depth):
                 for rs in rects]
     per_half = W * H * (7 if with_depth else 3)
     segments = [np.zeros(2 * per_half, np.uint8) for _ in range(K)]
-    ranks = [SharedPieces(_Comm(k, K), 1.0, dict(enumerate(segments)), per_half, with_depth)
-             for k in range(K)]
+    comms = World(K).comms()
+    ranks = [SharedPieces(comms[k], 1.0, dict(enumerate(segments)), per_half, with_depth) if backend == "shared"
+             else Messages(comms[k], 1.0) for k in range(K)]
     frame = 3
+    started = [ranks[k].start(frame, k, work.rects, rendered[k], plan, with_depth) for k in range(K)]
     for k in range(K):
-        ranks[k].publish(frame, k, work.rects, rendered[k], plan)
+        ranks[k].wait(started[k])
     # straight from every piece: ascending rank, nearer replaces (ties keep the lower rank)
     want = np.zeros((H, W, 3), np.uint8)
     wantz = np.ones((H, W), np.float32)
@@ -76,13 +72,14 @@ def test_every_tile_composes_from_own_and_published_parts(seed, with_depth):
         x0, y0, x1, y1 = tiles[k]
         color = np.zeros((y1 - y0, x1 - x0, 3), np.uint8)
         depth = np.ones((y1 - y0, x1 - x0), np.float32) if with_depth else None
-        sent, zbytes = ranks[k].compose(frame, k, work.rects, rendered[k], plan, tiles[k], color, depth)
+        sent, zbytes = ranks[k].finish(started[k], tiles[k], color, depth)
         assert (color == want[y0:y1, x0:x1]).all()
         away = sum(p.pixels for p in plan if p.sender == k and p.receiver != k)
         assert sent == away * (7 if with_depth else 3) and zbytes == (4 * away if with_depth else 0)
         read += away
     assert read == sum(p.pixels for p in plan if p.sender != p.receiver)
     assert not segments[0][:per_half].any()  # frame 3 wrote the second half only
+    assert segments[0][per_half:].any() == (backend == "shared")
     # one host sends no messages, so nothing here started MPI: an Open MPI singleton in the test
     # process would put its environment into every job a later test launches (they then fail)
     assert "mpi4py.MPI" not in sys.modules

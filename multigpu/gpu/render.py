@@ -174,8 +174,6 @@ class RegionRenderer:
         self.fbo_size = (0, 0)
         self._ring = None  # the scissor method's two framebuffers once a frame is submitted ahead (``submit``)
         self._tris = 0
-        self.levels = None  # (N,) each object's level of detail in the next frames (None: all as modelled)
-        self.scale = 1.0  # the render scale of the next frames (``core/resample.py``; 1: every pixel)
         # the largest framebuffer side a region chunk may use
         self.chunk = self.limits["renderbuffer"]
         if self.method == "scissor":
@@ -242,18 +240,19 @@ class RegionRenderer:
         return ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4)],
                                depth_attachment=ctx.depth_renderbuffer(size))
 
-    def _chunks(self, region):
-        """The region cut into pieces no larger than the framebuffer limit (usually one)."""
+    def _chunks(self, region, size: tuple[int, int]):
+        """The region of a ``size`` display cut into pieces no larger than the framebuffer limit
+        (usually one)."""
         x0, y0, x1, y1 = region
-        c = self.chunk if self.method != "scissor" else max(self.size)
+        c = self.chunk if self.method != "scissor" else max(size)
         for cy in range(y0, y1, c):
             for cx in range(x0, x1, c):
                 yield cx, cy, min(cx + c, x1), min(cy + c, y1)
 
-    def _commands(self, mask, seen) -> np.ndarray:
+    def _commands(self, mask, seen, levels) -> np.ndarray:
         """The draw commands of the objects in ``mask`` (of their ``seen`` parts) at their ``levels``
-        of detail; ``_tris``: their triangles."""
-        cmds = self.draws.leveled(mask, self.levels, seen)
+        of detail (None: as modelled); ``_tris``: their triangles."""
+        cmds = self.draws.leveled(mask, levels, seen)
         self.last_commands = len(cmds)
         self._tris = int(cmds[:, 0].sum()) // 3
         return cmds
@@ -287,21 +286,35 @@ class RegionRenderer:
                 sampler.use(unit)
 
     def render(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, region, mask: np.ndarray | None,
-               depth: bool = False, seen: np.ndarray | None = None):
+               depth: bool = False, seen: np.ndarray | None = None, scale: float = 1.0, levels=None):
         """Render the objects in ``mask`` (all when None) into ``region``; return its pixels.
         ``seen``: of a scene cut into parts, the parts that reach the region (``core/culling.py``;
-        None: every part of the objects in ``mask``).
+        None: every part of the objects in ``mask``). ``scale`` and ``levels``: the frame's
+        quality (``core/quality.py``): its render scale and each object's level of detail
+        ((N,), None: all as modelled).
 
         Returns ``(h, w, 3)`` uint8, row 0 at the BOTTOM of the region (GL order); with
         ``depth`` also the ``(h, w)`` float32 window depth. ``last_triangles`` is what it drew.
         At a ``scale`` below 1 the region's footprint is drawn on the scaled canvas and brought
-        back to the region's pixels (``core/resample.py``).
+        back to the region's pixels (``core/resample.py``): each canvas pixel takes the one it
+        shows, as a full render of the scaled canvas draws it.
         """
-        if self.scale != 1.0:
-            return self._scaled(view, proj, light, region, mask, depth, seen)
+        if scale == 1.0:
+            return self._pixels(view, proj, light, region, mask, depth, seen, levels, self.size)
+        from multigpu.core.resample import footprint, scaled_size, upscale
+
+        size = self.size
+        small = scaled_size(size, scale)
+        got = self._pixels(view, proj, light, footprint(region, size, small), mask, depth, seen, levels, small)
+        if depth:
+            return tuple(upscale(g, region, size, small) for g in got)
+        return upscale(got, region, size, small)
+
+    def _pixels(self, view, proj, light, region, mask, depth: bool, seen, levels, size: tuple[int, int]):
+        """``render`` at scale 1 of a ``size`` display (the canvas, or its scaled one)."""
         x0, y0, x1, y1 = (int(v) for v in region)
         w, h = x1 - x0, y1 - y0
-        cmds = self._commands(mask, seen)
+        cmds = self._commands(mask, seen, levels)
         self.last_triangles = self._tris
         ctx = self.ctx
         mvp = np.asarray(proj, dtype=np.float64) @ model_view(view, self.origin)
@@ -309,8 +322,8 @@ class RegionRenderer:
             self._upload(cmds, light)
         out = np.empty((h, w, 3), dtype=np.uint8)
         zout = np.empty((h, w), dtype=np.float32) if depth else None
-        W, H = self.size
-        for cx0, cy0, cx1, cy1 in self._chunks((x0, y0, x1, y1)):
+        W, H = size
+        for cx0, cy0, cx1, cy1 in self._chunks((x0, y0, x1, y1), size):
             cw, ch = cx1 - cx0, cy1 - cy0
             if self.method == "scissor":
                 fx, fy, viewport, m = cx0, cy0, (0, 0, W, H), mvp
@@ -320,7 +333,7 @@ class RegionRenderer:
                 if self.method == "viewport":
                     viewport, m = (-cx0, -cy0, W, H), mvp
                 else:
-                    viewport, m = (0, 0, cw, ch), region_clip((cx0, cy0, cx1, cy1), self.size) @ mvp
+                    viewport, m = (0, 0, cw, ch), region_clip((cx0, cy0, cx1, cy1), size) @ mvp
             self.fbo.use()
             self.fbo.viewport = viewport
             self.fbo.scissor = (fx, fy, cw, ch)
@@ -343,38 +356,23 @@ class RegionRenderer:
                 zout[rows, cols] = np.frombuffer(data, dtype=np.float32).reshape(ch, cw)
         return (out, zout) if depth else out
 
-    def _scaled(self, view, proj, light, region, mask, depth, seen):
-        """``render`` at ``scale``: the region's scaled pixels drawn as a full render of the scaled
-        canvas would draw them, then each canvas pixel takes the one it shows."""
-        from multigpu.core.resample import footprint, scaled_size, upscale
-
-        size, scale = self.size, self.scale
-        small_size = scaled_size(size, scale)
-        self.size, self.scale = small_size, 1.0
-        try:
-            got = self.render(view, proj, light, footprint(region, size, small_size), mask, depth, seen)
-        finally:
-            self.size, self.scale = size, scale
-        if depth:
-            return tuple(upscale(g, region, size, small_size) for g in got)
-        return upscale(got, region, size, small_size)
-
     def submit(self, view: np.ndarray, proj: np.ndarray, light: np.ndarray, pieces: list, depth: bool = False,
-               ahead: bool = False) -> "Pending":
+               ahead: bool = False, scale: float = 1.0, levels=None) -> "Pending":
         """Draw a frame's ``pieces`` ``(region, mask, seen)`` now and read their pixels later
         (``Pending.read``: the same pixels ``render`` gives, piece by piece). ``ahead``: the
         caller submits the next frame before it reads this one (``--latency`` 2 and more), so the
         pieces go into the next framebuffer of a ring of two: the GL draws this frame while the
         rank's thread composes the last (llvmpipe rasterizes one framebuffer's scene while the
         next one's triangles are binned; a GPU draws while the CPU plans). Only the scissor
-        method with disjoint pieces in one chunk each can wait; others are read at once."""
+        method with disjoint pieces in one chunk each can wait; others are read at once.
+        ``scale`` and ``levels``: the frame's quality, as ``render``'s."""
         if self._ring is not None:  # the other framebuffer than the last frame's (it may be unread yet)
             self._ring.reverse()
             self.fbo = self._ring[0]
-        if not (ahead and self.method == "scissor" and self.scale == 1.0 and _disjoint([r for r, _, _ in pieces])):
+        if not (ahead and self.method == "scissor" and scale == 1.0 and _disjoint([r for r, _, _ in pieces])):
             got, total = [], 0
             for r, m, s in pieces:  # pieces, not objects
-                got.append(self.render(view, proj, light, r, m, depth=depth, seen=s))
+                got.append(self.render(view, proj, light, r, m, depth, s, scale, levels))
                 total += self._tris
             self.last_triangles = total
             return Pending([g if depth else (g, None) for g in got])
@@ -384,7 +382,7 @@ class RegionRenderer:
         drawn, total = [], 0
         for region, mask, seen in pieces:  # pieces, not objects
             x0, y0, x1, y1 = (int(v) for v in region)
-            self._draw(self._commands(mask, seen), view, proj, light, (x0, y0, x1 - x0, y1 - y0))
+            self._draw(self._commands(mask, seen, levels), view, proj, light, (x0, y0, x1 - x0, y1 - y0))
             total += self._tris
             drawn.append((x0, y0, x1 - x0, y1 - y0))
         self.last_triangles = total

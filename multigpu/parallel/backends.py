@@ -16,19 +16,14 @@ from multigpu.core.work import Piece
 
 @runtime_checkable
 class Exchange(Protocol):
-    """Pieces to their tile owners: ``publish`` before the frame's barrier (a shared segment
-    writes its parts there), ``compose`` after it (copy or depth-merge into ``color``/``depth``,
-    returns bytes sent and of which depth), ``close`` at the end (``collective``: every rank
-    together). Frames in flight (``--latency``) use the split form instead of the barrier:
-    ``start`` as soon as the frame's pixels are read (parts out), ``wait`` until every peer's
-    parts are there, ``finish`` to compose, frames later."""
+    """Pieces to their tile owners, in three calls a frame: ``start`` as soon as the frame's
+    pixels are read (parts out), ``wait`` until every peer's parts are there (the frame's
+    ``sync``), ``finish`` to compose the tile (copy or depth-merge into ``color``/``depth``;
+    returns bytes sent and of which depth); ``close`` at the end (``collective``: every rank
+    together). Strictly in order (``--latency 0``) the three run back to back; frames in
+    flight run them a stage apart."""
 
     name: str
-
-    def publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None: ...
-
-    def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
-                depth: np.ndarray | None = None) -> tuple[int, int]: ...
 
     def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool): ...
 

@@ -29,19 +29,6 @@ def _part(piece_px: np.ndarray, origin, rect) -> np.ndarray:
     return piece_px[y0 - oy:y1 - oy, x0 - ox:x1 - ox]
 
 
-def composite(comm, me: int, rects, rendered: list, plan: list[Piece], tile, timeout: float, color: np.ndarray,
-              depth: np.ndarray | None = None, near: frozenset = frozenset(), read=None) -> tuple[int, int]:
-    """Compose rank ``me``'s tile into ``color`` (th, tw, 3) [and ``depth`` (th, tw)].
-
-    ``rects`` are every rank's pieces (``Work.rects``), ``rendered[j]`` rank ``me``'s piece j
-    as ``(rgb, z)`` (z None without depth), ``plan`` the frame's ``transfers``. With ``depth``
-    the tile must hold the background at depth 1.0 on entry. ``near``: ranks whose parts this
-    rank reads from shared memory instead of messages, ``read(sender, parts)`` giving their
-    views (``shared.py``; its own host's ranks). Returns (bytes sent as messages, of which
-    depth bytes). ``post`` and ``Posted.complete`` are its two halves, for frames in flight."""
-    return post(comm, me, rects, rendered, plan, depth is not None, near).complete(tile, timeout, color, depth, read)
-
-
 class Posted:
     """A frame's messages on their way: the sends and receives ``post`` started; ``complete``
     waits for them and composes the tile."""
@@ -53,6 +40,10 @@ class Posted:
 
     def complete(self, tile, timeout: float, color: np.ndarray, depth: np.ndarray | None = None,
                  read=None) -> tuple[int, int]:
+        """Compose rank ``me``'s tile into ``color`` (th, tw, 3) [and ``depth`` (th, tw), which
+        must hold the background at depth 1.0 on entry]: its own parts, the messages once they
+        are in, and the parts of ``near`` ranks as ``read(sender, parts)`` gives their views
+        (``shared.py``: its own host's ranks). Returns (bytes sent as messages, of which depth)."""
         me, rects, rendered, incoming = self.me, self.rects, self.rendered, self.incoming
         # colour parts tile the display, so their order is free: this rank's own go in while the
         # messages travel (fewer polls of the wait); depth parts merge in ascending sender order
@@ -76,7 +67,9 @@ class Posted:
 def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool,
          near: frozenset = frozenset()) -> Posted:
     """Start a frame's exchange: this rank's parts for other ranks' tiles packed and sent, its
-    receives posted (nothing for ``near`` ranks, read from shared memory)."""
+    receives posted (nothing for ``near`` ranks, read from shared memory). ``rects`` are every
+    rank's pieces (``Work.rects``), ``rendered[j]`` rank ``me``'s piece j as ``(rgb, z)`` (z
+    None without depth), ``plan`` the frame's ``transfers``."""
     per_px = 7 if with_depth else 3
     outgoing: dict[int, list[Piece]] = {}
     incoming: dict[int, list[Piece]] = {}
@@ -88,22 +81,20 @@ def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bo
     away = near | {me}  # parts that travel by no message
     sends = {r: parts for r, parts in outgoing.items() if r not in away}
     recvs = {s: parts for s, parts in incoming.items() if s not in away}
-    if sends or recvs:  # only then: a shared-memory exchange on one host stays MPI-free here
-        from mpi4py import MPI
     requests, keep = [], []
     sent = zbytes = 0
     for r, parts in sends.items():
         buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
         _pack(buf, parts, rects[me], rendered, with_depth)
         keep.append(buf)
-        requests.append(comm.Isend([buf, MPI.BYTE], dest=r, tag=TAG))
+        requests.append(comm.Isend(buf, dest=r, tag=TAG))
         sent += buf.nbytes
         zbytes += 4 * sum(p.pixels for p in parts) if with_depth else 0
     inbox = {}
     for s, parts in recvs.items():
         buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
         inbox[s] = buf
-        requests.append(comm.Irecv([buf, MPI.BYTE], source=s, tag=TAG))
+        requests.append(comm.Irecv(buf, source=s, tag=TAG))
     return Posted(me, rects, rendered, incoming, requests, keep, inbox, sent, zbytes, with_depth, near)
 
 
@@ -113,31 +104,28 @@ def _merge(color, depth, tile, views) -> None:
 
 
 class Messages:
-    """The exchange backend of direct sends: nothing to publish before the barrier; after it,
-    one message per (sender, receiver) pair (``composite``)."""
+    """The exchange backend of direct sends: one message per (sender, receiver) pair, sent as
+    soon as the frame's pixels are read (``start``), composed once in (``finish``). ``sync``:
+    ``wait`` is a barrier every rank reaches once its frame is read (the paper's GPU-GPU
+    synchronization, ``--latency 0``); with frames in flight the messages alone pace the ranks."""
 
     name = "messages"
 
-    def __init__(self, comm, timeout: float):
-        self.comm, self.timeout = comm, timeout
+    def __init__(self, comm, timeout: float, sync: bool = True):
+        self.comm, self.timeout, self.sync = comm, timeout, sync
 
-    def publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
-        """Messages leave in ``compose``."""
+    def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool):
+        """The frame's messages on their way (and the barrier posted, where there is one)."""
+        return post(self.comm, me, rects, rendered, plan, with_depth), self.comm.Ibarrier() if self.sync else None
 
-    def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
-                depth: np.ndarray | None = None) -> tuple[int, int]:
-        return composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth)
+    def wait(self, started) -> None:
+        """Until every rank has read its frame (``sync``; else at once: the messages are the wait)."""
+        if started[1] is not None:
+            wait_all([started[1]], self.timeout, "synchronization")
 
-    def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool) -> Posted:
-        """Frames in flight: the frame's messages leave as soon as its pixels are read."""
-        return post(self.comm, me, rects, rendered, plan, with_depth)
-
-    def wait(self, started: Posted) -> None:
-        """Frames in flight: nothing to wait for before ``finish`` (the messages are)."""
-
-    def finish(self, started: Posted, tile, color: np.ndarray, depth: np.ndarray | None = None) -> tuple[int, int]:
-        """Frames in flight: wait for the frame's messages and compose its tile."""
-        return started.complete(tile, self.timeout, color, depth)
+    def finish(self, started, tile, color: np.ndarray, depth: np.ndarray | None = None) -> tuple[int, int]:
+        """Wait for the frame's messages and compose its tile (``Posted.complete``)."""
+        return started[0].complete(tile, self.timeout, color, depth)
 
     def close(self, collective: bool = True) -> None:
         """Nothing held."""

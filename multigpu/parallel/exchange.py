@@ -35,16 +35,16 @@ class PeerTimeout(RuntimeError):
 
 def wait_all(requests, timeout: float, what: str, most: float | None = None) -> None:
     """Complete MPI requests, sleeping between tests (growing to ``most`` s); raise PeerTimeout
-    after ``timeout`` s. With none it returns before importing MPI (a process that never sent
-    stays MPI-free)."""
+    after ``timeout`` s. The requests' own class tests them (``MPI.Request.Testall``, or a
+    stand-in communicator's), so waiting imports no MPI: a process that never sent stays
+    MPI-free."""
     if not requests:
         return
-    from mpi4py import MPI
-
     start = time.monotonic()
     deadline, checks = start + timeout, start + CHECK_AFTER
     sleep, most = 1e-5, POLL if most is None else most
-    while not MPI.Request.Testall(requests):
+    testall = type(requests[0]).Testall
+    while not testall(requests):
         now = time.monotonic()
         if now > deadline:
             raise PeerTimeout(f"{what}: no answer from other ranks within {timeout:g} s")
@@ -64,8 +64,6 @@ def barrier(comm, timeout: float, most: float | None = None) -> None:
 def broadcast_partition(comm, part, k: int, n: int, timeout: float):
     """Rank 0's partition on every rank (the ``--partition broadcast`` variant): one
     non-blocking broadcast of regions, loads, splits and the bit-packed (K, N) T' masks."""
-    from mpi4py import MPI
-
     from multigpu.core.balance import Partition
 
     m = max(k - 1, 0)
@@ -79,7 +77,7 @@ def broadcast_partition(comm, part, k: int, n: int, timeout: float):
         buf[:8 * ints] = head_ints.view(np.uint8)
         buf[8 * ints:head] = np.asarray(part.splits, dtype=np.float64).view(np.uint8)
         buf[head:] = np.packbits(part.visible.ravel())
-    wait_all([comm.Ibcast([buf, MPI.BYTE], root=0)], timeout, "partition broadcast")
+    wait_all([comm.Ibcast(buf, root=0)], timeout, "partition broadcast")
     i = buf[:8 * ints].view(np.int64)
     total = int(i[-1])
     if total:  # a strategy that gives ranks several pieces (cross): counts, rects, packed masks
@@ -89,7 +87,7 @@ def broadcast_partition(comm, part, k: int, n: int, timeout: float):
             rects = np.concatenate([np.asarray(p, np.int64).reshape(-1, 4) for p in part.pieces])
             more[:8 * (k + 4 * total)] = np.concatenate([counts, rects.ravel()]).astype(np.int64).view(np.uint8)
             more[8 * (k + 4 * total):] = np.packbits(np.concatenate(part.piece_visible).ravel())
-        wait_all([comm.Ibcast([more, MPI.BYTE], root=0)], timeout, "partition broadcast")
+        wait_all([comm.Ibcast(more, root=0)], timeout, "partition broadcast")
     if root:
         return part
     visible = np.unpackbits(buf[head:], count=k * n).reshape(k, n).view(bool)

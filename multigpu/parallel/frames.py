@@ -20,20 +20,15 @@ from multigpu.core.quality import Fidelity, Quality
 from multigpu.core.resample import Widen, covered, grown, scaled_size
 from multigpu.core.work import Work, transfers
 from multigpu.errors import WriteFailed
-from multigpu.parallel.backends import Exchange, Projection
-from multigpu.parallel.composite import Messages
 from multigpu.parallel.exchange import agree, barrier, broadcast_partition
 from multigpu.parallel.fault import FAULT_SPEC, fault
+from multigpu.parallel.frame_setup import FrameSetup, planned_frames
 from multigpu.parallel.framelog import FrameLog
-from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.projection import make_projection
-from multigpu.parallel.record import RunRecord, config_doc, run_title
+from multigpu.parallel.record import run_title
 from multigpu.parallel.report import BALANCE_NAMES
 from multigpu.parallel.rows import Rows
-from multigpu.parallel.shared import SharedPieces
 from multigpu.parallel.stops import STOP_FLAG, stopped_by_flags
 from multigpu.parallel.timer import Timer
-from multigpu.planner import Planner
 
 #: the longest sleep between tests of the swap barrier (s): every rank swaps within about as much of the last
 #: one's arrival (the default 2 ms let the swap skew grow with frames in flight)
@@ -60,17 +55,18 @@ class InFlight:
 
 
 class Frames:
-    """The frame loop in named phases: balance, render, sync, exchange, display, record."""
+    """The frame loop in named phases: balance, render, sync, exchange, display, record. Built
+    from its parts (``frame_setup.build``), it does no work until ``run``."""
 
-    def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, presenter, out: OutputDir | None,
-                 load_info, placement: list[dict], monitor=None):
+    def __init__(self, cfg: WalkConfig, comm, job, scene, path, renderer, presenter, setup: FrameSetup):
         self.cfg, self.comm, self.job = cfg, comm, job
         self.scene, self.path, self.renderer, self.presenter = scene, path, renderer, presenter
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         tw, th = cfg.tile
         self.canvas = cfg.canvas
         self.tiles = self.canvas.tiles()
-        self.planner = Planner(cfg, scene, self.rank)  # MPI-free: projection, strategy, decomposition
+        self.planner, self.exchange, self.projection = setup.planner, setup.exchange, setup.projection
+        self.live, self.record, self.background = setup.live, setup.record, setup.background
         self.culler = PartCuller(scene) if renderer.draws.parts else None  # objects cut into parts
         # speed for accuracy: each frame's render scale and levels of detail (core/quality.py)
         self.fidelity = Fidelity(scene, self.canvas.size[1], cfg.target_fps, cfg.render_scale, cfg.lod_error,
@@ -79,54 +75,18 @@ class Frames:
         self.drawn = 0  # triangles this rank drew in the last frame
         self.balance_ids = [BALANCE_NAMES.index(b) for b in self.planner.balances]  # the CSV's balance column
         self.relay = self._relay if cfg.partition == "broadcast" and self.K > 1 else None  # screen only (door)
-        depth = self.planner.decomposition.depth
         self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
-        self.zback = np.ones((th, tw), dtype=np.float32) if depth else None
-        self.background = renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
-                                          np.zeros(scene.n_objects, dtype=bool))[0, 0]  # the clear colour
+        self.zback = np.ones((th, tw), dtype=np.float32) if self.planner.decomposition.depth else None
         self.latency, self.ahead = cfg.latency, read_lag(cfg.latency) > 0
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col
         self.interactive = cfg.path == INTERACTIVE
-        self.n_frames = cfg.frames if self.interactive else len(path)  # None: until the user stops it
+        self.n_frames = planned_frames(cfg, path)  # None: until the user stops it
         self.done = cfg.resume_at  # frames of the path shown (a resumed run's start after them)
         self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
         self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
-        # the exchange backend: a node-shared segment where asked for and possible, else messages
-        shared, why = None, None
-        if cfg.exchange != "messages":
-            shared, why = SharedPieces.make(comm, self.canvas.size, depth, cfg.timeout, cfg.exchange == "shared",
-                                            slots=3 if cfg.latency else 2, layers=self.planner.decomposition.layers)
-        self.exchange: Exchange = shared or Messages(comm, cfg.timeout)
-        # the bounds' projection: a slice per rank of a host into one shared array, where it can be
-        self.projection: Projection
-        self.projection, projection_why = make_projection(cfg, comm, self.planner, scene.n_objects)
         self.window = presenter.mode == "window"
-        self.live = None
-        if self.window:
-            from multigpu.parallel.live import Live
-
-            controls = start = None
-            if self.rank == 0:  # rank 0's windows take the keyboard and mouse
-                from multigpu.display import take_input
-
-                controls = take_input(presenter, *([monitor.window] if monitor is not None else []))
-                if self.interactive:
-                    start = unshifted(path.camera(0), cfg.offset)
-            self.live = Live(cfg, comm, scene, self.planner.balances, self.planner.using, controls, monitor, start)
-        doc = config_doc(cfg, scene, load_info, self.n_frames, placement, renderer.method)
-        doc["exchange"] = self.exchange.name
-        if why:
-            doc["exchange_why"] = f"messages: no shared segment ({why})"
-        doc["projection"] = self.projection.name
-        if projection_why:
-            doc["projection_why"] = projection_why
-        self.config_doc = doc
-        self.record = None
-        if self.rank == 0:
-            self.record = RunRecord(out, self.K, self.n_frames, doc, self.planner.report, cfg.video,
-                                    cfg.progress, cfg.overlay, cfg.record, cfg.resume_at)
         self.log = FrameLog(cfg, comm, job, self.record, self.col, self.n_frames, self.window)
 
     def _relay(self, partition):
@@ -136,11 +96,12 @@ class Frames:
 
     # -- phases of one frame
 
-    def render(self, t: Timer, work: Work, view, proj, light, rects, scale: float):
+    def render(self, t: Timer, work: Work, view, proj, light, rects, scale: float, levels):
         """Every piece this rank renders, drawn (read later: ``Pending.read``). Of a scene cut
         into parts, the parts each piece needs are found first (the ``cull`` phase); ``drawn``
         counts the triangles the pieces drew. Below ``scale`` 1 a piece draws what reaches the
-        canvas its scaled pixels cover (``core/resample.py``; ``rects``: the objects' visible rects)."""
+        canvas its scaled pixels cover (``core/resample.py``; ``rects``: the objects' visible rects);
+        ``levels``: each object's level of detail (None: as modelled)."""
         masks, reach = work.masks[self.rank], work.rects[self.rank]
         if scale != 1.0:
             size = self.canvas.size
@@ -160,7 +121,7 @@ class Frames:
         else:
             pieces = [(rect, mask, None) for rect, mask, _ in mine]
         with t.phase("render"):
-            pending = self.renderer.submit(view, proj, light, pieces, depth=work.depth, ahead=self.ahead)
+            pending = self.renderer.submit(view, proj, light, pieces, work.depth, self.ahead, scale, levels)
         self.drawn = self.renderer.last_triangles
         return pending
 
@@ -212,16 +173,15 @@ class Frames:
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
             quality, levels, tris = self.fidelity.frame(f, camera, rects)
-            self.renderer.scale, self.renderer.levels = quality.scale, levels
         with t.phase("plan"):
             work = self.planner.work(f, rects, self.relay, None if levels is None else tris.copy())
-            if self.latency:  # the planner's arrays may be its own again by the time the frame is shown
-                work = work._replace(rects=tuple(r.copy() for r in work.rects))
+            # the planner's arrays may be its own again by the time the frame is shown (frames in flight)
+            work = work._replace(rects=tuple(r.copy() for r in work.rects))
             if work.depth and quality.scale != 1.0:  # sort-last pieces reach the pixels their scaled samples show
                 front = work.front or (0,) * work.ranks  # a hybrid's regions stay
                 work = work._replace(rects=tuple(grown(r, self.canvas.size, quality.scale, f)
                                                  for r, f in zip(work.rects, front)))
-        pending = self.render(t, work, view, proj, light, rects, quality.scale)
+        pending = self.render(t, work, view, proj, light, rects, quality.scale, levels)
         with t.phase("exchange"):
             plan = transfers(work, self.tiles)
         recorded = None
@@ -237,11 +197,8 @@ class Frames:
         with x.t.phase("readback"):
             x.rendered = x.pending.read()
             x.pending = None
-        with x.t.phase("exchange"):  # parts for peers into the shared segment before the barrier (messages: nothing)
-            if self.latency:
-                x.started = self.exchange.start(x.f, self.rank, x.work.rects, x.rendered, x.plan, x.work.depth)
-            else:
-                self.exchange.publish(x.f, self.rank, x.work.rects, x.rendered, x.plan)
+        with x.t.phase("exchange"):  # parts for peers out: into the shared segment, or as messages
+            x.started = self.exchange.start(x.f, self.rank, x.work.rects, x.rendered, x.plan, x.work.depth)
 
     def deliver(self, x: "InFlight") -> None:
         """A frame's last stage: the peers' parts (the ``sync`` wait), the tile composed and
@@ -250,19 +207,12 @@ class Frames:
         for landed in self.rows.land():  # the last frame's row first: kept even if a peer fails in this one
             self.landed(*landed)
         with t.phase("sync"):
-            if self.latency:
-                self.exchange.wait(x.started)
-            else:
-                barrier(self.comm, self.cfg.timeout)
+            self.exchange.wait(x.started)
         with t.phase("exchange"):
             if depth:
                 self.back[:] = self.background
                 self.zback[:] = 1.0
-            tile, zback = self.tiles[self.rank], self.zback if depth else None
-            if self.latency:
-                sent = self.exchange.finish(x.started, tile, self.back, zback)
-            else:
-                sent = self.exchange.compose(x.f, self.rank, work.rects, x.rendered, x.plan, tile, self.back, zback)
+            sent = self.exchange.finish(x.started, self.tiles[self.rank], self.back, self.zback if depth else None)
         x.rendered = x.started = None
         swapped, stop = self.present(t, work, x.control, self.rows.allrows)
         # a signal, a window event or a failed write seen here stops every rank after the same frame
@@ -278,19 +228,6 @@ class Frames:
         self.done = f + 1
         if every[:, -1].any():
             self.stopping = True
-
-    def release(self, collective: bool) -> None:
-        """Let the shared segment and the live state go; ``collective``: every rank finished the
-        run and does so together (on a failure the job ends anyway, and a collective step would
-        wait on ranks that are gone or still in the frame loop)."""
-        if self.exchange is not None:
-            self.exchange.close(collective)
-            self.exchange = None
-        if self.live is not None:
-            self.live.close(collective)
-        if self.projection is not None:
-            self.projection.close(collective)
-            self.projection = None
 
     def loop(self) -> None:
         """Every frame through its three stages (``core/inflight.py``). A stop flag in a landed

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.core.bounds import BoxProjector
 from multigpu.parallel.exchange import barrier
 from multigpu.parallel.shared import host_segment
 
@@ -55,6 +56,10 @@ class SharedProjection:
         self.node, self.planner, self.rects, self.lo, self.hi, self.timeout = node, planner, rects, lo, hi, timeout
         self.ranks = node.Get_size()
         self.name = f"shared: a slice per rank of {self.ranks} on a host"
+        full, scene = planner.project, planner.scene
+        # the slice's own projector (box bounds only: ``sliceable``)
+        self.sub = (BoxProjector(scene.bmin[lo:hi], scene.bmax[lo:hi], full.dtype, compiled=full.compiled)
+                    if isinstance(full, BoxProjector) else None)
 
     @classmethod
     def make(cls, comm, planner, n_objects: int, timeout: float) -> "tuple[SharedProjection | None, str | None]":
@@ -78,9 +83,28 @@ class SharedProjection:
             if not keep:
                 node.Free()
 
+    @property
+    def sliceable(self) -> bool:
+        """Whether this frame's projection can be made a slice at a time: box bounds, and a
+        decomposition that wants no coverage."""
+        return self.sub is not None and not self.planner.decomposition.needs_coverage
+
     def out(self, frame: int) -> np.ndarray:
         """Frame ``frame``'s (4, N) rects array (shared by the host's ranks)."""
         return self.rects[frame % 2]
+
+    def project_slice(self, frame: int, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(view, proj, light) of ``camera``, and the canvas rects of objects [lo, hi) into columns
+        lo:hi of frame ``frame``'s array. A box's rect does not depend on the others, so the
+        slices make ``Planner.frame``'s rects bit for bit (tests/test_projection.py)."""
+        view, proj, light, rects = self.sub.frame(camera, self.planner.size)
+        self.out(frame)[:, self.lo:self.hi] = rects.T
+        return view, proj, light
+
+    def gathered(self, frame: int) -> np.ndarray:
+        """The (N, 4) visible rects of frame ``frame``, once every slice is in."""
+        out, planner = self.out(frame), self.planner
+        return planner.canvas.to_visible(out.T) if planner.bezels else out.T
 
     def wait(self) -> None:
         """Until every rank of the host has written its slice (bounded by the job's timeout)."""
@@ -89,16 +113,15 @@ class SharedProjection:
     def project(self, frame: int, camera, timer):
         """This rank's slice into the host's array (``project``), every slice of the host in
         (``sync``), then the whole array's visible rects."""
-        if not self.planner.sliceable:
+        if not self.sliceable:
             with timer.phase("project"):
                 return self.planner.frame(camera)
         with timer.phase("project"):
-            out = self.out(frame)
-            view, proj, light = self.planner.frame_slice(camera, self.lo, self.hi, out)
+            view, proj, light = self.project_slice(frame, camera)
         with timer.phase("sync"):
             self.wait()
         with timer.phase("project"):
-            return view, proj, light, self.planner.rects_of(out)
+            return view, proj, light, self.gathered(frame)
 
     def close(self, collective: bool = True) -> None:
         """Let the host's communicator go (the mapping goes with the arrays); only together."""

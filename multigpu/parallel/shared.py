@@ -36,7 +36,7 @@ import numpy as np
 
 from multigpu.core.work import Piece
 from multigpu.errors import InputError
-from multigpu.parallel.composite import _pack, _unpack, composite, post
+from multigpu.parallel.composite import _pack, _unpack, post
 from multigpu.parallel.exchange import agree, allgather_text, wait_all
 
 #: the most bytes a host's segment may hold (its ranks, both halves) before the job uses messages
@@ -189,19 +189,19 @@ class SharedPieces:
     def _base(self, frame: int) -> int:
         return (frame % self.slots) * self.half
 
-    def publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
+    def _publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
         """Copy the parts of this rank's rendered pieces ``(rgb, z or None)`` that tiles of this
         host's other ranks need into its segment half, in ``plan`` order (its own tile's parts
-        stay where they are; parts for other hosts leave as messages in ``compose``)."""
+        stay where they are; parts for other hosts leave as messages)."""
         near = self.near
         out = [p for p in plan if p.sender == me and p.receiver in near]  # parts, not objects
         if out:
             _pack(self.segments[me][self._base(frame):], out, rects[me], rendered, self.depth)
 
     def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool):
-        """Frames in flight: publish the frame's parts, post its messages to other hosts and a
-        barrier that completes once every rank has published it (``wait``)."""
-        self.publish(frame, me, rects, rendered, plan)
+        """The frame's parts published, its messages to other hosts posted, and a barrier that
+        completes once every rank has published it (``wait``)."""
+        self._publish(frame, me, rects, rendered, plan)
         posted = post(self.comm, me, rects, rendered, plan, with_depth, self.near)
         return frame, plan, posted, self.comm.Ibarrier()
 
@@ -210,7 +210,10 @@ class SharedPieces:
         wait_all([started[3]], self.timeout, "synchronization")
 
     def finish(self, started, tile, color: np.ndarray, depth: np.ndarray | None = None) -> tuple[int, int]:
-        """Compose the tile of a started frame (after ``wait``): as ``compose``."""
+        """Compose rank ``me``'s tile (after ``wait``) from its own pieces, the parts this host's
+        ranks published and messages from other hosts: the same result as messages alone,
+        parts in ascending sender order. Returns the bytes others get from this rank (colour
+        and depth, of which depth)."""
         frame, plan, posted, _ = started
         views = self._views(frame, self.me, plan, depth is not None)
         sent, zbytes = posted.complete(tile, self.timeout, color, depth, lambda s, parts: views[s])
@@ -219,18 +222,6 @@ class SharedPieces:
     def close(self, collective: bool = True) -> None:
         """Let the mapping go (the memory is the system's again once every rank on the host has)."""
         self.segments = {}
-
-    def compose(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], tile, color: np.ndarray,
-                depth: np.ndarray | None = None) -> tuple[int, int]:
-        """Compose rank ``me``'s tile from its own pieces, the parts this host's ranks published
-        (after the barrier) and messages from other hosts: the same result as
-        ``composite.composite`` alone, parts in ascending sender order. Returns the bytes others
-        get from this rank (colour and depth, of which depth)."""
-        with_depth = depth is not None
-        views = self._views(frame, me, plan, with_depth)
-        sent, zbytes = composite(self.comm, me, rects, rendered, plan, tile, self.timeout, color, depth, self.near,
-                                 lambda s, parts: views[s])
-        return self._counted(plan, sent, zbytes, with_depth)
 
     def _counted(self, plan: list[Piece], sent: int, zbytes: int, with_depth: bool) -> tuple[int, int]:
         """Bytes others get from this rank: by message, and read from its segment."""

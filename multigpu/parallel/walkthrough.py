@@ -29,6 +29,7 @@ from multigpu.errors import InputError, as_flags
 from multigpu.gpu.buffers import ensure_buffers
 from multigpu.parallel.exchange import agree, allgather_text
 from multigpu.parallel.fault import fault
+from multigpu.parallel.frame_setup import build
 from multigpu.parallel.frames import Frames
 from multigpu.parallel.outdir import OutputDir
 from multigpu.parallel.recovery import mark
@@ -170,15 +171,15 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         if out is not None:
             out.abandon()
         raise
-    frames = None
+    setup = None
     try:
-        frames = Frames(cfg, comm, job, scene, path, renderer, presenter, out, load_info, placement, monitor)
-        summary = frames.run()
-        frames.release(collective=True)  # every rank left the frame loop after the same frame
+        setup = build(cfg, comm, scene, path, renderer, presenter, out, load_info, placement, monitor)
+        summary = Frames(cfg, comm, job, scene, path, renderer, presenter, setup).run()
+        setup.release(collective=True)  # every rank left the frame loop after the same frame
         return summary
     except BaseException:
-        if frames is not None:
-            frames.release(collective=False)  # a failing rank must not wait in a collective free
+        if setup is not None:
+            setup.release(collective=False)  # a failing rank must not wait in a collective free
         raise
     finally:
         _close(renderer, presenter, monitor)

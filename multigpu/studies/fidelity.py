@@ -105,9 +105,8 @@ def _errors(flags: list[str], rec: Path, runs: dict, size, sample: int) -> dict:
 
     def image(cam: Camera, scale: float, lod: float) -> np.ndarray:
         view, proj, light, _ = planner.frame(cam)
-        renderer.scale = scale
-        renderer.levels = chooser.choose(cam, lod)[0]
-        return renderer.render(view, proj, light, (0, 0, *size), None).astype(np.int16)
+        levels = chooser.choose(cam, lod)[0]
+        return renderer.render(view, proj, light, (0, 0, *size), None, scale=scale, levels=levels).astype(np.int16)
 
     got: dict = {}
     full_cache: dict = {}

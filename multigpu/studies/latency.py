@@ -8,7 +8,6 @@ latency, medians over the rounds; the cut in wall time against ``--latency 0``. 
 
 from __future__ import annotations
 
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -30,19 +29,16 @@ def bench_latency(quick: bool, out: str = "out/latency", rounds: int = 2, timeou
 
 def _runs(dest: Path, frames: int, rounds: int, timeout: float) -> dict:
     """(scene, latency) -> [(wall, emulated, input-to-photon ms, frames)] over the rounds."""
-    from multigpu.parallel.mpirun import run_multigpu
+    from multigpu.config import WalkConfig
+    from multigpu.studies.runs import walk
 
     got: dict = {}
     for r in range(rounds):
         for name, flags in SCENES.items():
             order = LATENCIES[r % len(LATENCIES):] + LATENCIES[:r % len(LATENCIES)]  # rotating: drift falls alike
             for latency in order:
-                run = dest / f"{name}-{latency}-{r}"
-                job = run_multigpu(4, ["walkthrough", *flags, "--frames", str(frames), "--latency", str(latency),
-                                       "--no-progress", "--out", str(run)], timeout)
-                if job.returncode != 0:
-                    raise RuntimeError(f"bench latency: the walk failed (exit {job.returncode})\n{job.stderr[-1500:]}")
-                s = json.loads((run / "summary.json").read_text())
+                s = walk(dest / f"{name}-{latency}-{r}", WalkConfig.grid, WalkConfig.tile,
+                         [*flags, "--frames", str(frames), "--latency", str(latency)], timeout).summary
                 got.setdefault((name, latency), []).append(
                     (s["frame_ms"], s["emulated_frame_ms"], s["input_to_photon_ms"], s["input_to_photon_frames"]))
     return got

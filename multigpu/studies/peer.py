@@ -95,17 +95,14 @@ def paraview(pvbatch: str, mpiexec: str, ranks: int, cams: Path, model: str, siz
 def multigpu(mpiexec: str, ranks: int, cams: Path, scene: list[str], size: tuple[int, int], out: Path, env: dict,
              timeout: float, extra: list[str]) -> dict:
     """One multigpu run over the same cameras: the frame period and the emulated frame (ms)."""
-    from multigpu.parallel.mpirun import launcher_for, run_multigpu
+    from multigpu.parallel.mpirun import launcher_for
+    from multigpu.studies.runs import walk
 
     grid = (1, 1) if ranks == 1 else (2, ranks // 2)
     tile = (size[0] // grid[1], size[1] // grid[0])
     dest = out / f"multigpu-{ranks}-{time.monotonic_ns()}"
-    args = ["walkthrough", *scene, "--path", str(cams), "--grid", f"{grid[0]}x{grid[1]}",
-            "--tile", f"{tile[0]}x{tile[1]}", "--mosaic-every", "0", "--no-progress", "--out", str(dest), *extra]
-    job = run_multigpu(ranks, args, timeout, env=env, launcher=launcher_for(mpiexec))
-    if job.returncode != 0:
-        raise RuntimeError(f"bench peer: multigpu failed (exit {job.returncode})\n{job.stderr[-1500:]}")
-    s = json.loads((dest / "summary.json").read_text())
+    args = [*scene, "--path", str(cams), "--mosaic-every", "0", *extra]
+    s = walk(dest, grid, tile, args, timeout, env=env, launcher=launcher_for(mpiexec)).summary
     return {"wall_ms": s["frame_ms"], "cpu_ms": s["emulated_frame_ms"]}
 
 

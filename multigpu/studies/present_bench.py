@@ -28,8 +28,7 @@ MODES = ("headless", "window", "monitor")
 
 
 def bench_present(quick: bool) -> list[dict]:
-    from multigpu.parallel.mpirun import run_multigpu
-    from multigpu.studies.runs import study_env
+    from multigpu.studies.runs import walk
 
     if shutil.which("Xvfb") is None:
         raise InputError("bench present: needs Xvfb (Debian: apt install xvfb)")
@@ -51,17 +50,11 @@ def bench_present(quick: bool) -> list[dict]:
             with tempfile.TemporaryDirectory() as tmp:
                 for r in range(rounds):
                     for mode in MODES[r % len(MODES):] + MODES[:r % len(MODES)]:
-                        out = Path(tmp) / f"{mode}{r}"
-                        args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}",
-                                "--frames", str(frames), "--mosaic-every", "0", "--no-progress", "--present",
-                                "headless" if mode == "headless" else "window", "--out", str(out)]
-                        args += ["--monitor"] if mode == "monitor" else []
-                        job = run_multigpu(grid[0] * grid[1], args, 1800, env={"DISPLAY": display, **study_env()},
-                                           merge_stderr=True)
-                        if job.returncode != 0:
-                            raise RuntimeError(f"bench present: {mode} run failed (exit {job.returncode}):\n"
-                                               + "\n".join(job.stdout.strip().splitlines()[-5:]))
-                        got[mode].append(_figures(out))
+                        args = ["--frames", str(frames), "--mosaic-every", "0", "--present",
+                                "headless" if mode == "headless" else "window", *(["--monitor"] if mode == "monitor"
+                                                                                 else [])]
+                        run = walk(Path(tmp) / f"{mode}{r}", grid, tile, args, 1800, env={"DISPLAY": display})
+                        got[mode].append(_figures(run.summary))
             for mode, runs in got.items():
                 row = {k: float(np.median([x[k] for x in runs])) for k in runs[0]}
                 row.update(wall=f"{grid[0]}x{grid[1]} {tile[0]}x{tile[1]}", mode=mode)
@@ -74,10 +67,8 @@ def bench_present(quick: bool) -> list[dict]:
     return rows
 
 
-def _figures(out: Path) -> dict:
-    import json
-
-    s = json.loads((out / "summary.json").read_text())
+def _figures(s: dict) -> dict:
+    """A run's presentation figures from its summary."""
     p = s["present"]
     return {"emulated_ms": s["emulated_frame_ms_median"], "wall_ms": s["frame_ms_median"],
             "present_ms": p["present_ms_median"], "present_p99_ms": p["present_ms_p99"],

@@ -93,8 +93,11 @@ class Run:
         return self.col("rendering_cpu_ms").max(axis=1)
 
 
-def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str], timeout: int) -> Run:
-    """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``; kill it on timeout."""
+def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str], timeout: float,
+         env: dict | None = None, launcher=None) -> Run:
+    """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``, in the studies'
+    environment (``study_env``, ``env`` over it) under ``launcher`` (None: the one found);
+    kill it on timeout. Every study's walkthrough job goes through here."""
     import json
 
     k = grid[0] * grid[1]
@@ -102,7 +105,8 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str
     args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
             "--no-progress", *args]
     try:
-        job = run_multigpu(k, args, timeout, env=study_env(), merge_stderr=True)
+        job = run_multigpu(k, args, timeout, env={**study_env(), **(env or {})}, merge_stderr=True,
+                           launcher=launcher)
     except JobTimeout:
         raise RuntimeError(f"experiment job timed out after {timeout} s: multigpu {' '.join(args)}") from None
     log = job.stdout

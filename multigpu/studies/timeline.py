@@ -59,18 +59,16 @@ def plot(timelines: dict[str, Path], png: Path) -> Path:
 def bench_timeline(quick: bool, out: str = "out/timeline", scene: tuple[str, ...] = ("--scene", "plant"),
                    timeout: float = 900) -> Path:
     """Run the walk at each latency with ``--timeline`` on 4 ranks; plot both; print the file."""
-    from multigpu.parallel.mpirun import run_multigpu
+    from multigpu.config import WalkConfig
+    from multigpu.studies.runs import walk
 
     dest = Path(out)
     frames = 24 if quick else 120
     runs = {}
     for latency in (0, 1):
         run = dest / f"latency{latency}"
-        job = run_multigpu(4, ["walkthrough", *scene, "--frames", str(frames), "--latency", str(latency),
-                               "--timeline", "--mosaic-every", "0", "--no-progress", "--out", str(run)], timeout)
-        if job.returncode != 0:
-            raise RuntimeError(f"bench timeline: the walk failed (exit {job.returncode})\n{job.stderr[-1500:]}")
-        s = json.loads((run / "summary.json").read_text())
+        s = walk(run, WalkConfig.grid, WalkConfig.tile, [*scene, "--frames", str(frames), "--latency", str(latency),
+                                                         "--timeline", "--mosaic-every", "0"], timeout).summary
         runs[f"--latency {latency}: {s['frame_ms']:.1f} ms a frame (wall), input to photon "
              f"{s['input_to_photon_ms']:.1f} ms"] = run / "timeline.json"
     png = plot(runs, dest / "timeline.png")

@@ -1,0 +1,112 @@
+"""What the frame loop is built from, made before it: the planner, the exchange backend, the
+bounds' projection, window input, rank 0's run record and the clear colour.
+
+Here are the collective MPI calls (the shared segments are agreed on by every rank) and the one GL
+render that learns the clear colour; ``Frames`` is then built from these parts alone, so its
+constructor does no work and takes a stand-in communicator (tests/threadcomm.py). ``release``
+lets the parts go when the run ends, however it ends.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multigpu.config import INTERACTIVE, WalkConfig
+from multigpu.core.camera import unshifted
+from multigpu.parallel.backends import Exchange, Projection
+from multigpu.parallel.composite import Messages
+from multigpu.parallel.outdir import OutputDir
+from multigpu.parallel.projection import make_projection
+from multigpu.parallel.record import RunRecord, config_doc
+from multigpu.parallel.shared import SharedPieces
+from multigpu.planner import Planner
+
+
+def planned_frames(cfg: WalkConfig, path) -> int | None:
+    """The frames the run shows: the path's, or ``--frames`` of a flight (None: until stopped)."""
+    return cfg.frames if cfg.path == INTERACTIVE else len(path)
+
+
+@dataclass(slots=True)
+class FrameSetup:
+    """The frame loop's parts. ``record`` and ``live`` are None where there is none (``record``:
+    rank 0 only; ``live``: window runs only); ``doc`` is the run's configuration as
+    summary.json has it."""
+
+    planner: Planner
+    exchange: Exchange
+    projection: Projection
+    background: np.ndarray  # the clear colour (3,) uint8: a depth-composed tile starts from it
+    doc: dict
+    record: RunRecord | None = None
+    live: object = None  # parallel.live.Live
+
+    def release(self, collective: bool) -> None:
+        """Let the shared segments and the live state go; ``collective``: every rank finished the
+        run and does so together (on a failure the job ends anyway, and a collective step would
+        wait on ranks that are gone or still in the frame loop)."""
+        for part in (self.exchange, self.live, self.projection):
+            if part is not None:
+                part.close(collective)
+        self.exchange = self.live = self.projection = None
+
+
+def clear_colour(renderer, n_objects: int) -> np.ndarray:
+    """The renderer's background: one pixel drawn with nothing in it."""
+    return renderer.render(np.eye(4), np.eye(4), np.array([0.0, 0.0, 1.0]), (0, 0, 1, 1),
+                           np.zeros(n_objects, dtype=bool))[0, 0]
+
+
+def make_exchange(cfg: WalkConfig, comm, planner: Planner) -> tuple[Exchange, str | None]:
+    """The exchange backend: a node-shared segment where asked for and possible, else messages
+    (and why not the segment). Every rank the same (collective)."""
+    shared, why = None, None
+    d = planner.decomposition
+    if cfg.exchange != "messages":
+        shared, why = SharedPieces.make(comm, cfg.canvas.size, d.depth, cfg.timeout, cfg.exchange == "shared",
+                                        slots=3 if cfg.latency else 2, layers=d.layers)
+    return shared or Messages(comm, cfg.timeout, sync=cfg.latency == 0), why
+
+
+def _live(cfg: WalkConfig, comm, scene, path, planner: Planner, presenter, monitor):
+    """A window run's input and statistics: rank 0's windows take the keyboard and mouse."""
+    from multigpu.parallel.live import Live
+
+    controls = start = None
+    if comm.Get_rank() == 0:
+        from multigpu.display import take_input
+
+        controls = take_input(presenter, *([monitor.window] if monitor is not None else []))
+        if cfg.path == INTERACTIVE:
+            start = unshifted(path.camera(0), cfg.offset)
+    return Live(cfg, comm, scene, planner.balances, planner.using, controls, monitor, start)
+
+
+def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDir | None, load_info: dict,
+          placement: list[dict], monitor=None) -> FrameSetup:
+    """Every part of the frame loop for this rank (collective: every rank calls it)."""
+    rank = comm.Get_rank()
+    planner = Planner(cfg, scene, rank)  # MPI-free: projection, strategy, decomposition
+    exchange, why = make_exchange(cfg, comm, planner)
+    projection, projection_why = make_projection(cfg, comm, planner, scene.n_objects)
+    n_frames = planned_frames(cfg, path)
+    doc = config_doc(cfg, scene, load_info, n_frames, placement, renderer.method)
+    doc["exchange"] = exchange.name
+    if why:
+        doc["exchange_why"] = f"messages: no shared segment ({why})"
+    doc["projection"] = projection.name
+    if projection_why:
+        doc["projection_why"] = projection_why
+    setup = FrameSetup(planner, exchange, projection, clear_colour(renderer, scene.n_objects), doc)
+    try:
+        if presenter.mode == "window":
+            setup.live = _live(cfg, comm, scene, path, planner, presenter, monitor)
+        if rank == 0:
+            setup.record = RunRecord(out, comm.Get_size(), n_frames, doc, planner.report, cfg.video, cfg.progress,
+                                     cfg.overlay, cfg.record, cfg.resume_at)
+    except BaseException:
+        setup.release(collective=False)
+        raise
+    return setup
