@@ -17,7 +17,7 @@ import argparse
 import sys
 
 from multigpu.core.memory import keep_heap
-from multigpu.errors import InputError, WriteFailed, as_flags
+from multigpu.errors import InputError, WriteFailed
 from multigpu.flags import WALKTHROUGH, scene_args, spec, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
 
 
@@ -71,7 +71,14 @@ def build_parser() -> argparse.ArgumentParser:
                        **WALKTHROUGH)
     scene_args(w)
     walkthrough_args(w)
+    w.set_defaults(run=_walkthrough)
+    _tool_parsers(sub)
+    _study_parsers(sub)
+    return ap
 
+
+def _tool_parsers(sub) -> None:
+    """The scene, path, wall, monitor-view, tree and depth subcommands."""
     s = sub.add_parser("scene", help="scene tools")
     ssub = s.add_subparsers(dest="scmd", required=True)
     si = ssub.add_parser("info", help="print objects, triangles, bounds, memory and load time")
@@ -79,11 +86,13 @@ def build_parser() -> argparse.ArgumentParser:
     scene_args(si)
     si.add_argument("--grid", default="2x2", help="the wall the scene is prepared for (automatic clustering)")
     si.add_argument("--no-cache", action="store_true")
+    si.set_defaults(run=_scene_info)
     sc = ssub.add_parser("scan", help="write a scanned-style model: one closed surface of even triangles (binary "
                                       "PLY); load it cut into parts with --model OUT --split grid:8")
     sc.add_argument("out", help="PLY file to write")
     sc.add_argument("--triangles", type=int, default=1_000_000, help="about this many (default %(default)s)")
     sc.add_argument("--seed", type=int, default=0)
+    sc.set_defaults(run=_scene_scan)
 
     p = sub.add_parser("path", help="camera path tools")
     psub = p.add_subparsers(dest="pcmd", required=True)
@@ -93,6 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     pm.add_argument("--frames", type=int)
     pm.add_argument("--fov", type=float, default=60.0)
     pm.add_argument("--out", required=True, help="path file to write (JSON)")
+    pm.set_defaults(run=_path_make)
 
     wl = sub.add_parser("wall", help="wall file tools")
     wsub = wl.add_subparsers(dest="wall_cmd", required=True)
@@ -102,16 +112,20 @@ def build_parser() -> argparse.ArgumentParser:
     wc.add_argument("--hosts-only", action="store_true", help="print only the hosts as H:N,... (for launch scripts)")
     wc.add_argument("--offline", action="store_true",
                     help="check the file alone: no host name look-up, no X screen asked (a wall written elsewhere)")
+    wc.set_defaults(run=_wall_check)
     wt = wsub.add_parser("test", help="show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)")
     wt.add_argument("file", help="wall file (JSON)")
     wt.add_argument("--frames", type=int, default=None, help="stop after N frames (default: at Escape)")
+    wt.set_defaults(run=_wall_test)
     mv = sub.add_parser("monitor-view", help="the operator's view on a PC of its own (started by the launcher "
                                              "from the wall file's monitor.host)")
     mv.add_argument("--display", help="X display (default $DISPLAY)")
     mv.add_argument("--position", default="0x0", help="window position XxY on that display (default 0x0)")
     mv.add_argument("--port", type=int, default=0, help="TCP port to listen on (default: any, printed)")
+    mv.set_defaults(run=_monitor_view)
     t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
     t.add_argument("grid")
+    t.set_defaults(run=_tree)
 
     dp = sub.add_parser("depth", help="depth complexity and overdraw of one frame (images + stats)")
     scene_args(dp)
@@ -120,6 +134,11 @@ def build_parser() -> argparse.ArgumentParser:
     dp.add_argument("--frame", type=int, default=0, help="which frame of the path")
     dp.add_argument("--size", default="1024x1024", help="display WxH in pixels")
     dp.add_argument("--out", default="out/depth", help="output directory")
+    dp.set_defaults(run=_depth)
+
+
+def _study_parsers(sub) -> None:
+    """The experiment, accuracy and bench subcommands."""
     from multigpu.studies.registry import EXPERIMENTS, names_help
 
     e = sub.add_parser("experiment", help="the paper's evaluation: tables, plots, Markdown")
@@ -130,12 +149,13 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--rounds", type=int, default=None,
                    help="alternated rounds of payoff, speedup and partition "
                         "(default 3, 3 and 2; 1 with --quick)")
+    e.set_defaults(run=_experiment)
     ac = sub.add_parser("accuracy", help="measure every speed-for-accuracy trade (tables for docs/ACCURACY.md)")
     ac.add_argument("--quick", action="store_true", help="tiny sizes: the same code in under a minute")
     ac.add_argument("--out", default="out/accuracy", help="directory for the CSV tables")
     ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
+    ac.set_defaults(run=_accuracy)
     _bench_args(sub.add_parser("bench", help="benchmarks: print speed and memory figures"))
-    return ap
 
 
 def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -163,6 +183,7 @@ def _bench_args(b: argparse.ArgumentParser) -> None:
     b.add_argument("--out", default="out/peer", help="peer, latency, simplify: where the runs and the results CSV go "
                                                      "(default out/peer, out/latency, out/simplify)")
     scene_args(b)  # bench floor's worker: the scene it renders
+    b.set_defaults(run=_bench)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -184,43 +205,41 @@ def main(argv: list[str] | None = None) -> int:
         raise
     keep_heap()  # per-frame temporaries stay in the heap (see memory.py)
     try:
-        if args.cmd == "walkthrough":
-            return _walkthrough(args)
-        if args.cmd == "scene":
-            return _scene_scan(args) if args.scmd == "scan" else _scene_info(args)
-        if args.cmd == "path":
-            return _path_make(args)
-        if args.cmd == "wall" and args.wall_cmd == "test":
-            from multigpu.parallel.walltest import main as wall_test
-
-            return wall_test(args.file, args.frames)
-        if args.cmd == "wall":
-            return _wall_check(args)
-        if args.cmd == "tree":
-            return _tree(args)
-        if args.cmd == "depth":
-            return _depth(args)
-        if args.cmd == "experiment":
-            from multigpu.studies import experiments
-
-            return experiments.run(args.name, args.out, quick=args.quick, results=args.results,
-                                   rounds=args.rounds)
-        if args.cmd == "accuracy":
-            from multigpu.studies import accuracy
-
-            return accuracy.run(args.out, args.page, quick=args.quick)
-        if args.cmd == "bench":
-            from multigpu.studies import bench
-
-            return bench.run_args(args)
-        if args.cmd == "monitor-view":
-            from multigpu.config import parse_pair
-            from multigpu.display.remote import serve
-
-            serve(args.display, parse_pair(args.position, "--position"), args.port)
+        return args.run(args)  # the subcommand's own function (``set_defaults`` in ``build_parser``)
     except InputError as exc:
-        print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr)
+        print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2
+
+
+def _wall_test(a) -> int:
+    from multigpu.parallel.walltest import main as wall_test
+
+    return wall_test(a.file, a.frames)
+
+
+def _experiment(a) -> int:
+    from multigpu.studies import experiments
+
+    return experiments.run(a.name, a.out, quick=a.quick, results=a.results, rounds=a.rounds)
+
+
+def _accuracy(a) -> int:
+    from multigpu.studies import accuracy
+
+    return accuracy.run(a.out, a.page, quick=a.quick)
+
+
+def _bench(a) -> int:
+    from multigpu.studies import bench
+
+    return bench.run_args(a)
+
+
+def _monitor_view(a) -> int:
+    from multigpu.config import parse_pair
+    from multigpu.display.remote import serve
+
+    serve(a.display, parse_pair(a.position, "--position"), a.port)
     return 0
 
 
@@ -236,7 +255,7 @@ def _depth(a) -> int:
     scene, _ = load_scene(spec(a))
     path = generate(a.path_kind, scene, a.frames)
     if not 0 <= a.frame < len(path):
-        raise InputError(f"--frame must be in 0..{len(path) - 1}, got {a.frame}")
+        raise InputError.of("frame", f"must be in 0..{len(path) - 1}, got {a.frame}")
     s = depth.run(scene, path.camera(a.frame), size, Path(a.out))
     print(f"{scene.name} frame {a.frame} at {size[0]}x{size[1]}: coverage {s.get('coverage', 0):.1%}, "
           f"mean depth complexity d = {s['mean_d']:.2f} (max {s['max_d']}), measured overdraw o = {s['mean_o']:.2f}, "
@@ -264,7 +283,7 @@ def _walkthrough(a) -> int:
     except (InputError, WriteFailed) as exc:  # agreed on every rank: one line, all exit 2
         job.close()
         if comm.Get_rank() == 0:
-            print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr, flush=True)
+            print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
         collective_exit(2)
     except BaseException as exc:  # noqa: BLE001 -- every other way a run can end early
         job.close()
@@ -395,7 +414,7 @@ def _path_make(a) -> int:
     if a.kind not in GENERATORS:
         raise InputError(f"path kind must be one of {', '.join(GENERATORS)}, got '{a.kind}'")
     if a.frames is not None and a.frames < 1:
-        raise InputError(f"--frames must be >= 1, got {a.frames}")
+        raise InputError.of("frames", f"must be >= 1, got {a.frames}")
     scene, _ = load_scene(spec(a))
     path = generate(a.kind, scene, a.frames, fov=a.fov)
     path.save(a.out)

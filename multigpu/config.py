@@ -7,7 +7,10 @@ import re
 from dataclasses import dataclass, field, replace
 
 from multigpu.core.canvas import Canvas
+from multigpu.core.inflight import MOST
+from multigpu.core.resample import MIN_SCALE
 from multigpu.errors import InputError
+from multigpu.options import check, option, register
 from multigpu.scene.models import SceneSpec
 from multigpu.scene.paths import DEFAULT_FRAMES  # noqa: F401  (frames of generated paths; re-exported for the CLI)
 from multigpu.strategies import REGISTRY
@@ -37,192 +40,297 @@ def setup_timeout(cfg: "WalkConfig") -> float:
     return max(cfg.timeout, SETUP_SECONDS)
 
 
-def parse_vec3(text: str, flag: str) -> tuple[float, float, float]:
-    """'X,Y,Z' as three floats, or a clear error naming ``flag``."""
+def read_vec3(text: str) -> tuple[float, float, float]:
+    """'X,Y,Z' as three floats."""
     try:
         v = tuple(float(t) for t in str(text).split(","))
     except ValueError:
         v = ()
     if len(v) != 3:
-        raise InputError(f"{flag} must look like X,Y,Z (three numbers), got '{text}'")
+        raise InputError(f"must look like X,Y,Z (three numbers), got '{text}'")
     return v
 
 
-def parse_pair(text: str, flag: str, sep: str = "x") -> tuple[int, int]:
+def read_pair(text: str, sep: str = "x") -> tuple[int, int]:
+    """'AxB' as two positive integers."""
     m = re.fullmatch(rf"\s*(\d+)\s*{sep}\s*(\d+)\s*", str(text))
     if not m:
-        raise InputError(f"{flag} must look like A{sep}B with positive integers, got '{text}'")
+        raise InputError(f"must look like A{sep}B with positive integers, got '{text}'")
     a, b = int(m.group(1)), int(m.group(2))
     if a < 1 or b < 1:
-        raise InputError(f"{flag} must be positive on both sides, got '{text}'")
+        raise InputError(f"must be positive on both sides, got '{text}'")
     return a, b
+
+
+def parse_vec3(text: str, flag: str) -> tuple[float, float, float]:
+    """'X,Y,Z' as three floats, or a clear error naming ``flag``."""
+    return _named(read_vec3, flag, text)
+
+
+def parse_pair(text: str, flag: str, sep: str = "x") -> tuple[int, int]:
+    """'AxB' as two positive integers, or a clear error naming ``flag``."""
+    return _named(read_pair, flag, text, sep)
+
+
+def _named(read, flag: str, *args):
+    try:
+        return read(*args)
+    except InputError as exc:
+        raise InputError(f"{flag} {exc.message}") from None
+
+
+def read_mullion(text: str) -> tuple[int, int]:
+    """'MXxMY': pixels >= 0."""
+    m = re.fullmatch(r"\s*(\d+)\s*x\s*(\d+)\s*", str(text))
+    if not m:
+        raise InputError(f"must look like MXxMY with pixels >= 0 (e.g. 40x40), got '{text}'")
+    return int(m.group(1)), int(m.group(2))
+
+
+def read_monitor(text: str) -> tuple[int, int]:
+    """``--monitor`` [X,Y] as a window place (``beside``: the flag without a value)."""
+    if text == "beside":
+        return MONITOR_BESIDE
+    x, y = str(text).split(",", 1) if "," in str(text) else (text, "")
+    if not (x.strip().isdigit() and y.strip().isdigit()):
+        raise InputError(f"must look like X,Y (pixels from the display's top-left corner), got '{text}'")
+    return int(x), int(y)
+
+
+def read_labels(text: str) -> tuple[int, ...]:
+    """``--dark-tiles 2,3`` as tile labels."""
+    try:
+        return tuple(sorted({int(v) for v in str(text).split(",") if v.strip()}))
+    except ValueError:
+        raise InputError(f"must be tile numbers separated by commas, got '{text}'") from None
+
+
+def _pair(v) -> str:
+    return f"{v[0]}x{v[1]}"
+
+
+def _kinds():
+    from multigpu.scene.paths import DEFAULT_FRAMES as kinds
+
+    return kinds
+
+
+def _methods():
+    from multigpu.gpu.render import METHODS
+
+    return METHODS
+
+
+def _decompositions():
+    from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
+
+    return DECOMPOSITIONS
+
+
+def _patterns():
+    from multigpu.decompositions import PATTERNS
+
+    return PATTERNS
+
+
+def _ranges():
+    from multigpu.decompositions import RANGES
+
+    return RANGES
+
+
+def _color_views():
+    from multigpu.scene.looks import COLOR_VIEWS
+
+    return COLOR_VIEWS
+
+
+def _strategies() -> str:
+    from multigpu.strategies import describe
+
+    return f"the balancing strategy. {describe()}"
+
+
+def _frames() -> str:
+    from multigpu.scene.paths import DEFAULT_FRAMES as kinds
+
+    return f"frames to render (default: the whole path; generated: {', '.join(f'{k} {v}' for k, v in kinds.items())})"
+
+
+_finite = lambda v: math.isfinite(v)  # noqa: E731
+PATH, WALL, BALANCING, QUALITY, OUTPUTS, CONTROL = ("camera path", "wall and display", "balancing",
+                                                   "speed for accuracy", "outputs", "run control")
+#: the walkthrough's flag groups, in the help's order (the scene's come first, the launcher's hosts last)
+GROUPS = [PATH, WALL, BALANCING, QUALITY, OUTPUTS, CONTROL]
 
 
 @dataclass(frozen=True)
 class WalkConfig:
-    """Everything one walkthrough run needs. ``grid`` is (rows, cols), ``tile`` (tw, th)."""
+    """Everything one walkthrough run needs, each setting declared once with its flag
+    (``options.py``). ``grid`` is (rows, cols), ``tile`` (tw, th)."""
 
     scene: SceneSpec = field(default_factory=SceneSpec)
-    path: str | None = None
-    path_kind: str = "walkthrough"
-    frames: int | None = None
-    grid: tuple[int, int] = (2, 2)
-    tile: tuple[int, int] = (256, 256)
-    strips: int = 2048
-    balance: str = "auto"  # cross or strips, whichever the scene's frames favour (docs/RESULTS.md, payoff)
-    bounds: str = "box"
-    out: str = "out"
-    mosaic_every: int = 100
-    overlay: bool = True
-    video: bool = False
-    device: int | None = None
-    subfrustum: str = "auto"
-    partition: str = "redundant"
-    exchange: str = "auto"  # a shared-memory segment per host (messages between hosts) where it can be made
-    projection: str = "each"  # every rank projects every object's bounds (``shared``: a slice each per host)
-    decomposition: str = "screen"
-    bin_size: int = 64
-    bin_pattern: str = "diagonal"
-    db_ranges: str = "visible"
-    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    timeout: float = 120.0
-    liveness: float = 30.0
-    progress: bool = True
-    mullion: tuple[int, int] = (0, 0)  # pixels hidden behind the bezels between tiles (MX, MY)
-    present: str = "headless"  # or "window": every rank shows its tile in a window on its display
-    wall: str | None = None  # the wall file the grid/tile/mullion/displays came from
-    displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY
-    positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place
+    # -- camera path
+    path: str | None = option(None, group=PATH, metavar="FILE", help=(
+        "camera path JSON file, or 'interactive': fly by hand from rank 0's window, starting where --path-kind "
+        "starts (needs --present window; H prints the keys) (default: a generated path)"))
+    path_kind: str = option("walkthrough", group=PATH, choices=_kinds,
+                            help="the generated path when no --path is given")
+    frames: int | None = option(None, group=PATH, metavar="N", type=int, valid=lambda v: v is None or v >= 1,
+                                must="must be >= 1", help=_frames)
+    offset: tuple[float, float, float] = option(
+        (0.0, 0.0, 0.0), group=PATH, metavar="X,Y,Z", read=read_vec3, text="0,0,0",
+        valid=lambda v: len(v) == 3 and all(_finite(x) and abs(x) <= 1e15 for x in v),
+        must="must be three finite numbers of magnitude <= 1e15",
+        help="move scene and path by these world units (e.g. 1e8,0,0: far from the origin)")
+    # -- wall and display
+    grid: tuple[int, int] = option((2, 2), group=WALL, metavar="ROWSxCOLS", read=read_pair, show=_pair,
+                                   help="display wall; ranks = rows*cols (default: {default})")
+    tile: tuple[int, int] = option((256, 256), group=WALL, metavar="WxH", read=read_pair, show=_pair,
+                                   valid=lambda v: max(v) <= 16384, must="must be at most 16384 pixels per side",
+                                   help="pixels per display tile (default: {default})")
+    mullion: tuple[int, int] = option(
+        (0, 0), group=WALL, metavar="MXxMY", read=read_mullion, show=_pair,
+        valid=lambda v: len(v) == 2 and 0 <= min(v) and max(v) <= 4096, must="must be two pixel counts 0..4096",
+        help="pixels hidden behind the bezels between tiles: the camera spans them, nobody renders them "
+             "(default: {default})")
+    wall: str | None = option(None, group=WALL, metavar="FILE", help=(
+        "wall file (JSON): grid, tile, mullions, each rank's X display and window position; flags override it "
+        "(docs/USAGE.md: On a real wall)"))
+    present: str = option("headless", group=WALL, choices=lambda: PRESENTERS, help=(
+        "window: every rank shows its composed tile in a borderless window on its X display, all tiles swapped "
+        "in step"))
+    monitor: tuple[int, int] | None = option(None, group=WALL, metavar="X,Y", read=read_monitor, const="beside", help=(
+        "an operator view on rank 0's display: the whole wall shrunk, the partition over it, live (at X,Y; "
+        "without a value: the wall file's monitor position, else right of the wall)"))
+    device: int | None = option(None, group=WALL, metavar="I", type=int, valid=lambda v: v is None or v >= 0,
+                                must="must be >= 0", help="EGL device index (default: local rank modulo device count)")
+    subfrustum: str = option("auto", group=WALL, choices=_methods, help="how a rank renders its region "
+                                                                       "(docs/ACCURACY.md)")
+    displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY (wall file)
+    positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place (wall file)
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     gpus: tuple = ()  # per rank label: its EGL device (wall file "gpu"), or None for --device / the default
-    record: str | None = None  # write every frame's camera here, in the format --path reads
-    monitor: tuple[int, int] | None = None  # rank 0's operator view at this place (MONITOR_BESIDE: beside the wall)
+    # -- balancing
+    balance: str = option("auto", group=BALANCING, choices=lambda: REGISTRY, help=_strategies)
+    decomposition: str = option("screen", group=BALANCING, choices=_decompositions, help=(
+        "how a frame is divided: screen = the paper's screen partition (balanced by --balance); db = sort-last "
+        "database decomposition, depth-composited; bins = static bin patterns, no balancer; hybrid = the screen "
+        "partition (--balance) for most objects, the wide ones drawn once and depth-composited"))
+    strips: int = option(2048, group=BALANCING, metavar="N", type=int, valid=lambda v: v >= 2, must="must be >= 2",
+                         help="strips per split axis (>= 2)")
+    bounds: str = option("box", group=BALANCING, choices=lambda: ("box", "sphere"),
+                         help="object bounds: box (8 corners) or sphere")
+    bin_size: int = option(64, group=BALANCING, metavar="PX", type=int, valid=lambda v: 1 <= v <= 4096,
+                           must="must be 1..4096 pixels", help="bins: pixels per bin side")
+    bin_pattern: str = option("diagonal", group=BALANCING, choices=_patterns, help="bins: which rank owns a bin")
+    db_ranges: str = option("visible", group=BALANCING, choices=_ranges, help=(
+        "db: object ranges rebalanced over the visible objects every frame, or fixed by all triangles"))
+    partition: str = option("redundant", group=BALANCING, choices=lambda: ("redundant", "broadcast"),
+                            help="who computes the partition: every rank, or rank 0 and a broadcast")
+    projection: str = option("each", group=BALANCING, choices=lambda: PROJECTIONS, help=(
+        "who projects the object bounds: every rank every object, or the ranks of a machine a slice each into "
+        "one shared array (pays from ~50k objects)"))
     # frames in flight (core/inflight.py; 0: the strict order). None: by measurement (docs/USAGE.md, "Frames in
     # flight"): 1 headless (the plant walk and the city drive at 4 ranks over a third faster in wall time), 0 with
     # windows (the swap lock keeps the ranks in step each frame: no faster here, and input would come a frame later)
-    latency: int | None = None
-    # speed for accuracy (core/quality.py): a frame rate held while the camera moves; full quality's scale and bound
-    target_fps: float | None = None
-    render_scale: float = 1.0  # share of each side's pixels drawn (nearest-neighbour upscaled)
-    lod_error: float = 0.0  # level-of-detail bound in wall pixels (0: every object as modelled)
-    timeline: bool = False  # timeline.json: every rank's phases over the run's last TIMELINE_FRAMES frames
-    colors: str = "model"  # the model's own colours, or "objects": a colour per object (scene/looks.py)
+    latency: int | None = option(None, group=BALANCING, metavar="N", type=int,
+                                 valid=lambda v: 0 <= v <= MOST, must=f"must be 0..{MOST} frames", help=(
+        "frames in flight: a rank plans and draws the next frames while a frame's pixels travel and show (0: "
+        "each frame shown before the next starts; input reaches the screen N frames later; default: 1 headless, "
+        "0 with --present window)"))
+    exchange: str = option("auto", group=BALANCING, choices=lambda: EXCHANGES, help=(
+        "frame exchange: auto = a shared-memory segment per machine where it can be made, messages between "
+        "machines; shared = the same, an error where it cannot; messages = point to point"))
+    # -- speed for accuracy (core/quality.py)
+    target_fps: float | None = option(
+        None, group=QUALITY, metavar="F", type=float, valid=lambda v: v is None or (v > 0 and _finite(v)),
+        must="must be a frame rate above 0", help=(
+            "hold this frame rate while the camera moves: each frame a render scale and a level-of-detail bound "
+            "from the last frames' times; a frame whose camera stopped is full quality (default: none, every "
+            "frame full quality)"))
+    render_scale: float = option(1.0, group=QUALITY, metavar="S", type=float,
+                                 valid=lambda v: MIN_SCALE <= v <= 1.0, must=f"must be {MIN_SCALE:g}..1", help=(
+        "full quality's share of each side's pixels, 0.25..1 (nearest-neighbour upscaled to the tiles)"))
+    lod_error: float = option(0.0, group=QUALITY, metavar="PX", type=float, valid=lambda v: v >= 0 and _finite(v),
+                              must="must be >= 0 pixels", help=(
+        "full quality's level-of-detail bound: each object at its coarsest level whose error stays within PX "
+        "pixels on the wall (0: as modelled)"))
+    # -- outputs
+    out: str = option("out", group=OUTPUTS, metavar="DIR", help="output directory: timings.csv, summary.json, mosaic/")
+    mosaic_every: int = option(100, group=OUTPUTS, metavar="N", type=int, valid=lambda v: v >= 0,
+                               must="must be >= 0 (0 = never)",
+                               help="write the full wall as a PNG every N frames (0: never)")
+    overlay: bool = option(True, group=OUTPUTS, flag="--no-overlay", negate=True,
+                           help="no partition overlay beside each mosaic")
+    colors: str = option("model", group=OUTPUTS, choices=_color_views, help=(
+        "model: the model's own colours (its materials and vertex colours; one grey where the file has none); "
+        "objects: a colour per object, to see what the balancer moves between ranks"))
+    video: bool = option(False, group=OUTPUTS, switch=True,
+                         help="write mosaic.mp4 of every frame (needs imageio-ffmpeg)")
+    timeline: bool = option(False, group=OUTPUTS, switch=True, help=(
+        "write timeline.json: every rank's phases, start to end, over the run's last frames (multigpu bench "
+        "timeline plots it)"))
+    record: str | None = option(None, group=OUTPUTS, metavar="FILE", help=(
+        "write every frame's camera to FILE, in the format --path reads (replaying it renders the same images)"))
+    # -- run control
+    timeout: float = option(120.0, group=CONTROL, metavar="S", type=float, valid=lambda v: v > 0 and _finite(v),
+                            must="must be > 0 seconds", help="seconds a rank waits for the others within a frame")
+    liveness: float = option(30.0, group=CONTROL, metavar="S", type=float, valid=lambda v: v >= 0 and _finite(v),
+                             must="must be >= 0 seconds (0: off)", help=(
+        "seconds without a heartbeat before a rank counts as stopped and the job ends (0: off)"))
+    progress: bool = option(True, group=CONTROL, flag="--no-progress", negate=True, help="no progress bar")
     # recovery by relaunch (parallel/recovery.py): restarts allowed within its WINDOW (None: 3 with windows, an
     # unattended wall heals; 0 headless, where a failure should end a measurement), and the path frame a restart
     # resumes at, continuing the run in --out
-    recover: int | None = None
-    resume_at: int = 0
-    dark: tuple[int, ...] = ()  # tiles whose PC is gone: black, drawn by nobody; their ranks stand in elsewhere
+    recover: int | None = option(None, group=CONTROL, metavar="N", type=int, valid=lambda v: 0 <= v <= 100,
+                                 must="must be 0..100 restarts", help=(
+        "restart the job after a failure (a rank or host that dies or freezes), resuming at the first frame not "
+        "shown, at most N times in 10 minutes; the launcher's (default: 3 with --present window, 0 headless)"))
+    dark: tuple[int, ...] = option((), group=CONTROL, flag="--dark-tiles", metavar="K,...", read=read_labels, text="",
+                                   help=(
+        "tiles whose PC is gone: shown black, the rest of the wall shared among every rank (the launcher's "
+        "restart without a host that does not answer)"))
+    resume_at: int = option(0, group=CONTROL, metavar="F", type=int, valid=lambda v: v >= 0, must="must be >= 0",
+                            help=(
+        "start at frame F of the camera path, continuing the run already in --out (the launcher's restart after "
+        "a failure)"))
 
     def __post_init__(self):
         self._scene_as_drawn()
-        if self.frames is not None and self.frames < 1:
-            raise InputError(f"--frames must be >= 1, got {self.frames}")
-        if self.strips < 2:
-            raise InputError(f"--strips must be >= 2, got {self.strips}")
-        if self.balance not in REGISTRY:
-            raise InputError(f"--balance must be one of {', '.join(REGISTRY)}, got '{self.balance}'")
-        if self.bounds not in ("box", "sphere"):
-            raise InputError(f"--bounds must be 'box' or 'sphere', got '{self.bounds}'")
-        if self.path_kind not in DEFAULT_FRAMES:
-            raise InputError(f"--path-kind must be one of {', '.join(DEFAULT_FRAMES)}, got '{self.path_kind}'")
-        if self.mosaic_every < 0:
-            raise InputError(f"--mosaic-every must be >= 0 (0 = never), got {self.mosaic_every}")
-        from multigpu.gpu.render import METHODS
-
-        if self.subfrustum not in METHODS:
-            raise InputError(f"--subfrustum must be one of {', '.join(METHODS)}, got '{self.subfrustum}'")
-        if self.exchange not in EXCHANGES:
-            raise InputError(f"--exchange must be one of {', '.join(EXCHANGES)}, got '{self.exchange}'")
-        if self.projection not in PROJECTIONS:
-            raise InputError(f"--projection must be one of {', '.join(PROJECTIONS)}, got '{self.projection}'")
-        if self.partition not in ("redundant", "broadcast"):
-            raise InputError(f"--partition must be 'redundant' or 'broadcast', got '{self.partition}'")
-        from multigpu.decompositions import PATTERNS, RANGES
-        from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
-
-        if self.decomposition not in DECOMPOSITIONS:
-            raise InputError(f"--decomposition must be one of {', '.join(DECOMPOSITIONS)}, got '{self.decomposition}'")
-        if self.bin_pattern not in PATTERNS:
-            raise InputError(f"--bin-pattern must be one of {', '.join(PATTERNS)}, got '{self.bin_pattern}'")
-        if not 1 <= self.bin_size <= 4096:
-            raise InputError(f"--bin-size must be 1..4096 pixels, got {self.bin_size}")
-        if self.db_ranges not in RANGES:
-            raise InputError(f"--db-ranges must be one of {', '.join(RANGES)}, got '{self.db_ranges}'")
-        if self.partition == "broadcast" and self.decomposition != "screen":
-            raise InputError("--partition broadcast works with --decomposition screen (the balancer's partition), "
-                             f"got --decomposition {self.decomposition}")
-        if len(self.offset) != 3 or not all(math.isfinite(v) and abs(v) <= 1e15 for v in self.offset):
-            raise InputError(f"--offset must be three finite numbers of magnitude <= 1e15, got {self.offset}")
-        from multigpu.core.inflight import MOST
-
         if self.latency is None:
             object.__setattr__(self, "latency", 0 if self.present == "window" else 1)
-        if not 0 <= self.latency <= MOST:
-            raise InputError(f"--latency must be 0..{MOST} frames, got {self.latency}")
-        self._check_quality()
-        if self.device is not None and self.device < 0:
-            raise InputError(f"--device must be >= 0, got {self.device}")
-        if not (self.timeout > 0 and math.isfinite(self.timeout)):
-            raise InputError(f"--timeout must be > 0 seconds, got {self.timeout}")
-        self._check_recovery()
-        if not (self.liveness >= 0 and math.isfinite(self.liveness)):
-            raise InputError(f"--liveness must be >= 0 seconds (0: off), got {self.liveness}")
-        if self.present not in PRESENTERS:
-            raise InputError(f"--present must be one of {', '.join(PRESENTERS)}, got '{self.present}'")
+        if self.recover is None:
+            object.__setattr__(self, "recover", 3 if self.present == "window" else 0)
+        check(self)
+        if self.partition == "broadcast" and self.decomposition != "screen":
+            raise InputError.of("partition", "broadcast works with --decomposition screen (the balancer's "
+                                f"partition), got --decomposition {self.decomposition}")
         if self.path == INTERACTIVE and self.present != "window":
-            raise InputError("--path interactive needs --present window: the keyboard and mouse are read from rank 0's "
-                             f"window (got --present {self.present})")
+            raise InputError.of("path", "interactive needs --present window: the keyboard and mouse are read from "
+                                f"rank 0's window (got --present {self.present})")
         if self.monitor is not None and self.present != "window":
-            raise InputError(f"--monitor needs --present window (got --present {self.present})")
-        if len(self.mullion) != 2 or min(self.mullion) < 0 or max(self.mullion) > 4096:
-            raise InputError(f"--mullion must be two pixel counts 0..4096, got {self.mullion}")
-        tw, th = self.tile
-        if tw > 16384 or th > 16384:
-            raise InputError(f"--tile {tw}x{th}: tiles above 16384 pixels per side are not supported")
+            raise InputError.of("monitor", f"needs --present window (got --present {self.present})")
+        if any(not 0 <= k < self.ranks for k in self.dark) or len(set(self.dark)) >= self.ranks:
+            raise InputError.of("dark", f"must name some of the tiles 0..{self.ranks - 1}, got {list(self.dark)}")
         W, H = self.canvas.size
         if W > 32768 or H > 32768:
             raise InputError(f"--grid/--tile/--mullion: a {W}x{H} wall exceeds 32768 pixels per side")
         if self.decomposition == "bins":
             bins = -(-self.size[0] // self.bin_size) * -(-self.size[1] // self.bin_size)
             if bins < self.ranks:
-                raise InputError(f"--bin-size {self.bin_size}: a {self.size[0]}x{self.size[1]} wall has {bins} bins, "
-                                 f"fewer than the {self.ranks} ranks")
+                raise InputError.of("bin_size", f"{self.bin_size}: a {self.size[0]}x{self.size[1]} wall has {bins} "
+                                    f"bins, fewer than the {self.ranks} ranks")
             if bins > 65536:
-                raise InputError(f"--bin-size {self.bin_size}: {bins} bins on a {self.size[0]}x{self.size[1]} wall "
-                                 "(at most 65536: every bin is a draw per frame)")
+                raise InputError.of("bin_size", f"{self.bin_size}: {bins} bins on a {self.size[0]}x{self.size[1]} "
+                                    "wall (at most 65536: every bin is a draw per frame)")
 
     def _scene_as_drawn(self) -> None:
-        """The colour view checked, and the scene prepared with levels of detail only where the
-        run can draw them (``--lod-error``, ``--target-fps``): built, cached and held for nothing
-        otherwise."""
-        from multigpu.scene.looks import COLOR_VIEWS
-
-        if self.colors not in COLOR_VIEWS:
-            raise InputError(f"--colors must be one of {', '.join(COLOR_VIEWS)}, got '{self.colors}'")
+        """The scene prepared with levels of detail only where the run can draw them
+        (``--lod-error``, ``--target-fps``): built, cached and held for nothing otherwise."""
         lods = self.lod_error > 0 or self.target_fps is not None
         if self.scene.lods != lods:
             object.__setattr__(self, "scene", replace(self.scene, lods=lods))
-    def _check_recovery(self) -> None:
-        """``--recover`` (its default by ``--present``), ``--resume-at`` and ``--dark-tiles``."""
-        if self.recover is None:
-            object.__setattr__(self, "recover", 3 if self.present == "window" else 0)
-        if not 0 <= self.recover <= 100 or self.resume_at < 0:
-            raise InputError(f"--recover must be 0..100 restarts and --resume-at >= 0, got {self.recover}, "
-                             f"{self.resume_at}")
-        if any(not 0 <= k < self.ranks for k in self.dark) or len(set(self.dark)) >= self.ranks:
-            raise InputError(f"--dark-tiles must name some of the tiles 0..{self.ranks - 1}, got {list(self.dark)}")
-
-    def _check_quality(self) -> None:
-        """Speed for accuracy's flags: a frame rate above 0, a scale the renderer makes, a bound >= 0."""
-        if self.target_fps is not None and not (self.target_fps > 0 and math.isfinite(self.target_fps)):
-            raise InputError(f"--target-fps must be a frame rate above 0, got {self.target_fps}")
-        from multigpu.core.resample import MIN_SCALE
-
-        if not MIN_SCALE <= self.render_scale <= 1.0:
-            raise InputError(f"--render-scale must be {MIN_SCALE}..1, got {self.render_scale}")
-        if not (self.lod_error >= 0 and math.isfinite(self.lod_error)):
-            raise InputError(f"--lod-error must be >= 0 pixels, got {self.lod_error}")
 
     @property
     def ranks(self) -> int:
@@ -237,3 +345,6 @@ class WalkConfig:
     def canvas(self) -> Canvas:
         """The wall with its mullions: the camera's frustum, the renderers' framebuffer, the mosaic."""
         return Canvas(self.grid, self.tile, self.mullion, self.dark)
+
+
+register(WalkConfig)

@@ -1,9 +1,9 @@
 """User-facing errors: one clear line naming the setting or file and the problem.
 
-Library code names the *field* a bad value came from (``InputError.of("seed", "must be >= 0")``
-reads "seed must be >= 0"); ``as_flags`` turns it into the command line's words ("--seed must
-be >= 0"). Fields and flags follow one convention (``merge_below`` is ``--merge-below``), so the
-mapping lives here, once.
+Library code names the *field* a bad value came from (``InputError.of("seed", "must be >= 0")``),
+and the error reads as the command line says it: "--seed must be >= 0". Fields and flags follow
+one convention (``merge_below`` is ``--merge-below``; a flag named otherwise is declared with its
+field, ``options.py``, and registered here), so the mapping lives here, once.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ class InputError(ValueError):
         return cls(message, field)
 
     def __str__(self) -> str:
-        return f"{self.field} {self.message}" if self.field else self.message
+        return f"{flag(self.field)} {self.message}" if self.field else self.message
 
 
 class WriteFailed(RuntimeError):
@@ -35,16 +35,13 @@ class WriteFailed(RuntimeError):
         return cls(f"cannot write {path}: {exc.strerror or exc}" + (f"; {kept}" if kept else ""))
 
 
+#: fields whose flag is not ``--field-name`` (``options.register``: ``overlay`` is ``--no-overlay``)
+RENAMED: dict[str, str] = {}
+
+
 def flag(field: str) -> str:
     """The command-line flag of a configuration field."""
-    return "--" + field.replace("_", "-")
-
-
-def as_flags(exc: BaseException) -> str:
-    """An error as the command line says it: fields become flags."""
-    if isinstance(exc, InputError) and exc.field:
-        return f"{flag(exc.field)} {exc.message}"
-    return str(exc)
+    return RENAMED.get(field) or "--" + field.replace("_", "-")
 
 
 def check_file(path, field: str | None, what: str = "file"):

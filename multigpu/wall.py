@@ -156,7 +156,7 @@ def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:
     pitch = two(b["pixel_pitch_mm"]) if "pixel_pitch_mm" in b else (b["panel_mm"][0] / tile[0],
                                                                      b["panel_mm"][1] / tile[1])
     if min(pitch) <= 0:
-        raise InputError(f"--wall {wall.file}: bezel: the pixel pitch must be > 0 mm")
+        raise InputError.of("wall", f"{wall.file}: bezel: the pixel pitch must be > 0 mm")
     return round(gap[0] / pitch[0]), round(gap[1] / pitch[1])
 
 
@@ -165,10 +165,11 @@ def check_ranks(wall: Wall, ranks: int) -> None:
     every rank has one (a missing rank would silently take ``$DISPLAY``)."""
     for r in sorted(wall.displays):
         if r >= ranks:
-            raise InputError(f"--wall {wall.file}: displays entry for rank {r}, but the wall has ranks 0..{ranks - 1}")
+            raise InputError.of("wall", f"{wall.file}: displays entry for rank {r}, but the wall has ranks "
+                                f"0..{ranks - 1}")
     missing = [r for r in range(ranks) if wall.displays and r not in wall.displays]
     if missing:
-        raise InputError(f"--wall {wall.file}: no displays entry for rank {', '.join(map(str, missing))} of the "
+        raise InputError.of("wall", f"{wall.file}: no displays entry for rank {', '.join(map(str, missing))} of the "
                          f"{ranks}-rank wall (once displays is given, every rank needs one; "
                          "{\"rank\": R} alone means $DISPLAY)")
 
@@ -182,7 +183,8 @@ def hosts_of(wall: Wall, ranks: int) -> list[tuple[str, int]]:
         return []
     missing = [r for r in range(ranks) if r not in wall.hosts]
     if missing:
-        raise InputError(f"--wall {wall.file}: rank {missing[0]} names no host, but others do (name every rank's host)")
+        raise InputError.of("wall", f"{wall.file}: rank {missing[0]} names no host, but others do (name every "
+                            "rank's host)")
     order = list(dict.fromkeys(wall.hosts[r] for r in range(ranks)))
     return [(h, sum(wall.hosts[r] == h for r in range(ranks))) for h in order]
 
@@ -342,7 +344,7 @@ def check_command(path: str, grid_only: bool = False, hosts_only: bool = False,
                      (lambda host: None) if offline else None)
     if found:
         more = f" (and {len(found) - 1} more: {'; '.join(found[1:])})" if len(found) > 1 else ""
-        raise InputError(f"--wall {path}: {found[0]}{more}")
+        raise InputError.of("wall", f"{path}: {found[0]}{more}")
     bezel = ([f"mullion {mullion[0]}x{mullion[1]} pixels from the bezel: {json.dumps(wall.bezel)}"]
              if derived else [])
     return "\n".join([describe(wall, grid, tile, mullion), *bezel, *picture(wall, grid)])

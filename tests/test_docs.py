@@ -84,5 +84,5 @@ def test_walkthrough_help_groups_every_flag_shows_defaults_and_no_markup():
         if not action.option_strings or action.dest == "help":
             continue
         assert action.help, f"{action.option_strings[0]} has no help"
-        if action.default not in (None, False):
+        if action.default not in (None, False) and action.nargs != 0:  # a switch's default is its absence
             assert "default" in p._get_formatter()._get_help_string(action), action.option_strings[0]

@@ -1,16 +1,13 @@
 """Bad inputs named at the door, in one process: path files, model files, odd file kinds,
 and outputs written whole (issue: reliability, round two)."""
 
-import errno
 import json
 import os
 import warnings
 
-import numpy as np
 import pytest
 
-from multigpu.errors import InputError, WriteFailed, as_flags, check_file
-from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, write_json
+from multigpu.errors import InputError, check_file
 from multigpu.scene.models import SceneSpec, load_scene
 from multigpu.scene.paths import load_path
 
@@ -57,7 +54,7 @@ def test_interpolated_eye_meeting_target_is_refused_at_the_door(tmp_path):
 def test_seed_must_be_non_negative():
     with pytest.raises(InputError, match="seed must be >= 0, got -1") as e:
         SceneSpec(seed=-1)
-    assert e.value.field == "seed" and as_flags(e.value) == "--seed must be >= 0, got -1"
+    assert e.value.field == "seed" and str(e.value) == "--seed must be >= 0, got -1"
 
 
 def test_odd_file_kinds_say_what_they_are(tmp_path):
@@ -71,10 +68,10 @@ def test_odd_file_kinds_say_what_they_are(tmp_path):
     for path, needle in cases.items():
         with pytest.raises(InputError) as e:
             load_scene(SceneSpec(model=str(path)), use_cache=False)
-        assert needle in str(e.value) and as_flags(e.value).startswith("--model ")
+        assert needle in str(e.value) and str(e.value).startswith("--model ")
     with pytest.raises(InputError, match="is a directory, not a path file") as e:
         load_path(tmp_path / "d.obj")
-    assert as_flags(e.value).startswith("--path ")
+    assert str(e.value).startswith("--path ")
 
 
 def test_check_file_passes_regular_files(tmp_path):
@@ -120,90 +117,10 @@ def test_garbage_text_models_say_so(tmp_path, suffix):
     p.write_bytes(b"\x00\x01 garbage \xff\xfe nonsense\nxx yy zz\n" * 5)
     with pytest.raises(InputError) as e:
         load_scene(SceneSpec(model=str(p)), use_cache=False)
-    msg = as_flags(e.value)
+    msg = str(e.value)
     assert msg.startswith(f"--model {p}") and "charset" not in msg and "module" not in msg
     assert ("no triangles" in msg or f"cannot read as {suffix[1:].upper()}" in msg
             or "not a complete binary STL" in msg)
-
-
-def test_timing_rows_are_whole_after_a_failed_write(tmp_path, monkeypatch):
-    """A write that fails part way (disk full) leaves the file at the last whole frame."""
-    w = TimingWriter(tmp_path / "timings.csv")
-    rows = np.arange(2 * len(COLUMNS), dtype=float).reshape(2, len(COLUMNS))
-    rows[:, COLUMNS.index("balance")] = [0, 1]  # by name in the file, its index when read back
-    w.write(rows)
-    real = os.pwrite
-
-    def half_then_full(fd, data, offset):
-        if len(data) > 20:
-            real(fd, data[:len(data) // 2], offset)
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return real(fd, data, offset)
-
-    monkeypatch.setattr(os, "pwrite", half_then_full)
-    with pytest.raises(WriteFailed, match="cannot write .*timings.csv: No space left on device; kept .* bytes"):
-        w.write(rows)
-    monkeypatch.setattr(os, "pwrite", real)
-    later = rows.copy()
-    later[:, 0] += 200
-    w.write(later)  # the run could go on: appends after the last whole frame
-    w.close()
-    got = read_timings(tmp_path / "timings.csv")
-    assert got.shape == (4, len(COLUMNS))
-    assert (got[2:, 0] == rows[:, 0] + 200).all()
-    assert (got[:, COLUMNS.index("balance")] == [0, 1, 0, 1]).all()
-    lines = (tmp_path / "timings.csv").read_text().splitlines()[1:]
-    names = [line.split(",")[COLUMNS.index("balance")] for line in lines]
-    assert names == ["strips", "cost"] * 2
-
-
-def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
-    from pathlib import Path
-
-    def full(self, target):
-        raise OSError(errno.ENOSPC, "No space left on device")
-
-    monkeypatch.setattr(Path, "replace", full)
-    with pytest.raises(WriteFailed, match=f"cannot write {tmp_path / 'summary.json'}: No space left"):
-        write_json(tmp_path / "summary.json", {"a": 1})
-    from multigpu.parallel.mosaic import save_png
-
-    with pytest.raises(WriteFailed, match="f.png: No space left"):
-        save_png(np.zeros((4, 4, 3), np.uint8), tmp_path / "f.png")
-    assert list(tmp_path.iterdir()) == []
-
-
-def test_a_recorded_path_that_cannot_be_written_is_the_runs_failure(tmp_path, monkeypatch):
-    """``--record``'s file failing (disk full): the record names it (``failed``, which
-    ends the job with one line and exit 2), timings and summary are still written whole, and
-    the printout claims no recorded frames."""
-    import io
-    from contextlib import redirect_stdout
-
-    from multigpu.parallel.outdir import OutputDir
-    from multigpu.parallel.record import RunRecord
-    from multigpu.scene.pathfile import PathAppender
-
-    def full(self, data, frames):
-        raise OSError(errno.ENOSPC, "No space left on device")
-
-    monkeypatch.setattr(PathAppender, "_write", full)
-    record = RunRecord(OutputDir(tmp_path / "o"), 1, 2, {}, lambda: None, False, False, False,
-                       str(tmp_path / "rec.json"))
-    rows = np.ones((1, len(COLUMNS)))
-    for f in range(2):
-        record.camera(type("C", (), {"position": (0, 0, 1), "target": (0, 0, 0), "up": (0, 1, 0), "fov": 60.0,
-                                     "near": 0.1, "far": 10.0})())
-        rows[0, 0] = f
-        record.rows(f, rows)
-    summary = record.close(True, None)
-    assert str(record.failed) == f"cannot write {tmp_path / 'rec.json'}: No space left on device"
-    assert summary["frames"] == 2 and read_timings(tmp_path / "o" / "timings.csv").shape == (2, len(COLUMNS))
-    assert not (tmp_path / "rec.json").exists()
-    out = io.StringIO()
-    with redirect_stdout(out):
-        record.print_table(summary, "t")
-    assert "camera path" not in out.getvalue()
 
 
 def test_record_into_a_directory_that_takes_no_files_is_refused_at_the_door(tmp_path):
@@ -214,7 +131,7 @@ def test_record_into_a_directory_that_takes_no_files_is_refused_at_the_door(tmp_
                          (str(tmp_path), "is a directory")]:
         with pytest.raises(InputError) as e:
             check_record(path)
-        assert needle in as_flags(e.value)
+        assert needle in str(e.value)
     check_record(str(tmp_path / "ok.json"))
     assert list(tmp_path.iterdir()) == []  # the probe left nothing
 
@@ -226,7 +143,7 @@ def test_record_into_a_directory_that_takes_no_files_is_refused_at_the_door(tmp_
     (["--frames", "0"], "--frames must be >= 1"),
     (["--balance", "magic"], "--balance must be one of strips, cost, time, adaptive, cross, shares, auto, none"),
     (["--subfrustum", "tiles"], "--subfrustum must be one of"),
-    (["--partition", "gossip"], "--partition must be 'redundant' or 'broadcast'"),
+    (["--partition", "gossip"], "--partition must be one of redundant, broadcast, got 'gossip'"),
     (["--exchange", "pigeon"], "--exchange must be one of auto, messages, shared"),
     (["--projection", "pigeon"], "--projection must be one of each, shared"),
     (["--cluster", "-3"], "--cluster must be >= 0"),
@@ -253,7 +170,7 @@ def test_walkthrough_flags_are_validated_at_the_door(flags, needle):
     args = build_parser().parse_args(["walkthrough", *flags])
     with pytest.raises(InputError) as e:
         walk_config(args)
-    assert needle in as_flags(e.value)
+    assert needle in str(e.value)
 
 
 def test_setup_stage_errors_name_their_flag(tmp_path):
@@ -269,11 +186,11 @@ def test_setup_stage_errors_name_their_flag(tmp_path):
     ]:
         with pytest.raises(InputError) as e:
             make()
-        assert needle in as_flags(e.value)
+        assert needle in str(e.value)
     ctx, _ = create_context()
     with pytest.raises(InputError) as e:
         choose_method("scissor", (16384 * 4, 64), gl_limits(ctx))
-    assert "--subfrustum scissor: a 65536x64 display exceeds this GL's maximum framebuffer" in as_flags(e.value)
+    assert "--subfrustum scissor: a 65536x64 display exceeds this GL's maximum framebuffer" in str(e.value)
     ctx.release()
 
 
@@ -291,7 +208,7 @@ def test_decomposition_flags_are_validated_at_the_door(flags, needle):
 
     with pytest.raises(InputError) as e:
         walk_config(build_parser().parse_args(["walkthrough", *flags]))
-    assert needle in as_flags(e.value)
+    assert needle in str(e.value)
 
 
 def test_bench_floor_sizes_are_checked_in_one_line(capsys):

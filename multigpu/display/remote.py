@@ -36,7 +36,7 @@ class RemoteMonitor:
         try:
             self.sock = socket.create_connection((host, int(port)), timeout=TIMEOUT)
         except (OSError, ValueError) as exc:
-            raise InputError(f"--monitor: cannot reach the operator's view at {address} ({exc})") from None
+            raise InputError.of("monitor", f"cannot reach the operator's view at {address} ({exc})") from None
         self.sock.settimeout(TIMEOUT)
         self.window, self.controls, self.buf, self.closed = self, None, b"", None
 

@@ -39,7 +39,7 @@ class Window:
         try:
             import glfw
         except Exception as exc:  # the wheel bundles libglfw; a source install may lack it
-            raise InputError(f"--present window needs glfw with its library (pip install glfw; "
+            raise InputError.of("present", f"window needs glfw with its library (pip install glfw; "
                              f"Debian: apt install libglfw3): {exc.__class__.__name__}: {exc}") from None
         import moderngl
 
@@ -53,10 +53,12 @@ class Window:
             os.environ["DISPLAY"] = display
         name = os.environ.get("DISPLAY")
         if not name:
-            raise InputError(f"--present window: rank {rank} has no X display ($DISPLAY is not set, {where}); {X_HELP}")
+            raise InputError.of("present", f"window: rank {rank} has no X display ($DISPLAY is not set, {where}); "
+                                           f"{X_HELP}")
         if not glfw.init():
             why = errors[-1] if errors else "glfw could not initialise"
-            raise InputError(f"--present window: rank {rank} cannot open X display '{name}' ({where}): {why}; {X_HELP}")
+            raise InputError.of("present", f"window: rank {rank} cannot open X display '{name}' ({where}): {why}; "
+                                           f"{X_HELP}")
         _OPEN[0] += 1
         self.counted = True
         self.controls = None
@@ -73,7 +75,7 @@ class Window:
             self.window = glfw.create_window(tw, th, title or f"multigpu tile {rank}", None, None)
             if not self.window:
                 why = errors[-1] if errors else "no window"
-                raise InputError(f"--present window: rank {rank} cannot open a {tw}x{th} GL 4.3 window on "
+                raise InputError.of("present", f"window: rank {rank} cannot open a {tw}x{th} GL 4.3 window on "
                                  f"'{name}' ({where}): {why}; {X_HELP}")
             at = (0, 0) if fullscreen else position
             glfw.set_window_pos(self.window, int(at[0]), int(at[1]))

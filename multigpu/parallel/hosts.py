@@ -44,7 +44,7 @@ def parse_hosts(text: str) -> list[tuple[str, int]]:
     """``a:2,b:2`` (or ``a,b``: one rank each) as [(host, slots)]."""
     parts = text.split(",")
     if not text.strip() or any(not p.strip() for p in parts):
-        raise InputError(f"--hosts: '{text}' is not a host list (want e.g. a:2,b:2)")
+        raise InputError.of("hosts", f"'{text}' is not a host list (want e.g. a:2,b:2)")
     return _merged([_entry(p, "--hosts") for p in parts])
 
 
@@ -54,7 +54,7 @@ def read_hostfile(path: str) -> list[tuple[str, int]]:
     try:
         lines = p.read_text().splitlines()
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"--hostfile {path}: cannot read it ({exc.__class__.__name__}: "
+        raise InputError.of("hostfile", f"{path}: cannot read it ({exc.__class__.__name__}: "
                          f"{getattr(exc, 'strerror', None) or exc})") from None
     entries = []
     for i, line in enumerate(lines, 1):
@@ -62,7 +62,7 @@ def read_hostfile(path: str) -> list[tuple[str, int]]:
         if line.strip():
             entries.append(_entry(line, f"--hostfile {path}, line {i}"))
     if not entries:
-        raise InputError(f"--hostfile {path}: no hosts in it")
+        raise InputError.of("hostfile", f"{path}: no hosts in it")
     return _merged(entries)
 
 

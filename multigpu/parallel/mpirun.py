@@ -190,7 +190,7 @@ def wall_hosts(argv: list[str], ranks: int, hosts: list[tuple[str, int]] | None)
     if hosts is not None and hosts != named:
         from multigpu.parallel.hosts import spec
 
-        raise InputError(f"--wall {path} places the ranks on {spec(named)}, but --hosts/--hostfile says "
+        raise InputError.of("wall", f"{path} places the ranks on {spec(named)}, but --hosts/--hostfile says "
                          f"{spec(hosts)}: give one of them")
     return named
 

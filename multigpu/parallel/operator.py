@@ -58,7 +58,7 @@ def start_view(on: dict) -> subprocess.Popen:
     line = proc.stdout.readline().split() if ready else []
     if len(line) != 2 or line[0] != "port":
         stop_view(proc)
-        raise InputError(f"--monitor: the operator's view on {host} did not start ({shlex.join(cmd)})")
+        raise InputError.of("monitor", f"the operator's view on {host} did not start ({shlex.join(cmd)})")
     os.environ[ENV] = f"{on.get('address', host)}:{line[1]}"
     return proc
 

@@ -25,7 +25,7 @@ from multigpu.core.camera import frame_matrices
 from multigpu.core.memory import release_heap
 from multigpu.core.projectors import make_projector
 from multigpu.core.spheres import SphereProjector
-from multigpu.errors import InputError, as_flags
+from multigpu.errors import InputError
 from multigpu.gpu.buffers import ensure_buffers
 from multigpu.parallel.exchange import agree, allgather_text
 from multigpu.parallel.fault import fault
@@ -159,7 +159,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             load_info = {**load_info, "kernel_seconds": kernels.warm()}  # compiled here, never in a frame
             release_heap()  # setup's freed temporaries leave the heap before the first frame
         except (InputError, RuntimeError) as exc:
-            error = as_flags(exc)
+            error = str(exc)
         error = agree(comm, error, wait)
         if error:
             raise InputError(error)
@@ -203,7 +203,7 @@ def _first(cfg: WalkConfig) -> tuple:
         _check_path(cfg, scene, path)
         shared = ensure_buffers(load_info.get("cache"), scene)  # once, before the others map it
     except InputError as exc:
-        return as_flags(exc), out, scene, path, load_info, shared
+        return str(exc), out, scene, path, load_info, shared
     return None, out, scene, path, load_info, shared
 
 

@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from multigpu.errors import InputError, as_flags
+from multigpu.errors import InputError
 from multigpu.parallel.exchange import agree, barrier, wait_all
 
 PACE = 60.0  # frames a second at most: the bar moves at one speed a person can follow on any machine
@@ -41,8 +41,8 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
     wall = load_wall(path)
     grid, tile, mullion = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile, wall.mullion or (0, 0)
     if k != grid[0] * grid[1]:
-        raise InputError(f"--wall {path}: a {grid[0]}x{grid[1]} wall needs {grid[0] * grid[1]} ranks but the job has "
-                         f"{k} (launch/wall-test {path} starts the right number)")
+        raise InputError.of("wall", f"{path}: a {grid[0]}x{grid[1]} wall needs {grid[0] * grid[1]} ranks but the job "
+                            f"has {k} (launch/wall-test {path} starts the right number)")
     check_ranks(wall, k)
     host = socket.gethostname()
     presenter, error = None, None
@@ -53,7 +53,7 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
         presenter = make_presenter("window", rank, tile, place, wall.displays.get(rank), where,
                                    rank in wall.fullscreen)
     except InputError as exc:
-        error = as_flags(exc)
+        error = str(exc)
     error = agree(comm, error, timeout, "setup")
     if error:
         if presenter is not None:
@@ -105,7 +105,7 @@ def main(path: str, frames: int | None) -> int:
         got = run(path, comm, frames)
     except InputError as exc:
         if comm.Get_rank() == 0:
-            print(f"multigpu: error: {as_flags(exc)}", file=sys.stderr, flush=True)
+            print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
         collective_exit(2)
         return 2
     if got is not None:

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from multigpu.errors import InputError, check_file
+from multigpu.options import check, option
 from multigpu.scene import lod as scene_lod
 from multigpu.scene import parts as scene_parts
 from multigpu.scene.files import FORMATS, axis_name, axis_vector, load_model
@@ -41,40 +42,56 @@ __all__ = ["BUILTIN", "FORMATS", "SceneSpec", "axis_name", "axis_vector", "cache
 
 
 
+def read_cluster(text: str) -> int | None:
+    """``--cluster``: ``auto`` (None) or a number of triangles."""
+    if str(text).strip() == "auto":
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        raise InputError(f"must be 'auto' or a number of triangles (0: never), got '{text}'") from None
+
+
 @dataclass(frozen=True)
 class SceneSpec:
-    """What to load: a built-in scene by name or a model file, and how to split it."""
+    """What to load: a built-in scene by name or a model file, and how to split it; each
+    setting declared once with its flag (``options.py``)."""
 
-    scene: str = "plant"
-    model: str | None = None
-    split: str = "auto"
-    merge_below: int = 64
-    triangles: int = 100_000  # the one default size of the built-in scenes
-    copies: int = 1
-    seed: int = 0
-    cluster: int | None = None  # cut objects above N triangles into clusters (0: never; None: auto)
+    scene: str = option("plant", group="scene", metavar=lambda: "|".join(BUILTIN), help="a built-in scene")
+    model: str | None = option(None, group="scene", metavar="FILE",
+                               help="model file (OBJ, PLY, STL, OFF, glTF/GLB) instead of --scene")
+    split: str = option("auto", group="scene", metavar="auto|components|grid:N",
+                        valid=lambda v: re.fullmatch(r"auto|components|grid:[1-9][0-9]*", v) is not None,
+                        must="must be 'auto', 'components' or 'grid:N' with N >= 1", help=(
+        "objects of a model: scene-graph nodes (else connected components), connected components, or an N^3 grid "
+        "of cells (any file)"))
+    merge_below: int = option(64, group="scene", metavar="N", type=int, help="merge components under this many "
+                                                                            "triangles")
+    triangles: int = option(100_000, group="scene", metavar="N", type=int, valid=lambda v: v >= 1000,
+                            must="must be >= 1000", help="built-in scene size in triangles")
+    copies: int = option(1, group="scene", metavar="N", type=int, valid=lambda v: v >= 1, must="must be >= 1",
+                         help="built-in scenes side by side (the paper used 6..20 plants)")
+    seed: int = option(0, group="scene", metavar="N", type=int, valid=lambda v: v >= 0, must="must be >= 0",
+                       help="built-in scenes: the random seed")
+    # cut objects above N triangles into clusters (0: never; None: auto)
+    cluster: int | None = option(None, group="scene", metavar="auto|N|0", read=read_cluster, text="auto",
+                                 valid=lambda v: v is None or v >= 0, must="must be >= 0 (0 keeps objects whole)",
+                                 help=("cut objects above N triangles into spatial clusters of at most N (auto: when "
+                                       "an object is too big to balance on the wall; 0: keep objects as modelled)"))
     ranks: int = 4  # the wall the scene is prepared for (automatic clustering)
-    up: str | None = None  # x|y|z|-x|-y|-z, None: format convention / heuristic
+    up: str | None = option(None, group="scene", metavar="x|y|z|-x|-y|-z",
+                            valid=lambda v: v is None or re.fullmatch(r"[+-]?[xyz]", v) is not None,
+                            must="must be one of x, y, z, -x, -y, -z",
+                            help="up axis of the model (default: the format's convention, see scene info)")
     lods: bool = True  # build (and cache, and hold) levels of detail: only where the run can draw them
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
             known = ", ".join(BUILTIN)
             raise InputError.of("scene", f"must be one of {known} (or give a model file), got '{self.scene}'")
-        if not re.fullmatch(r"auto|components|grid:[1-9][0-9]*", self.split):
-            raise InputError.of("split", f"must be 'auto', 'components' or 'grid:N' with N >= 1, got '{self.split}'")
-        if self.up is not None and not re.fullmatch(r"[+-]?[xyz]", self.up):
-            raise InputError.of("up", f"must be one of x, y, z, -x, -y, -z, got '{self.up}'")
+        check(self)
         if self.ranks < 1:
             raise InputError(f"ranks must be >= 1, got {self.ranks}")
-        if self.triangles < 1000:
-            raise InputError.of("triangles", f"must be >= 1000, got {self.triangles}")
-        if self.seed < 0:
-            raise InputError.of("seed", f"must be >= 0, got {self.seed}")
-        if self.copies < 1:
-            raise InputError.of("copies", f"must be >= 1, got {self.copies}")
-        if self.cluster is not None and self.cluster < 0:
-            raise InputError.of("cluster", f"must be >= 0 (0 keeps objects whole), got {self.cluster}")
 
 
 def cache_dir() -> Path:

@@ -247,7 +247,7 @@ def ranks_list(text: str) -> list[int]:
     except ValueError:
         got = []
     if not got or min(got) < 1:
-        raise InputError(f"--ranks must be rank counts of at least 1, e.g. 4,9,16; got '{text}'")
+        raise InputError.of("ranks", f"must be rank counts of at least 1, e.g. 4,9,16; got '{text}'")
     return got
 
 

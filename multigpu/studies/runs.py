@@ -62,7 +62,7 @@ class Settings:
         from multigpu.strategies import REGISTRY
 
         if rounds is not None and rounds < 1:
-            raise InputError(f"--rounds must be at least 1, got {rounds}")
+            raise InputError.of("rounds", f"must be at least 1, got {rounds}")
         s = cls(quick=quick, strategies=tuple(REGISTRY), rounds=rounds)
         if quick:
             s.triangles, s.frames, s.copies = 20_000, 12, (1, 2)

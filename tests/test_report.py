@@ -1,0 +1,92 @@
+"""Rank 0's records written whole (``parallel/report.py``: the timing rows and the JSON files;
+``parallel/record.py``: the run's record): a write that fails part way keeps what came before
+it and names the file."""
+
+import errno
+import os
+
+import numpy as np
+import pytest
+
+from multigpu.errors import WriteFailed
+from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, write_json
+
+
+def test_timing_rows_are_whole_after_a_failed_write(tmp_path, monkeypatch):
+    """A write that fails part way (disk full) leaves the file at the last whole frame."""
+    w = TimingWriter(tmp_path / "timings.csv")
+    rows = np.arange(2 * len(COLUMNS), dtype=float).reshape(2, len(COLUMNS))
+    rows[:, COLUMNS.index("balance")] = [0, 1]  # by name in the file, its index when read back
+    w.write(rows)
+    real = os.pwrite
+
+    def half_then_full(fd, data, offset):
+        if len(data) > 20:
+            real(fd, data[:len(data) // 2], offset)
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(fd, data, offset)
+
+    monkeypatch.setattr(os, "pwrite", half_then_full)
+    with pytest.raises(WriteFailed, match="cannot write .*timings.csv: No space left on device; kept .* bytes"):
+        w.write(rows)
+    monkeypatch.setattr(os, "pwrite", real)
+    later = rows.copy()
+    later[:, 0] += 200
+    w.write(later)  # the run could go on: appends after the last whole frame
+    w.close()
+    got = read_timings(tmp_path / "timings.csv")
+    assert got.shape == (4, len(COLUMNS))
+    assert (got[2:, 0] == rows[:, 0] + 200).all()
+    assert (got[:, COLUMNS.index("balance")] == [0, 1, 0, 1]).all()
+    lines = (tmp_path / "timings.csv").read_text().splitlines()[1:]
+    names = [line.split(",")[COLUMNS.index("balance")] for line in lines]
+    assert names == ["strips", "cost"] * 2
+
+
+def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
+    from pathlib import Path
+
+    def full(self, target):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "replace", full)
+    with pytest.raises(WriteFailed, match=f"cannot write {tmp_path / 'summary.json'}: No space left"):
+        write_json(tmp_path / "summary.json", {"a": 1})
+    from multigpu.parallel.mosaic import save_png
+
+    with pytest.raises(WriteFailed, match="f.png: No space left"):
+        save_png(np.zeros((4, 4, 3), np.uint8), tmp_path / "f.png")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_recorded_path_that_cannot_be_written_is_the_runs_failure(tmp_path, monkeypatch):
+    """``--record``'s file failing (disk full): the record names it (``failed``, which
+    ends the job with one line and exit 2), timings and summary are still written whole, and
+    the printout claims no recorded frames."""
+    import io
+    from contextlib import redirect_stdout
+
+    from multigpu.parallel.outdir import OutputDir
+    from multigpu.parallel.record import RunRecord
+    from multigpu.scene.pathfile import PathAppender
+
+    def full(self, data, frames):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(PathAppender, "_write", full)
+    record = RunRecord(OutputDir(tmp_path / "o"), 1, 2, {}, lambda: None, False, False, False,
+                       str(tmp_path / "rec.json"))
+    rows = np.ones((1, len(COLUMNS)))
+    for f in range(2):
+        record.camera(type("C", (), {"position": (0, 0, 1), "target": (0, 0, 0), "up": (0, 1, 0), "fov": 60.0,
+                                     "near": 0.1, "far": 10.0})())
+        rows[0, 0] = f
+        record.rows(f, rows)
+    summary = record.close(True, None)
+    assert str(record.failed) == f"cannot write {tmp_path / 'rec.json'}: No space left on device"
+    assert summary["frames"] == 2 and read_timings(tmp_path / "o" / "timings.csv").shape == (2, len(COLUMNS))
+    assert not (tmp_path / "rec.json").exists()
+    out = io.StringIO()
+    with redirect_stdout(out):
+        record.print_table(summary, "t")
+    assert "camera path" not in out.getvalue()
