@@ -16,9 +16,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from multigpu import tools
 from multigpu.core.memory import keep_heap
 from multigpu.errors import InputError, WriteFailed
-from multigpu.flags import WALKTHROUGH, scene_args, spec, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
+from multigpu.flags import WALKTHROUGH, scene_args, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
 
 
 class Parser(argparse.ArgumentParser):
@@ -86,13 +87,13 @@ def _tool_parsers(sub) -> None:
     scene_args(si)
     si.add_argument("--grid", default="2x2", help="the wall the scene is prepared for (automatic clustering)")
     si.add_argument("--no-cache", action="store_true")
-    si.set_defaults(run=_scene_info)
+    si.set_defaults(run=tools.scene_info)
     sc = ssub.add_parser("scan", help="write a scanned-style model: one closed surface of even triangles (binary "
                                       "PLY); load it cut into parts with --model OUT --split grid:8")
     sc.add_argument("out", help="PLY file to write")
     sc.add_argument("--triangles", type=int, default=1_000_000, help="about this many (default %(default)s)")
     sc.add_argument("--seed", type=int, default=0)
-    sc.set_defaults(run=_scene_scan)
+    sc.set_defaults(run=tools.scene_scan)
 
     p = sub.add_parser("path", help="camera path tools")
     psub = p.add_subparsers(dest="pcmd", required=True)
@@ -102,7 +103,7 @@ def _tool_parsers(sub) -> None:
     pm.add_argument("--frames", type=int)
     pm.add_argument("--fov", type=float, default=60.0)
     pm.add_argument("--out", required=True, help="path file to write (JSON)")
-    pm.set_defaults(run=_path_make)
+    pm.set_defaults(run=tools.path_make)
 
     wl = sub.add_parser("wall", help="wall file tools")
     wsub = wl.add_subparsers(dest="wall_cmd", required=True)
@@ -112,20 +113,20 @@ def _tool_parsers(sub) -> None:
     wc.add_argument("--hosts-only", action="store_true", help="print only the hosts as H:N,... (for launch scripts)")
     wc.add_argument("--offline", action="store_true",
                     help="check the file alone: no host name look-up, no X screen asked (a wall written elsewhere)")
-    wc.set_defaults(run=_wall_check)
+    wc.set_defaults(run=tools.wall_check)
     wt = wsub.add_parser("test", help="show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)")
     wt.add_argument("file", help="wall file (JSON)")
     wt.add_argument("--frames", type=int, default=None, help="stop after N frames (default: at Escape)")
-    wt.set_defaults(run=_wall_test)
+    wt.set_defaults(run=tools.wall_test)
     mv = sub.add_parser("monitor-view", help="the operator's view on a PC of its own (started by the launcher "
                                              "from the wall file's monitor.host)")
     mv.add_argument("--display", help="X display (default $DISPLAY)")
     mv.add_argument("--position", default="0x0", help="window position XxY on that display (default 0x0)")
     mv.add_argument("--port", type=int, default=0, help="TCP port to listen on (default: any, printed)")
-    mv.set_defaults(run=_monitor_view)
+    mv.set_defaults(run=tools.monitor_view)
     t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
     t.add_argument("grid")
-    t.set_defaults(run=_tree)
+    t.set_defaults(run=tools.tree)
 
     dp = sub.add_parser("depth", help="depth complexity and overdraw of one frame (images + stats)")
     scene_args(dp)
@@ -134,7 +135,7 @@ def _tool_parsers(sub) -> None:
     dp.add_argument("--frame", type=int, default=0, help="which frame of the path")
     dp.add_argument("--size", default="1024x1024", help="display WxH in pixels")
     dp.add_argument("--out", default="out/depth", help="output directory")
-    dp.set_defaults(run=_depth)
+    dp.set_defaults(run=tools.depth)
 
 
 def _study_parsers(sub) -> None:
@@ -211,12 +212,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
-def _wall_test(a) -> int:
-    from multigpu.parallel.walltest import main as wall_test
-
-    return wall_test(a.file, a.frames)
-
-
 def _experiment(a) -> int:
     from multigpu.studies import experiments
 
@@ -233,35 +228,6 @@ def _bench(a) -> int:
     from multigpu.studies import bench
 
     return bench.run_args(a)
-
-
-def _monitor_view(a) -> int:
-    from multigpu.config import parse_pair
-    from multigpu.display.remote import serve
-
-    serve(a.display, parse_pair(a.position, "--position"), a.port)
-    return 0
-
-
-def _depth(a) -> int:
-    from pathlib import Path
-
-    from multigpu.config import parse_pair
-    from multigpu.gpu import depth
-    from multigpu.scene.models import load_scene
-    from multigpu.scene.paths import generate
-
-    size = parse_pair(a.size, "--size")
-    scene, _ = load_scene(spec(a))
-    path = generate(a.path_kind, scene, a.frames)
-    if not 0 <= a.frame < len(path):
-        raise InputError.of("frame", f"must be in 0..{len(path) - 1}, got {a.frame}")
-    s = depth.run(scene, path.camera(a.frame), size, Path(a.out))
-    print(f"{scene.name} frame {a.frame} at {size[0]}x{size[1]}: coverage {s.get('coverage', 0):.1%}, "
-          f"mean depth complexity d = {s['mean_d']:.2f} (max {s['max_d']}), measured overdraw o = {s['mean_o']:.2f}, "
-          f"model o(d) = 1 + 1/2 + ... + 1/d: {s['model_o']:.2f}")
-    print(f"images and depth.json in {a.out}/")
-    return 0
 
 
 def _walkthrough(a) -> int:
@@ -335,111 +301,6 @@ def _end_failed_job(comm, job, exc: BaseException) -> None:
         print(text, file=sys.stderr, flush=True)
     time.sleep(ABORT_PAUSE)  # the launcher forwards what we printed before MPI_Abort tears it down
     comm.Abort(code)
-
-
-def _scene_scan(a) -> int:
-    from pathlib import Path
-
-    from multigpu.scene.scan import MIN_TRIANGLES, write_scan
-
-    out = Path(a.out)
-    if a.triangles < MIN_TRIANGLES:
-        raise InputError.of("triangles", f"a scan needs at least {MIN_TRIANGLES}, got {a.triangles}")
-    if out.suffix.lower() != ".ply":
-        raise InputError(f"scene scan writes PLY: name the file *.ply, got '{out}'")
-    if not out.parent.is_dir():
-        raise InputError(f"scene scan: directory '{out.parent}' does not exist")
-    write_scan(out, a.triangles, a.seed)
-    print(f"wrote {out} ({out.stat().st_size / 2**20:.1f} MiB); walk it: launch/walkthrough --model {out} "
-          f"--split grid:8 --path-kind orbit")
-    return 0
-
-
-def _scene_info(a) -> int:
-    import resource
-    from pathlib import Path
-
-    from multigpu.scene.models import axis_name, load_scene
-
-    src = a.source
-    is_file = Path(src).suffix != "" or Path(src).exists()
-    wanted = spec(a, scene=a.scene if is_file else src, model=src if is_file else a.model)
-    scene, info = load_scene(wanted, use_cache=not a.no_cache)
-    lo, hi = scene.bounds
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    tris = scene.tris
-    print(f"scene      {scene.name}")
-    print(f"objects    {scene.n_objects}")
-    median = int(sorted(tris)[len(tris) // 2]) if len(tris) else 0
-    print(f"triangles  {scene.n_triangles} (per object: min {tris.min()}, median {median}, max {tris.max()})")
-    print(f"vertices   {scene.vertices.shape[0]}")
-    print(f"bounds     {lo.round(3).tolist()} .. {hi.round(3).tolist()}")
-    print(f"up         {axis_name(scene.meta.get('up', [0, 0, 1]))} ({scene.meta.get('up_source', 'as generated')})")
-    objs = scene.meta.get("objects", {})
-    if objs:
-        print(f"split      {objs['split']}: {objs['modelled']} objects as modelled -> {objs['objects']}; {objs['why']}")
-    look = scene.meta.get("look")
-    if look:
-        per_vertex = "kept per vertex" if look.get("vertex_colors") else "one per object"
-        print(f"colours    {look['colors']} ({look['materials']} materials; {per_vertex})"
-              if look["colors"] != "none" else "colours    none in the file: one neutral grey (--colors objects: "
-                                               "a colour per object)")
-        tex = look.get("textures") or {"count": 0}
-        if tex["count"]:
-            print(f"textures   {tex['count']} ({tex['pixels']:,} pixels, the largest {tex['largest'][0]}x"
-                  f"{tex['largest'][1]}; {tex['mib']:.2f} MiB with their mip levels)")
-        print(f"normals    {look['normals']}")
-        a = look.get("alpha") or {}
-        if a.get("mask") or a.get("blend_drawn_opaque"):
-            print(f"alpha      MASK: {a['mask']} parts, {a['masked_faces']} faces below the cutoff left out; "
-                  f"BLEND: {a['blend_drawn_opaque']} parts drawn opaque")
-    per_tri = scene.nbytes / max(scene.n_triangles, 1)
-    lods = scene.meta.get("lods")
-    if lods:
-        borders = "locked" if lods["locked_borders"] else "free"
-        print(f"levels     {lods['levels']} of detail: {lods['objects']} objects simplified, the coarsest "
-              f"{lods['coarsest_triangles']} triangles in all (borders {borders})")
-    print(f"memory     {scene.nbytes / 2**20:.1f} MiB in arrays ({per_tri:.1f} B/triangle), peak RSS {peak:.0f} MiB")
-    where = ", " + info["cache"] if info["cache"] else ""
-    print(f"load       {info['seconds']:.3f} s ({'cache hit' if info['cached'] else 'built'}{where})")
-    for w in scene.meta.get("warnings", []):
-        print(f"warning    {w}")
-    return 0
-
-
-def _path_make(a) -> int:
-    from multigpu.scene.models import load_scene
-    from multigpu.scene.paths import GENERATORS, generate
-
-    if a.kind not in GENERATORS:
-        raise InputError(f"path kind must be one of {', '.join(GENERATORS)}, got '{a.kind}'")
-    if a.frames is not None and a.frames < 1:
-        raise InputError.of("frames", f"must be >= 1, got {a.frames}")
-    scene, _ = load_scene(spec(a))
-    path = generate(a.kind, scene, a.frames, fov=a.fov)
-    path.save(a.out)
-    print(f"wrote {a.out}: {len(path)} frames ({a.kind} of {scene.name})")
-    return 0
-
-
-def _wall_check(a) -> int:
-    from multigpu.wall import check_command
-
-    print(check_command(a.file, a.grid_only, a.hosts_only, a.offline))
-    return 0
-
-
-def _tree(a) -> int:
-    from multigpu.config import parse_pair
-    from multigpu.core.tree import GpuTree
-
-    rows, cols = parse_pair(a.grid, "grid")
-    t = GpuTree(rows, cols)
-    print(t.describe())
-    for label in range(t.size):
-        info = ", ".join(f"({i.method}, {i.nc_l}, {i.nc_r}, {i.side})" for i in t.parinfo[label])
-        print(f"GPU{label} tile{t.tile_of(label)} depth {t.depth(label)}: {info}")
-    return 0
 
 
 if __name__ == "__main__":
