@@ -10,6 +10,7 @@ import numpy as np
 
 from multigpu.strategies import REGISTRY
 from multigpu.studies.floor import run as floor_run
+from multigpu.studies.prose import prose
 from multigpu.studies.runs import Settings, walk
 from multigpu.studies.tables import md_table, write_csv
 
@@ -121,83 +122,43 @@ def exp_payoff(s: Settings, out: Path) -> str:
 
 
 def _page(s: Settings, rows, bounds, ranking, verdict: str, checks, rounds: int, parts: list[dict]) -> str:
-    """The payoff section of the results page from its tables."""
+    """The payoff section of the results page from its tables (its words: ``text/payoff.md``)."""
     SCENES = tuple(dict.fromkeys(r["scene"] for r in rows))
-    return "\n".join([
-        f"2x2 wall of 256x256 tiles, {s.frames} frames per run: the plant walkthrough, the city drive along its "
-        f"streets, {orbit_copies(s)} plants on an orbit keeping them all in view (the paper's Section 7 "
-        f"setup), and a scanned-style model (`multigpu scene scan`: one closed surface of "
-        f"{rows_of(rows, 'scan')['triangles']:,} even triangles, cut by `--split grid:8` into "
-        f"{rows_of(rows, 'scan')['objects']} parts: few large objects) on an orbit; {rounds} alternating rounds; "
-        "medians over rounds (min..max of the speedup beside). Emulated "
-        "parallel frame = "
-        "slowest rank's CPU time per frame; `LB share` = load-balancing CPU per rank (projection, plan, learning "
-        "from the last frame's times) / emulated frame; `Cull ms` = the cull of big objects' parts per rank; "
-        "`LB + cull share` = both over the emulated frame (the walkthrough's own summary line).", "",
-        md_table(rows, [("scene", "Scene", ""), ("objects", "Objects", "d"), ("balance", "Balance", ""),
-                        ("emulated_ms", "Frame (emulated) ms", ".2f"), ("speedup_vs_none", "vs none", ".2f"),
-                        ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f"),
-                        ("render_max_ms", "Slowest render ms", ".2f"), ("imb_render", "Imb. render", ".3f"),
-                        ("imb_tris", "Imb. tris", ".3f"), ("tris_drawn", "Tris drawn / frame", ",.0f"),
-                        ("lb_cpu_ms", "LB CPU ms", ".2f"), ("lb_share", "LB share", ".1%"),
-                        ("cull_ms", "Cull ms", ".2f"), ("lb_cull_share", "LB + cull share", ".1%")]), "",
-        "How far balancing can go here. `Floor` = the render imbalance of identical work on every rank "
-        "(`multigpu bench floor`, measured in every round beside the runs: this machine's noise, which a perfect "
-        "balancer would still show). `Ideal frame` = `none`'s frame with its balancing, exchange and display CPU "
-        "kept but its render time replaced by the mean rank's render time times the floor: a balancer that is "
-        "free, perfect to the noise floor and adds no exchange or overlap. `Ceiling` = `none`'s frame / ideal "
-        "frame: an estimate of the most any strategy could gain over `none` on this machine (it is itself as noisy "
-        "as the floor).", "",
-        md_table(bounds, [("scene", "Scene", ""), ("floor", "Floor", ".3f"), ("none_ms", "none frame ms", ".2f"),
-                          ("render_mean_ms", "Mean render ms", ".2f"), ("render_max_ms", "Slowest render ms", ".2f"),
-                          ("ideal_ms", "Ideal frame ms", ".2f"), ("ceiling", "Ceiling vs none", ".2f"),
-                          ("best", "Best measured vs none", ".2f")]), "",
-        "Which strategy pays best over every scene (speedup over `none`, emulated frame), ranked by the worst "
-        "case, then the geometric mean:", "",
-        md_table(ranking, [("balance", "Balance", ""), *[(sc, sc, ".2f") for sc in SCENES],
-                           ("geomean", "Geometric mean", ".3f"), ("worst", "Worst", ".2f")]), "",
-        verdict, "",
-        "The default against the best strategy and the ceiling, scene by scene (targets: within 3 % of the best "
-        "measured strategy everywhere, and at least 0.9 of the ceiling where the ceiling is above 1.05x):", "",
-        md_table(checks, [("scene", "Scene", ""), ("ceiling", "Ceiling", ".2f"), ("best", "Best", ""),
-                          ("best_speedup", "Best vs none", ".2f"), ("default", "Default", ""),
-                          ("default_speedup", "Default vs none", ".2f"), ("of_best", "Default / best", ".3f"),
-                          ("of_ceiling", "Default / ceiling", ".3f"), ("meets", "Meets both", ""),
-                          ("paired_of_best", "Default / best, paired by round", ".3f"),
-                          ("paired_min", "min", ".3f"), ("paired_max", "max", ".3f")]), "",
-        "`Default / best` compares medians over rounds; `paired by round` takes the best's frame over the "
-        "default's within each round (they ran minutes apart), the median of the rounds and their range.", "",
-        "What the default planned with (a default that chooses, as `auto` does): the share of its frames the best "
-        "strategy planned (median over rounds), and `Expected / best`, the best's frame over the frame the "
-        "default would have if each of its candidates' frames cost what that candidate's own runs cost: what "
-        "its choices and trial frames cost, the run-to-run noise aside. Where `Default / best` lies well below "
-        "it, the rest is that noise or what its trial frames cost beyond its candidates' average frames ('-': "
-        "the default is the best, or the best is not its candidate). The last three columns pair the "
-        "default's run with the best's of the same round frame by frame: the best's mean frame over the "
-        "default's on the frames of the default's first trial (`First trial`, in frames, the candidates "
-        "alternating) and on the frames after it, medians over rounds ('-': the default holds no trial).", "",
-        md_table(checks, [("scene", "Scene", ""), ("default", "Default", ""), ("best", "Best", ""),
-                          ("by_best", "Frames planned by the best", ""), ("expected_of_best", "Expected / best", ""),
-                          ("of_best", "Default / best", ".3f"), ("trial_frames", "First trial", ""),
-                          ("trial_of_best", "Best / default in it", ""),
-                          ("after_of_best", "Best / default after it", "")]), "",
-        "What stands between the default and the ideal frame, CPU ms per frame (medians over rounds): "
-        "`Duplicated` = its mean render above `none`'s (objects two ranks draw, cross's pieces), `Imbalance "
-        "left` = its slowest render above its mean times the floor, `Fixed extra` = its balancing + exchange + "
-        "display CPU above `none`'s. They add up to about `Frame - ideal` (the emulated frame is the "
-        "slowest rank's sum, frame by frame).", "",
-        md_table(checks, [("scene", "Scene", ""), ("default", "Default", ""), ("gap_ms", "Frame - ideal ms", ".2f"),
-                          ("overlap_ms", "Duplicated ms", ".2f"), ("imbalance_ms", "Imbalance left ms", ".2f"),
-                          ("fixed_extra_ms", "Fixed extra ms", ".2f")]), "",
-        "Where the balancing CPU goes, per rank and frame (medians over rounds), for `none`, the default and the "
-        "best strategy: `Learn` = the strategy taking the last frame's measured times, `Project` = the object "
-        "bounds projected to screen rects, `Plan` = the partition, the ranks' masks and the work (for `none`: its "
-        "tiles' masks). `none` pays its projection and masks too (culling); `Above none` is what balancing adds "
-        "to them. `Project share` = projection CPU / emulated frame.", "",
-        md_table(parts, [("scene", "Scene", ""), ("balance", "Balance", ""), ("learn_ms", "Learn ms", ".3f"),
-                         ("project_ms", "Project ms", ".3f"), ("plan_ms", "Plan ms", ".3f"),
-                         ("lb_cpu_ms", "LB CPU ms", ".3f"), ("above_none_ms", "Above none ms", "+.3f"),
-                         ("lb_share", "LB share", ".1%"), ("project_share", "Project share", ".1%")])])
+    return prose(
+        "payoff", "section", frames=s.frames, copies=orbit_copies(s), scan_triangles=rows_of(rows, "scan")["triangles"],
+        scan_objects=rows_of(rows, "scan")["objects"], rounds=rounds, verdict=verdict,
+        runs=md_table(rows, [("scene", "Scene", ""), ("objects", "Objects", "d"), ("balance", "Balance", ""),
+                             ("emulated_ms", "Frame (emulated) ms", ".2f"), ("speedup_vs_none", "vs none", ".2f"),
+                             ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f"),
+                             ("render_max_ms", "Slowest render ms", ".2f"), ("imb_render", "Imb. render", ".3f"),
+                             ("imb_tris", "Imb. tris", ".3f"), ("tris_drawn", "Tris drawn / frame", ",.0f"),
+                             ("lb_cpu_ms", "LB CPU ms", ".2f"), ("lb_share", "LB share", ".1%"),
+                             ("cull_ms", "Cull ms", ".2f"), ("lb_cull_share", "LB + cull share", ".1%")]),
+        bounds=md_table(bounds, [("scene", "Scene", ""), ("floor", "Floor", ".3f"), ("none_ms", "none frame ms", ".2f"),
+                                 ("render_mean_ms", "Mean render ms", ".2f"),
+                                 ("render_max_ms", "Slowest render ms", ".2f"), ("ideal_ms", "Ideal frame ms", ".2f"),
+                                 ("ceiling", "Ceiling vs none", ".2f"), ("best", "Best measured vs none", ".2f")]),
+        ranking=md_table(ranking, [("balance", "Balance", ""), *[(sc, sc, ".2f") for sc in SCENES],
+                                   ("geomean", "Geometric mean", ".3f"), ("worst", "Worst", ".2f")]),
+        checks=md_table(checks, [("scene", "Scene", ""), ("ceiling", "Ceiling", ".2f"), ("best", "Best", ""),
+                                 ("best_speedup", "Best vs none", ".2f"), ("default", "Default", ""),
+                                 ("default_speedup", "Default vs none", ".2f"), ("of_best", "Default / best", ".3f"),
+                                 ("of_ceiling", "Default / ceiling", ".3f"), ("meets", "Meets both", ""),
+                                 ("paired_of_best", "Default / best, paired by round", ".3f"),
+                                 ("paired_min", "min", ".3f"), ("paired_max", "max", ".3f")]),
+        planned=md_table(checks, [("scene", "Scene", ""), ("default", "Default", ""), ("best", "Best", ""),
+                                  ("by_best", "Frames planned by the best", ""),
+                                  ("expected_of_best", "Expected / best", ""), ("of_best", "Default / best", ".3f"),
+                                  ("trial_frames", "First trial", ""), ("trial_of_best", "Best / default in it", ""),
+                                  ("after_of_best", "Best / default after it", "")]),
+        gaps=md_table(checks, [("scene", "Scene", ""), ("default", "Default", ""),
+                               ("gap_ms", "Frame - ideal ms", ".2f"), ("overlap_ms", "Duplicated ms", ".2f"),
+                               ("imbalance_ms", "Imbalance left ms", ".2f"),
+                               ("fixed_extra_ms", "Fixed extra ms", ".2f")]),
+        parts=md_table(parts, [("scene", "Scene", ""), ("balance", "Balance", ""), ("learn_ms", "Learn ms", ".3f"),
+                               ("project_ms", "Project ms", ".3f"), ("plan_ms", "Plan ms", ".3f"),
+                               ("lb_cpu_ms", "LB CPU ms", ".3f"), ("above_none_ms", "Above none ms", "+.3f"),
+                               ("lb_share", "LB share", ".1%"), ("project_share", "Project share", ".1%")]))
 
 
 def default_checks(rows: list[dict], bounds: list[dict], per_round: dict | None = None) -> list[dict]:
