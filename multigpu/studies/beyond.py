@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.prose import prose
 from multigpu.studies.runs import Settings, _breakdown, _plt, _scene_args, walk
 from multigpu.studies.tables import md_table, write_csv
 
@@ -68,12 +69,9 @@ def exp_overlap(s: Settings, out: Path) -> str:
     fig.tight_layout()
     fig.savefig(out / "overlap.png", dpi=100)
     plt.close(fig)
-    return "\n".join([f"Walkthrough ({len(path)} frames) of the {scene.n_triangles}-triangle plant on a {W}x{H} "
-                      "display, balancer only. Molnar's prediction uses S = sqrt(W H / K) and, for sqrt(rho a), the "
-                      "triangle-weighted RMS footprint of the visible objects' screen rects (we cull whole objects, "
-                      "so the object is the primitive).", "",
-                      md_table(rows, [("grid", "Grid", ""), ("strips", "Strips", ""), ("overlap", "Measured O", ".3f"),
-                                       ("molnar", "Molnar O", ".3f")]), "", "![overlap](overlap.png)"])
+    return prose("beyond", "overlap", frames=len(path), triangles=scene.n_triangles, W=W, H=H,
+                 table=md_table(rows, [("grid", "Grid", ""), ("strips", "Strips", ""), ("overlap", "Measured O", ".3f"),
+                                       ("molnar", "Molnar O", ".3f")]))
 
 
 def exp_cost(s: Settings, out: Path) -> str:
@@ -112,31 +110,23 @@ def exp_cost(s: Settings, out: Path) -> str:
         st = depth.run(sc, path.camera(len(path) // 2), (tile[0] * 2, tile[1] * 2), out / f"depth-{scene_name}")
         for img in ("depth_complexity", "overdraw"):
             shutil.copyfile(out / f"depth-{scene_name}" / f"{img}.png", out / f"{scene_name}_{img}.png")
-        md_depth.append(f"| {scene_name} | {st.get('coverage', 0):.1%} | {st['mean_d']:.2f} | {st['max_d']} | "
-                        f"{st['mean_o']:.2f} | {st['model_o']:.2f} | ![]({scene_name}_depth_complexity.png) |")
+        md_depth.append(prose("beyond", "depth-row", scene=scene_name, coverage=st.get("coverage", 0),
+                              mean_d=st["mean_d"], max_d=st["max_d"], mean_o=st["mean_o"], model_o=st["model_o"]))
         (out / f"depth-{scene_name}.json").write_text(json.dumps(st))
     write_csv(out / "cost.csv", rows)
     fill = {r["balance"]: r for r in rows if r["scene"] == "fill"}
     plant = {r["balance"]: r for r in rows if r["scene"] == "plant"}
-    return "\n".join([
-        f"2x2 wall of {tile[0]}x{tile[1]} tiles, {s.frames} frames: the plant on its walkthrough (triangle-bound) "
-        "and the fill scene (24 screen-filling panels beside a dense sphere cluster) on its orbit. "
-        "`Imb. render` is max/mean of the measured per-rank rendering CPU time, averaged over frames; "
-        "`vs strips` divides it by strips' on the same scene; `LB extra` is the extra balancer CPU ms per frame.", "",
-        md_table(rows, [("scene", "Scene", ""), ("balance", "Balance", ""), ("imb_tris", "Imb. tris", ".3f"),
+    fs, ps = fill["strips"]["imb_render"], plant["strips"]["imb_render"]
+    return prose(
+        "beyond", "cost", tw=tile[0], th=tile[1], frames=s.frames, fill_cost=fill["cost"]["imb_render"],
+        fill_strips=fs, fill_target=1 + (fs - 1) / 2, plant_cost=plant["cost"]["imb_render"], plant_strips=ps,
+        plant_change=plant["cost"]["imb_render"] / ps - 1, depth="\n".join(md_depth),
+        table=md_table(rows, [("scene", "Scene", ""), ("balance", "Balance", ""), ("imb_tris", "Imb. tris", ".3f"),
                          ("imb_render", "Imb. render", ".3f"), ("imb_vs_strips", "vs strips", ".2f"),
                          ("render_cpu_max_ms", "Slowest render CPU", ".2f"),
                          ("emulated_ms", "Frame (emulated)", ".2f"), ("lb_cpu_ms", "LB CPU", ".2f"),
                          ("lb_extra_ms", "LB extra", "+.2f"), ("terms", "Cost terms kept", ""),
-                         ("pixel_frames", "Frames with pixel term", ".0%")]), "",
-        f"Fill scene: cost model render imbalance {fill['cost']['imb_render']:.3f} vs strips "
-        f"{fill['strips']['imb_render']:.3f} (target: at most half of strips' excess over 1 would be "
-        f"{1 + (fill['strips']['imb_render'] - 1) / 2:.3f}); plant: cost {plant['cost']['imb_render']:.3f} vs strips "
-        f"{plant['strips']['imb_render']:.3f} "
-        f"({plant['cost']['imb_render'] / plant['strips']['imb_render'] - 1:+.1%}).",
-        "", "Depth complexity of the middle frame (`multigpu depth`):", "",
-        "| Scene | Coverage | mean d | max d | measured o | model o(d) = 1 + 1/2 + ... + 1/d | d image |",
-        "|---:|---:|---:|---:|---:|---:|---:|", *md_depth])
+                         ("pixel_frames", "Frames with pixel term", ".0%")]))
 
 
 def exp_speedup(s: Settings, out: Path) -> str:
@@ -171,19 +161,13 @@ def exp_speedup(s: Settings, out: Path) -> str:
                      "speedup_min": float(a[:, 0].min()), "speedup_max": float(a[:, 0].max())})
     write_csv(out / "speedup.csv", rows)
     best = max(rows, key=lambda r: r["speedup_median"])
-    return "\n".join([
-        f"Default plant ({s.triangles} requested triangles), walkthrough resampled to {s.frames} frames, 1 rank "
-        f"against a 2x2 wall of the same display, {rounds} alternating rounds. Speedup = mean 1-rank rendering "
-        "CPU time / mean over frames of the slowest of 4 ranks' rendering CPU time (emulated parallel; per-rank "
-        "CPU time with `LP_NUM_THREADS=1`). `Cluster 64`: objects above 64 triangles split into spatial clusters "
-        "(`--cluster 64`, same triangles and images, less overlap). Time imbalance: per frame max/mean of the 4 "
-        "ranks' rendering CPU time, averaged.", "",
-        md_table(rows, [("display", "Display", ""), ("balance", "Balance", ""), ("cluster", "Cluster", ""),
+    return prose(
+        "beyond", "speedup", triangles=s.triangles, frames=s.frames, rounds=rounds, balance=best["balance"],
+        cluster=best["cluster"], display=best["display"], speedup=best["speedup_median"],
+        table=md_table(rows, [("display", "Display", ""), ("balance", "Balance", ""), ("cluster", "Cluster", ""),
                          ("k1_render_ms", "1 rank ms", ".2f"), ("k4_mean_rank_ms", "4 ranks: mean rank ms", ".2f"),
                          ("time_imbalance", "Time imbalance", ".3f"), ("speedup_median", "Speedup (median)", ".2f"),
-                         ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f")]), "",
-        f"Best: {best['balance']} with cluster {best['cluster']} at {best['display']}: {best['speedup_median']:.2f}x "
-        f"(target 3x)."])
+                         ("speedup_min", "min", ".2f"), ("speedup_max", "max", ".2f")]))
 
 
 def exp_partition(s: Settings, out: Path) -> str:
@@ -210,13 +194,10 @@ def exp_partition(s: Settings, out: Path) -> str:
                      "lb_cpu_ms_per_rank": a[1], "lb_cpu_ms_all_ranks": a[2], "emulated_ms": a[3],
                      "frame_wall_ms": a[4]})
     write_csv(out / "partition.csv", rows)
-    return "\n".join([
-        f"2x2 wall of {W}x{H}, walkthrough resampled to {s.frames} frames, {rounds} alternating round(s), medians. "
-        "LB wall: load-balancing phase per rank and frame (for broadcast: rank 0's plan plus the broadcast, "
-        "which the other ranks spend waiting); LB CPU: process CPU time in that phase, per rank and summed over "
-        "the 4 ranks; emulated: slowest rank's CPU time per frame.", "",
-        md_table(rows, [("copies", "Plants", ""), ("objects", "Objects", ""), ("partition", "Partition", ""),
+    return prose(
+        "beyond", "partition", W=W, H=H, frames=s.frames, rounds=rounds,
+        table=md_table(rows, [("copies", "Plants", ""), ("objects", "Objects", ""), ("partition", "Partition", ""),
                          ("lb_wall_ms", "LB wall ms", ".2f"), ("lb_cpu_ms_per_rank", "LB CPU ms/rank", ".2f"),
                          ("lb_cpu_ms_all_ranks", "LB CPU ms, 4 ranks", ".2f"),
                          ("emulated_ms", "Frame (emulated) ms", ".2f"),
-                         ("frame_wall_ms", "Frame (wall) ms", ".2f")])])
+                         ("frame_wall_ms", "Frame (wall) ms", ".2f")]))

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.prose import prose
 from multigpu.studies.runs import BREAKDOWN_COLS, Settings, _breakdown, _plt, _scene_args, walk
 from multigpu.studies.tables import md_table, write_csv
 
@@ -42,17 +43,14 @@ def exp_compare(s: Settings, out: Path) -> str:
         r["paper_vs_strips"] = r["paper_fps"] / PAPER_FPS["screen+strips"]
     write_csv(out / "compare.csv", rows)
     _plot(rows, out / "compare.png")
-    return "\n".join([
-        f"{copies} plants ({s.triangles * copies} requested triangles) on a 2x2 wall of 256x256 tiles, orbit path "
-        f"({s.frames} frames) keeping the whole scene in view, as in the paper's Section 7; each configuration one "
-        "run, one after the other. FPS and ratios use the emulated frame (slowest rank's CPU time).", "",
-        md_table(rows, [("config", "Configuration", ""), *BREAKDOWN_COLS,
-                        ("bytes_per_frame", "Bytes/frame", ".0f"), ("depth_bytes_per_frame", "of which depth", ".0f"),
-                        ("imb_tris", "Imb. tris", ".3f"), ("imb_render", "Imb. render", ".3f"),
-                        ("load_cv", "c_v", ".3f"), ("vs_strips", "FPS / strips", ".2f"),
-                        ("paper_vs_strips", "paper: FPS / strips", ".2f")]), "",
-        "![emulated FPS and frame components per configuration](compare.png)", "",
-        _discussion(rows)])
+    return prose("compare", "section", copies=copies, triangles=s.triangles * copies, frames=s.frames,
+                 discussion=_discussion(rows),
+                 table=md_table(rows, [("config", "Configuration", ""), *BREAKDOWN_COLS,
+                                       ("bytes_per_frame", "Bytes/frame", ".0f"),
+                                       ("depth_bytes_per_frame", "of which depth", ".0f"),
+                                       ("imb_tris", "Imb. tris", ".3f"), ("imb_render", "Imb. render", ".3f"),
+                                       ("load_cv", "c_v", ".3f"), ("vs_strips", "FPS / strips", ".2f"),
+                                       ("paper_vs_strips", "paper: FPS / strips", ".2f")]))
 
 
 def _plot(rows: list[dict], path: Path) -> None:
@@ -91,40 +89,21 @@ def _discussion(rows: list[dict]) -> str:
     everyone = ", ".join("{} {:.1f}".format(r["config"], r["emulated_fps"])
                          for r in sorted(rows, key=lambda r: -r["emulated_fps"]))
     fps = [by[c]["emulated_fps"] for c in paper_order]
-    close = max(fps) / min(fps) < 1.10
-    lines = [
-        f"**Ranking.** The paper: {' > '.join(paper_order)}. Here: {' > '.join(ours)} "
-        f"({'the same order' if agree else 'a different order'}; all configurations: {everyone} FPS emulated)."
-        + (f" The paper's four lie within {max(fps) / min(fps) - 1:.0%} of each other here, within what one run "
-           "on this shared machine can resolve: on this scale they tie, where the paper separates them by up "
-           f"to {22.16 / 10.72:.1f}x." if close else ""), "",
-        f"**Sort-first methods.** `time` reaches {time['vs_strips']:.2f}x of `strips` (paper {17.65 / 22.16:.2f}x) "
-        f"and `cross` {cross['vs_strips']:.2f}x (paper {11.71 / 22.16:.2f}x). Render-time imbalance: strips "
-        f"{strips['imb_render']:.3f}, time {time['imb_render']:.3f}, cross {cross['imb_render']:.3f}. Time-based "
-        "methods learn from last frame's per-rank times (`time` spreads them evenly over each rank's pixels and "
-        "reacts one frame late; `cross` weighs them by where this frame's triangles lie), while the strip split "
-        "counts the triangles each region will hold in this frame. "
-        f"`cross` renders {cross['pieces_per_rank']:.2f} pieces per rank per frame on average (a rank helps a "
-        "neighbouring segment), which costs a draw and a message per piece.", "",
-        f"**Sort-last (`db`).** {db['vs_strips']:.2f}x of `strips` (paper {10.72 / 22.16:.2f}x): no geometry is "
-        f"drawn twice (triangle imbalance {db['imb_tris']:.3f}), but every rank sends colour and depth for "
-        f"everything its objects cover: {db['bytes_per_frame'] / 1e6:.2f} MB per frame "
-        f"({db['depth_bytes_per_frame'] / 1e6:.2f} MB of it depth) against {strips['bytes_per_frame'] / 1e6:.2f} "
-        "MB for `strips`, and compositing costs "
-        f"{db['exchange_cpu_ms']:.2f} ms CPU per rank against {strips['exchange_cpu_ms']:.2f} ms. Its ranks render "
-        f"over the whole display, so its render time imbalance is {db['imb_render']:.3f}.", "",
-        f"**Wide objects once (`hybrid`).** {hybrid['vs_strips']:.2f}x of `strips`: the strips partition for "
-        f"most objects, the wide ones drawn once with depth (triangle imbalance {hybrid['imb_tris']:.3f}); every "
-        f"region carries depth too, so it sends {hybrid['bytes_per_frame'] / 1e6:.2f} MB per frame and composes "
-        f"in {hybrid['exchange_cpu_ms']:.2f} ms CPU per rank.", "",
-        f"**Static bins.** Best {best_bins['config']} at {best_bins['vs_strips']:.2f}x of `strips` (c_v "
-        f"{best_bins['load_cv']:.3f}), worst {worst_bins['config']} at {worst_bins['vs_strips']:.2f}x (c_v "
-        f"{worst_bins['load_cv']:.3f}). {_bin_size_effect(bins)} Every bin is a separate scissored draw of the "
-        "objects touching it, so an object is transformed once per bin it touches and the draw overhead grows "
-        "with the bin count; GPU hardware bins primitives after one transform, here binning is emulated and paid "
-        "for.",
-    ]
-    return "\n".join(lines)
+    close = prose("compare", "close", spread=max(fps) / min(fps) - 1, paper_spread=22.16 / 10.72) \
+        if max(fps) / min(fps) < 1.10 else ""
+    return prose(
+        "compare", "discussion", paper_order=" > ".join(paper_order), ours=" > ".join(ours),
+        order="the same order" if agree else "a different order", everyone=everyone, close=close,
+        time_vs=time["vs_strips"], paper_time=17.65 / 22.16, cross_vs=cross["vs_strips"], paper_cross=11.71 / 22.16,
+        strips_imb=strips["imb_render"], time_imb=time["imb_render"], cross_imb=cross["imb_render"],
+        cross_pieces=cross["pieces_per_rank"], db_vs=db["vs_strips"], paper_db=10.72 / 22.16, db_tris=db["imb_tris"],
+        db_mb=db["bytes_per_frame"] / 1e6, db_depth_mb=db["depth_bytes_per_frame"] / 1e6,
+        strips_mb=strips["bytes_per_frame"] / 1e6, db_exchange=db["exchange_cpu_ms"],
+        strips_exchange=strips["exchange_cpu_ms"], db_imb=db["imb_render"], hybrid_vs=hybrid["vs_strips"],
+        hybrid_tris=hybrid["imb_tris"], hybrid_mb=hybrid["bytes_per_frame"] / 1e6,
+        hybrid_exchange=hybrid["exchange_cpu_ms"], best=best_bins["config"], best_vs=best_bins["vs_strips"],
+        best_cv=best_bins["load_cv"], worst=worst_bins["config"], worst_vs=worst_bins["vs_strips"],
+        worst_cv=worst_bins["load_cv"], bin_sizes=_bin_size_effect(bins))
 
 
 def _bin_size_effect(bins: list[dict]) -> str:
@@ -135,7 +114,7 @@ def _bin_size_effect(bins: list[dict]) -> str:
         rs = sorted((r for r in bins if r["config"].split()[1] == pattern), key=size)
         small, big = rs[0], rs[-1]
         trend = "lower" if small["load_cv"] < big["load_cv"] else "higher"
-        out.append(f"{pattern}: {small['config'].split()[2]} bins give a {trend} c_v than {big['config'].split()[2]} "
-                   f"({small['load_cv']:.3f} against {big['load_cv']:.3f}) at {small['emulated_fps']:.1f} against "
-                   f"{big['emulated_fps']:.1f} FPS.")
+        out.append(prose("compare", "bin-size", pattern=pattern, small=small["config"].split()[2], trend=trend,
+                         big=big["config"].split()[2], small_cv=small["load_cv"], big_cv=big["load_cv"],
+                         small_fps=small["emulated_fps"], big_fps=big["emulated_fps"]))
     return " ".join(out)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.prose import prose
 from multigpu.studies.runs import BREAKDOWN_COLS, PAPER, Run, Settings, _breakdown, _plt, _scene_args, walk
 from multigpu.studies.tables import md_table, write_csv
 
@@ -49,19 +50,13 @@ def exp_gpus(s: Settings, out: Path) -> str:
     fig.savefig(out / "gpus.png", dpi=100)
     plt.close(fig)
     k4 = [x for x in rows if x["ranks"] == 4]
-    md = [f"Display {W}x{H}; walkthrough path resampled to {s.frames} frames; plant copies {list(s.copies)}.",
-          "Render speedup = mean 1-rank rendering CPU time / mean over frames of the slowest rank's rendering "
-          "CPU time (emulated parallel); efficiency = speedup / ranks.", "",
-          md_table(rows, [("triangles", "Triangles", ""), ("grid", "Grid", ""), ("balance", "Balance", ""),
-                           *BREAKDOWN_COLS, ("render_speedup", "Render speedup", ".2f"),
-                           ("render_efficiency", "Efficiency", ".0%")]),
-          "", "![gpus](gpus.png)", ""]
     by = {b: ", ".join(f"{x['render_speedup']:.2f}" for x in k4 if x["balance"] == b) for b in s.strategies}
-    paper = PAPER["gpus_frame_ms_1"] / PAPER["gpus_frame_ms_4"]
-    md.append("4 ranks, rendering-component speedup over 1 rank, by scene size: "
-              + "; ".join(f"{b} {v}" for b, v in by.items())
-              + f". Paper (Table 1, 6 plants): 52.36 ms on one GPU vs 31.89 ms on four = {paper:.2f}x frame speedup.")
-    return "\n".join(md)
+    table = md_table(rows, [("triangles", "Triangles", ""), ("grid", "Grid", ""), ("balance", "Balance", ""),
+                            *BREAKDOWN_COLS, ("render_speedup", "Render speedup", ".2f"),
+                            ("render_efficiency", "Efficiency", ".0%")])
+    return prose("paper", "gpus", W=W, H=H, frames=s.frames, copies=list(s.copies), table=table,
+                 by="; ".join(f"{b} {v}" for b, v in by.items()),
+                 paper=PAPER["gpus_frame_ms_1"] / PAPER["gpus_frame_ms_4"])
 
 
 def exp_resolution(s: Settings, out: Path) -> str:
@@ -89,11 +84,10 @@ def exp_resolution(s: Settings, out: Path) -> str:
     fig.tight_layout()
     fig.savefig(out / "resolution.png", dpi=100)
     plt.close(fig)
-    return "\n".join([f"2x2 wall, strips = display width, {s.res_frames} frames.", "",
-                      md_table(rows, [("display", "Display", ""), *BREAKDOWN_COLS,
+    return prose("paper", "resolution", frames=s.res_frames,
+                 table=md_table(rows, [("display", "Display", ""), *BREAKDOWN_COLS,
                                        ("exchange_cpu_ms", "Exchange CPU", ".2f"),
-                                       ("bytes_per_frame", "Bytes/frame", ".0f")]),
-                      "", "![resolution](resolution.png)"])
+                                       ("bytes_per_frame", "Bytes/frame", ".0f")]))
 
 
 def _thumb(run: Run, frame: int) -> Path | None:
@@ -132,17 +126,14 @@ def exp_balance(s: Settings, out: Path) -> str:
             for n, p in zip(("strips", "none"), pair):
                 dst = out / f"thumb_{f:05d}_{n}.png"
                 shutil.copyfile(p, dst)
-            md_thumbs.append(f"Frame {f} (none / strips emulated time {gap[np.flatnonzero(saved == f)[0]]:.2f}x): "
-                             f"strips ![]({f'thumb_{f:05d}_strips.png'}) none ![]({f'thumb_{f:05d}_none.png'})")
+            md_thumbs.append(prose("paper", "thumb", frame=f, gap=gap[np.flatnonzero(saved == f)[0]],
+                                   strips=f"thumb_{f:05d}_strips.png", none=f"thumb_{f:05d}_none.png"))
     sp = rows[[r["balance"] for r in rows].index("strips")]["speedup_vs_none"]
-    return "\n".join([f"2x2 wall of 256x256 tiles, walkthrough resampled to {s.frames} frames, plant "
-                      f"{runs['strips'].summary['config']['scene']['triangles']} triangles.", "",
-                      md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
+    return prose("paper", "balance", frames=s.frames, triangles=runs["strips"].summary["config"]["scene"]["triangles"],
+                 table=md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
                                        ("imb_render", "Imb. render", ".3f"),
                                        ("speedup_vs_none", "Speedup vs none", ".2f")]),
-                      "", "![balance](balance.png)", "", *md_thumbs, "",
-                      f"Emulated frame-time speedup of strips over none: {sp:.2f}x (paper, Fig. 7: "
-                      f"{PAPER['balance_speedup']:.2f}x)."])
+                 thumbs="".join(t + "\n" for t in md_thumbs), speedup=sp, paper=PAPER["balance_speedup"])
 
 
 def exp_strips(s: Settings, out: Path) -> str:
@@ -170,15 +161,12 @@ def exp_strips(s: Settings, out: Path) -> str:
     fig.savefig(out / "strips.png", dpi=100)
     plt.close(fig)
     last = rows[-1]
-    return "\n".join([f"2x2 wall of {W}x{W}, {s.strip_frames} frames per strip count. Balancer share = "
-                      "balancer CPU time / emulated frame time.", "",
-                      md_table(rows, [("strips", "Strips", ""), ("lb_cpu_ms", "Balancer CPU ms", ".2f"),
+    return prose("paper", "strips", W=W, frames=s.strip_frames, strips=last["strips"], share=last["balancer_share"],
+                 paper=PAPER["balancer_share_max"],
+                 table=md_table(rows, [("strips", "Strips", ""), ("lb_cpu_ms", "Balancer CPU ms", ".2f"),
                                        ("balancer_share", "Share", ".1%"), ("imb_tris", "Imb. tris", ".3f"),
                                        ("emulated_ms", "Frame (emulated)", ".2f"),
-                                       ("emulated_fps", "FPS (emulated)", ".1f"), ("frame_ms", "Frame (wall)", ".2f")]),
-                      "", "![strips](strips.png)", "",
-                      f"At the largest strip count ({last['strips']}) the balancer takes {last['balancer_share']:.1%} "
-                      f"of the emulated frame (paper: at most {PAPER['balancer_share_max']:.0%})."])
+                                       ("emulated_fps", "FPS (emulated)", ".1f"), ("frame_ms", "Frame (wall)", ".2f")]))
 
 
 def exp_orbit(s: Settings, out: Path) -> str:
@@ -189,6 +177,6 @@ def exp_orbit(s: Settings, out: Path) -> str:
             "--path-kind", "orbit", "--frames", str(s.frames), "--balance", name, "--mosaic-every", "0"], s.timeout)
         rows.append({"balance": name, **_breakdown(run)})
     write_csv(out / "orbit.csv", rows)
-    return "\n".join([f"2x2 wall of 256x256 tiles, orbit path ({s.frames} frames) with the whole plant in view.", "",
-                      md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
-                                       ("imb_render", "Imb. render", ".3f")])])
+    return prose("paper", "orbit", frames=s.frames,
+                 table=md_table(rows, [("balance", "Balance", ""), *BREAKDOWN_COLS, ("imb_tris", "Imb. tris", ".3f"),
+                                       ("imb_render", "Imb. render", ".3f")]))
