@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.prose import prose
 from multigpu.studies.runs import PAPER, Settings, _plt, walk
 from multigpu.studies.tables import md_table, write_csv
 
@@ -102,23 +103,15 @@ def exp_walls(s: Settings, out: Path) -> str:
     write_csv(out / "walls.csv", rows)
     _plot(rows, out / "walls.png", default)
     paper = PAPER["gpus_frame_ms_1"] / PAPER["gpus_frame_ms_4"] / 4
-    return "\n".join([
-        f"The plant walk, the city drive and a scanned mesh (`--split grid:8`, orbit), {frames} frames, one "
-        f"{size}x{size} display as one rank and as {', '.join(f'{a}x{b}' for a, b in grids)} walls; the default "
-        f"(`{default}`) and `none`; objects above 64 triangles are cut into parts and a rank draws only the parts "
-        "its pieces need. Efficiency = 1-rank render CPU / (K x slowest rank's) = 1 / (time overlap x "
-        "imbalance); triangle overlap = triangles drawn summed over ranks / one rank's; `planned` = the whole "
-        f"objects the plan gave (what would be drawn without parts). The paper's 4 GPUs: {paper:.0%} efficiency "
-        "of the whole frame (Table 1).",
-        "",
-        md_table(rows, [("scene", "Scene", ""), ("grid", "Wall", ""), ("balance", "Balance", ""),
+    return prose(
+        "walls", "walls", frames=frames, size=size, walls=", ".join(f"{a}x{b}" for a, b in grids), default=default,
+        paper=paper,
+        table=md_table(rows, [("scene", "Scene", ""), ("grid", "Wall", ""), ("balance", "Balance", ""),
                         ("efficiency", "Efficiency", ".1%"), ("time_overlap", "Time overlap", ".2f"),
                         ("imbalance", "Imbalance", ".2f"), ("triangle_overlap", "Triangle overlap", ".2f"),
                         ("planned_overlap", "Planned", ".2f"), ("molnar", "Molnar", ".2f"),
                         ("balancing_cpu_ms", "Balancing", ".2f"), ("culling_cpu_ms", "Culling", ".2f"),
-                        ("exchange_cpu_ms", "Exchange", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f")]),
-        "",
-        "![efficiency, overlaps and imbalance against the wall size](walls.png)"])
+                        ("exchange_cpu_ms", "Exchange", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f")]))
 
 
 def _plot(rows: list[dict], path: Path, default: str) -> None:
@@ -172,20 +165,13 @@ def exp_hybrid(s: Settings, out: Path) -> str:
                 rows.append({"scene": scene, "grid": f"{g[0]}x{g[1]}", "ranks": k, "decomposition": d,
                              **_metrics(one, run, k)})
     write_csv(out / "hybrid.csv", rows)
-    return "\n".join([
-        f"The `walls` scenes, {frames} frames, one {size}x{size} display as "
-        f"{' and '.join(f'{a}x{b}' for a, b in grids)} walls, the default strategy (`{WalkConfig().balance}`): "
-        "`screen` (the default: the screen partition, parts culled), `hybrid` (the wide objects, the largest by "
-        "triangles x world size holding a quarter of the triangles, drawn once by contiguous draw-order ranges "
-        "and depth-composited; the rest by the screen partition) and `db` (sort-last for every object). Render "
-        "CPU includes each piece's readback (colour, and depth where pieces carry it); `Exchange` is the "
-        "composing CPU per rank.",
-        "",
-        md_table(rows, [("scene", "Scene", ""), ("grid", "Wall", ""), ("decomposition", "Decomposition", ""),
+    return prose(
+        "walls", "hybrid", frames=frames, size=size, walls=" and ".join(f"{a}x{b}" for a, b in grids),
+        default=WalkConfig().balance, verdict=_hybrid_verdict(rows),
+        table=md_table(rows, [("scene", "Scene", ""), ("grid", "Wall", ""), ("decomposition", "Decomposition", ""),
                         ("triangle_overlap", "Triangle overlap", ".2f"), ("time_overlap", "Time overlap", ".2f"),
                         ("imbalance", "Imbalance", ".2f"), ("efficiency", "Efficiency", ".1%"),
-                        ("exchange_cpu_ms", "Exchange ms", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f")]),
-        "", _hybrid_verdict(rows)])
+                        ("exchange_cpu_ms", "Exchange ms", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f")]))
 
 
 def _hybrid_verdict(rows: list[dict]) -> str:
@@ -195,17 +181,14 @@ def _hybrid_verdict(rows: list[dict]) -> str:
         by = {r["decomposition"]: r for r in rows if (r["scene"], r["grid"]) == key}
         best = min(by.values(), key=lambda r: r["emulated_ms"])
         screen, hybrid = by["screen"], by["hybrid"]
-        cases.append(f"{key[0]} {key[1]}: fastest `{best['decomposition']}`; hybrid triangle overlap "
-                     f"{hybrid['triangle_overlap']:.2f} against {screen['triangle_overlap']:.2f}, frame "
-                     f"{hybrid['emulated_ms'] / screen['emulated_ms']:.2f}x screen's")
+        cases.append(prose("walls", "hybrid-case", scene=key[0], grid=key[1], best=best["decomposition"],
+                           hybrid=hybrid["triangle_overlap"], screen=screen["triangle_overlap"],
+                           ratio=hybrid["emulated_ms"] / screen["emulated_ms"]))
     won = sorted({f"{r['scene']} {r['grid']}" for r in rows if r["decomposition"] == "hybrid"
                   and r["emulated_ms"] == min(x["emulated_ms"] for x in rows
                                               if (x["scene"], x["grid"]) == (r["scene"], r["grid"]))})
-    verdict = (f"`hybrid` is the fastest on {', '.join(won)}; `screen` stays the default elsewhere." if won else
-               "`screen` is the fastest on every scene and wall here, so it stays the default.")
-    return ("**What wins.** " + "; ".join(cases) + ". Drawing the wide objects once cuts the triangles, but "
-            "every region's depth is read back and sent and the depth pieces of the wide objects near the camera "
-            "cover much of the display: on llvmpipe pixels cost more than triangles. " + verdict)
+    verdict = prose("walls", "hybrid-won", won=", ".join(won)) if won else prose("walls", "hybrid-lost")
+    return prose("walls", "hybrid-verdict", cases="; ".join(cases), verdict=verdict)
 
 
 SIXTEEN = ("strips", "shares", "cross", "auto")
@@ -245,18 +228,11 @@ def exp_sixteen(s: Settings, out: Path) -> str:
     write_csv(out / "sixteen.csv", rows)
     best = min(rows, key=lambda r: r["imbalance"])
     fastest = min(rows, key=lambda r: r["emulated_ms"])
-    return "\n".join([
-        f"The plant walk ({frames} frames) on a {n}x{n} wall of {tile}x{tile} tiles ({side}x{side}: {k} ranks on "
-        f"this machine's two cores), against one rank on the same display; {rounds} alternated rounds, medians. "
-        f"`Floor`: the render imbalance of identical work on {k} ranks (`multigpu bench floor --ranks {k} --tile "
-        f"{tile} --display {side}`, the same region size, in every round); `Allowed`: the efficiency that floor "
-        "alone allows at the run's time overlap, 1 / (time overlap x floor); `Of allowed`: efficiency / allowed.",
-        "",
-        md_table(rows, [("balance", "Balance", ""), ("imbalance", "Render imbalance", ".2f"),
+    return prose(
+        "walls", "sixteen", frames=frames, n=n, tile=tile, side=side, k=k, rounds=rounds, best=best["balance"],
+        imbalance=best["imbalance"], floor=floor, fastest=fastest["balance"], fastest_ms=fastest["emulated_ms"],
+        table=md_table(rows, [("balance", "Balance", ""), ("imbalance", "Render imbalance", ".2f"),
                         ("floor", "Floor", ".2f"), ("render_max_ms", "Slowest render ms", ".2f"),
                         ("time_overlap", "Time overlap", ".2f"), ("efficiency", "Efficiency", ".1%"),
                         ("allowed", "Allowed", ".1%"), ("of_allowed", "Of allowed", ".2f"),
-                        ("balancing_cpu_ms", "Balancing ms", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f")]),
-        "",
-        f"Lowest render imbalance: `{best['balance']}` ({best['imbalance']:.2f} against the floor's {floor:.2f}); "
-        f"shortest emulated frame: `{fastest['balance']}` ({fastest['emulated_ms']:.2f} ms)."])
+                        ("balancing_cpu_ms", "Balancing ms", ".2f"), ("emulated_ms", "Frame (emulated) ms", ".2f")]))
