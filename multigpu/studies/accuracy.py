@@ -28,6 +28,7 @@ from multigpu.core.bounds import BoxProjector
 from multigpu.core.projectors import make_projector
 from multigpu.core.regions import overlaps, pixel_spans
 from multigpu.core.spheres import SphereProjector
+from multigpu.studies.prose import prose
 from multigpu.studies.synthetic import median_ms
 from multigpu.studies.tables import md_table, write_csv
 
@@ -149,26 +150,17 @@ def _subfrustum_page(ctx, limits: dict, rows: list, plant_triangles: int, n_fram
     big = (2 * rb, 1024)
     methods = ("auto", "scissor", "viewport", "offaxis")
     beyond = ", ".join(f"{m}: {_try_method(choose_method, m, big, limits)}" for m in methods)
-    return "\n".join([
-        f"The default plant ({plant_triangles} triangles) and the shipped pump (`models/pump.glb`: material "
-        f"colours, a mipmapped texture repeated across its base), {n_frames} walkthrough frames, balanced with "
-        "`strips`; each rank's region rendered with its own draw list and composed, against a one-rank render "
-        "of the whole display (`scissor` over the full display). Depth is window depth in [0, 1]. Render time "
-        "is process CPU time summed over the ranks' regions (median frame); `slowest rank` is the emulated "
-        "parallel rendering time.", "",
-        md_table(rows, [("scene", "Scene", ""), ("grid", "Grid", ""), ("display", "Display", ""),
-                        ("method", "Method", ""),
-                   ("mismatch_px", "Mismatching px", ""), ("mismatch_share", "Share", ".2e"),
-                   ("max_color_diff", "Max colour diff", ""), ("max_depth_diff", "Max depth diff", ".2e"),
-                   ("render_cpu_ms", "Render CPU ms (sum)", ".2f"), ("slowest_rank_ms", "Slowest rank ms", ".2f"),
-                   ("vs_scissor", "Time vs scissor", ".3f"), ("fbo_mib", "FBO MiB/rank", ".1f")]), "",
-        f"Limits on this GL ({ctx.info.get('GL_RENDERER')}): GL_MAX_VIEWPORT_DIMS {vw}x{vh}, "
-        f"GL_MAX_RENDERBUFFER_SIZE {rb}, GL_VIEWPORT_BOUNDS_RANGE from {limits['bounds_low']}. `scissor` holds a "
-        f"W x H framebuffer per rank (8 bytes per pixel: {rb}x{rb} would be "
-        f"{rb * rb * 8 / 2**30:.0f} GiB) and needs W, H <= {rb}; `viewport` needs W, H <= {vw} and region-sized "
-        f"memory; `offaxis` works for any display, cutting regions larger than {rb} pixels into chunks drawn one "
-        f"after another. `--subfrustum auto` takes the first that fits, in the order scissor, viewport, offaxis. "
-        f"For a {big[0]}x{big[1]} display: {beyond}."])
+    return prose(
+        "accuracy", "subfrustum", triangles=plant_triangles, frames=n_frames, renderer=ctx.info.get("GL_RENDERER"),
+        vw=vw, vh=vh, rb=rb, bounds_low=limits["bounds_low"], rb_gib=rb * rb * 8 / 2**30, big_w=big[0], big_h=big[1],
+        beyond=beyond,
+        table=md_table(rows, [("scene", "Scene", ""), ("grid", "Grid", ""), ("display", "Display", ""),
+                              ("method", "Method", ""), ("mismatch_px", "Mismatching px", ""),
+                              ("mismatch_share", "Share", ".2e"), ("max_color_diff", "Max colour diff", ""),
+                              ("max_depth_diff", "Max depth diff", ".2e"),
+                              ("render_cpu_ms", "Render CPU ms (sum)", ".2f"),
+                              ("slowest_rank_ms", "Slowest rank ms", ".2f"), ("vs_scissor", "Time vs scissor", ".3f"),
+                              ("fbo_mib", "FBO MiB/rank", ".1f")]))
 
 
 def _try_method(choose, m, size, limits) -> str:
@@ -224,15 +216,12 @@ def table_balance(s: Sizes, out: Path) -> str:
                          "balancer_ms": float(np.median(ms)),
                          "rect_err_px": float(max(err)) if err else float("nan")})
     write_csv(out / "balance.csv", rows)
-    return "\n".join([
-        f"Synthetic plant-like objects (`multigpu.studies.bench.synthetic_objects`: clustered boxes, heavy-tailed "
-        f"triangle counts), {len(views)} views, a 2x2 wall of {size[0]}x{size[1]} pixels (so {W} strips is one "
-        "strip per pixel). Imbalance: max/mean triangles per rank; overlap: triangles rendered summed over ranks "
-        "over triangles visible; balancer: wall ms per frame for projection + partition (median); rect error: "
-        "largest difference of any rect side against float64 corners, in pixels.", "",
-        md_table(rows, [("objects", "Objects", ""), ("bounds", "Bounds", ""), ("dtype", "Corners", ""),
-                   ("strips", "Strips", ""), ("imbalance", "Imbalance", ".3f"), ("overlap", "Overlap", ".3f"),
-                   ("balancer_ms", "Balancer ms", ".2f"), ("rect_err_px", "Rect error px", ".1e")])])
+    return prose(
+        "accuracy", "balance", views=len(views), w=size[0], h=size[1], W=W,
+        table=md_table(rows, [("objects", "Objects", ""), ("bounds", "Bounds", ""), ("dtype", "Corners", ""),
+                              ("strips", "Strips", ""), ("imbalance", "Imbalance", ".3f"),
+                              ("overlap", "Overlap", ".3f"), ("balancer_ms", "Balancer ms", ".2f"),
+                              ("rect_err_px", "Rect error px", ".1e")]))
 
 
 # ---------------------------------------------------------------- 3. only what a scene requires
@@ -277,21 +266,16 @@ def table_needed(s: Sizes, out: Path) -> str:
                          "share_of_scene": float(sub[:, k].mean() / scene.n_triangles),
                          "objects_not_needed": float(wasted[:, k].mean()), "missed": missed})
     write_csv(out / "needed.csv", rows)
-    return "\n".join([
-        f"The default plant ({scene.n_triangles} triangles, {scene.n_objects} objects), {len(frames)} walkthrough "
-        f"frames on a 2x2 wall of {size[0]}x{size[1]}, `strips` balancing. Per rank and frame (means): triangles "
-        "submitted (the rank's draw list), triangles of the objects that have at least one triangle in the "
-        "region (what object-granular culling can at best submit), and triangles that themselves touch the "
-        "region (each triangle projected and near-clipped, `multigpu/core/triangles.py`, counted with the balancer's "
-        "own pixel-span rule). `Objects not needed`: share of submitted objects without any triangle in the "
-        "region (loose bounds). `Missed`: objects with a triangle in the region that the rank did not draw, "
-        "summed over all frames and ranks: it must be 0 (a missing object would be a hole in the image).", "",
-        md_table(rows, [("bounds", "Bounds", ""), ("rank", "Rank", ""), ("scene", "Scene tris", ""),
-                   ("submitted", "Submitted", ".0f"), ("share_of_scene", "of scene", ".3f"),
-                   ("needed_objects", "Needed (objects)", ".0f"), ("needed_triangles", "Needed (triangles)", ".0f"),
-                   ("submitted_over_needed_objects", "Submitted / needed objects", ".3f"),
-                   ("submitted_over_needed", "Submitted / needed triangles", ".2f"),
-                   ("objects_not_needed", "Objects not needed", ".3f"), ("missed", "Missed", "")])])
+    return prose(
+        "accuracy", "needed", triangles=scene.n_triangles, objects=scene.n_objects, frames=len(frames), w=size[0],
+        h=size[1],
+        table=md_table(rows, [("bounds", "Bounds", ""), ("rank", "Rank", ""), ("scene", "Scene tris", ""),
+                              ("submitted", "Submitted", ".0f"), ("share_of_scene", "of scene", ".3f"),
+                              ("needed_objects", "Needed (objects)", ".0f"),
+                              ("needed_triangles", "Needed (triangles)", ".0f"),
+                              ("submitted_over_needed_objects", "Submitted / needed objects", ".3f"),
+                              ("submitted_over_needed", "Submitted / needed triangles", ".2f"),
+                              ("objects_not_needed", "Objects not needed", ".3f"), ("missed", "Missed", "")]))
 
 
 # ---------------------------------------------------------------- 4. far from the origin
@@ -337,16 +321,11 @@ def table_offsets(s: Sizes, ctx, out: Path) -> str:
                          "mismatch_share": px / (len(frames) * size[0] * size[1]), "max_color_diff": dc,
                          "same_partition": f"{same}/{len(frames)}"})
     write_csv(out / "offsets.csv", rows)
-    return "\n".join([
-        f"The plant and its walkthrough moved by (d, d, 0), {len(frames)} frames on a 2x2 wall of "
-        f"{size[0]}x{size[1]}, each composed from 4 ranks' regions, against the scene at its own coordinates. "
-        "Ours: float32 vertices relative to the scene's float64 origin, which the camera absorbs in float64 "
-        "(`core/camera.py: model_view`). The alternative stores float32 world coordinates (what a renderer without an "
-        "origin does). `Same partition`: frames whose regions and draw lists equal those at offset 0 (bounds "
-        "projected with float64 centres).", "",
-        md_table(rows, [("offset", "Offset d", ""), ("vertices", "Vertices", ""), ("mismatch_px", "Mismatching px", ""),
-                   ("mismatch_share", "Share", ".2e"), ("max_color_diff", "Max colour diff", ""),
-                   ("same_partition", "Same partition", "")])])
+    return prose(
+        "accuracy", "offsets", frames=len(frames), w=size[0], h=size[1],
+        table=md_table(rows, [("offset", "Offset d", ""), ("vertices", "Vertices", ""),
+                              ("mismatch_px", "Mismatching px", ""), ("mismatch_share", "Share", ".2e"),
+                              ("max_color_diff", "Max colour diff", ""), ("same_partition", "Same partition", "")]))
 
 
 
@@ -372,22 +351,13 @@ def run(out: Path, page: Path | None, quick: bool = False) -> int:
         md = fn()
         dt = time.perf_counter() - t
         data = os.path.relpath(out / (name + ".csv"), page.parent)
-        sections.append(f"## {title}\n\n{md}\n\n_{dt:.0f} s wall; data: `{data}`._\n")
+        sections.append(prose("accuracy", "section", title=title, body=md, seconds=dt, data=data) + "\n")
         print(f"accuracy: {name}: {dt:.0f} s", flush=True)
     cmd = "launch/accuracy" + (" --quick" if quick else "")
     page.parent.mkdir(parents=True, exist_ok=True)
-    page.write_text("\n".join([
-        "# Accuracy against speed", "",
-        f"Regenerate with `{cmd}` (runs `multigpu accuracy`, {(time.perf_counter() - t_all) / 60:.1f} min here). "
-        f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
-        f"{ctx.info.get('GL_RENDERER')}, `LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS')}`. Everything runs in one "
-        "process; times are medians within this run (compare rows, not machines).", "",
-        "The stability extremes (near/far ratios, field of view, eye inside a box, near-plane crossings, "
-        "offsets, needle rects, 1x16 walls, sums near 2**53) are tests: `tests/test_extremes.py`, "
-        "`tests/test_accuracy.py`.", "",
-        "The trades made while the wall runs (render scale, levels of detail, `--target-fps`: frame time against "
-        "PSNR and the pixels that differ, every frame of a target run) are measured with the wall itself by "
-        "`multigpu experiment fidelity`: [RESULTS.md, fidelity](RESULTS.md#fidelity).", "",
-        *sections]))
+    page.write_text(prose("accuracy", "page", cmd=cmd, minutes=(time.perf_counter() - t_all) / 60,
+                          machine=platform.machine(), cores=os.cpu_count(), python=platform.python_version(),
+                          renderer=ctx.info.get("GL_RENDERER"), threads=os.environ.get("LP_NUM_THREADS"),
+                          sections="\n".join(sections)))
     print(f"accuracy page: {page}")
     return 0

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from multigpu.errors import InputError
+from multigpu.studies.prose import prose
 from multigpu.studies.registry import EXPERIMENTS as NAMES
 from multigpu.studies.registry import load
 from multigpu.studies.runs import PAPER, Settings
@@ -82,18 +83,6 @@ def _results_page(sections, out: Path, page: Path, s: Settings, seconds: float) 
 
     body = [_relink(md, out, page, n) for n, md in sections]  # links in fragments are relative to OUT/NAME/
     cmd = "launch/experiments" + (" --quick" if s.quick else "")
-    return "\n".join([
-        "# Results", "",
-        f"Regenerate with `{cmd}` (runs `multigpu experiment all`, {seconds / 60:.1f} min here).", "",
-        "Machine: " + f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, Mesa "
-        "llvmpipe (no GPU), `LP_NUM_THREADS=1`, MPI ranks emulate GPUs and outnumber cores.", "",
-        "How to read the figures: `LB`, `Render`, `Sync`, `Exchange`, `Display`, `Frame (wall)` are wall-clock "
-        "means per rank per frame (distorted by ranks sharing 2 cores); `Frame (emulated)` is, per frame, the "
-        "slowest rank's CPU time for balancing + rendering + exchange + display (what one core per rank would "
-        "give), averaged over frames. Speedups and efficiencies use emulated figures.", "",
-        f"Scale: the paper rendered {PAPER['triangles'] / 1e6:.0f} M triangles on four GTX 980 Ti; here one plant "
-        f"is {s.triangles} requested triangles (about 85 %% generated) and llvmpipe draws a few M triangles/s "
-        f"per core, "
-        f"so scenes are scaled down by about {PAPER['triangles'] / s.triangles:.0f}x; each experiment keeps the "
-        "paper's shape (ranks, resolutions, strips, balancing on/off).".replace("%%", "%"), "",
-        *body])
+    return prose("experiments", "page", cmd=cmd, minutes=seconds / 60, machine=platform.machine(),
+                 cores=os.cpu_count(), python=platform.python_version(), paper_mtris=PAPER["triangles"] / 1e6,
+                 triangles=s.triangles, scaled=PAPER["triangles"] / s.triangles, sections="\n".join(body))

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.prose import prose
 from multigpu.studies.runs import Settings, _plt, walk
 from multigpu.studies.tables import write_csv
 
@@ -224,7 +225,4 @@ def _markdown(rows: list[dict]) -> str:
                      f"{r['psnr_median']:.1f} / {r['psnr_min']:.1f} | {100 * r['differ_share']:.1f} % | {hold} | "
                      f"{r['settle_frames'] if r['target_fps'] else ''} | "
                      f"{r['reduced_frames'] if r['target_fps'] else ''} | {100 * r['choose_share']:.2f} % |")
-    return ("Frame time against image error (`multigpu experiment fidelity`; 2x2 wall of 512x512, 4 ranks; "
-            "PSNR 99 = identical). Targets are multiples of the full run's frame rate; \"floor\": the full "
-            "run's own frames within 10 % of its median.\n\n" + "\n".join(lines)
-            + "\n\n![fidelity](fidelity.png)\n\n![target](fidelity_target.png)\n")
+    return prose("fidelity", "section", table="\n".join(lines)) + "\n"

@@ -22,6 +22,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from multigpu.studies.prose import prose
+
 ROOT = Path(__file__).resolve().parents[2]
 #: the pages whose figures come from results files only
 PAGES = ("README.md", "docs/USAGE.md")
@@ -72,32 +74,25 @@ TABLES = {
          ("best", "best strategy", "`{}`"), ("best_speedup", "best over `none`", "{:.2f}x"),
          ("of_best", "default / best", "{:.3f}"), ("paired_of_best", "paired by round", "{:.3f}"),
          ("ceiling", "ceiling over `none`", "{:.2f}x"), ("of_ceiling", "default / ceiling", "{:.2f}")),
-        note="Emulated parallel frame (the slowest rank's CPU time), 4 ranks on a 2x2 wall; `default / best` "
-             "compares medians over rounds, `paired by round` the two runs of each round (minutes apart: less of "
-             "the machine's drift); the ceiling is what a perfect balancer reaches over this machine's noise "
-             "floor."),
+        note=prose("pages", "payoff")),
     "walls": Table(
         "docs/results/walls/walls.csv", "multigpu experiment walls",
         (("scene", "scene", "{}"), ("grid", "wall", "{}"), ("balance", "balance", "`{}`"),
          ("efficiency", "render efficiency", "{:.0%}"), ("time_overlap", "time overlap", "{:.2f}"),
          ("imbalance", "imbalance", "{:.2f}"), ("triangle_overlap", "triangles drawn", "{:.2f}"),
          ("planned_overlap", "whole objects", "{:.2f}")),
-        note="One display as one rank and as each wall; efficiency = one rank's render CPU over K times the "
-             "slowest rank's; triangle overlaps against one rank's: drawn (parts culled) and of the whole objects "
-             "the plan gave."),
+        note=prose("pages", "walls")),
     "compare": Table(
         "docs/results/compare/compare.csv", "multigpu experiment compare",
         (("config", "decomposition", "{}"), ("emulated_fps", "emulated FPS", "{:.1f}"),
          ("imb_render", "render imbalance", "{:.2f}"), ("bytes_per_frame", "bytes sent per frame", "{:.0f}")),
-        note="Four plants on an orbit keeping the whole scene in view (the paper's Section 7 setup), "
-             "2x2 wall of 256x256 tiles."),
+        note=prose("pages", "compare")),
     "latency": Table(
         "docs/results/latency/latency.csv", "multigpu bench latency",
         (("scene", "scene", "{}"), ("latency", "`--latency`", "{}"), ("wall_ms", "wall ms per frame", "{:.1f}"),
          ("wall_cut", "cut against 0", "{:.0%}"), ("emulated_ms", "emulated frame ms", "{:.2f}"),
          ("input_to_photon_ms", "input to photon ms", "{:.1f}")),
-        note="4 ranks on a 2x2 wall, 2 cores: wall time per frame = the frame period averaged over the ranks; "
-             "emulated = the slowest rank's CPU time (the work); medians of rotated rounds."),
+        note=prose("pages", "latency")),
     "peer": Table(
         "docs/results/peer/peer.csv",
         "multigpu bench peer --model dragon_vrip.ply --split grid:8 --ranks 1,4 --out docs/results/peer",
@@ -105,9 +100,7 @@ TABLES = {
          ("multigpu_wall_ms", "multigpu wall ms", "{:.1f}"), ("wall_lead", "wall lead", "{:.2f}x"),
          ("paraview_cpu_ms", "ParaView CPU ms", "{:.1f}"), ("multigpu_cpu_ms", "multigpu CPU ms", "{:.1f}"),
          ("cpu_lead", "CPU lead", "{:.2f}x")),
-        note="The Stanford dragon (871k triangles), 150 orbit cameras, 1024x1024 (4 ranks: multigpu a 2x2 wall of "
-             "512x512), llvmpipe with one rasterizer thread per process, Open MPI unbound for both, 2 alternated "
-             "rounds, medians per frame; CPU = the slowest rank's."),
+        note=prose("pages", "peer")),
     "fidelity": Table(
         "docs/results/fidelity/fidelity.csv", "multigpu experiment fidelity",
         (("scene", "scene", "{}"), ("config", "frames", "{}"), ("frame_ms", "wall ms per frame", "{:.1f}"),
@@ -118,17 +111,14 @@ TABLES = {
         key="scene+config",
         rows=tuple(f"{s}: {c}" for s in ("plant", "city", "orbit", "large")
                    for c in ("full", "scale 0.5, lod 0 px", "scale 1, lod 4 px", "target 2x", "target 0.5x")),
-        note="4 ranks on a 2x2 wall of 512x512, 2 cores: wall ms = the frame period averaged over the ranks; errors "
-             "against the full-quality replay of the same cameras (PSNR 99: identical); targets are multiples of "
-             "the full run's frame rate (0.5x: a target already met)."),
+        note=prose("pages", "fidelity")),
     "simplify": Table(
         "docs/results/simplify/simplify.csv",
         "multigpu bench simplify --model dragon_vrip.ply --out docs/results/simplify",
         (("mesh", "mesh", "{}"), ("library", "simplifier", "{}"), ("target", "triangles kept", "{:.4f}"),
          ("s_per_mtri", "s per M triangles", "{:.2f}"), ("hausdorff", "Hausdorff / diagonal", "{:.2e}"),
          ("mean_distance", "mean distance / diagonal", "{:.2e}")),
-        note="The scanned-style model (400k triangles) and the Stanford dragon (871k); distances from 100k "
-             "points sampled on each surface to the nearest triangle of the other."),
+        note=prose("pages", "simplify")),
 }
 
 
