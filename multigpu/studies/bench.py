@@ -15,6 +15,7 @@ import numpy as np
 
 from multigpu.errors import InputError
 from multigpu.studies.synthetic import median_ms, synthetic_objects
+from multigpu.studies.tables import Columns
 
 
 def bench_balance(quick: bool) -> list[dict]:
@@ -36,8 +37,11 @@ def bench_balance(quick: bool) -> list[dict]:
     warmed = f"compiled/loaded in {kernels.warm():.2f} s" if kernels.available() else "absent"
     print(f"compiled kernel (numba): {warmed}"
           "; 'numpy ms' is the reference partition, 'partition ms' the one runs use")
-    print(f"{'objects':>9} {'grid':>5} {'bounds':>7} {'project ms':>11} {'numpy ms':>9} {'partition ms':>13} "
-          f"{'total ms':>9} {'target ms':>10}")
+    table = Columns(("objects", "objects", "9d"), ("grid", "grid", "<5"), ("bounds", "bounds", ">7"),
+                    ("project_ms", "project ms", "11.1f"), ("numpy_ms", "numpy ms", "9.1f"),
+                    ("partition_ms", "partition ms", "13.1f"), ("total_ms", "total ms", "9.1f"),
+                    ("target", "target ms", ">10"))
+    print(table.header())
     for n in sizes:
         bmin, bmax, c, r, tris = synthetic_objects(n)
         for grid in [(2, 2), (4, 4)]:
@@ -53,9 +57,7 @@ def bench_balance(quick: bool) -> list[dict]:
                 rows.append({"objects": n, "grid": f"{grid[0]}x{grid[1]}", "bounds": kind, "project_ms": t_proj,
                              "numpy_ms": t_ref, "partition_ms": t_part, "total_ms": t_all, "target_ms": target,
                              "heap_kept": heap})
-                print(f"{n:9d} {grid[0]}x{grid[1]:<3} {kind:>7} {t_proj:11.1f} {t_ref:9.1f} {t_part:13.1f} "
-                      f"{t_all:9.1f} "
-                      f"{'' if target is None else f'{target:.0f}':>10}")
+                print(table.row({**rows[-1], "target": "" if target is None else f"{target:.0f}"}))
     return rows
 
 
@@ -80,8 +82,10 @@ def bench_scene(quick: bool) -> list[dict]:
                                       "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)"],
                                      capture_output=True, text=True, check=True).stdout)
     print(f"interpreter + imports peak RSS: {base / 2**20:.0f} MiB")
-    print(f"{'target tris':>12} {'triangles':>10} {'load':>7} {'seconds':>8} {'arrays MiB':>11} {'B/tri':>6} "
-          f"{'peak RSS MiB':>13} {'(RSS-base)/tri':>15}")
+    table = Columns(("target", "target tris", "12d"), ("triangles", "triangles", "10d"), ("load", "load", ">7"),
+                    ("seconds", "seconds", "8.2f"), ("mib", "arrays MiB", "11.1f"), ("per_tri", "B/tri", "6.1f"),
+                    ("rss_mib", "peak RSS MiB", "13.0f"), ("above", "(RSS-base)/tri", "15.1f"))
+    print(table.header())
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "MULTIGPU_CACHE": cache}
         for n in sizes:
@@ -91,9 +95,8 @@ def bench_scene(quick: bool) -> list[dict]:
                 d = json.loads(out)
                 d.update(target=n, load=attempt)
                 rows.append(d)
-                print(f"{n:12d} {d['triangles']:10d} {attempt:>7} {d['seconds']:8.2f} {d['bytes'] / 2**20:11.1f} "
-                      f"{d['bytes'] / d['triangles']:6.1f} {d['peak_rss'] / 2**20:13.0f} "
-                      f"{(d['peak_rss'] - base) / d['triangles']:15.1f}")
+                print(table.row({**d, "mib": d["bytes"] / 2**20, "per_tri": d["bytes"] / d["triangles"],
+                                 "rss_mib": d["peak_rss"] / 2**20, "above": (d["peak_rss"] - base) / d["triangles"]}))
     return rows
 
 
@@ -139,8 +142,10 @@ def bench_render(quick: bool) -> list[dict]:
     eye, light = np.eye(4), np.array([0, 0, 1.0])
     rows = []
     print("wall ms per frame, median of 7; 'bare' is one vao.render of every triangle (no culling)")
-    print(f"{'frame':>9} {'objects':>8} {'triangles':>10} {'commands':>9} {'indirect ms':>12} {'bare ms':>8} "
-          f"{'vs bare':>8}")
+    table = Columns(("frame", "frame", ">9"), ("objects", "objects", "8d"), ("triangles", "triangles", "10d"),
+                    ("commands", "commands", "9d"), ("indirect_ms", "indirect ms", "12.2f"),
+                    ("bare_ms", "bare ms", "8.2f"), ("vs_bare", "vs bare", "8.2f"))
+    print(table.header())
     for blocks in (32, 320):  # 1024 and 102400 objects
         scene = _quad_grid_scene(g, blocks)
         n = scene.n_objects
@@ -166,8 +171,7 @@ def bench_render(quick: bool) -> list[dict]:
             t = median_ms(lambda: r.render(eye, eye, light, region, mask), 7)
             rows.append({"frame": frame, "objects": n, "triangles": int(scene.tris[mask].sum()),
                          "commands": r.last_commands, "indirect_ms": t, "bare_ms": t_bare})
-            print(f"{frame:>9} {n:8d} {rows[-1]['triangles']:10d} {r.last_commands:9d} {t:12.2f} {t_bare:8.2f} "
-                  f"{t / t_bare:8.2f}")
+            print(table.row({**rows[-1], "vs_bare": t / t_bare}))
         r.release()
     by = {(d["frame"], d["objects"]): d["indirect_ms"] for d in rows}
     for frame in ("all", "quarter", "scattered"):

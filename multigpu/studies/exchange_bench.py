@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.tables import Columns
+
 SCENES = ("city", "plant")
 BALANCES = ("cross", "none")
 EXCHANGES = ("messages", "shared")
@@ -30,8 +32,11 @@ def bench_exchange(quick: bool) -> list[dict]:
     print(f"bench exchange: 2x2 wall of 256x256, {frames} frames, --triangles {triangles}, {rounds} alternated "
           f"rounds (medians); emulated = slowest rank's CPU per frame, exchange CPU per rank, wall-clock frame "
           f"and exchange, ms, frames {skip}+")
-    print(f"{'scene':<6} {'balance':<7} {'exchange':<9} {'emulated':>9} {'exch CPU':>9} {'wall':>8} {'exch wall':>10} "
-          f"{'bytes/rank':>11}")
+    table = Columns(("scene", "scene", "<6"), ("balance", "balance", "<7"), ("exchange", "exchange", "<9"),
+                    ("emulated_ms", "emulated", "9.2f"), ("exchange_cpu_ms", "exch CPU", "9.3f"),
+                    ("wall_ms", "wall", "8.2f"), ("exchange_ms", "exch wall", "10.3f"),
+                    ("bytes_sent", "bytes/rank", "11.0f"))
+    print(table.header())
     with tempfile.TemporaryDirectory() as tmp:
         for scene in SCENES:
             for balance in BALANCES:
@@ -47,9 +52,7 @@ def bench_exchange(quick: bool) -> list[dict]:
                     row = {k: float(np.median([x[k] for x in runs])) for k in runs[0]}
                     row.update(scene=scene, balance=balance, exchange=exchange)
                     rows.append(row)
-                    print(f"{scene:<6} {balance:<7} {exchange:<9} {row['emulated_ms']:9.2f} "
-                          f"{row['exchange_cpu_ms']:9.3f} {row['wall_ms']:8.2f} {row['exchange_ms']:10.3f} "
-                          f"{row['bytes_sent']:11.0f}")
+                    print(table.row(row))
     return rows
 
 

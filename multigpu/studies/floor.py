@@ -12,6 +12,7 @@ import json
 import sys
 
 from multigpu.parallel.floor import MARK
+from multigpu.studies.tables import Columns
 
 #: the scenes ``bench floor`` measures by default: name -> scene flags (as ``walkthrough`` takes them)
 SCENES = {"plant": ["--scene", "plant"], "city": ["--scene", "city"]}
@@ -46,9 +47,11 @@ def bench_floor(quick: bool, frames: int | None = None, ranks: list[int] | tuple
     side = 2 * tile if display is None else display
     print(f"identical work on every rank (the same {tile}x{tile} region of a {side}x{side} display, objects and "
           "camera), process CPU time per rank:")
-    print(f"{'scene':>6} {'ranks':>5} {'frames':>6} {'render ms':>9} {'imbalance floor':>15} {'noise c_v':>9}")
+    table = Columns(("scene", "scene", ">6"), ("ranks", "ranks", "5d"), ("frames", "frames", "6d"),
+                    ("render_ms_mean", "render ms", "9.2f"), ("imbalance_floor", "imbalance floor", "15.3f"),
+                    ("noise_cv", "noise c_v", "9.3f"))
+    print(table.header())
     for r in rows:
-        print(f"{r['scene']:>6} {r['ranks']:5d} {r['frames']:6d} {r['render_ms_mean']:9.2f} "
-              f"{r['imbalance_floor']:15.3f} {r['noise_cv']:9.3f}")
+        print(table.row(r))
     sys.stdout.flush()
     return rows

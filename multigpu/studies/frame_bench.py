@@ -22,6 +22,8 @@ import time
 
 import numpy as np
 
+from multigpu.studies.tables import Columns
+
 PHASES = ("learn", "project", "plan", "drawlist", "transfers", "row")
 
 
@@ -117,8 +119,10 @@ def bench_frame(quick: bool) -> list[dict]:
     print("'cold': the balancing with the caches flushed before every frame (64 MiB written, as the renderer and "
           "the ranks sharing the cores do between two plans in a run); 'fixed': the same, cold, with "
           f"{FEW} of the scene's objects (spread through it): what a frame costs whatever its objects")
-    print(f"{'scene':>6} {'objects':>8} {'strategy':>9} " + " ".join(f"{p:>9}" for p in (*PHASES, "total"))
-          + f" {'balancing':>9} {'cold':>6} {'fixed':>6} {'calls':>6}")
+    table = Columns(("scene", "scene", ">6"), ("objects", "objects", "8d"), ("strategy", "strategy", ">9"),
+                    *((p, p, "9.3f") for p in (*PHASES, "total", "balancing")), ("cold", "cold", "6.3f"),
+                    ("fixed", "fixed", "6.3f"), ("calls", "calls", "6d"))
+    print(table.header())
     for name, spec in scenes:
         scene, _ = load_scene(spec)
         few = scene.objects(np.linspace(0, scene.n_objects - 1, FEW).astype(np.int64))
@@ -130,8 +134,7 @@ def bench_frame(quick: bool) -> list[dict]:
             fixed = frame_phases(few, strategy, frames=frames, cold=True, path=path)["balancing"]
             rows.append({"scene": name, "objects": scene.n_objects, "strategy": strategy, **med, "cold": cold,
                          "fixed": fixed})
-            figures = " ".join(f"{med[p]:9.3f}" for p in (*PHASES, "total", "balancing"))
-            print(f"{name:>6} {scene.n_objects:8d} {strategy:>9} {figures} {cold:6.3f} {fixed:6.3f} {med['calls']:6d}")
+            print(table.row(rows[-1]))
     return rows
 
 
@@ -150,7 +153,9 @@ def bench_growth(quick: bool) -> list[dict]:
     view = look_at([-40, -60, 40], [100, 60, 0], [0, 0, 1])
     proj = perspective(60, 1.0, 0.1, 1000)
     rows = []
-    print(f"{'objects':>9} {'ranks':>5} {'strips':>6} {'ms':>9} {'peak MiB':>9} {'B/object':>9}")
+    table = Columns(("objects", "objects", "9d"), ("ranks", "ranks", "5d"), ("strips", "strips", "6d"),
+                    ("ms", "ms", "9.3f"), ("mib", "peak MiB", "9.2f"), ("per_object", "B/object", "9.1f"))
+    print(table.header())
     for n in sizes:
         bmin, bmax, _, _, tris = synthetic_objects(n)
         project = BoxProjector(bmin, bmax)
@@ -164,7 +169,7 @@ def bench_growth(quick: bool) -> list[dict]:
                 peak = tracemalloc.get_traced_memory()[1]
                 tracemalloc.stop()
                 rows.append({"objects": n, "ranks": g[0] * g[1], "strips": strips, "ms": ms, "peak_bytes": peak})
-                print(f"{n:9d} {g[0] * g[1]:5d} {strips:6d} {ms:9.3f} {peak / 2**20:9.2f} {peak / n:9.1f}")
+                print(table.row({**rows[-1], "mib": peak / 2**20, "per_object": peak / n}))
     for k in (4, 9, 16):
         r = [x for x in rows if x["ranks"] == k and x["strips"] == 2048]
         big = [x for x in r if x["objects"] >= 10_000]

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.tables import Columns
+
 CONFIGS = (("1x1", (1, 1), []), ("2x2", (2, 2), []), ("4x4", (4, 4), []),
            ("4x4 hybrid", (4, 4), ["--decomposition", "hybrid"]))
 
@@ -45,15 +47,16 @@ def bench_gpu(quick: bool, out: Path = Path("out/gpu"), rounds: int = 2) -> dict
                               "renderer": sorted({str(p.get("gl_renderer")) for p in s["config"]["ranks"]})})
     med = {n: {k: float(np.median([x[k] for x in v])) for k in v[0] if k != "renderer"} for n, v in got.items()}
     one = med["1x1"]["frame_ms"]
-    print(f"{'wall':>11} {'frame ms':>9} {'outside':>8} {'render':>7} {'emulated':>9} {'triangles':>10} "
-          f"{'speedup':>8} {'efficiency':>10}  GL renderer")
+    table = Columns(("wall", "wall", ">11"), ("frame_ms", "frame ms", "9.2f"), ("outside_ms", "outside", "8.2f"),
+                    ("render_ms", "render", "7.2f"), ("emulated_ms", "emulated", "9.2f"),
+                    ("triangles", "triangles", "10.0f"), ("speedup", "speedup", "8.2f"),
+                    ("efficiency", "efficiency", "10.3f"), ("renderer", " GL renderer", "<"))
+    print(table.header())
     for name, grid, _ in configs:
         m, k = med[name], grid[0] * grid[1]
         m["speedup"] = one / m["frame_ms"]
         m["efficiency"] = m["speedup"] / k
-        print(f"{name:>11} {m['frame_ms']:9.2f} {m['outside_ms']:8.2f} {m['render_ms']:7.2f} {m['emulated_ms']:9.2f} "
-              f"{m['triangles']:10.0f} {m['speedup']:8.2f} {m['efficiency']:10.3f}  "
-              f"{', '.join(got[name][0]['renderer'])}")
+        print(table.row({**m, "wall": name, "renderer": " " + ", ".join(got[name][0]["renderer"])}))
     if "4x4 hybrid" in med:
         print(f"4x4 hybrid over screen: frame period {med['4x4 hybrid']['frame_ms'] / med['4x4']['frame_ms']:.2f}x, "
               f"triangles drawn {med['4x4 hybrid']['triangles'] / med['4x4']['triangles']:.2f}x")

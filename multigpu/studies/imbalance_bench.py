@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.studies.tables import Columns
+
 #: the work's features, per rank and frame (``_features``)
 FEATURES = ("triangles", "spread", "pixels", "cover", "objects")
 
@@ -39,8 +41,11 @@ def bench_imbalance(quick: bool) -> list[dict]:
     ctx, _ = create_context()
     print(f"bench imbalance: cross on a 2x2 wall of 256x256, walkthrough of {frames} frames, every rank's work "
           "rendered twice (process CPU time); deviations of a rank's render from its frame's mean, relative")
-    print(f"{'scene':<6} {'max/mean':>8} {'of 2':>6} {'dev sd':>7} {'repeat':>7} {'noise':>6} {'persists':>8} "
-          f"{'fit leaves':>10}")
+    table = Columns(("scene", "scene", "<6"), ("imbalance", "max/mean", "8.3f"),
+                    ("imbalance_of_two", "of 2", "6.3f"), ("deviation_sd", "dev sd", "7.3f"),
+                    ("repeatable_sd", "repeat", "7.3f"), ("noise_sd", "noise", "6.3f"),
+                    ("persists", "persists", "8.2f"), ("fit_leaves", "fit leaves", "10.2f"))
+    print(table.header())
     rows = []
     for name in ("plant", "city"):
         scene = load_scene(SceneSpec(scene=name, triangles=triangles))[0]
@@ -49,8 +54,7 @@ def bench_imbalance(quick: bool) -> list[dict]:
         renderer.release()
         row = {"scene": name, **split(first, second, feats)}
         rows.append(row)
-        print(f"{name:<6} {row['imbalance']:8.3f} {row['imbalance_of_two']:6.3f} {row['deviation_sd']:7.3f} "
-              f"{row['repeatable_sd']:7.3f} {row['noise_sd']:6.3f} {row['persists']:8.2f} {row['fit_leaves']:10.2f}")
+        print(table.row(row))
     return rows
 
 

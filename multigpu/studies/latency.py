@@ -12,7 +12,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from multigpu.studies.tables import write_csv
+from multigpu.studies.tables import Columns, write_csv
 
 SCENES = {"plant": ["--scene", "plant"], "city": ["--scene", "city"]}
 LATENCIES = (0, 1, 2)
@@ -59,9 +59,12 @@ def _table(got: dict, frames: int, rounds: int, dest: Path) -> list[dict]:
     dest.mkdir(parents=True, exist_ok=True)
     write_csv(dest / "latency.csv", rows, ".3f")
     print(f"frames in flight, 4 ranks, {frames} frames, {rounds} rotated rounds, medians:")
-    print(f"{'scene':>6} {'latency':>7} {'wall ms':>8} {'cut':>6} {'emulated ms':>11} {'input to photon':>16}")
+    table = Columns(("scene", "scene", ">6"), ("latency", "latency", "7d"), ("wall_ms", "wall ms", "8.2f"),
+                    ("wall_cut", "cut", "6.0%"), ("emulated_ms", "emulated ms", "11.2f"),
+                    ("photon", "input to photon", ">16"))
+    print(table.header())
     for row in rows:
-        print(f"{row['scene']:>6} {row['latency']:7d} {row['wall_ms']:8.2f} {row['wall_cut']:6.0%} "
-              f"{row['emulated_ms']:11.2f} {row['input_to_photon_ms']:8.1f} ms {row['input_to_photon_frames']:4.2f} fr")
+        photon = f"{row['input_to_photon_ms']:8.1f} ms {row['input_to_photon_frames']:4.2f} fr"
+        print(table.row({**row, "photon": photon}))
     sys.stdout.flush()
     return rows

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.studies.tables import Columns
+
 
 def _rss(pid: int) -> int:
     """Bytes of ``pid``'s resident set (0 when gone)."""
@@ -97,7 +99,10 @@ def _longrun(frames: int, extra: list[str]) -> dict:
     tenths = np.array_split(period[10:], 10)  # past the first frames' warm-up
     done = np.array([d for d, _ in samples])
     mem = np.array([v for _, v in samples], dtype=np.float64) / 2**20
-    print(f"{'tenth':>6} {'frames':>8} {'median ms':>10} {'p99 ms':>8} {'max ms':>8} {'mean ms':>8} {'rank 0 MiB':>11}")
+    table = Columns(("tenth", "tenth", "6d"), ("frames", "frames", ">8"), ("median_ms", "median ms", "10.3f"),
+                    ("p99_ms", "p99 ms", "8.3f"), ("max_ms", "max ms", "8.2f"), ("mean_ms", "mean ms", "8.3f"),
+                    ("rss_mib", "rank 0 MiB", "11.1f"))
+    print(table.header())
     result = {"frames": int(period.size), "tenths": []}
     first = 10
     for i, p in enumerate(tenths):
@@ -107,8 +112,7 @@ def _longrun(frames: int, extra: list[str]) -> dict:
                "rss_mib": float(np.median(m)) if m.size else float("nan")}
         first += p.size
         result["tenths"].append(row)
-        print(f"{i + 1:6d} {row['frames']:>8} {row['median_ms']:10.3f} {row['p99_ms']:8.3f} {row['max_ms']:8.2f} "
-              f"{row['mean_ms']:8.3f} {row['rss_mib']:11.1f}")
+        print(table.row({**row, "tenth": i + 1}))
     a, b = result["tenths"][0], result["tenths"][-1]
     flight = json.loads((out / "flight.json").read_text()) if (out / "flight.json").exists() else None
     result.update({"mean_last_over_first": b["mean_ms"] / a["mean_ms"],

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from multigpu.errors import InputError
+from multigpu.studies.tables import Columns
 
 
 def proc_kib(pid: int, name: str, key: str) -> int:
@@ -134,18 +135,19 @@ def bench_memory(quick: bool) -> list[dict]:
     sizes = [100_000, 1_000_000] if quick else [100_000, 1_000_000, 5_000_000, 25_000_000]
     ranks = [2, 4] if quick else [2, 4, 8]
     rows = []
-    print(f"{'ranks':>5} {'triangles':>10} {'run':>6} {'peak PSS/rank MiB':>18} {'peak PSS/host MiB':>18} "
-          f"{'host B/tri':>10} {'seconds':>8}", flush=True)
+    table = Columns(("ranks", "ranks", "5d"), ("triangles", "triangles", "10d"), ("run", "run", ">6"),
+                    ("rank_mib", "peak PSS/rank MiB", "18.0f"), ("host_mib", "peak PSS/host MiB", "18.0f"),
+                    ("host_per_tri", "host B/tri", "10.0f"), ("seconds", "seconds", "8.1f"))
+    print(table.header(), flush=True)
     for n in sizes:
         for k in ranks:
             with tempfile.TemporaryDirectory() as cache:  # each case's first run builds its own cache
                 for run in ("first", "cached"):
                     d = {**measure(k, n, cache), "run": run}
                     rows.append(d)
-                    print(f"{k:5d} {d['triangles']:10d} {run:>6} {d['peak_pss_rank_max'] / 2**20:18.0f} "
-                          f"{d['peak_pss_host'] / 2**20:18.0f} {d['peak_pss_host'] / max(d['triangles'], 1):10.0f} "
-                          f"{d['seconds']:8.1f}",
-                          flush=True)
+                    print(table.row({**d, "ranks": k, "rank_mib": d["peak_pss_rank_max"] / 2**20,
+                                     "host_mib": d["peak_pss_host"] / 2**20,
+                                     "host_per_tri": d["peak_pss_host"] / max(d["triangles"], 1)}), flush=True)
     return rows
 
 
@@ -189,9 +191,10 @@ def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
                 steps.append((f"{name} ({how})", float(mib)))
             elif first_run or (shared and name.startswith("GL")):
                 steps.append((name, float(mib)))
-    print(f"{'step':<44} {'anonymous MiB':>14}")
+    table = Columns(("step", "step", "<44"), ("mib", "anonymous MiB", "14.0f"))
+    print(table.header())
     for name, mib in steps:
-        print(f"{name:<44} {mib:14.0f}")
+        print(table.row({"step": name, "mib": mib}))
     return steps
 
 
@@ -262,12 +265,13 @@ def bench_model_load(quick: bool) -> list[dict]:
         base = int(subprocess.run([sys.executable, "-c", f"import trimesh, multigpu.scene.models; print({_HWM})"],
                                   capture_output=True, text=True, check=True, env=env).stdout)
         print(f"PLY of {size / 2**20:.0f} MiB; interpreter + imports peak RSS {base / 2**20:.0f} MiB")
-        print(f"{'load':<28} {'triangles':>10} {'seconds':>8} {'peak RSS MiB':>13} {'above imports B/tri':>20}")
+        table = Columns(("load", "load", "<28"), ("triangles", "triangles", "10d"), ("seconds", "seconds", "8.1f"),
+                        ("rss_mib", "peak RSS MiB", "13.0f"), ("above", "above imports B/tri", "20.0f"))
+        print(table.header())
         for what in ("trimesh", "into the cache", "cached"):
             out = subprocess.run([sys.executable, "-c", _MODEL_CHILD, what, path], capture_output=True, text=True,
                                  check=True, env=env, timeout=1800).stdout
             d = {"load": what, **json.loads(out)}
             rows.append(d)
-            print(f"{what:<28} {d['triangles']:10d} {d['seconds']:8.1f} {d['peak_rss'] / 2**20:13.0f} "
-                  f"{(d['peak_rss'] - base) / d['triangles']:20.0f}")
+            print(table.row({**d, "rss_mib": d["peak_rss"] / 2**20, "above": (d["peak_rss"] - base) / d["triangles"]}))
     return rows

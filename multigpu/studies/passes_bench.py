@@ -25,6 +25,8 @@ import time
 
 import numpy as np
 
+from multigpu.studies.tables import Columns
+
 GRID, TILE = (2, 2), (256, 256)
 WIDTHS = (3, 26, 64)  # pixels of the second piece
 #: part 2's variants of ``cross``: their options
@@ -42,18 +44,23 @@ def bench_passes(quick: bool) -> list[dict]:
     print(f"bench passes: 2x2 wall of 256x256, walkthrough of {frames} frames, process CPU time; "
           "part 1: one rank's tile with a w-pixel piece as a second pass or joined (extra ms over the tile alone, "
           "median over frames)")
-    print(f"{'scene':<6} {'tile ms':>8} " + " ".join(f"{f'+{w}px pass':>11} {f'+{w}px joined':>12}" for w in WIDTHS))
+    table = Columns(("scene", "scene", "<6"), ("tile_ms", "tile ms", "8.2f"),
+                    *(c for w in WIDTHS for c in ((f"pass_{w}", f"+{w}px pass", "11.3f"),
+                                                  (f"joined_{w}", f"+{w}px joined", "12.3f"))))
+    print(table.header())
     scenes = {name: load_scene(SceneSpec(scene=name, triangles=triangles))[0] for name in ("plant", "city")}
     for name, scene in scenes.items():
         renderer = RegionRenderer(ctx, scene, (GRID[1] * TILE[0], GRID[0] * TILE[1]))
         row = _pass_cost(scene, renderer, frames)
         rows.append({"scene": name, "part": "passes", **row})
-        print(f"{name:<6} {row['tile_ms']:8.2f} " + " ".join(f"{row[f'pass_{w}']:11.3f} {row[f'joined_{w}']:12.3f}"
-                                                          for w in WIDTHS))
+        print(table.row(rows[-1]))
         renderer.release()
     print(f"part 2: cross as Equalizer built it (layout and time model), the joined layout with that time model, "
           f"and the default, {rounds} alternated rounds (medians), render CPU ms per frame")
-    print(f"{'scene':<6} {'variant':<10} {'passes/rank':>11} {'tris/frame':>10} {'mean':>7} {'slowest':>8} {'imb':>6}")
+    table = Columns(("scene", "scene", "<6"), ("variant", "variant", "<10"), ("passes", "passes/rank", "11.2f"),
+                    ("tris", "tris/frame", "10.0f"), ("mean_ms", "mean", "7.2f"), ("slowest_ms", "slowest", "8.2f"),
+                    ("imb", "imb", "6.3f"))
+    print(table.header())
     for name, scene in scenes.items():
         renderer = RegionRenderer(ctx, scene, (GRID[1] * TILE[0], GRID[0] * TILE[1]))
         got: dict[str, list[dict]] = {v: [] for v in VARIANTS}
@@ -63,8 +70,7 @@ def bench_passes(quick: bool) -> list[dict]:
         for variant, runs in got.items():
             row = {k: float(np.median([x[k] for x in runs])) for k in runs[0]}
             rows.append({"scene": name, "part": "variants", "variant": variant, **row})
-            print(f"{name:<6} {variant:<10} {row['passes']:11.2f} {row['tris']:10.0f} {row['mean_ms']:7.2f} "
-                  f"{row['slowest_ms']:8.2f} {row['slowest_ms'] / row['mean_ms']:6.3f}")
+            print(table.row({**rows[-1], "imb": row["slowest_ms"] / row["mean_ms"]}))
         renderer.release()
     return rows
 

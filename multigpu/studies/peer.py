@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 from multigpu.errors import InputError
+from multigpu.studies.tables import Columns
 
 #: the ParaView side: run by ``pvbatch --symmetric SCRIPT CAMERAS MODEL W H OUT`` on every rank
 PVBATCH_SCRIPT = r'''
@@ -174,10 +175,13 @@ def _csv(path: Path, rows: list, model: str, frames: int, size) -> None:
 def _print(rows: list, model: str, frames: int, size, rounds: int) -> None:
     print(f"{Path(model).name}, {frames} orbit cameras, {size[0]}x{size[1]}, LP_NUM_THREADS=1, Open MPI, "
           f"{rounds} alternated rounds, medians (ms per frame):")
-    print(f"{'ranks':>5} {'ParaView wall':>13} {'multigpu wall':>13} {'lead':>6} {'ParaView CPU':>12} "
-          f"{'multigpu CPU':>12} {'lead':>6}")
+    table = Columns(("ranks", "ranks", "5d"), ("p_wall", "ParaView wall", "13.1f"),
+                    ("m_wall", "multigpu wall", "13.1f"), ("wall_lead", "lead", ">6"),
+                    ("p_cpu", "ParaView CPU", "12.1f"), ("m_cpu", "multigpu CPU", "12.1f"), ("cpu_lead", "lead", ">6"))
+    print(table.header())
     for r in rows:
         p, m = r["paraview"], r["multigpu"]
-        print(f"{r['ranks']:5d} {p['wall_ms']:13.1f} {m['wall_ms']:13.1f} {r['wall_lead']:5.2f}x "
-              f"{p['cpu_ms']:12.1f} {m['cpu_ms']:12.1f} {r['cpu_lead']:5.2f}x")
+        print(table.row({"ranks": r["ranks"], "p_wall": p["wall_ms"], "m_wall": m["wall_ms"], "p_cpu": p["cpu_ms"],
+                         "m_cpu": m["cpu_ms"], "wall_lead": f"{r['wall_lead']:5.2f}x",
+                         "cpu_lead": f"{r['cpu_lead']:5.2f}x"}))
     sys.stdout.flush()

@@ -21,6 +21,7 @@ import numpy as np
 
 from multigpu.display.xvfb import start_xvfb, stop_xvfb
 from multigpu.errors import InputError
+from multigpu.studies.tables import Columns
 
 WALLS = [((2, 2), (512, 512)), ((3, 3), (320, 240))]
 #: headless; a window per rank; windows and rank 0's operator monitor (its gather and window)
@@ -37,8 +38,11 @@ def bench_present(quick: bool) -> list[dict]:
     rows = []
     print(f"bench present: headless vs --present window on Xvfb, {frames} frames, {rounds} alternated rounds; "
           "emulated = slowest rank's CPU time (median ms), wall = wall-clock frame (median ms)")
-    print(f"{'wall':<14} {'mode':<9} {'emulated':>9} {'wall':>8} {'present':>8} {'present p99':>12} "
-          f"{'input':>7} {'skew':>7} {'skew p99':>9}")
+    table = Columns(("wall", "wall", "<14"), ("mode", "mode", "<9"), ("emulated_ms", "emulated", "9.2f"),
+                    ("wall_ms", "wall", "8.2f"), ("present_ms", "present", "8.3f"),
+                    ("present_p99_ms", "present p99", "12.3f"), ("input_ms", "input", "7.3f"),
+                    ("skew_ms", "skew", "7.3f"), ("skew_p99_ms", "skew p99", "9.3f"))
+    print(table.header())
     for grid, tile in walls:
         size = (grid[1] * tile[0], grid[0] * tile[1])
         try:
@@ -59,9 +63,7 @@ def bench_present(quick: bool) -> list[dict]:
                 row = {k: float(np.median([x[k] for x in runs])) for k in runs[0]}
                 row.update(wall=f"{grid[0]}x{grid[1]} {tile[0]}x{tile[1]}", mode=mode)
                 rows.append(row)
-                print(f"{row['wall']:<14} {mode:<9} {row['emulated_ms']:9.2f} {row['wall_ms']:8.2f} "
-                      f"{row['present_ms']:8.3f} {row['present_p99_ms']:12.3f} {row['input_ms']:7.3f} "
-                      f"{row['skew_ms']:7.3f} {row['skew_p99_ms']:9.3f}")
+                print(table.row(row))
         finally:
             stop_xvfb(proc)
     return rows

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.parallel.recovery import STEPS
+from multigpu.studies.tables import Columns
 
 #: frames before the kill, and in all
 KILL_AFTER, FRAMES = 150, 400
@@ -76,12 +77,12 @@ def bench_recovery(quick: bool) -> list[dict]:
         one_round(cache, tmp, -1, kill=False)  # the caches warm: scene, buffers file, compiled kernels
         print(f"bench recovery: default plant, 2x2 wall of 256x256 tiles (4 ranks), a rank killed after "
               f"{KILL_AFTER} frames; wall seconds")
-        print(f"{'round':>5} {'dark s':>7} " + " ".join(f"{s:>9}" for s in STEPS), flush=True)
+        table = Columns(("round", "round", ">5"), ("seconds", "dark s", "7.2f"), *((s, s, "9.2f") for s in STEPS))
+        print(table.header(), flush=True)
         for k in range(rounds):
             r = one_round(cache, tmp, k)["recoveries"][0]
             rows.append({"round": k, "seconds": r["seconds"], **r["steps"]})
-            print(f"{k:5d} {r['seconds']:7.2f} " + " ".join(f"{r['steps'].get(s, float('nan')):9.2f}" for s in STEPS),
-                  flush=True)
+            print(table.row({s: float("nan") for s in STEPS} | rows[-1]), flush=True)
     med = {s: float(np.median([r.get(s, np.nan) for r in rows])) for s in ("seconds", *STEPS)}
-    print(f"{'median':>5} {med['seconds']:7.2f} " + " ".join(f"{med[s]:9.2f}" for s in STEPS), flush=True)
+    print(table.row({**med, "round": "median"}), flush=True)
     return rows

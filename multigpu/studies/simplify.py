@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError
-from multigpu.studies.tables import write_csv
+from multigpu.studies.tables import Columns, write_csv
 
 #: the triangle targets, as shares of the input
 TARGETS = (0.25, 1 / 16)
@@ -138,10 +138,12 @@ def bench_simplify(model: str | None, quick: bool, out: str = "out/simplify") ->
     dest = Path(out)
     dest.mkdir(parents=True, exist_ok=True)
     write_csv(dest / "simplify.csv", rows)
-    print(f"{'mesh':>18} {'library':>20} {'target':>7} {'reached':>8} {'s/Mtri':>7} {'Hausdorff':>10} {'mean':>9}")
+    table = Columns(("mesh", "mesh", ">18"), ("library", "library", ">20"), ("target", "target", "7.4f"),
+                    ("reached", "reached", "8.4f"), ("s_per_mtri", "s/Mtri", "7.2f"),
+                    ("hausdorff", "Hausdorff", "10.2e"), ("mean_distance", "mean", "9.2e"))
+    print(table.header())
     for r in rows:
-        print(f"{r['mesh']:>18} {r['library']:>20} {r['target']:7.4f} {r['reached']:8.4f} {r['s_per_mtri']:7.2f} "
-              f"{r['hausdorff']:10.2e} {r['mean_distance']:9.2e}")
+        print(table.row(r))
     print("(distances as shares of the bounding-box diagonal)")
     sys.stdout.flush()
     return rows

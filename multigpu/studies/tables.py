@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 from pathlib import Path
 
 
@@ -21,3 +22,25 @@ def md_table(rows: list[dict], cols: list[tuple[str, str, str]]) -> str:
     sep = "|" + "|".join("---:" for _ in cols) + "|"
     body = ["| " + " | ".join(format(r[k], f) if f else str(r[k]) for k, _, f in cols) + " |" for r in rows]
     return "\n".join([head, sep, *body])
+
+
+class Columns:
+    """A table printed a row at a time, as a benchmark measures its rows: each column is (key,
+    header, spec), the spec a format spec with its width ('8.3f', '>9', '<6': left-aligned); a
+    header takes its column's width and side. The one way the studies print a table."""
+
+    def __init__(self, *cols: tuple[str, str, str]):
+        self.cols = cols
+
+    @staticmethod
+    def _side(spec: str) -> tuple[str, int]:
+        m = re.match(r"([<>^]?)[+\- ]?0?(\d*)", spec)
+        return (m.group(1) or ">"), int(m.group(2) or 0)
+
+    def header(self) -> str:
+        return " ".join(f"{h:{side}{width}}" for _, h, spec in self.cols for side, width in [self._side(spec)])
+
+    def row(self, values: dict) -> str:
+        """A row from ``values`` by key (a key missing: blank at the column's width)."""
+        return " ".join(format(values[k], spec) if k in values else " " * self._side(spec)[1]
+                        for k, _, spec in self.cols)

@@ -16,6 +16,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from multigpu.studies.tables import Columns
+
 #: the models: name -> textured
 MODELS = {"plain": False, "textured": True}
 #: the cases: name -> (model, texture path)
@@ -65,14 +67,16 @@ def bench_textures(quick: bool) -> list[dict]:
         models = write_models(Path(tmp), triangles, side)
         caches = {name: os.path.join(tmp, f"cache-{i}") for i, name in enumerate(CASES)}
         print(f"scan of {triangles:,} triangles; texture {side}x{side}; 4 ranks, 2x2 tiles of 256x256")
-        print(f"{'model':<16} {'run':>6} {'load s':>7} {'frame ms':>9} {'peak PSS/rank MiB':>18} "
-              f"{'peak PSS/host MiB':>18}", flush=True)
+        table = Columns(("model", "model", "<16"), ("run", "run", ">6"), ("load_seconds", "load s", "7.2f"),
+                        ("frame_ms_median", "frame ms", "9.2f"), ("rank_mib", "peak PSS/rank MiB", "18.0f"),
+                        ("host_mib", "peak PSS/host MiB", "18.0f"))
+        print(table.header(), flush=True)
         for run in ("first", "cached"):
             for name, (model, how) in CASES.items():  # alternated: drift falls on each
                 d = measure(4, triangles, caches[name], frames=60, env={"MULTIGPU_TEXTURES": how},
                             scene=["--model", str(models[model]), "--split", "grid:8"])
                 d = {**d, "model": name, "run": run, "texture_side": side if MODELS[model] else 0}
                 rows.append(d)
-                print(f"{name:<16} {run:>6} {d['load_seconds']:7.2f} {d['frame_ms_median']:9.2f} "
-                      f"{d['peak_pss_rank_max'] / 2**20:18.0f} {d['peak_pss_host'] / 2**20:18.0f}", flush=True)
+                mib = {"rank_mib": d["peak_pss_rank_max"] / 2**20, "host_mib": d["peak_pss_host"] / 2**20}
+                print(table.row({**d, **mib}), flush=True)
     return rows
