@@ -232,8 +232,8 @@ class WalkConfig:
         "who projects the object bounds: every rank every object, or the ranks of a machine a slice each into "
         "one shared array (pays from ~50k objects)"))
     # frames in flight (core/inflight.py; 0: the strict order). None: by measurement (docs/USAGE.md, "Frames in
-    # flight"): 1 headless (the plant walk and the city drive at 4 ranks over a third faster in wall time), 0 with
-    # windows (the swap lock keeps the ranks in step each frame: no faster here, and input would come a frame later)
+    # flight"): 1 headless (the plant walk and the city drive at 4 ranks faster in wall time, a few per cent here),
+    # 0 with windows (the swap lock keeps the ranks in step each frame: no faster here, and input comes a frame later)
     latency: int | None = option(None, group=BALANCING, metavar="N", type=int,
                                  valid=lambda v: 0 <= v <= MOST, must=f"must be 0..{MOST} frames", help=(
         "frames in flight: a rank plans and draws the next frames while a frame's pixels travel and show (0: "

@@ -94,10 +94,12 @@ class Run:
 
 
 def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str], timeout: float,
-         env: dict | None = None, launcher=None) -> Run:
+         env: dict | None = None, launcher=None, as_run: bool = False) -> Run:
     """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``, in the studies'
-    environment (``study_env``, ``env`` over it) under ``launcher`` (None: the one found);
-    kill it on timeout. Every study's walkthrough job goes through here."""
+    environment (``study_env``; ``as_run``: the walkthrough's own, each rank choosing its raster
+    threads as a user's run does, for studies of what a user's wall time is; ``env`` over either)
+    under ``launcher`` (None: the one found); kill it on timeout. Every study's walkthrough job
+    goes through here."""
     import json
 
     k = grid[0] * grid[1]
@@ -105,7 +107,7 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str
     args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
             "--no-progress", *args]
     try:
-        job = run_multigpu(k, args, timeout, env={**study_env(), **(env or {})}, merge_stderr=True,
+        job = run_multigpu(k, args, timeout, env={**({} if as_run else study_env()), **(env or {})}, merge_stderr=True,
                            launcher=launcher)
     except JobTimeout:
         raise RuntimeError(f"experiment job timed out after {timeout} s: multigpu {' '.join(args)}") from None

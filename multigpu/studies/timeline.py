@@ -67,8 +67,8 @@ def bench_timeline(quick: bool, out: str = "out/timeline", scene: tuple[str, ...
     runs = {}
     for latency in (0, 1):
         run = dest / f"latency{latency}"
-        s = walk(run, WalkConfig.grid, WalkConfig.tile, [*scene, "--frames", str(frames), "--latency", str(latency),
-                                                         "--timeline", "--mosaic-every", "0"], timeout).summary
+        flags = [*scene, "--frames", str(frames), "--latency", str(latency), "--timeline", "--mosaic-every", "0"]
+        s = walk(run, WalkConfig.grid, WalkConfig.tile, flags, timeout, as_run=True).summary
         runs[f"--latency {latency}: {s['frame_ms']:.1f} ms a frame (wall), input to photon "
              f"{s['input_to_photon_ms']:.1f} ms"] = run / "timeline.json"
     png = plot(runs, dest / "timeline.png")
