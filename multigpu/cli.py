@@ -181,8 +181,9 @@ def _bench_args(b: argparse.ArgumentParser) -> None:
                                                         "(default 256)")
     b.add_argument("--display", type=int, default=None, help="floor: the side of the display that region is the "
                                                              "centre of, pixels (default twice the tile)")
-    b.add_argument("--out", default="out/peer", help="peer, latency, simplify: where the runs and the results CSV go "
-                                                     "(default out/peer, out/latency, out/simplify)")
+    b.add_argument("--out", default="out/peer", help="peer, latency, simplify, timeline: where the runs and the "
+                                                     "results go (default out/peer, out/latency, out/simplify, "
+                                                     "out/timeline)")
     scene_args(b)  # bench floor's worker: the scene it renders
     b.set_defaults(run=_bench)
 

@@ -218,7 +218,7 @@ def run_args(args) -> int:
     if args.what == "timeline":
         from multigpu.studies.timeline import bench_timeline
 
-        bench_timeline(args.quick)
+        bench_timeline(args.quick, out=args.out if args.out != "out/peer" else "out/timeline")
         return 0
     if args.what == "peer":
         from multigpu.studies.peer import bench_peer

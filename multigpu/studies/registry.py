@@ -48,6 +48,7 @@ BENCH_FLAGS = {
     "peer": ("--quick", "--model", "--split", "--ranks", "--rounds", "--out"),
     "latency": ("--quick", "--rounds", "--out"),
     "simplify": ("--quick", "--model", "--out"),
+    "timeline": ("--quick", "--out"),
 }
 
 
