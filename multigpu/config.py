@@ -12,7 +12,7 @@ from multigpu.core.resample import MIN_SCALE
 from multigpu.errors import InputError
 from multigpu.options import check, option, register
 from multigpu.scene.models import SceneSpec
-from multigpu.scene.paths import DEFAULT_FRAMES  # noqa: F401  (frames of generated paths; re-exported for the CLI)
+from multigpu.scene.paths import DEFAULT_FRAMES
 from multigpu.strategies import REGISTRY
 
 #: rank 0 rewrites summary.json every this many frames (and whenever the run ends)
@@ -109,40 +109,12 @@ def _pair(v) -> str:
     return f"{v[0]}x{v[1]}"
 
 
-def _kinds():
-    from multigpu.scene.paths import DEFAULT_FRAMES as kinds
+def _names(module: str, name: str):
+    """A registry's names, looked up when a value is checked or the help is made (its module
+    imports more than the door needs: GL, the decompositions, the scene's looks)."""
+    import importlib
 
-    return kinds
-
-
-def _methods():
-    from multigpu.gpu.render import METHODS
-
-    return METHODS
-
-
-def _decompositions():
-    from multigpu.decompositions import REGISTRY as DECOMPOSITIONS
-
-    return DECOMPOSITIONS
-
-
-def _patterns():
-    from multigpu.decompositions import PATTERNS
-
-    return PATTERNS
-
-
-def _ranges():
-    from multigpu.decompositions import RANGES
-
-    return RANGES
-
-
-def _color_views():
-    from multigpu.scene.looks import COLOR_VIEWS
-
-    return COLOR_VIEWS
+    return lambda: getattr(importlib.import_module(module), name)
 
 
 def _strategies() -> str:
@@ -152,9 +124,8 @@ def _strategies() -> str:
 
 
 def _frames() -> str:
-    from multigpu.scene.paths import DEFAULT_FRAMES as kinds
-
-    return f"frames to render (default: the whole path; generated: {', '.join(f'{k} {v}' for k, v in kinds.items())})"
+    kinds = ", ".join(f"{k} {v}" for k, v in DEFAULT_FRAMES.items())
+    return f"frames to render (default: the whole path; generated: {kinds})"
 
 
 _finite = lambda v: math.isfinite(v)  # noqa: E731
@@ -174,7 +145,7 @@ class WalkConfig:
     path: str | None = option(None, group=PATH, metavar="FILE", help=(
         "camera path JSON file, or 'interactive': fly by hand from rank 0's window, starting where --path-kind "
         "starts (needs --present window; H prints the keys) (default: a generated path)"))
-    path_kind: str = option("walkthrough", group=PATH, choices=_kinds,
+    path_kind: str = option("walkthrough", group=PATH, choices=lambda: DEFAULT_FRAMES,
                             help="the generated path when no --path is given")
     frames: int | None = option(None, group=PATH, metavar="N", type=int, valid=lambda v: v is None or v >= 1,
                                 must="must be >= 1", help=_frames)
@@ -205,15 +176,15 @@ class WalkConfig:
         "without a value: the wall file's monitor position, else right of the wall)"))
     device: int | None = option(None, group=WALL, metavar="I", type=int, valid=lambda v: v is None or v >= 0,
                                 must="must be >= 0", help="EGL device index (default: local rank modulo device count)")
-    subfrustum: str = option("auto", group=WALL, choices=_methods, help="how a rank renders its region "
-                                                                       "(docs/ACCURACY.md)")
+    subfrustum: str = option("auto", group=WALL, choices=_names("multigpu.gpu.render", "METHODS"),
+                             help="how a rank renders its region (docs/ACCURACY.md)")
     displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY (wall file)
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place (wall file)
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     gpus: tuple = ()  # per rank label: its EGL device (wall file "gpu"), or None for --device / the default
     # -- balancing
     balance: str = option("auto", group=BALANCING, choices=lambda: REGISTRY, help=_strategies)
-    decomposition: str = option("screen", group=BALANCING, choices=_decompositions, help=(
+    decomposition: str = option("screen", group=BALANCING, choices=_names("multigpu.decompositions", "REGISTRY"), help=(
         "how a frame is divided: screen = the paper's screen partition (balanced by --balance); db = sort-last "
         "database decomposition, depth-composited; bins = static bin patterns, no balancer; hybrid = the screen "
         "partition (--balance) for most objects, the wide ones drawn once and depth-composited"))
@@ -223,8 +194,9 @@ class WalkConfig:
                          help="object bounds: box (8 corners) or sphere")
     bin_size: int = option(64, group=BALANCING, metavar="PX", type=int, valid=lambda v: 1 <= v <= 4096,
                            must="must be 1..4096 pixels", help="bins: pixels per bin side")
-    bin_pattern: str = option("diagonal", group=BALANCING, choices=_patterns, help="bins: which rank owns a bin")
-    db_ranges: str = option("visible", group=BALANCING, choices=_ranges, help=(
+    bin_pattern: str = option("diagonal", group=BALANCING, choices=_names("multigpu.decompositions", "PATTERNS"),
+                              help="bins: which rank owns a bin")
+    db_ranges: str = option("visible", group=BALANCING, choices=_names("multigpu.decompositions", "RANGES"), help=(
         "db: object ranges rebalanced over the visible objects every frame, or fixed by all triangles"))
     partition: str = option("redundant", group=BALANCING, choices=lambda: ("redundant", "broadcast"),
                             help="who computes the partition: every rank, or rank 0 and a broadcast")
@@ -263,7 +235,7 @@ class WalkConfig:
                                help="write the full wall as a PNG every N frames (0: never)")
     overlay: bool = option(True, group=OUTPUTS, flag="--no-overlay", negate=True,
                            help="no partition overlay beside each mosaic")
-    colors: str = option("model", group=OUTPUTS, choices=_color_views, help=(
+    colors: str = option("model", group=OUTPUTS, choices=_names("multigpu.scene.looks", "COLOR_VIEWS"), help=(
         "model: the model's own colours (its materials and vertex colours; one grey where the file has none); "
         "objects: a colour per object, to see what the balancer moves between ranks"))
     video: bool = option(False, group=OUTPUTS, switch=True,
