@@ -198,3 +198,32 @@ def test_bad_decomposition_flags_print_once(tmp_path):
             "--decomposition", "bins", "--bin-pattern", "sudoku"]
     res = run_mpi(2, args, timeout=60)
     assert res.returncode == 2 and res.stderr.count("--bin-pattern must be one of") == 1, res.stderr
+
+
+HELD = 10  # frames of the held-back runs
+
+
+@pytest.fixture(scope="module")
+def held_reference(tmp_path_factory):
+    """One rank's render of the 120x96 display, HELD frames."""
+    out = tmp_path_factory.mktemp("held") / "one"
+    res = run_mpi(1, ["walkthrough", *SMALL, "--frames", str(HELD), "--grid", "1x1", "--tile", "120x96",
+                      "--mosaic-every", "1", "--no-overlay", "--out", str(out)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    return frames_of(out, HELD)
+
+
+@pytest.mark.parametrize("exchange", ["shared", "messages"])
+@pytest.mark.parametrize("latency", ["0", "1", "2", "3"])
+def test_a_held_back_rank_composes_what_one_rank_renders(tmp_path, held_reference, latency, exchange):
+    """One rank held back in every frame just before it reads its peers' parts (a sleep): the
+    others run ahead as far as the loop's waits let them, and no frame they write reaches a slot
+    still being read (--latency 3 with three slots put a block of another frame into a frame)."""
+    out = tmp_path / "held"
+    args = ["walkthrough", *SMALL, "--frames", str(HELD), "--grid", "2x2", "--tile", "60x48", "--mosaic-every",
+            "1", "--no-overlay", "--out", str(out), "--latency", latency, "--exchange", exchange]
+    res = run_mpi(4, args, env={"MULTIGPU_FAULT": "1:compose:sleep=0.15"})
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert json.loads((out / "summary.json").read_text())["config"]["exchange"] == exchange
+    for f, (got, want) in enumerate(zip(frames_of(out, HELD), held_reference)):
+        assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"

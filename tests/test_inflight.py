@@ -5,7 +5,7 @@ submitted; pieces drawn ahead are the pixels ``render`` gives."""
 import numpy as np
 import pytest
 
-from multigpu.core.inflight import MOST, read_lag, step
+from multigpu.core.inflight import MOST, held_back_reach, read_lag, slots, step
 
 
 def run(n, latency, stop_at=None):
@@ -42,6 +42,43 @@ def test_every_frame_passes_each_stage_once_in_order_with_its_lags(n, latency):
 def test_a_stop_shows_every_frame_submitted_and_no_more(latency):
     seen, _, _ = run(None, latency, stop_at=6)
     assert seen["submit"] == seen["send"] == seen["deliver"] == list(range(7))
+
+
+def furthest_sent_while_held(latency: int, f: int) -> int:
+    """Walk the loop's schedule (``step``) on a fast rank while a peer is held reading frame f's
+    parts (in ``deliver``, after its barrier, before its row is posted): the last frame the fast
+    rank sends, and so writes to its shared slice, before one of the loop's waits stops it.
+    The waits, as ``frames.deliver`` makes them: the row of frame d - 1 lands first (headless
+    frames in flight; in the strict order a row lands as it is posted), then the exchange's
+    barrier of frame d (every rank has sent d)."""
+    held_at = f + latency  # the step of the peer's deliver of f: its submit and send of that step are done
+    peer_sent = {g for k in range(held_at + 1) for g in [step(k, None, latency)[1]] if g is not None}
+    peer_rows = set(range(f))  # rows posted by the held peer
+    furthest = -1
+    for k in range(held_at + 10 * (MOST + 2)):
+        submit, send, deliver = step(k, None, latency)
+        if send is not None:
+            furthest = send
+        if deliver is not None:
+            if latency > 0 and deliver - 1 >= 0 and deliver - 1 not in peer_rows:
+                return furthest  # lands the last row first
+            if deliver not in peer_sent:
+                return furthest  # the exchange's barrier
+            if latency == 0 and deliver not in peer_rows:
+                return furthest  # the strict order lands its row at once
+    raise AssertionError("nothing stopped the fast rank")
+
+
+@pytest.mark.parametrize("latency", range(MOST + 1))
+@pytest.mark.parametrize("f", [0, 1, 5, 6, 7])
+def test_a_held_back_rank_never_reads_a_slot_a_peer_overwrites(latency, f):
+    """While a rank reads frame f's parts, a peer may send frames f + 1 .. f + reach, and none of
+    them may land in f's slot of a ring of ``slots`` (frames at --latency 3 with three slots did:
+    issue 69)."""
+    reach = furthest_sent_while_held(latency, f) - f
+    assert reach == held_back_reach(latency)
+    assert reach < slots(latency)
+    assert [slots(n) for n in range(MOST + 1)] == [2, 3, 3, 4]
 
 
 def test_reads_wait_a_step_from_two_frames_in_flight():

@@ -5,6 +5,7 @@ no MPI, so it belongs to the quick test loop; the ``_mpi`` tests remain the end-
 
 import json
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from multigpu.parallel import walkthrough
 from multigpu.scene.models import SceneSpec
 
 FRAMES = 4
+HELD = 10  # frames of the held-back runs: enough that a slot's frames differ where they collide
 CASES = {  # name: (config fields, grids that run it)
     "screen": ({"balance": "strips"}, [(1, 2), (2, 2)]),
     "cross": ({"balance": "cross"}, [(1, 3), (2, 2)]),
@@ -31,20 +33,21 @@ class _Job:
     thread_cpu = 0.0
 
 
-def _walk(out, grid, tile, **fields) -> list[np.ndarray]:
-    cfg = WalkConfig(scene=SceneSpec(triangles=20_000), frames=FRAMES, grid=grid, tile=tile, mosaic_every=1,
-                     overlay=False, progress=False, exchange="messages", out=str(out), timeout=60.0, **fields)
+def _walk(out, grid, tile, exchange_as="messages", frames=FRAMES, **fields) -> list[np.ndarray]:
+    cfg = WalkConfig(scene=SceneSpec(triangles=20_000), frames=frames, grid=grid, tile=tile, mosaic_every=1,
+                     overlay=False, progress=False, exchange=exchange_as, out=str(out), timeout=60.0, **fields)
     summaries = run_ranks(grid[0] * grid[1], lambda comm: walkthrough.run(cfg, comm, _Job()))
-    assert summaries[0]["frames"] == FRAMES and all(s is None for s in summaries[1:])  # rank 0's summary only
-    assert json.loads((out / "summary.json").read_text())["frames_written"] == FRAMES
-    return [read_png(out / "mosaic" / f"frame_{f:05d}.png") for f in range(FRAMES)]
+    assert summaries[0]["frames"] == frames and all(s is None for s in summaries[1:])  # rank 0's summary only
+    assert json.loads((out / "summary.json").read_text())["frames_written"] == frames
+    return [read_png(out / "mosaic" / f"frame_{f:05d}.png") for f in range(frames)]
 
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     """One rank's frames of the 120x96 display (and of the 1x3 wall's 120x32)."""
     base = tmp_path_factory.mktemp("one")
-    return {(120, 96): _walk(base / "a", (1, 1), (120, 96)), (120, 32): _walk(base / "b", (1, 1), (120, 32))}
+    return {(120, 96): _walk(base / "a", (1, 1), (120, 96)), (120, 32): _walk(base / "b", (1, 1), (120, 32)),
+            "held": _walk(base / "c", (1, 1), (120, 96), frames=HELD)}
 
 
 @pytest.mark.parametrize("latency", [0, 1])
@@ -59,3 +62,40 @@ def test_threads_compose_what_one_rank_renders(tmp_path, reference, name, grid, 
     s = json.loads((tmp_path / name / "summary.json").read_text())
     assert s["config"]["exchange"] == "messages" and s["config"]["latency"] == latency
     assert "mpi4py.MPI" not in sys.modules  # nothing here started MPI (see test_exchange.py)
+
+
+@pytest.fixture
+def shared_in_memory(monkeypatch):
+    """The shared-segment backend with the threads' memory as the host's segment: every rank
+    one host, each its slice of ``slots`` slots, as ``frame_setup.make_exchange`` asks."""
+    from multigpu.parallel.shared import SharedPieces
+
+    lock, memory = threading.Lock(), {}
+
+    def make(comm, size, with_depth, timeout, asked=True, slots=2, layers=1):
+        per_slot, K = SharedPieces.slot_bytes(size, with_depth, layers), comm.Get_size()
+        with lock:
+            host = memory.setdefault(id(comm.world), np.zeros(K * slots * per_slot, dtype=np.uint8))
+        return SharedPieces.over(comm, timeout, host, {r: r for r in range(K)}, per_slot, with_depth, slots), None
+
+    monkeypatch.setattr(SharedPieces, "make", staticmethod(make))
+
+
+@pytest.mark.parametrize("latency", [0, 1, 2, 3])
+@pytest.mark.parametrize("name", ["screen", "db"])
+def test_a_held_back_rank_on_the_shared_segment_composes_one_ranks_render(tmp_path, reference, shared_in_memory,
+                                                                         monkeypatch, name, latency):
+    """The shared-segment backend at every latency, rank 1 held back in every frame before it
+    reads its peers' parts (the others run ahead as far as the loop's waits allow): each mosaic
+    is one rank's render bit for bit (at --latency 3 a ring of three slots let a peer overwrite a
+    frame still being read)."""
+    from multigpu.parallel import fault, frames
+
+    for module in (fault, frames):
+        monkeypatch.setattr(module, "FAULT_SPEC", "1:compose:sleep=0.1")
+    got = _walk(tmp_path / name, (2, 2), (60, 48), latency=latency, exchange_as="shared", frames=HELD,
+                **CASES[name][0])
+    for f, (a, b) in enumerate(zip(got, reference["held"])):
+        assert (a == b).all(), f"frame {f}: {(a != b).any(axis=2).sum()} pixels differ"
+    s = json.loads((tmp_path / name / "summary.json").read_text())
+    assert s["config"]["exchange"] == "shared" and s["config"]["latency"] == latency

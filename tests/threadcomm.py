@@ -88,23 +88,26 @@ class ThreadComm:
 
         return Request(test)
 
-    def _collective(self, part, finish) -> Request:
-        """This rank's ``part`` of the next collective; ``finish(parts)`` once every rank's is in."""
+    def _collective(self, part, finish, needs=None) -> Request:
+        """This rank's ``part`` of the next collective; ``finish(parts)`` once the parts of the
+        ranks in ``needs`` are in (None: every rank's). As MPI's, a rank's call completes as soon
+        as what it receives is there: a gather's sender and a broadcast's root wait for no one."""
         w, n = self.world, self.calls
         self.calls += 1
         with w.lock:
             entry = w.rounds.setdefault(n, [[_MISSING] * w.size, 0])
             entry[0][self.rank] = part
+        wanted = range(w.size) if needs is None else needs
 
         def test() -> bool:
             with w.lock:
                 parts = entry[0]
-                if any(p is _MISSING for p in parts):
+                if any(parts[r] is _MISSING for r in wanted):
                     return False
             finish(parts)
             with w.lock:
                 entry[1] += 1
-                if entry[1] == w.size:
+                if entry[1] == w.size and not any(p is _MISSING for p in entry[0]):
                     del w.rounds[n]
             return True
 
@@ -128,14 +131,15 @@ class ThreadComm:
                 for r, p in enumerate(parts):
                     rows[r] = p.reshape(-1)
 
-        return self._collective(np.array(send, copy=True), finish)
+        return self._collective(np.array(send, copy=True), finish, None if self.rank == root else ())
 
     def Ibcast(self, buf, root: int = 0) -> Request:  # noqa: N802
         def finish(parts):
             if self.rank != root:
                 buf[...] = parts[root].reshape(buf.shape)
 
-        return self._collective(np.array(buf, copy=True) if self.rank == root else None, finish)
+        return self._collective(np.array(buf, copy=True) if self.rank == root else None, finish,
+                                (root,) if self.rank != root else ())
 
 
 def run_ranks(size: int, body, timeout: float = 120.0) -> list:

@@ -13,11 +13,18 @@ FAULT_SPEC = os.environ.get("MULTIGPU_FAULT")
 def fault(rank: int, where: int | str) -> None:
     """Test-only fault injection: MULTIGPU_FAULT='RANK:WHERE[:stop]' (in the job's environment
     at start) with WHERE a frame number or 'setup' raises there, or with ':stop' stops the rank
-    (SIGSTOP: a frozen rank; if something continues it, it carries on as if nothing happened)."""
+    (SIGSTOP: a frozen rank; if something continues it, it carries on as if nothing happened).
+    'RANK:compose:sleep=S' holds the rank back S seconds in every frame, after the exchange's
+    wait and before it reads its peers' parts (where a peer running ahead could overwrite them)."""
     spec = FAULT_SPEC
     if spec:
         r, w, *action = spec.split(":")
         if int(r) == rank and w == str(where):
+            if action and action[0].startswith("sleep="):
+                import time
+
+                time.sleep(float(action[0][len("sleep="):]))
+                return
             if action == ["stop"]:
                 import signal
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core.camera import unshifted
+from multigpu.core.inflight import slots
 from multigpu.parallel.backends import Exchange, Projection
 from multigpu.parallel.composite import Messages
 from multigpu.parallel.outdir import OutputDir
@@ -66,7 +67,7 @@ def make_exchange(cfg: WalkConfig, comm, planner: Planner) -> tuple[Exchange, st
     d = planner.decomposition
     if cfg.exchange != "messages":
         shared, why = SharedPieces.make(comm, cfg.canvas.size, d.depth, cfg.timeout, cfg.exchange == "shared",
-                                        slots=3 if cfg.latency else 2, layers=d.layers)
+                                        slots=slots(cfg.latency), layers=d.layers)
     return shared or Messages(comm, cfg.timeout, sync=cfg.latency == 0), why
 
 

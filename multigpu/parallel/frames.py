@@ -208,6 +208,8 @@ class Frames:
             self.landed(*landed)
         with t.phase("sync"):
             self.exchange.wait(x.started)
+            if FAULT_SPEC:
+                fault(self.rank, "compose")
         with t.phase("exchange"):
             if depth:
                 self.back[:] = self.background

@@ -6,11 +6,12 @@ slice of the host's segment before the frame's barrier, and after it every tile 
 depth-merges) them straight from the senders' slices: one copy per pixel instead of pack, two
 message copies and unpack. A rank's own tile's parts never leave its pieces; parts for ranks on
 other hosts go as messages (``composite``, which also merges every part in ascending sender
-order), as DESIGN.md has it: shared per node, messages between nodes. Each slice has two halves
-used by alternate frames: a rank writes frame f+2's parts only after the barrier of frame f+1,
-which every rank reaches after its reads of frame f, so a half is never overwritten while a peer
-still reads it. The barrier orders the stores and the loads: both MPIs synchronize a barrier
-between ranks of one host through shared-memory atomics with release and acquire fences.
+order), as DESIGN.md has it: shared per node, messages between nodes. Each slice is a ring of
+frames (``core.inflight.slots``: 2 in the strict order, 3 at latency 1 and 2, 4 at latency 3): the
+loop's waits let a rank run at most ``held_back_reach`` frames ahead of a peer still reading a
+frame's parts, so a slot is never overwritten while a peer still reads it. The barrier orders the
+stores and the loads: both MPIs synchronize a barrier between ranks of one host through
+shared-memory atomics with release and acquire fences.
 
 The segment is ours, not MPI's (``MPI_Win_allocate_shared``). The host's lowest rank creates a
 file in ``/dev/shm`` and reserves every byte of it up front (``posix_fallocate``), the host's
@@ -21,7 +22,7 @@ MPI 4.1 does not return from a shared-window allocation that fails: under RLIMIT
 never ended.) Before making it, every rank still checks that its file-size limit and the free
 space of ``/dev/shm`` hold its host's segment (``room``), so the reason names the limit.
 
-Layout of a slice half: the rank's parts for its host's other ranks in ``transfers`` order, each
+Layout of a slot: the rank's parts for its host's other ranks in ``transfers`` order, each
 its RGB bytes, then (sort-last) its float32 depth.
 """
 
@@ -140,10 +141,10 @@ class SharedPieces:
     finds no room; it refuses (one line) ranks on several hosts where the user asked for
     ``--exchange shared``."""
 
-    def __init__(self, comm, timeout: float, segments: dict[int, np.ndarray], half: int, with_depth: bool,
+    def __init__(self, comm, timeout: float, segments: dict[int, np.ndarray], slot: int, with_depth: bool,
                  slots: int = 2):
         self.comm, self.timeout, self.me = comm, timeout, comm.Get_rank()
-        self.segments, self.half, self.depth, self.slots = segments, half, with_depth, slots
+        self.segments, self.slot, self.depth, self.slots = segments, slot, with_depth, slots
         self.host = frozenset(segments)  # the job ranks on this rank's host, itself included
         self.near = self.host - {self.me}
         self.name = "shared" if len(self.host) == comm.Get_size() else "shared + messages"
@@ -153,11 +154,11 @@ class SharedPieces:
              asked: bool = True, slots: int = 2, layers: int = 1) -> "tuple[SharedPieces | None, str | None]":
         """The backend, or None and why not (every rank the same). ``asked``: the user chose
         ``--exchange shared``, so ranks on several hosts are an error, not a reason. ``slots``:
-        frames a rank's segment holds at once (2; 3 with frames in flight, ``frames.slots``).
+        frames a rank's segment holds at once (``core.inflight.slots``).
         ``layers``: how many times a rank's pieces may cover the display (the decomposition's)."""
         from mpi4py import MPI
 
-        per_half = size[0] * size[1] * (7 if with_depth else 3) * layers  # a rank's parts: at most its layers
+        per_slot = cls.slot_bytes(size, with_depth, layers)
         K = comm.Get_size()
         node = comm.Split_type(MPI.COMM_TYPE_SHARED)
         try:
@@ -169,7 +170,7 @@ class SharedPieces:
                                     "several (use --exchange messages or auto)")
             if most[0] < 2:
                 return None, "no two ranks share a host"
-            memory, why = host_segment(comm, node, slots * per_half * n, timeout)  # this host's segment
+            memory, why = host_segment(comm, node, slots * per_slot * n, timeout)  # this host's segment
             if why:
                 return None, why
             # every job rank's host (its host's lowest job rank) and node rank
@@ -179,19 +180,32 @@ class SharedPieces:
             mine = np.array([lead[0], at], dtype=np.int64)
             every = np.zeros((K, 2), dtype=np.int64)
             wait_all([comm.Iallgather(mine, every)], timeout, "shared segment")
-            span = slots * per_half
-            segments = {r: memory[every[r, 1] * span:(every[r, 1] + 1) * span]
-                        for r in range(K) if every[r, 0] == lead[0]}
-            return cls(comm, timeout, segments, per_half, with_depth, slots), None
+            places = {r: int(every[r, 1]) for r in range(K) if every[r, 0] == lead[0]}
+            return cls.over(comm, timeout, memory, places, per_slot, with_depth, slots), None
         finally:
             node.Free()
 
+    @staticmethod
+    def slot_bytes(size: tuple[int, int], with_depth: bool, layers: int = 1) -> int:
+        """Bytes of a rank's slot: its parts for its host's other ranks cover the display at most
+        ``layers`` times, colour (and depth) per pixel."""
+        return size[0] * size[1] * (7 if with_depth else 3) * layers
+
+    @classmethod
+    def over(cls, comm, timeout: float, memory: np.ndarray, places: dict[int, int], per_slot: int,
+             with_depth: bool, slots: int) -> "SharedPieces":
+        """The backend over a host's ``memory``: ``places`` maps each job rank on this host to its
+        place on the host, whose ``slots`` slots of ``per_slot`` bytes are its slice."""
+        span = slots * per_slot
+        segments = {r: memory[at * span:(at + 1) * span] for r, at in places.items()}
+        return cls(comm, timeout, segments, per_slot, with_depth, slots)
+
     def _base(self, frame: int) -> int:
-        return (frame % self.slots) * self.half
+        return (frame % self.slots) * self.slot
 
     def _publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
         """Copy the parts of this rank's rendered pieces ``(rgb, z or None)`` that tiles of this
-        host's other ranks need into its segment half, in ``plan`` order (its own tile's parts
+        host's other ranks need into the frame's slot, in ``plan`` order (its own tile's parts
         stay where they are; parts for other hosts leave as messages)."""
         near = self.near
         out = [p for p in plan if p.sender == me and p.receiver in near]  # parts, not objects
