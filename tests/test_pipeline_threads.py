@@ -99,3 +99,16 @@ def test_a_held_back_rank_on_the_shared_segment_composes_one_ranks_render(tmp_pa
         assert (a == b).all(), f"frame {f}: {(a != b).any(axis=2).sum()} pixels differ"
     s = json.loads((tmp_path / name / "summary.json").read_text())
     assert s["config"]["exchange"] == "shared" and s["config"]["latency"] == latency
+
+
+def test_a_timeline_that_cannot_be_written_fails_the_run(tmp_path):
+    """``--timeline`` with timeline.json taken by a folder: every rank ends with the failed
+    write (exit 2 at the door), where it once ended in success with no timeline."""
+    from multigpu.errors import WriteFailed
+
+    out = tmp_path / "o"
+    (out / "timeline.json").mkdir(parents=True)
+    with pytest.raises(WriteFailed, match="timeline.json"):
+        _walk(out, (1, 2), (60, 96), timeline=True)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["frames_written"] == FRAMES and s["frames"] == FRAMES

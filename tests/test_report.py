@@ -90,3 +90,59 @@ def test_a_recorded_path_that_cannot_be_written_is_the_runs_failure(tmp_path, mo
     with redirect_stdout(out):
         record.print_table(summary, "t")
     assert "camera path" not in out.getvalue()
+
+
+def _video_in_subprocess(tmp_path, limit: int, frames: int) -> str:
+    """Write ``frames`` noise frames through ``record.Video`` under a file-size limit (ffmpeg
+    inherits it, as from a full disk); what the writer raised, or 'ok'."""
+    import subprocess
+    import sys
+
+    code = f"""
+import resource, numpy as np
+from pathlib import Path
+from multigpu.errors import WriteFailed
+from multigpu.parallel.record import Video
+resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))
+v = Video(Path({str(tmp_path / 'v.mp4')!r}))
+rng = np.random.default_rng(0)
+try:
+    for _ in range({frames}):
+        v.append(rng.integers(0, 255, (96, 128, 3), dtype=np.uint8))
+    v.close()
+    print('ok')
+except WriteFailed as exc:
+    print('WriteFailed:', exc)
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[-2000:]
+    return res.stdout.strip()
+
+
+def test_a_video_cut_short_is_a_failed_write_and_a_whole_one_is_not(tmp_path):
+    """A truncated mp4 (ffmpeg out of room) once ended the run with exit 0: its encoder exits
+    quietly. ``Video`` counts the frames back and names the file; a whole video passes."""
+    got = _video_in_subprocess(tmp_path, 5000, 40)
+    assert got.startswith(f"WriteFailed: cannot write {tmp_path / 'v.mp4'}: "), got
+    assert len(got.splitlines()) == 1
+    assert _video_in_subprocess(tmp_path, 1 << 30, 12) == "ok"
+
+
+def test_a_video_frame_the_encoder_refuses_stops_the_run_as_a_failed_write(tmp_path, monkeypatch):
+    """The encoder's own error on a frame (imageio raises its own types) is kept as the run's
+    failed write, so every rank stops after the next frame; nothing more is written."""
+    from multigpu.parallel.framelog import FrameLog
+    from multigpu.parallel.outdir import OutputDir
+    from multigpu.parallel.record import RunRecord
+
+    record = RunRecord(OutputDir(tmp_path / "o"), 1, 2, {}, lambda: None, True, False, False)
+
+    def broken(img):
+        raise OSError("[Errno 32] Broken pipe\n\nFFMPEG COMMAND:\nffmpeg ...")
+
+    monkeypatch.setattr(record.video.writer, "append_data", broken)
+    log = FrameLog.__new__(FrameLog)
+    log.record = record
+    log.write(record.image, 0, np.zeros((48, 64, 3), dtype=np.uint8), [], False)
+    assert str(record.failed) == f"cannot write {tmp_path / 'o' / 'mosaic.mp4'}: [Errno 32] Broken pipe"
+    record.close(False, "an output could not be written (rank 0)")

@@ -28,6 +28,56 @@ from multigpu.parallel.tally import RunningSummary, summarize_file, tally_file
 from multigpu.scene.models import axis_name
 
 
+class Video:
+    """The mosaics as an mp4 (imageio's ffmpeg writer). The encoder's own errors, on a frame or
+    at the end (a full disk, an encoder that died), become one ``WriteFailed`` naming the file: the
+    run then stops as for any output that cannot be written, and a truncated video never ends
+    in exit 0. ffmpeg that fails to write its file still exits quietly here, so ``close`` reads
+    the finished file's frames back (a stream copy, no decoding) and counts them."""
+
+    def __init__(self, path: Path):
+        import imageio.v2 as imageio
+
+        self.path, self.frames = path, 0
+        try:
+            self.writer = imageio.get_writer(str(path), fps=30, macro_block_size=1)
+        except Exception as exc:  # imageio's and ffmpeg's own error types
+            raise self._failed(exc) from None
+
+    def _failed(self, exc: Exception) -> WriteFailed:
+        if isinstance(exc, OSError) and exc.strerror:
+            return WriteFailed.of(self.path, exc)
+        first = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), exc.__class__.__name__)
+        return WriteFailed(f"cannot write {self.path}: {first}")
+
+    def append(self, img: np.ndarray) -> None:
+        try:
+            self.writer.append_data(img)
+        except Exception as exc:
+            raise self._failed(exc) from None
+        self.frames += 1
+
+    def close(self) -> None:
+        """Finish the file (the encoder flushes and exits here: its failure is the file's)."""
+        writer, self.writer = self.writer, None
+        if writer is None:
+            return
+        try:
+            writer.close()
+        except Exception as exc:
+            raise self._failed(exc) from None
+        if self.frames:
+            from imageio_ffmpeg import count_frames_and_secs
+
+            try:
+                found = count_frames_and_secs(str(self.path))[0]
+            except Exception:  # ffmpeg cannot read it: the file was cut short
+                found = None
+            if found != self.frames:
+                whole = "it cannot be read back" if found is None else f"it holds {found} of {self.frames} frames"
+                raise WriteFailed(f"cannot write {self.path}: the encoder did not finish it ({whole})")
+
+
 class RunRecord:
     """What a run leaves in ``--out``; ``config`` and ``report`` go into summary.json."""
 
@@ -58,10 +108,8 @@ class RunRecord:
         self.video = self.bar = None
         self.summary(complete=False)
         if video:
-            import imageio.v2 as imageio
-
             name = f"mosaic-r{restarts()}.mp4" if resume_at else "mosaic.mp4"  # an mp4 cannot be resumed
-            self.video = imageio.get_writer(str(out.path / name), fps=30, macro_block_size=1)
+            self.video = Video(out.path / name)
         if progress:
             from tqdm import tqdm
 
@@ -110,7 +158,7 @@ class RunRecord:
             if self.overlay:
                 save_png(overlay(img, rects), self.out.path / "mosaic" / f"frame_{f:05d}_partition.png")
         if self.video is not None:
-            self.video.append_data(img)
+            self.video.append(img)
 
     def summary(self, complete: bool, stopped_by: str | None = None) -> dict:
         """Rewrite summary.json from the tally, the rows since the last checkpoint added first."""
@@ -136,6 +184,8 @@ class RunRecord:
             if thing is not None:
                 try:
                     thing.close()
+                except WriteFailed as exc:  # a file that could not be finished (the video's encoder)
+                    self.failed = self.failed or exc
                 except Exception:  # closing must not hide the run's own error
                     pass
         try:
