@@ -146,3 +146,26 @@ def test_a_video_frame_the_encoder_refuses_stops_the_run_as_a_failed_write(tmp_p
     log.write(record.image, 0, np.zeros((48, 64, 3), dtype=np.uint8), [], False)
     assert str(record.failed) == f"cannot write {tmp_path / 'o' / 'mosaic.mp4'}: [Errno 32] Broken pipe"
     record.close(False, "an output could not be written (rank 0)")
+
+
+@pytest.mark.parametrize("decomposition", ["screen", "db", "bins", "hybrid"])
+def test_a_run_is_titled_and_summarized_by_what_divides_its_frames(decomposition):
+    """The title and summary.json's ``balance`` follow the decomposition: hybrid balances its
+    regions with ``--balance`` (it was titled "db (... ranges)" with no balance)."""
+    from types import SimpleNamespace
+
+    from multigpu.config import WalkConfig
+    from multigpu.decompositions import REGISTRY
+    from multigpu.parallel.record import config_doc, run_title
+
+    cfg = WalkConfig(decomposition=decomposition, balance="cross")
+    scene = SimpleNamespace(name="plant", n_triangles=10, n_objects=2, meta={})
+    place = [{"host": "a", "egl_device": None}]
+    doc = config_doc(cfg, scene, {"seconds": 0.0, "cached": False}, 4, place, "scissor")
+    title = run_title(cfg, scene)
+    assert title.split("), ")[-1].split()[0].startswith(("balance=", decomposition))
+    if decomposition in ("screen", "hybrid"):
+        assert REGISTRY[decomposition].balanced and doc["balance"] == "cross" and "balance=cross" in title
+    else:
+        assert not REGISTRY[decomposition].balanced and doc["balance"] is None and "balance" not in title
+    assert ("hybrid" in title) == (decomposition == "hybrid") and ("db (" in title) == (decomposition == "db")

@@ -18,6 +18,7 @@ from multigpu.core.work import Work
 @runtime_checkable
 class Decomposition(Protocol):
     name: ClassVar[str]
+    balanced: ClassVar[bool]  # whether ``--balance``'s strategy divides the frame (summary, title)
     depth: ClassVar[bool]  # pieces carry depth and are composited by the nearest fragment
     layers: ClassVar[int]  # how many times a rank's pieces may cover the display (the exchange's room)
     needs_coverage: bool  # whether ``plan`` wants per-object silhouette coverage

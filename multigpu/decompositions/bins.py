@@ -16,6 +16,7 @@ from multigpu.core.work import Work
 
 class Bins:
     name = "bins"
+    balanced = False  # whether ``--balance`` chooses how it divides a frame
     depth = False
     layers = 1
     needs_coverage = False

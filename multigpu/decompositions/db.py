@@ -41,6 +41,7 @@ class Database:
     """Contiguous draw-order ranges of objects per rank, depth-composited onto the tiles."""
 
     name = "db"
+    balanced = False  # whether ``--balance`` chooses how it divides a frame
     depth = True
     layers = 1
     needs_coverage = False

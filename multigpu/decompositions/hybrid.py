@@ -46,6 +46,7 @@ class Hybrid:
     """Sort-first regions for most objects, the wide objects in depth-composited ranges."""
 
     name = "hybrid"
+    balanced = True  # whether ``--balance`` chooses how it divides a frame
     depth = True
     layers = 2  # a rank's pieces may cover the display twice: its region and its depth piece
 

@@ -13,6 +13,7 @@ class Screen:
     """Sort-first balancing, sort-last region exchange, around any registered strategy."""
 
     name = "screen"
+    balanced = True  # whether ``--balance`` chooses how it divides a frame
     depth = False
     layers = 1
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from multigpu.config import SUMMARY_EVERY
 from multigpu.core import jit
+from multigpu.decompositions import REGISTRY
 from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
 from multigpu.parallel.mosaic import save_png
@@ -246,7 +247,7 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
     return {"grid": list(cfg.grid), "tile": list(cfg.tile), "size": list(cfg.size), "strips": cfg.strips,
             "decomposition": cfg.decomposition, "latency": cfg.latency, "target_fps": cfg.target_fps,
             "render_scale": cfg.render_scale, "lod_error": cfg.lod_error,
-            "balance": cfg.balance if cfg.decomposition == "screen" else None,
+            "balance": cfg.balance if REGISTRY[cfg.decomposition].balanced else None,
             "bin_size": cfg.bin_size if cfg.decomposition == "bins" else None,
             "bin_pattern": cfg.bin_pattern if cfg.decomposition == "bins" else None,
             "db_ranges": cfg.db_ranges if cfg.decomposition == "db" else None, "bounds": cfg.bounds,
@@ -271,6 +272,8 @@ def run_title(cfg, scene) -> str:
     """The printout's first line: the scene, the wall and how frames are divided."""
     if cfg.decomposition == "screen":
         what = f"balance={cfg.balance}"
+    elif cfg.decomposition == "hybrid":
+        what = f"hybrid (balance={cfg.balance}, wide objects depth-composited)"
     elif cfg.decomposition == "bins":
         what = f"bins {cfg.bin_pattern} {cfg.bin_size}px"
     else:
