@@ -112,3 +112,41 @@ def test_a_timeline_that_cannot_be_written_fails_the_run(tmp_path):
         _walk(out, (1, 2), (60, 96), timeline=True)
     s = json.loads((out / "summary.json").read_text())
     assert s["frames_written"] == FRAMES and s["frames"] == FRAMES
+
+
+def test_a_models_warnings_reach_the_console_once(tmp_path, capsys):
+    """An OBJ whose map_Kd names a missing image: the walkthrough says so once on the console
+    (it ran silently, the warning only in summary.json)."""
+    (tmp_path / "m.mtl").write_text("newmtl gone\nKd 0.5 0.1 0.1\nmap_Kd missing.png\n")
+    (tmp_path / "m.obj").write_text("mtllib m.mtl\no a\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\n"
+                                    "vt 1 1\nvt 0 1\nusemtl gone\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+    cfg = WalkConfig(scene=SceneSpec(model=str(tmp_path / "m.obj")), frames=2, grid=(1, 2), tile=(40, 40),
+                     mosaic_every=0, progress=False, out=str(tmp_path / "o"), timeout=60.0, exchange="messages")
+    run_ranks(2, lambda comm: walkthrough.run(cfg, comm, _Job()))
+    warned = [ln for ln in capsys.readouterr().err.splitlines() if "missing.png" in ln]
+    assert len(warned) == 1 and warned[0].startswith(f"multigpu: warning: {tmp_path / 'm.obj'}: "), warned
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert any("missing.png" in w for w in s["config"]["scene"]["warnings"])
+
+
+def test_a_setup_that_fails_after_the_exchange_lets_it_go(tmp_path, monkeypatch):
+    """``frame_setup.build``: a failure after the exchange backend is made (here the bounds'
+    projection) releases it, so no host segment outlives a failed setup."""
+    from multigpu.parallel import frame_setup
+
+    closed = []
+    made = frame_setup.make_exchange
+
+    def exchange(cfg, comm, planner):
+        backend, why = made(cfg, comm, planner)
+        monkeypatch.setattr(backend, "close", lambda collective=True: closed.append(collective), raising=False)
+        return backend, why
+
+    def projection(*args):
+        raise RuntimeError("no projection")
+
+    monkeypatch.setattr(frame_setup, "make_exchange", exchange)
+    monkeypatch.setattr(frame_setup, "make_projection", projection)
+    with pytest.raises(RuntimeError, match="no projection"):
+        _walk(tmp_path / "o", (1, 1), (40, 40))
+    assert closed == [False]

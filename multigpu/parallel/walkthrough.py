@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import socket
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +33,7 @@ from multigpu.parallel.fault import fault
 from multigpu.parallel.frame_setup import build
 from multigpu.parallel.frames import Frames
 from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.recovery import mark
+from multigpu.parallel.recovery import mark, restarts
 from multigpu.scene.models import load_scene
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
@@ -200,11 +201,22 @@ def _first(cfg: WalkConfig) -> tuple:
             check_record(cfg.record)
         scene, path, load_info = load_world(cfg)
         mark("scene")
+        warn_once(cfg, scene)
         _check_path(cfg, scene, path)
         shared = ensure_buffers(load_info.get("cache"), scene)  # once, before the others map it
     except InputError as exc:
         return str(exc), out, scene, path, load_info, shared
     return None, out, scene, path, load_info, shared
+
+
+def warn_once(cfg: WalkConfig, scene) -> None:
+    """The model's warnings (a texture missing, faces dropped) on the console, one line each, at
+    the job's first start (a restarted job has said them): they are in summary.json too."""
+    if restarts():
+        return
+    name = cfg.scene.model or scene.name
+    for w in scene.meta.get("warnings", []):
+        print(f"multigpu: warning: {name}: {w}", file=sys.stderr, flush=True)
 
 
 def _presenter(cfg: WalkConfig, rank: int):
