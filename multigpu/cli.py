@@ -123,6 +123,8 @@ def _tool_parsers(sub) -> None:
     mv.add_argument("--display", help="X display (default $DISPLAY)")
     mv.add_argument("--position", default="0x0", help="window position XxY on that display (default 0x0)")
     mv.add_argument("--port", type=int, default=0, help="TCP port to listen on (default: any, printed)")
+    mv.add_argument("--listen", default="", help="address to listen on (default: every interface; a connection "
+                                                 "must bring the token the launcher writes on standard input)")
     mv.set_defaults(run=tools.monitor_view)
     t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
     t.add_argument("grid")

@@ -14,10 +14,17 @@ def wall_test(a) -> int:
 
 
 def monitor_view(a) -> int:
+    import sys
+
     from multigpu.config import parse_pair
     from multigpu.display.remote import serve
 
-    serve(a.display, parse_pair(a.position, "--position"), a.port)
+    token = sys.stdin.readline().strip()  # the launcher's, on standard input (not on a command line)
+    if not token:
+        print("multigpu monitor-view: error: no token on standard input (the launcher writes one)",
+              file=sys.stderr)
+        return 2
+    serve(a.display, parse_pair(a.position, "--position"), token, a.port, a.listen)
     return 0
 
 

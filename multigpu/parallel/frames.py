@@ -142,7 +142,7 @@ class Frames:
             if self.live is not None:
                 seen = self.live.show_monitor(self.back, work, control, rows)
                 if seen and not why:
-                    return swapped, STOP_FLAG[f"{seen} (the monitor)"]
+                    return swapped, STOP_FLAG.get(f"{seen} (the monitor)", STOP_FLAG["window closed (the monitor)"])
         return swapped, STOP_FLAG.get(why, 0)
 
     def _camera(self, f: int, t: Timer):

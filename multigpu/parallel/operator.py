@@ -2,14 +2,16 @@
 
 Where the wall file's ``monitor`` names a ``host`` (the operator's desk PC) and the walkthrough
 asks for ``--monitor``, the launcher starts ``multigpu monitor-view`` there through the remote
-shell (as it starts the ranks; on this machine, directly) before the job, reads the port it
-listens on, and tells rank 0 where to find it (``MULTIGPU_MONITOR``). The view outlives a
+shell (as it starts the ranks; on this machine, directly) before the job, writes a random token on
+its standard input (never on a command line), reads the port it listens on, and tells rank 0 where
+to find it (``MULTIGPU_MONITOR``) and the token to bring (``remote.TOKEN_ENV``). The view outlives a
 restart of the wall (``--recover``) and ends with the launcher.
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 import select
 import shlex
 import shutil
@@ -43,23 +45,32 @@ def own_pc(argv: list[str]) -> dict | None:
 
 def start_view(on: dict) -> subprocess.Popen:
     """Start the view on its host; its process, once it listens (``ENV`` set to where)."""
+    from multigpu.display.remote import TOKEN_ENV
     from multigpu.parallel.hosts import is_this_machine
 
     x, y = on["position"]
     cmd = [sys.executable, "-m", "multigpu", "monitor-view", "--position", f"{x}x{y}",
-           *(["--display", on["display"]] if on.get("display") else [])]
+           *(["--display", on["display"]] if on.get("display") else []),
+           *(["--listen", on["address"]] if on.get("address") else [])]
     host = on["host"]
     if not is_this_machine(host):
         rsh = os.environ.get("MULTIGPU_RSH")
         shell = [shutil.which(rsh) or rsh] if rsh else ["ssh", "-o", "BatchMode=yes"]
         cmd = [*shell, host, shlex.join(cmd)]
-    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True, start_new_session=True)
+    token = secrets.token_urlsafe(24)
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        proc.stdin.write(token + "\n")
+        proc.stdin.close()
+    except OSError:  # the view ended at once: said below
+        pass
     ready, _, _ = select.select([proc.stdout], [], [], START)
     line = proc.stdout.readline().split() if ready else []
     if len(line) != 2 or line[0] != "port":
         stop_view(proc)
         raise InputError.of("monitor", f"the operator's view on {host} did not start ({shlex.join(cmd)})")
     os.environ[ENV] = f"{on.get('address', host)}:{line[1]}"
+    os.environ[TOKEN_ENV] = token
     return proc
 
 

@@ -252,9 +252,9 @@ def _monitor(cfg: WalkConfig, presenter):
     from multigpu.parallel.live import monitor_size
 
     if os.environ.get("MULTIGPU_MONITOR"):
-        from multigpu.display.remote import RemoteMonitor
+        from multigpu.display.remote import TOKEN_ENV, RemoteMonitor
 
-        return RemoteMonitor(os.environ["MULTIGPU_MONITOR"])
+        return RemoteMonitor(os.environ["MULTIGPU_MONITOR"], os.environ.get(TOKEN_ENV, ""))
 
     where = cfg.monitor if cfg.monitor != MONITOR_BESIDE else (cfg.canvas.size[0], 0)
     return Monitor(monitor_size(cfg.canvas.size, cfg.canvas.tiles(), cfg.tile), where, presenter)
