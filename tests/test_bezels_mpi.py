@@ -4,7 +4,6 @@ decomposition, at 2x2 and 1x3; the mullion pixels are never rendered."""
 
 import csv
 
-import numpy as np
 import pytest
 from mpirun import SMALL, read_png, run_mpi
 
@@ -57,4 +56,4 @@ def test_bezel_walls_equal_the_canvas_render_with_mullions_black(tmp_path, refer
             x0, y0, x1, y1 = (int(r[k]) for k in ("x0", "y0", "x1", "y1"))
             if x1 > x0 and kind in ("cross", "strips"):
                 assert not hidden[y0, x0] and not hidden[y1 - 1, x1 - 1]
-    assert np.isfinite(float(r["swap_skew_ms"]))
+            assert float(r["swap_skew_ms"]) == 0.0 and float(r["swap_ms"]) == 0.0  # headless: nothing swaps

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from multigpu.core import jit
 from multigpu.core.balance import partition, tree_partition
 from multigpu.core.regions import pixel_spans
 from multigpu.core.splits import fill_prefix, strip_chooser
@@ -392,8 +391,6 @@ def test_cross_segment_helpers_take_at_least_min_help(compiled):
     the segment's only helper, and the pieces still tile the display."""
     from multigpu.core.work import from_partition, pieces_tile_display
 
-    if compiled and not jit.available():
-        pytest.skip("numba is not installed")
     rects, tris = workload(400, seed=21)
     size = (128, 128)
     rng = np.random.default_rng(5)
@@ -436,8 +433,6 @@ def test_cross_segment_pieces_of_a_row_join_into_one_pass_per_rank(compiled):
     along each row joins the same way (most ranks render one rect)."""
     from multigpu.core.work import from_partition, pieces_tile_display
 
-    if compiled and not jit.available():
-        pytest.skip("numba is not installed")
     rects, tris = workload(500, seed=23)
     rng = np.random.default_rng(8)
     for grid, size in (((1, 4), (256, 64)), ((2, 2), (128, 128))):

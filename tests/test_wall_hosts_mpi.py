@@ -35,10 +35,7 @@ def _pcs(tmp_path, sizes):
         try:
             for name, size in zip("ab", sizes):
                 enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
-                try:
-                    servers.append(start_xvfb(size, prefix=enter))
-                except RuntimeError as exc:
-                    pytest.skip(str(exc))
+                servers.append(start_xvfb(size, prefix=enter))  # tools present (need_tools): a failure fails
             yield hosts, [name for _, name in servers]
         finally:
             for proc, _ in servers:
@@ -94,7 +91,7 @@ def test_each_host_shows_its_tile_of_the_mosaic(tmp_path, two_pcs, mpiexec_env):
     assert proc.returncode == 0, err[-2000:]
     s = json.loads((out / "summary.json").read_text())
     assert [r["host"] for r in s["config"]["ranks"]] == ["a", "b"]
-    assert set(s["present"]["swap_skew_ms_by_host"]) == {"a", "b"}  # each PC's own skew (one rank each: 0)
+    assert s["present"]["swap_skew_ms_by_host"] == {"a": 0.0, "b": 0.0}  # each PC's own skew (one rank each: 0)
     mosaic = read_png(out / "mosaic" / "frame_00000.png")
     assert mosaic.shape[1] == 2 * TILE[0] + 9 and mosaic[:, TILE[0]:TILE[0] + 9].max() == 0  # the mullion
     assert (shots[0] == mosaic[:, :TILE[0]]).all()
@@ -166,10 +163,7 @@ def test_the_operators_view_on_a_pc_of_its_own(tmp_path, mpiexec_env):
         try:
             for name, size in (("a", (2 * TILE[0], TILE[1])), ("desk", (320, 240))):
                 enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
-                try:
-                    servers.append(start_xvfb(size, prefix=enter))
-                except RuntimeError as exc:
-                    pytest.skip(str(exc))
+                servers.append(start_xvfb(size, prefix=enter))  # tools present (need_tools): a failure fails
             xa, xd = (name for _, name in servers)
             wall = tmp_path / "wall.json"
             wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
