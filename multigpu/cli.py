@@ -240,7 +240,12 @@ def _walkthrough(a) -> int:
     from multigpu.parallel.hosts import tile_comm
     from multigpu.parallel.job import Interrupted, Job, collective_exit, teardown_barrier
 
-    comm = tile_comm(MPI.COMM_WORLD, getattr(a, "wall", None), dark_tiles(a))
+    try:
+        comm = tile_comm(MPI.COMM_WORLD, getattr(a, "wall", None), dark_tiles(a))
+    except InputError as exc:  # agreed on every rank (a wall file one host cannot read): one line, all exit 2
+        if MPI.COMM_WORLD.Get_rank() == 0:
+            print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
+        collective_exit(2)
     job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else 30.0)
     job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:

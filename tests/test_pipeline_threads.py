@@ -150,3 +150,31 @@ def test_a_setup_that_fails_after_the_exchange_lets_it_go(tmp_path, monkeypatch)
     with pytest.raises(RuntimeError, match="no projection"):
         _walk(tmp_path / "o", (1, 1), (40, 40))
     assert closed == [False]
+
+
+def test_a_wall_file_one_host_cannot_read_is_every_ranks_error(tmp_path, monkeypatch):
+    """``tile_comm``: the wall file missing on one host (here rank 1's) is one InputError on every
+    rank naming that host, agreed before any split (that host once skipped the split the others
+    blocked in). The stand-in communicator has no Split: reaching it fails the test."""
+    from multigpu import wall
+    from multigpu.errors import InputError
+    from multigpu.parallel.hosts import tile_comm
+
+    path = tmp_path / "wall.json"
+    path.write_text(json.dumps({"grid": "1x2", "tile": "40x40", "displays": [
+        {"rank": 0, "host": "a"}, {"rank": 1, "host": "a"}]}))
+    load = wall.load_wall
+
+    def on_host(p):
+        if threading.current_thread().name == "rank-1":
+            raise InputError(f"--wall: cannot read {p}: No such file or directory")
+        return load(p)
+
+    monkeypatch.setattr(wall, "load_wall", on_host)
+    with pytest.raises(InputError) as err:
+        run_ranks(2, lambda comm: tile_comm(comm, str(path)))
+    assert str(err.value).startswith(f"--wall: cannot read {path}: No such file or directory (on host ")
+    assert "rank 1; the wall file must be at the same path on every host" in str(err.value)
+    monkeypatch.setattr(wall, "load_wall", load)
+    got = run_ranks(2, lambda comm: tile_comm(comm, str(path)) is comm)  # read everywhere, no renumbering
+    assert got == [True, True]

@@ -100,11 +100,11 @@ def main(path: str, frames: int | None) -> int:
     from multigpu.parallel.hosts import tile_comm
     from multigpu.parallel.job import collective_exit
 
-    comm = tile_comm(MPI.COMM_WORLD, path)
     try:
+        comm = tile_comm(MPI.COMM_WORLD, path)
         got = run(path, comm, frames)
     except InputError as exc:
-        if comm.Get_rank() == 0:
+        if MPI.COMM_WORLD.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
         collective_exit(2)
         return 2
