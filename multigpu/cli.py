@@ -31,7 +31,7 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (--help lists the flags)\n")
 
     def _print_message(self, message, file=None):
-        from multigpu.parallel.job import launcher_rank
+        from multigpu.rank.job import launcher_rank
 
         if launcher_rank() == 0:
             super()._print_message(message, file)
@@ -203,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors and --help: the same on every rank
         if "mpi4py.MPI" in sys.modules:  # under `python -m mpi4py`: exit together, no MPI_Abort
-            from multigpu.parallel.job import collective_exit
+            from multigpu.rank.job import collective_exit
 
             collective_exit(exc.code if isinstance(exc.code, int) else 0)
         raise
@@ -237,8 +237,8 @@ def _walkthrough(a) -> int:
     from mpi4py import MPI
 
     from multigpu.flags import dark_tiles
-    from multigpu.parallel.hosts import tile_comm
-    from multigpu.parallel.job import Interrupted, Job, collective_exit, teardown_barrier
+    from multigpu.rank.job import Interrupted, Job, collective_exit, teardown_barrier
+    from multigpu.rank.tiles import tile_comm
 
     try:
         comm = tile_comm(MPI.COMM_WORLD, getattr(a, "wall", None), dark_tiles(a))
@@ -250,7 +250,7 @@ def _walkthrough(a) -> int:
     job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:
         cfg = walk_config(a)
-        from multigpu.parallel.walkthrough import run
+        from multigpu.rank.walkthrough import run
 
         with job:
             run(cfg, comm, job)
@@ -280,8 +280,8 @@ def _end_failed_job(comm, job, exc: BaseException) -> None:
     """
     import time
 
-    from multigpu.parallel.exchange import PeerTimeout
-    from multigpu.parallel.job import ABORT_PAUSE, FAILURE_GRACE, Interrupted, PeerFailed, PeerStalled
+    from multigpu.rank.exchange import PeerTimeout
+    from multigpu.rank.job import ABORT_PAUSE, FAILURE_GRACE, Interrupted, PeerFailed, PeerStalled
 
     rank = comm.Get_rank()
     consequence = isinstance(exc, (PeerTimeout, PeerFailed))

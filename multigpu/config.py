@@ -252,7 +252,7 @@ class WalkConfig:
                              must="must be >= 0 seconds (0: off)", help=(
         "seconds without a heartbeat before a rank counts as stopped and the job ends (0: off)"))
     progress: bool = option(True, group=CONTROL, flag="--no-progress", negate=True, help="no progress bar")
-    # recovery by relaunch (parallel/recovery.py): restarts allowed within its WINDOW (None: 3 with windows, an
+    # recovery by relaunch (records/recovery.py): restarts allowed within its WINDOW (None: 3 with windows, an
     # unattended wall heals; 0 headless, where a failure should end a measurement), and the path frame a restart
     # resumes at, continuing the run in --out
     recover: int | None = option(None, group=CONTROL, metavar="N", type=int, valid=lambda v: 0 <= v <= 100,

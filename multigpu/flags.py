@@ -85,7 +85,7 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
     from multigpu.options import add_flags
 
     add_flags(w, WalkConfig, GROUPS)
-    h = w.add_argument_group("hosts (the launcher's: launch/walkthrough, python -m multigpu.parallel.mpirun)")
+    h = w.add_argument_group("hosts (the launcher's: launch/walkthrough, python -m multigpu.launcher.mpirun)")
     h.add_argument("--hosts", metavar="H:N,...", help="place the ranks on these hosts in order, N each (e.g. a:2,b:2)")
     h.add_argument("--hostfile", metavar="FILE", help="hosts one per line: HOST, HOST:N or HOST slots=N")
 
@@ -101,7 +101,7 @@ def walk_config(a):
     for name in ("hosts", "hostfile"):
         if getattr(a, name, None) is not None:
             raise InputError(f"--{name} places the ranks when the job starts: give it to launch/walkthrough or "
-                             "python -m multigpu.parallel.mpirun, or place them with your mpiexec's own flags")
+                             "python -m multigpu.launcher.mpirun, or place them with your mpiexec's own flags")
     wall = load_wall(a.wall) if a.wall else Wall("")
     given = from_flags(WalkConfig, a)
     grid = given.pop("grid", None) or wall.grid or WalkConfig.grid

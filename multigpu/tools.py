@@ -8,7 +8,7 @@ from multigpu.flags import spec
 
 
 def wall_test(a) -> int:
-    from multigpu.parallel.walltest import main as wall_test
+    from multigpu.rank.walltest import main as wall_test
 
     return wall_test(a.file, a.frames)
 

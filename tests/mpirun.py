@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multigpu.parallel.mpirun import JobTimeout, find_launcher, launcher_for, openmpi_on_path, run_multigpu
+from multigpu.launcher.mpirun import JobTimeout, find_launcher, launcher_for, openmpi_on_path, run_multigpu
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--triangles", "20000", "--no-progress"]
@@ -40,9 +40,9 @@ def run_mpi(n: int, args: list[str], timeout: float = 120, env: dict | None = No
 
 
 def start_launcher(args: list[str], env: dict) -> subprocess.Popen:
-    """``python -m multigpu.parallel.mpirun ARGS`` as a user starts it (its own process group,
+    """``python -m multigpu.launcher.mpirun ARGS`` as a user starts it (its own process group,
     output captured), ``env`` over this process's environment."""
-    return subprocess.Popen([sys.executable, "-m", "multigpu.parallel.mpirun", *args], cwd=ROOT,
+    return subprocess.Popen([sys.executable, "-m", "multigpu.launcher.mpirun", *args], cwd=ROOT,
                             env={**os.environ, **env}, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
 

@@ -1,14 +1,14 @@
-"""The frame loop's edges behind their declared interfaces (parallel/backends.py): every exchange
+"""The frame loop's edges behind their declared interfaces (rank/backends.py): every exchange
 backend and every projection has the protocol's methods with the protocol's parameters."""
 
 import inspect
 
 import pytest
 
-from multigpu.parallel.backends import Exchange, Projection
-from multigpu.parallel.composite import Messages
-from multigpu.parallel.projection import EachRank, SharedProjection
-from multigpu.parallel.shared import SharedPieces
+from multigpu.rank.backends import Exchange, Projection
+from multigpu.rank.composite import Messages
+from multigpu.rank.projection import EachRank, SharedProjection
+from multigpu.rank.shared import SharedPieces
 
 
 def _methods(protocol) -> dict[str, list[str]]:
@@ -26,7 +26,7 @@ def test_backend_satisfies_its_protocol(protocol, cls):
 
 
 def test_each_rank_projects_in_the_project_phase():
-    from multigpu.parallel.timer import Timer
+    from multigpu.rank.timer import Timer
 
     class Planner:
         def frame(self, camera):

@@ -1,4 +1,4 @@
-"""A wall that goes on without a PC (``--dark-tiles``, ``parallel/relaunch.py``): its tiles black,
+"""A wall that goes on without a PC (``--dark-tiles``, ``launcher/relaunch.py``): its tiles black,
 every rank sharing the live ones, bit for bit a one-rank render with those tiles black; and on
 two simulated hosts, under MPICH and Open MPI, a host that goes down and stays down: the
 launcher restarts the wall on the other host with the lost tiles dark, then takes the host back
@@ -55,7 +55,7 @@ def test_a_host_that_stays_down_leaves_its_tiles_dark_until_it_answers(tmp_path,
     with SimHosts(["a", "b"], tmp_path / "hosts") as hosts:
         env = {**os.environ, **hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache"), "MULTIGPU_MPIEXEC": launcher.path,
                "LP_NUM_THREADS": "1", "MULTIGPU_REJOIN_EVERY": "2"}
-        cmd = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "4", "--hosts", "a:2,b:2", "walkthrough",
+        cmd = [sys.executable, "-m", "multigpu.launcher.mpirun", "-n", "4", "--hosts", "a:2,b:2", "walkthrough",
                *SMALL, "--frames", str(frames), "--grid", "2x2", "--tile", f"{W // 2}x{H // 2}", "--mosaic-every",
                "25", "--no-overlay", "--out", str(out), "--recover", "2", "--liveness", "5"]
         proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

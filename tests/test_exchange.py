@@ -12,8 +12,8 @@ import pytest
 from threadcomm import World
 
 from multigpu.core.work import Work, transfers
-from multigpu.parallel.composite import Messages
-from multigpu.parallel.shared import SharedPieces, attach, reserve, room
+from multigpu.rank.composite import Messages
+from multigpu.rank.shared import SharedPieces, attach, reserve, room
 
 
 def _cuts(n: int, size: int, rng) -> list[int]:
@@ -91,7 +91,7 @@ def test_room_sees_the_file_size_limit_and_free_space():
     got = room(huge)
     assert got is not None and ("/dev/shm" in got or "file-size limit" in got)
     code = ("import resource; resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000)); "
-            "from multigpu.parallel.shared import room; print(room(30000)); print(room(10000))")
+            "from multigpu.rank.shared import room; print(room(30000)); print(room(10000))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout.split("\n")
     assert "file-size limit (20000 bytes)" in out[0] and "30000-byte segment" in out[0] and out[1] == "None"
 
@@ -108,7 +108,7 @@ def test_reserve_makes_a_file_two_mappings_share_and_fails_cleanly(tmp_path):
     a[12345:12348] = (7, 8, 9)
     assert b.flags.writeable and b[12345:12348].tolist() == [7, 8, 9]
     code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000)); "
-            "from multigpu.parallel.shared import reserve; print(reserve(30000, sys.argv[1])[1])")
+            "from multigpu.rank.shared import reserve; print(reserve(30000, sys.argv[1])[1])")
     out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == f"cannot reserve 30000 bytes in {tmp_path}: File too large", out.stderr
     assert not list(tmp_path.iterdir())

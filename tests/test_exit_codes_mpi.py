@@ -1,5 +1,5 @@
 """Exit codes through every launcher: ``launch/walkthrough``, ``python -m
-multigpu.parallel.mpirun`` and raw ``mpiexec``, for MPICH and Open MPI. A bad flag gives 2, a
+multigpu.launcher.mpirun`` and raw ``mpiexec``, for MPICH and Open MPI. A bad flag gives 2, a
 failing rank 1, SIGINT (Ctrl-C) 130 and SIGTERM 143, and summary.json says what happened.
 Raw Open MPI ``mpiexec`` cannot carry a signal's code (it forwards Ctrl-C as SIGTERM and
 returns 1 itself; docs/USAGE.md says so): our two launchers return the documented codes with
@@ -16,7 +16,7 @@ import pytest
 from mpirun import ROOT, SMALL
 
 from multigpu.config import WalkConfig
-from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
+from multigpu.launcher.mpirun import find_launcher, launcher_for, openmpi_on_path
 
 pytestmark = pytest.mark.mpi
 ENTRIES = ["script", "module", "raw"]
@@ -40,7 +40,7 @@ def command(entry: str, launcher, args: list[str]) -> list[str]:
     if entry == "script":
         return [str(ROOT / "launch" / "walkthrough"), *args]
     if entry == "module":
-        return [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", "walkthrough", *args]
+        return [sys.executable, "-m", "multigpu.launcher.mpirun", "-n", "2", "walkthrough", *args]
     return launcher.command(2, ["walkthrough", *args])
 
 

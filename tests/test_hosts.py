@@ -9,8 +9,8 @@ import pytest
 from mpirun import ROOT
 
 from multigpu.errors import InputError
-from multigpu.parallel.hosts import parse_hosts, placement, read_hostfile, spec
-from multigpu.parallel.mpirun import Launcher
+from multigpu.launcher.hosts import parse_hosts, placement, read_hostfile, spec
+from multigpu.launcher.mpirun import Launcher
 
 
 def test_host_lists_and_files_of_either_mpi_give_one_placement(tmp_path):
@@ -71,7 +71,7 @@ def test_each_mpi_gets_its_own_placement_flags(tmp_path):
                                         (["--hostfile", "/no/such/file", "walkthrough"], "cannot read it"),
                                         (["--hosts"], "--hosts needs a value")])
 def test_the_launcher_refuses_bad_placement_before_starting_anything(argv, want):
-    res = subprocess.run([sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "2", *argv],
+    res = subprocess.run([sys.executable, "-m", "multigpu.launcher.mpirun", "-n", "2", *argv],
                          capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and want in res.stderr, res.stderr
 
@@ -90,7 +90,7 @@ def test_llvmpipe_gets_a_raster_thread_only_where_a_core_is_spare(monkeypatch, h
 def test_a_remote_shell_that_fails_is_one_line_naming_host_and_shell(tmp_path, capsys, monkeypatch):
     """``MULTIGPU_RSH=/bin/false ... --hosts a:2,b:2``: refused before any rank starts, exit 2,
     one line naming the first host and the shell (not the MPI launcher's internal errors)."""
-    from multigpu.parallel import mpirun
+    from multigpu.launcher import mpirun
 
     monkeypatch.setenv("MULTIGPU_RSH", "/bin/false")
     code = mpirun.main(["-n", "4", "--hosts", "a:2,b:2", "walkthrough", "--grid", "2x2", "--out", str(tmp_path / "o")])
@@ -104,7 +104,7 @@ def test_the_probe_passes_hosts_that_answer_and_skips_this_machine(tmp_path):
     import socket
 
     from multigpu.errors import InputError
-    from multigpu.parallel.hosts import is_this_machine, probe
+    from multigpu.launcher.hosts import is_this_machine, probe
 
     said = tmp_path / "said"
     shell = tmp_path / "rsh"

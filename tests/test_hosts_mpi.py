@@ -104,7 +104,7 @@ def test_shared_exchange_across_hosts_is_refused_in_one_line(tmp_path, hosts, la
 def test_a_host_dying_mid_run_ends_the_job_with_every_whole_frame_kept(tmp_path, hosts, launcher):
     """Host b's namespace killed mid-run: the MPI runtime tears the job down (MPICH at once,
     Open MPI within seconds) long before ``--liveness``; no rank is left, the exit code is 1
-    through ``python -m multigpu.parallel.mpirun``, timings.csv holds whole frames only and
+    through ``python -m multigpu.launcher.mpirun``, timings.csv holds whole frames only and
     summary.json is rewritten from them, saying what happened."""
     import os
     import signal
@@ -115,12 +115,12 @@ def test_a_host_dying_mid_run_ends_the_job_with_every_whole_frame_kept(tmp_path,
 
     from mpirun import ROOT
 
-    from multigpu.parallel.report import COLUMNS, read_timings
+    from multigpu.records.report import COLUMNS, read_timings
 
     out, liveness = tmp_path / "o", 20
     env = {**os.environ, **hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache"), "MULTIGPU_MPIEXEC": launcher.path,
            "LP_NUM_THREADS": "1"}
-    cmd = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "4", "--hosts", "a:2,b:2",
+    cmd = [sys.executable, "-m", "multigpu.launcher.mpirun", "-n", "4", "--hosts", "a:2,b:2",
            *args(out, frames=100000, extra=["--mosaic-every", "0", "--liveness", str(liveness)])]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)

@@ -124,7 +124,7 @@ def test_garbage_text_models_say_so(tmp_path, suffix):
 
 
 def test_record_into_a_directory_that_takes_no_files_is_refused_at_the_door(tmp_path):
-    from multigpu.parallel.walkthrough import check_record
+    from multigpu.rank.walkthrough import check_record
 
     for path, needle in [("/proc/x.json", "--record /proc/x.json: cannot write in /proc"),
                          (str(tmp_path / "no" / "x.json"), "does not exist"),
@@ -176,7 +176,7 @@ def test_walkthrough_flags_are_validated_at_the_door(flags, needle):
 def test_setup_stage_errors_name_their_flag(tmp_path):
     """Checks that need the file system or GL: output directory, files, device, GL limits."""
     from multigpu.gpu.render import choose_method, create_context, gl_limits
-    from multigpu.parallel.outdir import OutputDir
+    from multigpu.records.outdir import OutputDir
 
     for make, needle in [
         (lambda: OutputDir("/proc/multigpu-cannot-write"), "--out /proc/multigpu-cannot-write: not writable"),

@@ -31,7 +31,8 @@ def _files(sub: str | None = None):
 def test_pure_packages_import_neither_gl_nor_mpi(sub):
     for f in _files(sub):
         bad = {m for m in _imports(f) if m.split(".")[0] in ("moderngl", "mpi4py", "glcontext")
-               or m.startswith(("multigpu.gpu", "multigpu.parallel", "multigpu.studies", "multigpu.cli"))}
+               or m.startswith(("multigpu.gpu", "multigpu.rank", "multigpu.launcher", "multigpu.records",
+                                   "multigpu.studies", "multigpu.cli"))}
         assert not bad, f"{f.relative_to(PKG)} imports {bad}"
 
 
@@ -64,7 +65,21 @@ def test_gl_and_mpi_live_at_their_edges():
         if "glfw" in mods:
             assert rel.parts[0] == "display", f"{rel} imports glfw"
         if "mpi4py" in mods:
-            assert rel.parts[0] == "parallel" or rel.name == "cli.py", f"{rel} imports mpi4py"
+            assert rel.parts[0] == "rank" or rel.name == "cli.py", f"{rel} imports mpi4py"
+
+
+#: where code runs, told by its folder: each may not import the folders named here
+APART = {"rank": ("multigpu.launcher",), "launcher": ("multigpu.rank",),
+         "records": ("multigpu.rank", "multigpu.launcher", "mpi4py", "moderngl")}
+
+
+@pytest.mark.parametrize("sub", list(APART))
+def test_rank_launcher_and_records_stay_apart(sub):
+    """A rank's code (under MPI), the launcher's (never under MPI) and the records (neither)
+    do not reach into one another; only the rank's side imports mpi4py (above)."""
+    for f in _files(sub):
+        bad = {m for m in _imports(f) if m.startswith(APART[sub])}
+        assert not bad, f"{f.relative_to(PKG)} imports {bad}"
 
 
 def test_modules_and_functions_stay_small():
@@ -188,7 +203,7 @@ def test_the_cycle_finder_finds_one():
 #: blocking calls allowed, with why: the exit's one moment to leave at (every rank that gets there
 #: is leaving with an error; MPICH's launcher kills those still finalizing otherwise), and the
 #: heartbeat's receive of a message ``Iprobe`` has already found (it returns at once)
-BLOCKING_ALLOWED = {("parallel/job.py", "allreduce"), ("parallel/job.py", "Recv")}
+BLOCKING_ALLOWED = {("rank/job.py", "allreduce"), ("rank/job.py", "Recv")}
 BLOCKING = ("Barrier", "Bcast", "bcast", "Gather", "gather", "Allgather", "allgather", "Allreduce", "allreduce",
             "Reduce", "reduce", "Scatter", "scatter", "Alltoall", "alltoall", "Recv", "recv", "Wait", "Waitall")
 

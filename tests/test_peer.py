@@ -21,7 +21,7 @@ def test_no_paraview_is_one_clear_line(monkeypatch):
 
 @pytest.mark.mpi
 def test_beside_paraview_both_sides_measure_the_same_cameras(tmp_path):
-    from multigpu.parallel.mpirun import openmpi_on_path
+    from multigpu.launcher.mpirun import openmpi_on_path
     from multigpu.studies.peer import bench_peer
 
     if shutil.which("pvbatch") is None or openmpi_on_path() is None or shutil.which("Xvfb") is None:

@@ -13,7 +13,7 @@ from mpirun import read_png
 from threadcomm import run_ranks
 
 from multigpu.config import WalkConfig
-from multigpu.parallel import walkthrough
+from multigpu.rank import walkthrough
 from multigpu.scene.models import SceneSpec
 
 FRAMES = 4
@@ -26,7 +26,7 @@ CASES = {  # name: (config fields, grids that run it)
 
 
 class _Job:
-    """What the frame loop asks of the rank's job (``parallel/job.py``): no heartbeats here."""
+    """What the frame loop asks of the rank's job (``rank/job.py``): no heartbeats here."""
 
     signum = None
     in_frames = False
@@ -68,7 +68,7 @@ def test_threads_compose_what_one_rank_renders(tmp_path, reference, name, grid, 
 def shared_in_memory(monkeypatch):
     """The shared-segment backend with the threads' memory as the host's segment: every rank
     one host, each its slice of ``slots`` slots, as ``frame_setup.make_exchange`` asks."""
-    from multigpu.parallel.shared import SharedPieces
+    from multigpu.rank.shared import SharedPieces
 
     lock, memory = threading.Lock(), {}
 
@@ -89,7 +89,7 @@ def test_a_held_back_rank_on_the_shared_segment_composes_one_ranks_render(tmp_pa
     reads its peers' parts (the others run ahead as far as the loop's waits allow): each mosaic
     is one rank's render bit for bit (at --latency 3 a ring of three slots let a peer overwrite a
     frame still being read)."""
-    from multigpu.parallel import fault, frames
+    from multigpu.rank import fault, frames
 
     for module in (fault, frames):
         monkeypatch.setattr(module, "FAULT_SPEC", "1:compose:sleep=0.1")
@@ -132,7 +132,7 @@ def test_a_models_warnings_reach_the_console_once(tmp_path, capsys):
 def test_a_setup_that_fails_after_the_exchange_lets_it_go(tmp_path, monkeypatch):
     """``frame_setup.build``: a failure after the exchange backend is made (here the bounds'
     projection) releases it, so no host segment outlives a failed setup."""
-    from multigpu.parallel import frame_setup
+    from multigpu.rank import frame_setup
 
     closed = []
     made = frame_setup.make_exchange
@@ -158,7 +158,7 @@ def test_a_wall_file_one_host_cannot_read_is_every_ranks_error(tmp_path, monkeyp
     blocked in). The stand-in communicator has no Split: reaching it fails the test."""
     from multigpu import wall
     from multigpu.errors import InputError
-    from multigpu.parallel.hosts import tile_comm
+    from multigpu.rank.tiles import tile_comm
 
     path = tmp_path / "wall.json"
     path.write_text(json.dumps({"grid": "1x2", "tile": "40x40", "displays": [

@@ -122,7 +122,7 @@ def test_ctrl_c_ends_a_window_run_with_130(tmp_path, still_path):
         finally:
             kill() if proc.poll() is None else None
         assert windows(x.name) == []  # no window left behind
-    from multigpu.parallel.mpirun import find_launcher
+    from multigpu.launcher.mpirun import find_launcher
 
     # MPICH forwards Ctrl-C and returns 130; Open MPI forwards it as SIGTERM and returns 1 (docs/USAGE.md)
     code, seen = (1, "SIGTERM") if find_launcher().flavor == "openmpi" else (130, "SIGINT")

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from multigpu.config import WalkConfig
-from multigpu.parallel.projection import SharedProjection
 from multigpu.planner import Planner
+from multigpu.rank.projection import SharedProjection
 from multigpu.scene.models import SceneSpec, load_scene
 from multigpu.scene.paths import generate
 

@@ -11,8 +11,8 @@ from multigpu.cli import main as cli
 from multigpu.core.camera import frame_matrices
 from multigpu.core.projectors import make_projector
 from multigpu.errors import InputError
-from multigpu.parallel.report import COLUMNS, table
-from multigpu.parallel.tally import summarize
+from multigpu.records.report import COLUMNS, table
+from multigpu.records.tally import summarize
 from multigpu.scene.models import SceneSpec, axis_name, load_scene
 from multigpu.scene.paths import orbit, walkthrough
 

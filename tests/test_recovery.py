@@ -1,4 +1,4 @@
-"""Recovery by relaunch, its pure parts (parallel/recovery.py, parallel/segments.py, the
+"""Recovery by relaunch, its pure parts (records/recovery.py, launcher/segments.py, the
 launcher's command-line handling): where a run resumes, the summary's recoveries, the sweep of
 left-over shared-memory segments. In one process, no MPI."""
 
@@ -8,11 +8,11 @@ import time
 
 import numpy as np
 
-from multigpu.parallel import recovery
-from multigpu.parallel.mpirun import restart_bound
-from multigpu.parallel.relaunch import _without, with_flight
-from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings
-from multigpu.parallel.segments import sweep
+from multigpu.launcher.mpirun import restart_bound
+from multigpu.launcher.relaunch import _without, with_flight
+from multigpu.launcher.segments import sweep
+from multigpu.records import recovery
+from multigpu.records.report import COLUMNS, TimingWriter, read_timings
 
 
 def timings(out, frames: int, ranks: int, extra: str = ""):
@@ -107,7 +107,7 @@ def test_the_statistics_panel_tells_the_operator_of_a_restart():
 
 def test_a_restarted_flight_starts_where_its_record_ends(tmp_path):
     from multigpu.config import WalkConfig
-    from multigpu.parallel.walkthrough import make_path
+    from multigpu.rank.walkthrough import make_path
     from multigpu.scene.models import SceneSpec, load_scene
     from multigpu.scene.pathfile import PathAppender
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 from mpirun import SMALL, end_launcher, read_png, start_launcher
 
-from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
-from multigpu.parallel.report import read_timings
+from multigpu.launcher.mpirun import find_launcher, launcher_for, openmpi_on_path
+from multigpu.records.report import read_timings
 from multigpu.studies.recovery_bench import rank_pids as ranks_of
 
 pytestmark = pytest.mark.mpi

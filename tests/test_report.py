@@ -1,5 +1,5 @@
-"""Rank 0's records written whole (``parallel/report.py``: the timing rows and the JSON files;
-``parallel/record.py``: the run's record): a write that fails part way keeps what came before
+"""Rank 0's records written whole (``records/report.py``: the timing rows and the JSON files;
+``records/record.py``: the run's record): a write that fails part way keeps what came before
 it and names the file."""
 
 import errno
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from multigpu.errors import WriteFailed
-from multigpu.parallel.report import COLUMNS, TimingWriter, read_timings, write_json
+from multigpu.records.report import COLUMNS, TimingWriter, read_timings, write_json
 
 
 def test_timing_rows_are_whole_after_a_failed_write(tmp_path, monkeypatch):
@@ -52,7 +52,7 @@ def test_json_write_failure_leaves_no_temp_file(tmp_path, monkeypatch):
     monkeypatch.setattr(Path, "replace", full)
     with pytest.raises(WriteFailed, match=f"cannot write {tmp_path / 'summary.json'}: No space left"):
         write_json(tmp_path / "summary.json", {"a": 1})
-    from multigpu.parallel.mosaic import save_png
+    from multigpu.records.mosaic import save_png
 
     with pytest.raises(WriteFailed, match="f.png: No space left"):
         save_png(np.zeros((4, 4, 3), np.uint8), tmp_path / "f.png")
@@ -66,8 +66,8 @@ def test_a_recorded_path_that_cannot_be_written_is_the_runs_failure(tmp_path, mo
     import io
     from contextlib import redirect_stdout
 
-    from multigpu.parallel.outdir import OutputDir
-    from multigpu.parallel.record import RunRecord
+    from multigpu.records.outdir import OutputDir
+    from multigpu.records.record import RunRecord
     from multigpu.scene.pathfile import PathAppender
 
     def full(self, data, frames):
@@ -102,7 +102,7 @@ def _video_in_subprocess(tmp_path, limit: int, frames: int) -> str:
 import resource, numpy as np
 from pathlib import Path
 from multigpu.errors import WriteFailed
-from multigpu.parallel.record import Video
+from multigpu.records.record import Video
 resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))
 v = Video(Path({str(tmp_path / 'v.mp4')!r}))
 rng = np.random.default_rng(0)
@@ -131,9 +131,9 @@ def test_a_video_cut_short_is_a_failed_write_and_a_whole_one_is_not(tmp_path):
 def test_a_video_frame_the_encoder_refuses_stops_the_run_as_a_failed_write(tmp_path, monkeypatch):
     """The encoder's own error on a frame (imageio raises its own types) is kept as the run's
     failed write, so every rank stops after the next frame; nothing more is written."""
-    from multigpu.parallel.framelog import FrameLog
-    from multigpu.parallel.outdir import OutputDir
-    from multigpu.parallel.record import RunRecord
+    from multigpu.rank.framelog import FrameLog
+    from multigpu.records.outdir import OutputDir
+    from multigpu.records.record import RunRecord
 
     record = RunRecord(OutputDir(tmp_path / "o"), 1, 2, {}, lambda: None, True, False, False)
 
@@ -156,7 +156,7 @@ def test_a_run_is_titled_and_summarized_by_what_divides_its_frames(decomposition
 
     from multigpu.config import WalkConfig
     from multigpu.decompositions import REGISTRY
-    from multigpu.parallel.record import config_doc, run_title
+    from multigpu.records.record import config_doc, run_title
 
     cfg = WalkConfig(decomposition=decomposition, balance="cross")
     scene = SimpleNamespace(name="plant", n_triangles=10, n_objects=2, meta={})

@@ -11,7 +11,7 @@ import pytest
 from mpirun import SMALL, run_mpi, start_mpi
 
 from multigpu.config import WalkConfig
-from multigpu.parallel.report import read_timings
+from multigpu.records.report import read_timings
 
 pytestmark = pytest.mark.mpi
 LATENCY = WalkConfig().latency  # frames in flight by default: a rank stopped at frame f leaves f - LATENCY shown
@@ -170,7 +170,7 @@ def _kept(f: int) -> set:
     """The frames a rank frozen as it starts frame ``f`` leaves: every frame all ranks showed; with
     frames in flight under Open MPI (messages move only inside MPI calls) the frozen rank may keep
     its last row, and that frame with it."""
-    from multigpu.parallel.mpirun import find_launcher
+    from multigpu.launcher.mpirun import find_launcher
 
     shown = f - LATENCY
     return {shown, shown - 1} if LATENCY and find_launcher().flavor == "openmpi" else {shown}
@@ -193,7 +193,7 @@ def _start(args, tmp_path, env=None):
 def _expected_signal_exit(sig):
     """(exit code, signal the ranks see): MPICH's mpiexec forwards the signal and returns the
     ranks' 128 + signal; Open MPI's forwards Ctrl-C as SIGTERM and returns 1 itself."""
-    from multigpu.parallel.mpirun import find_launcher
+    from multigpu.launcher.mpirun import find_launcher
 
     if find_launcher().flavor == "openmpi":
         return 1, signal.SIGTERM
@@ -262,7 +262,7 @@ def test_disk_full_keeps_whole_rows_and_no_temp_files(tmp_path, mpi, exchange):
 
     from mpirun import ROOT
 
-    from multigpu.parallel.mpirun import find_launcher, launcher_for, openmpi_on_path
+    from multigpu.launcher.mpirun import find_launcher, launcher_for, openmpi_on_path
 
     out = tmp_path / "o"
     if mpi == "openmpi" and openmpi_on_path() is None:
@@ -305,7 +305,7 @@ def test_sigkill_of_one_rank_ends_the_job(tmp_path):
 def test_open_mpi_runs_and_refuses_bad_input(tmp_path):
     """With a system Open MPI (Debian's openmpi-bin), the launcher passes what it needs: more
     ranks than cores, root, its own libmpi; outputs equal MPICH's."""
-    from multigpu.parallel.mpirun import launcher_for, openmpi_on_path
+    from multigpu.launcher.mpirun import launcher_for, openmpi_on_path
 
     found = openmpi_on_path()
     if not found:

@@ -1,4 +1,4 @@
-"""The running summary (parallel/tally.py) against a direct computation over every row, its
+"""The running summary (records/tally.py) against a direct computation over every row, its
 memory bounded however many frames it takes, and the appended ``--record`` path file."""
 
 import errno
@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from multigpu.parallel.report import BALANCE_NAMES, COLUMNS, TimingWriter
-from multigpu.parallel.tally import EXACT, REL, Quantiles, RunningSummary, summarize, summarize_file, whole_frames
+from multigpu.records.report import BALANCE_NAMES, COLUMNS, TimingWriter
+from multigpu.records.tally import EXACT, REL, Quantiles, RunningSummary, summarize, summarize_file, whole_frames
 
 C = {c: i for i, c in enumerate(COLUMNS)}
 

@@ -4,7 +4,7 @@ import time
 
 import pytest
 
-from multigpu.parallel.timer import Timer
+from multigpu.rank.timer import Timer
 
 
 def test_phases_add_up_by_name_and_span_the_frame():

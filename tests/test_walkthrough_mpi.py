@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpirun import SMALL, read_png, run_mpi
 
-from multigpu.parallel.report import COLUMNS
+from multigpu.records.report import COLUMNS
 
 pytestmark = pytest.mark.mpi
 W, H = 120, 96

@@ -104,7 +104,7 @@ def test_wall_check_refuses_in_one_line_and_prints_hosts_for_the_launcher(tmp_pa
 
 
 def test_the_launcher_takes_the_hosts_from_the_wall_file(tmp_path, capsys, monkeypatch):
-    from multigpu.parallel import mpirun
+    from multigpu.launcher import mpirun
 
     path = _wall(tmp_path, TWO_PCS)
     assert mpirun.wall_hosts(["walkthrough", "--wall", path], 4, None) == [("pc1", 2), ("pc2", 2)]
@@ -187,7 +187,7 @@ def test_a_gpu_per_rank_reaches_the_configuration(tmp_path):
     path = _wall(tmp_path, {"grid": "1x2", "displays": [{"rank": 0, "gpu": 1}, {"rank": 1}]})
     cfg = walk_config(build_parser().parse_args(["walkthrough", "--wall", path]))
     assert cfg.gpus == (1, None)
-    from multigpu.parallel.walkthrough import screen_of
+    from multigpu.rank.walkthrough import screen_of
 
     assert screen_of(":0", 1) == ":0.1" and screen_of(":0.2", 1) == ":0.2" and screen_of(":3", None) == ":3"
 

@@ -1,6 +1,6 @@
 """A wall of several PCs, end to end: two simulated hosts (namespaces, simhosts.py), each with
 its own X server started inside it, one wall file naming each rank's host, display and window
-position, started by the launcher users run (``python -m multigpu.parallel.mpirun`` with no
+position, started by the launcher users run (``python -m multigpu.launcher.mpirun`` with no
 placement flag) under MPICH and Open MPI. Each host's screenshot equals its tile of the mosaic
 bit for bit; a host whose X server is missing is one line naming the host and the display, exit
 2, and nothing left running. Every job, X server and namespace under a hard timeout, killed by id."""
@@ -155,7 +155,7 @@ def test_the_operators_view_on_a_pc_of_its_own(tmp_path, mpiexec_env):
     server, as the wall file says: it shows the wall, its keys reach the run (B: the next
     strategy on every rank), and Escape there ends the run."""
     from multigpu.display.xvfb import start_xvfb, stop_xvfb
-    from multigpu.parallel.report import BALANCE_NAMES, read_timings
+    from multigpu.records.report import BALANCE_NAMES, read_timings
 
     need_tools()
     with SimHosts(["a", "desk"], tmp_path / "hosts") as hosts:
@@ -203,7 +203,7 @@ def test_a_hosts_x_server_that_dies_and_comes_back(tmp_path, two_pcs, mpiexec_en
     """Host b's X server dies mid-run under windows: the wall's restarts fail while it is gone
     (each one counted), and once it is back on its display (as a display manager restarts it)
     the launcher brings the whole wall back, every frame once in timings.csv."""
-    from multigpu.parallel.report import read_timings
+    from multigpu.records.report import read_timings
 
     hosts, (xa, xb) = two_pcs
     wall = tmp_path / "wall.json"

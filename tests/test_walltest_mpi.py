@@ -16,7 +16,7 @@ from xserver import Xvfb, escape, need_tools, screenshot, wait_for, windows
 
 from multigpu.core.canvas import Canvas
 from multigpu.display.pattern import BACKGROUND, BAR, tile_pattern
-from multigpu.parallel.walltest import PACE
+from multigpu.rank.walltest import PACE
 
 pytestmark = pytest.mark.mpi
 GRID, TILE, MULLION = (1, 2), (64, 48), (6, 0)

@@ -15,7 +15,7 @@ becomes invisible). ``to_canvas`` cuts a frame's work at the tile borders and mo
 onto the canvas, so hidden pixels are never rendered. With zero mullions both are identities
 and are skipped.
 
-**Dark tiles** (``dark``: the labels of tiles whose PC is gone, ``parallel/recovery.py``) hide
+**Dark tiles** (``dark``: the labels of tiles whose PC is gone, ``records/recovery.py``) hide
 like mullions: an object that reaches no live tile is invisible, the parts of a plan on dark
 tiles are cut away, and the mosaic shows them black; the balancers, planning loads of visible
 objects, share the live tiles among all the ranks. Pure numpy.

@@ -14,7 +14,7 @@ the screen N steps later.
 
 What orders the ranks, and so which buffers a frame may reuse (``slots``): a rank's ``deliver`` of
 frame f first lands the timing row of frame f - 1, which every rank posts only once it has composed
-frame f - 1 (``parallel/rows.py``); then it waits for every rank to have sent frame f (the
+frame f - 1 (``rank/rows.py``); then it waits for every rank to have sent frame f (the
 exchange's barrier). No other wait keeps ranks together with frames in flight. A rank held back
 while it reads frame f's parts out of its peers' shared slices lets a peer go on until it blocks
 in ``deliver`` of f + 1 (f's row is not posted yet), having sent frame f + 1 + N - ``read_lag``:

@@ -200,7 +200,7 @@ def run_args(args) -> int:
     (those that take only ``--quick`` through ``main``)."""
     if args.what == "floor" and args.worker:  # the MPI side, started by bench floor
         from multigpu.flags import spec
-        from multigpu.parallel import floor
+        from multigpu.rank import floor
 
         floor.main(spec(args), args.path_kind, args.frames or 120, args.tile, args.display)
         return 0

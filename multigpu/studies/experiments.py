@@ -6,7 +6,7 @@ under a hard timeout) or, for ``overlap``, runs the balancer in process, then wr
 ``NAME.md``, a Markdown fragment with the table and the plots. ``all`` runs every experiment
 and joins the fragments into one results page.
 
-Figures and what they are (see parallel/report.py): component columns are wall-clock means per rank;
+Figures and what they are (see records/report.py): component columns are wall-clock means per rank;
 "emulated" figures use each rank's process CPU time and take the slowest rank per frame, the
 frame time the run would have with one core (GPU) per rank. Ranks outnumber cores here, so
 speedups and efficiencies are computed from emulated figures only.

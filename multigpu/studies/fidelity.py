@@ -88,8 +88,8 @@ def _errors(flags: list[str], rec: Path, runs: dict, size, sample: int) -> dict:
     from multigpu.core.lod import LevelChooser
     from multigpu.flags import scene_args, spec
     from multigpu.gpu.render import RegionRenderer, create_context
-    from multigpu.parallel.report import COLUMNS
     from multigpu.planner import Planner
+    from multigpu.records.report import COLUMNS
     from multigpu.scene.models import load_scene
     from multigpu.scene.paths import load_path
 
@@ -146,7 +146,7 @@ def _judge(period: np.ndarray, target_ms: float) -> dict:
 
 
 def _rows(name: str, runs: dict, errors: dict, base) -> tuple[list[dict], list[dict]]:
-    from multigpu.parallel.report import COLUMNS
+    from multigpu.records.report import COLUMNS
 
     col = {c: i for i, c in enumerate(COLUMNS)}
     full_period = base.rows[:, :, col["frame_ms"]].mean(axis=1)

@@ -1,6 +1,6 @@
 """``multigpu bench floor``: the render imbalance a perfect balancer would still measure here.
 
-Every rank renders exactly the same work (``parallel/floor.py``, started under mpiexec), so
+Every rank renders exactly the same work (``rank/floor.py``, started under mpiexec), so
 any imbalance it shows is this machine's measurement noise (ranks sharing cores, caches and
 memory bandwidth): the floor under every strategy's ``imbalance_render_cpu``, and how much
 noise alone inflates the slowest-rank (emulated) frame.
@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 
-from multigpu.parallel.floor import MARK
+from multigpu.rank.floor import MARK
 from multigpu.studies.tables import Columns
 
 #: the scenes ``bench floor`` measures by default: name -> scene flags (as ``walkthrough`` takes them)
@@ -22,7 +22,7 @@ def run(scenes: dict[str, list[str]] | None = None, ranks: int = 4, frames: int 
         timeout: float = 600, tile: int = 256, display: int | None = None) -> list[dict]:
     """Start the worker under mpiexec for each scene (name -> scene flags, and ``--path-kind``
     where not the walkthrough); the figures it printed, each with its ``scene`` name."""
-    from multigpu.parallel.mpirun import run_multigpu
+    from multigpu.launcher.mpirun import run_multigpu
     from multigpu.studies.runs import study_env
 
     rows = []

@@ -45,8 +45,8 @@ def frame_phases(scene, strategy: str = "strips", grid=(2, 2), tile=(256, 256), 
     from multigpu.config import WalkConfig
     from multigpu.core.drawlist import DrawList
     from multigpu.core.work import transfers
-    from multigpu.parallel.report import COLUMNS
     from multigpu.planner import Planner
+    from multigpu.records.report import COLUMNS
     from multigpu.scene.paths import generate
 
     cfg = WalkConfig(grid=tuple(grid), tile=tuple(tile), balance=strategy)

@@ -54,8 +54,8 @@ def bench_longrun(quick: bool) -> list[dict]:
 
 
 def _longrun(frames: int, extra: list[str]) -> dict:
-    from multigpu.parallel.mpirun import find_launcher
-    from multigpu.parallel.report import COLUMNS, read_timings
+    from multigpu.launcher.mpirun import find_launcher
+    from multigpu.records.report import COLUMNS, read_timings
     from multigpu.studies.runs import study_env
 
     out = Path(tempfile.mkdtemp(prefix="longrun-"))

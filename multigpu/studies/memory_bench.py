@@ -81,7 +81,7 @@ def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: fl
     the scene's flags, e.g. ``--model FILE``, instead of the plant of ``triangles``; ``env``: more
     environment for the job), with the
     run's scene load time and median emulated frame (per-rank CPU time) from its summary."""
-    from multigpu.parallel.mpirun import find_launcher
+    from multigpu.launcher.mpirun import find_launcher
 
     rows, cols = (1, ranks) if ranks < 4 else (2, ranks // 2)
     launcher = find_launcher()

@@ -62,7 +62,7 @@ json.dump({"rank": rank, "frames": len(cams), "wall_ms": 1e3 * wall / len(cams),
 
 def _tools():
     """(pvbatch, Open MPI's mpiexec) or a one-line error naming what is missing."""
-    from multigpu.parallel.mpirun import openmpi_on_path
+    from multigpu.launcher.mpirun import openmpi_on_path
 
     pvbatch = shutil.which("pvbatch")
     if pvbatch is None:
@@ -96,7 +96,7 @@ def paraview(pvbatch: str, mpiexec: str, ranks: int, cams: Path, model: str, siz
 def multigpu(mpiexec: str, ranks: int, cams: Path, scene: list[str], size: tuple[int, int], out: Path, env: dict,
              timeout: float, extra: list[str]) -> dict:
     """One multigpu run over the same cameras: the frame period and the emulated frame (ms)."""
-    from multigpu.parallel.mpirun import launcher_for
+    from multigpu.launcher.mpirun import launcher_for
     from multigpu.studies.runs import walk
 
     grid = (1, 1) if ranks == 1 else (2, ranks // 2)

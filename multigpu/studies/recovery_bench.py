@@ -5,7 +5,7 @@ The default plant on a 2x2 wall of 256x256 tiles (4 ranks) runs under the launch
 compiled kernels); a rank is killed (SIGKILL) after 150 frames and the launcher brings the wall
 back at the first frame not shown. Each round's ``summary.json`` holds the recovery's
 ``seconds`` (from the last frame shown before the kill to the first after) and its ``steps``
-(``parallel/recovery.py``: the failure detected and the job torn down, the new ranks launched,
+(``records/recovery.py``: the failure detected and the job torn down, the new ranks launched,
 their imports, the scene, the GL context and buffers, the first frame), all wall time.
 """
 
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multigpu.parallel.recovery import STEPS
+from multigpu.records.recovery import STEPS
 from multigpu.studies.tables import Columns
 
 #: frames before the kill, and in all
@@ -46,7 +46,7 @@ def rank_pids(out) -> list[int]:
 def one_round(cache: str, tmp: str, k: int, kill: bool = True) -> dict:
     """One run, killed once after ``KILL_AFTER`` frames (``kill``); its summary."""
     out = os.path.join(tmp, f"run-{k}")
-    args = [sys.executable, "-m", "multigpu.parallel.mpirun", "-n", "4", "walkthrough", "--frames", str(FRAMES),
+    args = [sys.executable, "-m", "multigpu.launcher.mpirun", "-n", "4", "walkthrough", "--frames", str(FRAMES),
             "--mosaic-every", "0", "--no-progress", "--out", out, "--recover", "1"]
     env = {**os.environ, "MULTIGPU_CACHE": cache}
     proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,

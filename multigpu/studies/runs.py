@@ -2,7 +2,7 @@
 hard timeout, through ``parallel.mpirun``), reading a run's timings back, the paper's figures
 quoted for comparison, and the matplotlib setup.
 
-Figures and what they are (see parallel/report.py): component columns are wall-clock means per
+Figures and what they are (see records/report.py): component columns are wall-clock means per
 rank; "emulated" figures use each rank's process CPU time and take the slowest rank per frame,
 the frame time the run would have with one core (GPU) per rank. Ranks outnumber cores here, so
 speedups and efficiencies are computed from emulated figures only.
@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError
-from multigpu.parallel.mpirun import JobTimeout, run_multigpu
-from multigpu.parallel.report import COLUMNS, read_timings
+from multigpu.launcher.mpirun import JobTimeout, run_multigpu
+from multigpu.records.report import COLUMNS, read_timings
 
 
 def study_env() -> dict:

@@ -7,7 +7,7 @@ Open MPI (OpenRTE / Open MPI). Open MPI gets what it needs on a workstation: ``-
 multi-line banner after a non-zero exit), and ``MPI4PY_LIBMPI`` so mpi4py's wheel loads Open
 MPI's library even where the ``mpich`` wheel is installed too.
 
-Used by the launch scripts (``python -m multigpu.parallel.mpirun -n K ARGS``), the experiments and
+Used by the launch scripts (``python -m multigpu.launcher.mpirun -n K ARGS``), the experiments and
 the tests: a job started from Python runs in its own process group, which is killed whole
 (launcher and every rank) when it outlives its timeout.
 """
@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from multigpu.errors import InputError
-from multigpu.parallel.supervise import flag_value, out_dir, supervise
+from multigpu.launcher.supervise import flag_value, out_dir, supervise
 
 #: the soname of Open MPI's library (3.x to 5.x); mpi4py loads it by this name
 OPENMPI_LIBMPI = "libmpi.so.40"
@@ -75,7 +75,7 @@ class Launcher:
         """Flags that place the ranks on ``hosts`` in order, started through the remote shell
         ``$MULTIGPU_RSH`` (default: the MPI's own, ssh). Open MPI is told to pass on the
         environment the ranks need (Hydra passes all of it by default)."""
-        from multigpu.parallel.hosts import spec
+        from multigpu.launcher.hosts import spec
 
         rsh = env.get("MULTIGPU_RSH")
         if rsh:
@@ -165,7 +165,7 @@ def run_multigpu(n: int, args: list[str], timeout: float, env: dict | None = Non
 
 def hosts_from(flag: str, value: str, ranks: int) -> list[tuple[str, int]]:
     """The hosts of ``--hosts LIST`` or ``--hostfile FILE``, checked to hold ``ranks`` ranks."""
-    from multigpu.parallel.hosts import parse_hosts, placement, read_hostfile
+    from multigpu.launcher.hosts import parse_hosts, placement, read_hostfile
 
     hosts = parse_hosts(value) if flag == "--hosts" else read_hostfile(value)
     placement(hosts, ranks, f"{flag} {value}")
@@ -188,7 +188,7 @@ def wall_hosts(argv: list[str], ranks: int, hosts: list[tuple[str, int]] | None)
     if not named:
         return hosts
     if hosts is not None and hosts != named:
-        from multigpu.parallel.hosts import spec
+        from multigpu.launcher.hosts import spec
 
         raise InputError.of("wall", f"{path} places the ranks on {spec(named)}, but --hosts/--hostfile says "
                          f"{spec(hosts)}: give one of them")
@@ -201,10 +201,10 @@ def help_only(argv: list[str]) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m multigpu.parallel.mpirun -n K [--hosts a:2,b:2 | --hostfile FILE] ARGS...``:
+    """``python -m multigpu.launcher.mpirun -n K [--hosts a:2,b:2 | --hostfile FILE] ARGS...``:
     run the right mpiexec for K ranks, on those hosts when given (``supervise``)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    usage = "usage: python -m multigpu.parallel.mpirun -n RANKS [--hosts H:N,... | --hostfile FILE] MULTIGPU_ARGS..."
+    usage = "usage: python -m multigpu.launcher.mpirun -n RANKS [--hosts H:N,... | --hostfile FILE] MULTIGPU_ARGS..."
     if len(argv) < 2 or argv[0] != "-n" or not argv[1].isdigit() or int(argv[1]) < 1:
         print(usage, file=sys.stderr)
         return 2
@@ -219,20 +219,20 @@ def main(argv: list[str] | None = None) -> int:
         cmd = launcher.command(ranks, rest, hosts=hosts)
         bound = restart_bound(rest)
         if hosts and not help_only(rest):
-            from multigpu.parallel.hosts import probe
+            from multigpu.launcher.hosts import probe
 
             probe(hosts, shutil.which(os.environ["MULTIGPU_RSH"]) if os.environ.get("MULTIGPU_RSH") else None)
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2
-    from multigpu.parallel import operator
+    from multigpu.launcher import operator
 
     view = None
     try:
         on = None if help_only(rest) else operator.own_pc(rest)
         view = operator.start_view(on) if on else None  # the operator's view on a PC of its own
         if bound and not help_only(rest):
-            from multigpu.parallel.relaunch import recovering
+            from multigpu.launcher.relaunch import recovering
 
             return recovering(launcher, ranks, rest, hosts, bound)
         return supervise(cmd, launcher.environ(), out_dir(rest), Path(launcher.path).name)

@@ -17,7 +17,7 @@ import numpy as np
 
 from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
-from multigpu.parallel.exchange import wait_all
+from multigpu.rank.exchange import wait_all
 
 TAG = 8
 

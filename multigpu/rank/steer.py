@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multigpu.core.camera import Camera
-from multigpu.parallel.exchange import wait_all
+from multigpu.rank.exchange import wait_all
 
 #: position 3, target 3, up 3, fov, near, far, strategy index, partition, stats, orbiting
 SIZE = 16

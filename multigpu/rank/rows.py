@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.parallel.exchange import wait_all
-from multigpu.parallel.report import COLUMNS
+from multigpu.rank.exchange import wait_all
+from multigpu.records.report import COLUMNS
 
 
 class Rows:

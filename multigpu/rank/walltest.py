@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from multigpu.errors import InputError
-from multigpu.parallel.exchange import agree, barrier, wait_all
+from multigpu.rank.exchange import agree, barrier, wait_all
 
 PACE = 60.0  # frames a second at most: the bar moves at one speed a person can follow on any machine
 
@@ -97,8 +97,8 @@ def main(path: str, frames: int | None) -> int:
     """The CLI's ``wall test`` under MPI: one line and exit 2 for bad input on every rank."""
     from mpi4py import MPI
 
-    from multigpu.parallel.hosts import tile_comm
-    from multigpu.parallel.job import collective_exit
+    from multigpu.rank.job import collective_exit
+    from multigpu.rank.tiles import tile_comm
 
     try:
         comm = tile_comm(MPI.COMM_WORLD, path)

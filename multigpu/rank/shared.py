@@ -37,8 +37,8 @@ import numpy as np
 
 from multigpu.core.work import Piece
 from multigpu.errors import InputError
-from multigpu.parallel.composite import _pack, _unpack, post
-from multigpu.parallel.exchange import agree, allgather_text, wait_all
+from multigpu.rank.composite import _pack, _unpack, post
+from multigpu.rank.exchange import agree, allgather_text, wait_all
 
 #: the most bytes a host's segment may hold (its ranks, both halves) before the job uses messages
 MAX_SHARED_BYTES = 1 << 30

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from multigpu.parallel import exchange
+from multigpu.rank import exchange
 
 HEARTBEAT, FAILED, BYE = 1, 2, 3
 #: how long a closing rank waits for its peers' last heartbeats (their BYE), so none is left

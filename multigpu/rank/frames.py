@@ -20,15 +20,15 @@ from multigpu.core.quality import Fidelity, Quality
 from multigpu.core.resample import Widen, covered, grown, scaled_size
 from multigpu.core.work import Work, transfers
 from multigpu.errors import WriteFailed
-from multigpu.parallel.exchange import agree, barrier, broadcast_partition
-from multigpu.parallel.fault import FAULT_SPEC, fault
-from multigpu.parallel.frame_setup import FrameSetup, planned_frames
-from multigpu.parallel.framelog import FrameLog
-from multigpu.parallel.record import run_title
-from multigpu.parallel.report import BALANCE_NAMES
-from multigpu.parallel.rows import Rows
-from multigpu.parallel.stops import STOP_FLAG, stopped_by_flags
-from multigpu.parallel.timer import Timer
+from multigpu.rank.exchange import agree, barrier, broadcast_partition
+from multigpu.rank.fault import FAULT_SPEC, fault
+from multigpu.rank.frame_setup import FrameSetup, planned_frames
+from multigpu.rank.framelog import FrameLog
+from multigpu.rank.rows import Rows
+from multigpu.rank.timer import Timer
+from multigpu.records.record import run_title
+from multigpu.records.report import BALANCE_NAMES
+from multigpu.records.stops import STOP_FLAG, stopped_by_flags
 
 #: the longest sleep between tests of the swap barrier (s): every rank swaps within about as much of the last
 #: one's arrival (the default 2 ms let the swap skew grow with frames in flight)
@@ -273,6 +273,9 @@ class Frames:
             complete = self.done == self.n_frames and self.stop_flags is None
             if not complete:
                 stopped_by = stopped_by_flags(self.job.signum, self.stop_flags, self.K)
+            # every rank's spans (collective: here, where every rank is); before the ranks agree on
+            # rank 0's writes below, so a timeline that cannot be written is the run's failure
+            self.log.write_timeline(self.latency)
         except BaseException as exc:
             stopped_by = f"{exc.__class__.__name__}: {exc}"
             self._keep_shown()
@@ -287,7 +290,6 @@ class Frames:
             self.record.print_table(summary, self._title(complete, stopped_by))
         if failed:
             raise WriteFailed(failed)
-        self.log.write_timeline(self.latency)
         if self.rank != 0:
             return None
         self.record.print_table(summary, self._title(complete, stopped_by))

@@ -30,8 +30,8 @@ def measure(spec, path_kind: str, frames: int, tile: int = 256, display: int | N
     from multigpu.config import WalkConfig
     from multigpu.core.regions import overlaps, pixel_spans
     from multigpu.gpu.render import RegionRenderer, create_context
-    from multigpu.parallel.exchange import barrier, wait_all
     from multigpu.planner import Planner
+    from multigpu.rank.exchange import barrier, wait_all
     from multigpu.scene.models import load_scene
     from multigpu.scene.paths import generate
 

@@ -28,12 +28,12 @@ from multigpu.core.projectors import make_projector
 from multigpu.core.spheres import SphereProjector
 from multigpu.errors import InputError
 from multigpu.gpu.buffers import ensure_buffers
-from multigpu.parallel.exchange import agree, allgather_text
-from multigpu.parallel.fault import fault
-from multigpu.parallel.frame_setup import build
-from multigpu.parallel.frames import Frames
-from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.recovery import mark, restarts
+from multigpu.rank.exchange import agree, allgather_text
+from multigpu.rank.fault import fault
+from multigpu.rank.frame_setup import build
+from multigpu.rank.frames import Frames
+from multigpu.records.outdir import OutputDir
+from multigpu.records.recovery import mark, restarts
 from multigpu.scene.models import load_scene
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
@@ -191,7 +191,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
 def _first(cfg: WalkConfig) -> tuple:
     """Rank 0's setup before the others': ``(error, out, scene, path, load_info, buffers file)``
     (``error``: the bad input's line; the output directory is then released)."""
-    mark("imported")  # a restarted job's steps (parallel/recovery.py)
+    mark("imported")  # a restarted job's steps (records/recovery.py)
     out = scene = path = load_info = shared = None
     try:
         out = OutputDir(cfg.out)
@@ -247,9 +247,9 @@ def screen_of(display: str | None, gpu: int | None) -> str | None:
 
 def _monitor(cfg: WalkConfig, presenter):
     """Rank 0's operator view on its display, at ``--monitor X,Y`` (default: right of the wall),
-    or on a PC of its own (the launcher started it there: ``parallel/operator.py``)."""
+    or on a PC of its own (the launcher started it there: ``launcher/operator.py``)."""
     from multigpu.display import Monitor
-    from multigpu.parallel.live import monitor_size
+    from multigpu.rank.live import monitor_size
 
     if os.environ.get("MULTIGPU_MONITOR"):
         from multigpu.display.remote import TOKEN_ENV, RemoteMonitor

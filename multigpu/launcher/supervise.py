@@ -82,14 +82,14 @@ def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec"
     code = 128 - code if code < 0 else code
     if code == 0 or (code == 2 and not got):  # a signal during setup ends the ranks as they are: its own code
         return code
-    from multigpu.parallel.segments import sweep
+    from multigpu.launcher.segments import sweep
 
     sweep(started)  # the shared-memory segments of ranks that never finished
     summary = read_summary(out)
     if got and summary is not None and str(summary.get("stopped_by", "")).startswith("signal "):
         return 128 + got[0]
     if out is not None:
-        from multigpu.parallel.record import salvage
+        from multigpu.records.record import salvage
 
         frames = salvage(out, f"the job ended abnormally ({name} exited {code}: a rank or its host died)")
         if frames is not None:

@@ -25,9 +25,9 @@ import threading
 import time
 from pathlib import Path
 
-from multigpu.parallel import recovery
-from multigpu.parallel.hosts import survivors, unreachable
-from multigpu.parallel.supervise import flag_value, out_dir, read_summary, supervise
+from multigpu.launcher.hosts import survivors, unreachable
+from multigpu.launcher.supervise import flag_value, out_dir, read_summary, supervise
+from multigpu.records import recovery
 
 #: seconds between asking a host that is out whether it answers again (MULTIGPU_REJOIN_EVERY)
 REJOIN = float(os.environ.get("MULTIGPU_REJOIN_EVERY", "30"))

@@ -22,10 +22,10 @@ from multigpu.config import INTERACTIVE
 from multigpu.core.navigate import Navigator
 from multigpu.core.work import Work
 from multigpu.display.hud import overlay, paste, stats_panel
-from multigpu.parallel.exchange import wait_all
-from multigpu.parallel.mosaic import stitch
-from multigpu.parallel.report import COLUMNS
-from multigpu.parallel.steer import Control, Steering
+from multigpu.rank.exchange import wait_all
+from multigpu.rank.steer import Control, Steering
+from multigpu.records.mosaic import stitch
+from multigpu.records.report import COLUMNS
 
 #: the monitor shows the wall shrunk by a whole factor to fit in this many pixels
 MONITOR_FIT = (640, 480)

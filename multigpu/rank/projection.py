@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from multigpu.core.bounds import BoxProjector
-from multigpu.parallel.exchange import barrier
-from multigpu.parallel.shared import host_segment
+from multigpu.rank.exchange import barrier
+from multigpu.rank.shared import host_segment
 
 
 class EachRank:

@@ -4,7 +4,7 @@ Rows reach the CSV a whole frame at a time and before anything else of that fram
 summary, rewritten every ``SUMMARY_EVERY`` frames and whenever the run ends, always describes
 exactly the rows written; the recorded camera path (``--record``) grows with it, holding the
 camera of every frame written. Nothing here grows with the run's length: rows are added to a
-running tally (``parallel/tally.py``) a checkpoint's batch at a time and let go, cameras are
+running tally (``records/tally.py``) a checkpoint's batch at a time and let go, cameras are
 appended to the path file as they are written. No MPI here: the frame loop hands over the
 gathered rows and images.
 """
@@ -21,11 +21,11 @@ from multigpu.core import jit
 from multigpu.decompositions import REGISTRY
 from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
-from multigpu.parallel.mosaic import save_png
-from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.recovery import Recovery, restarts
-from multigpu.parallel.report import COLUMNS, TimingWriter, table, write_json
-from multigpu.parallel.tally import RunningSummary, summarize_file, tally_file
+from multigpu.records.mosaic import save_png
+from multigpu.records.outdir import OutputDir
+from multigpu.records.recovery import Recovery, restarts
+from multigpu.records.report import COLUMNS, TimingWriter, table, write_json
+from multigpu.records.tally import RunningSummary, summarize_file, tally_file
 from multigpu.scene.models import axis_name
 
 

@@ -18,11 +18,11 @@ from collections import deque
 import numpy as np
 
 from multigpu.errors import WriteFailed
-from multigpu.parallel.exchange import allgather_text, wait_all
-from multigpu.parallel.mosaic import stitch
-from multigpu.parallel.recovery import restarts
-from multigpu.parallel.report import COLUMNS
-from multigpu.parallel.stops import STOP_FLAG, STOPS
+from multigpu.rank.exchange import allgather_text, wait_all
+from multigpu.records.mosaic import stitch
+from multigpu.records.recovery import restarts
+from multigpu.records.report import COLUMNS
+from multigpu.records.stops import STOP_FLAG, STOPS
 
 #: the phases a frame's balancing is timed in, in order (their sum is the Load Balancing
 #: column): learning from the last frame's measured times, projecting the object bounds,

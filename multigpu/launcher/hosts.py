@@ -5,8 +5,7 @@ Pure parsing (no MPI): a list of (host, slots), ranks filling the hosts in order
 A hostfile holds one host per line as ``host``, ``host:N`` (MPICH's form) or ``host slots=N``
 (Open MPI's), ``#`` starts a comment; so a user's existing hostfile of either MPI works with
 either. The launcher (``mpirun.Launcher``) writes the list in its MPI's own syntax.
-``tile_comm`` renumbers the started processes by the tile each drives (a wall file's hosts in
-any order): a split of the communicator it is given, the module's one MPI step.
+The ranks' side of placement (each rank's tile, whatever host it landed on) is ``rank/tiles.py``.
 """
 
 from __future__ import annotations
@@ -147,32 +146,9 @@ def unreachable(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = 
     return failed
 
 
-def tile_comm(world, wall_path: str | None, dark: tuple[int, ...] = ()):
-    """The job's communicator with each process's rank the tile it drives: where a wall file puts
-    a host's tiles apart (a PC per row), MPI's processes, filled into the hosts in order, are
-    renumbered by ``wall.tile_order`` (one split at start; every process reads the same file).
-    Without a PC that is gone (``dark``: its tiles), the launcher starts its processes last, on
-    the last host that answers (``survivors``): they take the dark tiles. The world itself
-    where nothing is renumbered, or where the file cannot be read (the configuration's check
-    then reports it, once)."""
-    from multigpu.errors import InputError
-    from multigpu.wall import load_wall, tile_order
-
-    try:
-        order = tile_order(load_wall(wall_path), world.Get_size()) if wall_path else None
-    except InputError:
-        order = None
-    if dark:
-        base = order or list(range(world.Get_size()))
-        order = [t for t in base if t not in dark] + [t for t in base if t in dark]
-    if order is None or order == sorted(order):
-        return world
-    return world.Split(0, order[world.Get_rank()])
-
-
 def survivors(hosts: list[tuple[str, int]], gone: set[str]) -> list[tuple[str, int]]:
     """The placement without the ``gone`` hosts: the others in order, the last of them also
-    running the gone hosts' processes (they stand in for the dark tiles: ``tile_comm``)."""
+    running the gone hosts' processes (they stand in for the dark tiles: ``rank.tiles.tile_comm``)."""
     kept = [(h, n) for h, n in hosts if h not in gone]
     if not kept:
         return []

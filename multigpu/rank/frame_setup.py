@@ -16,13 +16,13 @@ import numpy as np
 from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core.camera import unshifted
 from multigpu.core.inflight import slots
-from multigpu.parallel.backends import Exchange, Projection
-from multigpu.parallel.composite import Messages
-from multigpu.parallel.outdir import OutputDir
-from multigpu.parallel.projection import make_projection
-from multigpu.parallel.record import RunRecord, config_doc
-from multigpu.parallel.shared import SharedPieces
 from multigpu.planner import Planner
+from multigpu.rank.backends import Exchange, Projection
+from multigpu.rank.composite import Messages
+from multigpu.rank.projection import make_projection
+from multigpu.rank.shared import SharedPieces
+from multigpu.records.outdir import OutputDir
+from multigpu.records.record import RunRecord, config_doc
 
 
 def planned_frames(cfg: WalkConfig, path) -> int | None:
@@ -38,7 +38,7 @@ class FrameSetup:
 
     planner: Planner
     exchange: Exchange
-    projection: Projection
+    projection: Projection | None  # None only while ``build`` makes it
     background: np.ndarray  # the clear colour (3,) uint8: a depth-composed tile starts from it
     doc: dict
     record: RunRecord | None = None
@@ -73,7 +73,7 @@ def make_exchange(cfg: WalkConfig, comm, planner: Planner) -> tuple[Exchange, st
 
 def _live(cfg: WalkConfig, comm, scene, path, planner: Planner, presenter, monitor):
     """A window run's input and statistics: rank 0's windows take the keyboard and mouse."""
-    from multigpu.parallel.live import Live
+    from multigpu.rank.live import Live
 
     controls = start = None
     if comm.Get_rank() == 0:
@@ -91,17 +91,18 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
     rank = comm.Get_rank()
     planner = Planner(cfg, scene, rank)  # MPI-free: projection, strategy, decomposition
     exchange, why = make_exchange(cfg, comm, planner)
-    projection, projection_why = make_projection(cfg, comm, planner, scene.n_objects)
-    n_frames = planned_frames(cfg, path)
-    doc = config_doc(cfg, scene, load_info, n_frames, placement, renderer.method)
-    doc["exchange"] = exchange.name
-    if why:
-        doc["exchange_why"] = f"messages: no shared segment ({why})"
-    doc["projection"] = projection.name
-    if projection_why:
-        doc["projection_why"] = projection_why
-    setup = FrameSetup(planner, exchange, projection, clear_colour(renderer, scene.n_objects), doc)
-    try:
+    setup = FrameSetup(planner, exchange, None, np.zeros(3, dtype=np.uint8), {})
+    try:  # from here on, whatever fails lets go of what was made (the exchange's segments first)
+        setup.projection, projection_why = make_projection(cfg, comm, planner, scene.n_objects)
+        n_frames = planned_frames(cfg, path)
+        doc = setup.doc = config_doc(cfg, scene, load_info, n_frames, placement, renderer.method)
+        doc["exchange"] = exchange.name
+        if why:
+            doc["exchange_why"] = f"messages: no shared segment ({why})"
+        doc["projection"] = setup.projection.name
+        if projection_why:
+            doc["projection_why"] = projection_why
+        setup.background = clear_colour(renderer, scene.n_objects)
         if presenter.mode == "window":
             setup.live = _live(cfg, comm, scene, path, planner, presenter, monitor)
         if rank == 0:

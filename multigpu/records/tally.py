@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multigpu.parallel.report import BALANCE_CPU, BALANCE_NAMES, COLUMNS, COMPONENTS, TARGET_BAND, WAITED
+from multigpu.records.report import BALANCE_CPU, BALANCE_NAMES, COLUMNS, COMPONENTS, TARGET_BAND, WAITED
 
 #: values a quantile stream keeps exactly before it folds them into its histogram
 EXACT = 1 << 13
@@ -221,7 +221,7 @@ def summarize_file(path: Path, ranks: int, hosts: list | None = None, target: tu
 def tally_file(path: Path, tally: RunningSummary, ranks: int) -> None:
     """A timings.csv's rows into ``tally``, read ``BATCH`` frames at a time (rows reach it a whole
     frame at a time, so every chunk of ``ranks * BATCH`` rows holds whole frames)."""
-    from multigpu.parallel.report import parse_rows
+    from multigpu.records.report import parse_rows
 
     with open(path) as f:
         next(f, None)  # the header

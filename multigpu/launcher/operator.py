@@ -19,7 +19,7 @@ import subprocess
 import sys
 
 from multigpu.errors import InputError
-from multigpu.parallel.supervise import flag_value
+from multigpu.launcher.supervise import flag_value
 
 #: the environment variable that tells rank 0 where the view listens (HOST:PORT)
 ENV = "MULTIGPU_MONITOR"
@@ -46,7 +46,7 @@ def own_pc(argv: list[str]) -> dict | None:
 def start_view(on: dict) -> subprocess.Popen:
     """Start the view on its host; its process, once it listens (``ENV`` set to where)."""
     from multigpu.display.remote import TOKEN_ENV
-    from multigpu.parallel.hosts import is_this_machine
+    from multigpu.launcher.hosts import is_this_machine
 
     x, y = on["position"]
     cmd = [sys.executable, "-m", "multigpu", "monitor-view", "--position", f"{x}x{y}",
