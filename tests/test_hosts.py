@@ -115,3 +115,19 @@ def test_the_probe_passes_hosts_that_answer_and_skips_this_machine(tmp_path):
     assert said.read_text().split("\n")[:-1] == ["far true"]  # this machine: a local fork, not the shell
     with pytest.raises(InputError, match=r"host slow: .* \(no answer within 0.5 s\)"):
         probe([("slow", 1)], str(shell), timeout=0.5)
+
+
+def test_one_remote_shell_for_every_launcher_step():
+    """``remote_shell``/``shell_command``: the ranks' launchers, the host checks, recovery and
+    the operator's view all start a remote command the same way."""
+    import shutil
+
+    from multigpu.launcher.hosts import remote_shell, shell_command
+
+    assert remote_shell({}) is None and remote_shell({"MULTIGPU_RSH": ""}) is None
+    assert remote_shell({"MULTIGPU_RSH": "true"}) == shutil.which("true")
+    with pytest.raises(InputError, match="MULTIGPU_RSH=no-such-shell: not an executable"):
+        remote_shell({"MULTIGPU_RSH": "no-such-shell"})
+    assert shell_command("/bin/rsh") == ["/bin/rsh"]
+    assert shell_command(None) == ["ssh", "-o", "BatchMode=yes"]
+    assert shell_command(None, 5) == ["ssh", "-o", "BatchMode=yes", "-o", "ConnectTimeout=5"]

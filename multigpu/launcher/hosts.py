@@ -102,6 +102,30 @@ def is_this_machine(host: str) -> bool:
     return addr in mine
 
 
+def remote_shell(env=None) -> str | None:
+    """The remote shell every launcher step uses (the ranks' MPI launchers, host checks, the
+    operator's view): ``$MULTIGPU_RSH`` as an executable's path, or None for ssh. A name that is
+    no executable is one InputError, the same wherever it is asked."""
+    import os
+    import shutil
+
+    name = (os.environ if env is None else env).get("MULTIGPU_RSH")
+    if not name:
+        return None
+    found = shutil.which(name)
+    if not found:
+        raise InputError(f"MULTIGPU_RSH={name}: not an executable")
+    return found
+
+
+def shell_command(rsh: str | None, timeout: float | None = None) -> list[str]:
+    """The command that runs something on another host: ``rsh``, or ssh in batch mode (never a
+    password prompt), with a connect timeout where one is given."""
+    if rsh:
+        return [rsh]
+    return ["ssh", "-o", "BatchMode=yes", *(["-o", f"ConnectTimeout={int(timeout)}"] if timeout else [])]
+
+
 def probe(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = PROBE_TIMEOUT) -> None:
     """Every host that is not this machine answers ``RSH HOST true`` (the remote shell the
     launchers will use: ``rsh``, or ssh in batch mode), all asked at once; the first that does
@@ -118,7 +142,7 @@ def unreachable(hosts: list[tuple[str, int]], rsh: str | None, timeout: float = 
     import shlex
     import subprocess
 
-    shell = [rsh] if rsh else ["ssh", "-o", "BatchMode=yes", "-o", f"ConnectTimeout={int(timeout)}"]
+    shell = shell_command(rsh, timeout)
     remote = [h for h, _ in hosts if not is_this_machine(h)]
     running = []
     for h in remote:

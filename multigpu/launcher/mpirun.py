@@ -75,13 +75,9 @@ class Launcher:
         """Flags that place the ranks on ``hosts`` in order, started through the remote shell
         ``$MULTIGPU_RSH`` (default: the MPI's own, ssh). Open MPI is told to pass on the
         environment the ranks need (Hydra passes all of it by default)."""
-        from multigpu.launcher.hosts import spec
+        from multigpu.launcher.hosts import remote_shell, spec
 
-        rsh = env.get("MULTIGPU_RSH")
-        if rsh:
-            rsh = shutil.which(rsh) or ""
-            if not rsh:
-                raise InputError(f"MULTIGPU_RSH={env['MULTIGPU_RSH']}: not an executable")
+        rsh = remote_shell(env)
         if self.flavor == "openmpi":
             names = {*self.env, *(k for k in env if k.startswith(("MULTIGPU_", "LP_NUM_THREADS")) or k == "XAUTHORITY")}
             forward = [a for k in sorted(names) for a in ("-x", k)]
@@ -219,9 +215,9 @@ def main(argv: list[str] | None = None) -> int:
         cmd = launcher.command(ranks, rest, hosts=hosts)
         bound = restart_bound(rest)
         if hosts and not help_only(rest):
-            from multigpu.launcher.hosts import probe
+            from multigpu.launcher.hosts import probe, remote_shell
 
-            probe(hosts, shutil.which(os.environ["MULTIGPU_RSH"]) if os.environ.get("MULTIGPU_RSH") else None)
+            probe(hosts, remote_shell())
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return 2

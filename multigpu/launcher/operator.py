@@ -14,7 +14,6 @@ import os
 import secrets
 import select
 import shlex
-import shutil
 import subprocess
 import sys
 
@@ -46,7 +45,7 @@ def own_pc(argv: list[str]) -> dict | None:
 def start_view(on: dict) -> subprocess.Popen:
     """Start the view on its host; its process, once it listens (``ENV`` set to where)."""
     from multigpu.display.remote import TOKEN_ENV
-    from multigpu.launcher.hosts import is_this_machine
+    from multigpu.launcher.hosts import is_this_machine, remote_shell, shell_command
 
     x, y = on["position"]
     cmd = [sys.executable, "-m", "multigpu", "monitor-view", "--position", f"{x}x{y}",
@@ -54,9 +53,7 @@ def start_view(on: dict) -> subprocess.Popen:
            *(["--listen", on["address"]] if on.get("address") else [])]
     host = on["host"]
     if not is_this_machine(host):
-        rsh = os.environ.get("MULTIGPU_RSH")
-        shell = [shutil.which(rsh) or rsh] if rsh else ["ssh", "-o", "BatchMode=yes"]
-        cmd = [*shell, host, shlex.join(cmd)]
+        cmd = [*shell_command(remote_shell()), host, shlex.join(cmd)]
     token = secrets.token_urlsafe(24)
     proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, start_new_session=True)
     try:

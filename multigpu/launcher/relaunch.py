@@ -18,14 +18,13 @@ from __future__ import annotations
 import collections
 import json
 import os
-import shutil
 import signal
 import sys
 import threading
 import time
 from pathlib import Path
 
-from multigpu.launcher.hosts import survivors, unreachable
+from multigpu.launcher.hosts import remote_shell, survivors, unreachable
 from multigpu.launcher.supervise import flag_value, out_dir, read_summary, supervise
 from multigpu.records import recovery
 
@@ -38,7 +37,7 @@ def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
     good (module doc); its exit code."""
     out, name = out_dir(argv), Path(launcher.path).name
     argv = with_flight(argv, out)
-    rsh = shutil.which(os.environ["MULTIGPU_RSH"]) if os.environ.get("MULTIGPU_RSH") else None
+    rsh = remote_shell() if hosts else None  # checked at the start where there are hosts
     restarts: collections.deque = collections.deque()
     history: list[dict] = []
     env, args, place, gone = launcher.environ(), argv, hosts, set()
