@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-from multigpu import tools
 from multigpu.core.memory import keep_heap
 from multigpu.errors import InputError, WriteFailed
 from multigpu.flags import WALKTHROUGH, scene_args, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
@@ -73,121 +72,49 @@ def build_parser() -> argparse.ArgumentParser:
     scene_args(w)
     walkthrough_args(w)
     w.set_defaults(run=_walkthrough)
-    _tool_parsers(sub)
-    _study_parsers(sub)
+    _commands(sub)
     return ap
 
 
-def _tool_parsers(sub) -> None:
-    """The scene, path, wall, monitor-view, tree and depth subcommands."""
-    s = sub.add_parser("scene", help="scene tools")
-    ssub = s.add_subparsers(dest="scmd", required=True)
-    si = ssub.add_parser("info", help="print objects, triangles, bounds, memory and load time")
-    si.add_argument("source", nargs="?", default="plant", help="built-in scene name or model file")
-    scene_args(si)
-    si.add_argument("--grid", default="2x2", help="the wall the scene is prepared for (automatic clustering)")
-    si.add_argument("--no-cache", action="store_true")
-    si.set_defaults(run=tools.scene_info)
-    sc = ssub.add_parser("scan", help="write a scanned-style model: one closed surface of even triangles (binary "
-                                      "PLY); load it cut into parts with --model OUT --split grid:8")
-    sc.add_argument("out", help="PLY file to write")
-    sc.add_argument("--triangles", type=int, default=1_000_000, help="about this many (default %(default)s)")
-    sc.add_argument("--seed", type=int, default=0)
-    sc.set_defaults(run=tools.scene_scan)
+def _commands(sub) -> None:
+    """Every subcommand of ``commands.COMMANDS``, its arguments added in one loop."""
+    from multigpu.commands import COMMANDS
+    from multigpu.studies.registry import BENCHES, EXPERIMENTS, names_help
 
-    p = sub.add_parser("path", help="camera path tools")
-    psub = p.add_subparsers(dest="pcmd", required=True)
-    pm = psub.add_parser("make", help="write a camera path file")
-    pm.add_argument("kind", help="walkthrough | orbit")
-    scene_args(pm)
-    pm.add_argument("--frames", type=int)
-    pm.add_argument("--fov", type=float, default=60.0)
-    pm.add_argument("--out", required=True, help="path file to write (JSON)")
-    pm.set_defaults(run=tools.path_make)
-
-    wl = sub.add_parser("wall", help="wall file tools")
-    wsub = wl.add_subparsers(dest="wall_cmd", required=True)
-    wc = wsub.add_parser("check", help="validate a wall file and print its layout")
-    wc.add_argument("file", help="wall file (JSON: grid, tile, mullion, displays)")
-    wc.add_argument("--grid-only", action="store_true", help="print only ROWSxCOLS (for launch scripts)")
-    wc.add_argument("--hosts-only", action="store_true", help="print only the hosts as H:N,... (for launch scripts)")
-    wc.add_argument("--offline", action="store_true",
-                    help="check the file alone: no host name look-up, no X screen asked (a wall written elsewhere)")
-    wc.set_defaults(run=tools.wall_check)
-    wt = wsub.add_parser("test", help="show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)")
-    wt.add_argument("file", help="wall file (JSON)")
-    wt.add_argument("--frames", type=int, default=None, help="stop after N frames (default: at Escape)")
-    wt.set_defaults(run=tools.wall_test)
-    mv = sub.add_parser("monitor-view", help="the operator's view on a PC of its own (started by the launcher "
-                                             "from the wall file's monitor.host)")
-    mv.add_argument("--display", help="X display (default $DISPLAY)")
-    mv.add_argument("--position", default="0x0", help="window position XxY on that display (default 0x0)")
-    mv.add_argument("--port", type=int, default=0, help="TCP port to listen on (default: any, printed)")
-    mv.add_argument("--listen", default="", help="address to listen on (default: every interface; a connection "
-                                                 "must bring the token the launcher writes on standard input)")
-    mv.set_defaults(run=tools.monitor_view)
-    t = sub.add_parser("tree", help="print the GPU tree of a ROWSxCOLS wall")
-    t.add_argument("grid")
-    t.set_defaults(run=tools.tree)
-
-    dp = sub.add_parser("depth", help="depth complexity and overdraw of one frame (images + stats)")
-    scene_args(dp)
-    dp.add_argument("--path-kind", default="walkthrough", help="generated path: walkthrough | orbit")
-    dp.add_argument("--frames", type=int, default=None, help="frames of the generated path")
-    dp.add_argument("--frame", type=int, default=0, help="which frame of the path")
-    dp.add_argument("--size", default="1024x1024", help="display WxH in pixels")
-    dp.add_argument("--out", default="out/depth", help="output directory")
-    dp.set_defaults(run=tools.depth)
+    words = {"experiments": names_help(["all", *EXPERIMENTS]),
+             "benches": "; ".join(f"{n}: {about}" for n, (_, about) in BENCHES.items())}
+    groups: dict[str, object] = {}
+    for c in COMMANDS:
+        where = sub
+        if len(c.words) == 2:
+            if c.words[0] not in groups:
+                g = sub.add_parser(c.words[0], help=c.group_help.get(c.words[0]))
+                groups[c.words[0]] = g.add_subparsers(dest=f"{c.words[0]}_cmd", required=True)
+            where = groups[c.words[0]]
+        p = where.add_parser(c.words[-1], help=c.help)
+        for a in c.args:
+            kw = {**a.kw, "help": a.kw["help"].format(**words)} if a.kw.get("help", "").startswith("{") else a.kw
+            p.add_argument(*a.names, **kw)
+        if c.scene:
+            scene_args(p)
+        p.set_defaults(run=_runner(c.run))
 
 
-def _study_parsers(sub) -> None:
-    """The experiment, accuracy and bench subcommands."""
-    from multigpu.studies.registry import EXPERIMENTS, names_help
+def _runner(target: str):
+    """The function ``module:function`` names, imported when the command runs."""
+    def run(a) -> int:
+        import importlib
 
-    e = sub.add_parser("experiment", help="the paper's evaluation: tables, plots, Markdown")
-    e.add_argument("name", help=names_help(["all", *EXPERIMENTS]))
-    e.add_argument("--quick", action="store_true", help="tiny sizes: the same code in a few minutes")
-    e.add_argument("--out", default="out/experiments", help="output directory")
-    e.add_argument("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)")
-    e.add_argument("--rounds", type=int, default=None,
-                   help="alternated rounds of payoff, speedup and partition "
-                        "(default 3, 3 and 2; 1 with --quick)")
-    e.set_defaults(run=_experiment)
-    ac = sub.add_parser("accuracy", help="measure every speed-for-accuracy trade (tables for docs/ACCURACY.md)")
-    ac.add_argument("--quick", action="store_true", help="tiny sizes: the same code in under a minute")
-    ac.add_argument("--out", default="out/accuracy", help="directory for the CSV tables")
-    ac.add_argument("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)")
-    ac.set_defaults(run=_accuracy)
-    _bench_args(sub.add_parser("bench", help="benchmarks: print speed and memory figures"))
+        module, name = target.split(":")
+        return getattr(importlib.import_module(module), name)(a)
+
+    return run
 
 
 def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """The ``bench`` subcommand's parser."""
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     return sub.choices["bench"]
-
-
-def _bench_args(b: argparse.ArgumentParser) -> None:
-    """The ``bench`` subcommand's arguments."""
-    from multigpu.studies.registry import BENCHES
-
-    b.add_argument("what", help="; ".join(f"{n}: {about}" for n, (_, about) in BENCHES.items()))
-    b.add_argument("--quick", action="store_true", help="small sizes, a few seconds")
-    b.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)  # floor: the MPI side
-    b.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)
-    b.add_argument("--path-kind", default="walkthrough", help=argparse.SUPPRESS)
-    b.add_argument("--ranks", default="4", help="floor, peer: the rank counts to measure, e.g. 4,9,16 or 1,4 "
-                                                "(default 4)")
-    b.add_argument("--rounds", type=int, default=2, help="peer, latency: alternated rounds (default 2)")
-    b.add_argument("--tile", type=int, default=256, help="floor: the side of the region every rank renders, pixels "
-                                                        "(default 256)")
-    b.add_argument("--display", type=int, default=None, help="floor: the side of the display that region is the "
-                                                             "centre of, pixels (default twice the tile)")
-    b.add_argument("--out", default="out/peer", help="peer, latency, simplify, timeline: where the runs and the "
-                                                     "results go (default out/peer, out/latency, out/simplify, "
-                                                     "out/timeline)")
-    scene_args(b)  # bench floor's worker: the scene it renders
-    b.set_defaults(run=_bench)
 
 
 def main(argv: list[str] | None = None) -> int:

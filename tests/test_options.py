@@ -79,3 +79,25 @@ def test_bad_values_name_their_flag(flags, needle):
     with pytest.raises(InputError) as e:
         _walk(*flags)
     assert str(e.value) == needle
+
+
+def test_the_entry_point_declares_flags_as_data():
+    """cli.py, tools.py and commands.py make at most 10 ``add_argument`` calls (the subcommands'
+    arguments are ``commands.COMMANDS``, added in one loop; the walkthrough's come from the
+    declared options), and each shared flag has one helper."""
+    import ast
+    from pathlib import Path
+
+    pkg = Path(__file__).resolve().parents[1] / "multigpu"
+    calls = 0
+    for name in ("cli.py", "tools.py", "commands.py"):
+        for node in ast.walk(ast.parse((pkg / name).read_text())):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "add_argument":
+                calls += 1
+    assert calls <= 10, calls
+    from multigpu.commands import COMMANDS
+
+    outs = [a for c in COMMANDS for a in c.args if a.names == ("--out",)]
+    assert outs and all(("default" in a.kw) != a.kw.get("required", False) for a in outs)
+    kinds = [a for c in COMMANDS for a in c.args if a.names == ("--path-kind",)]
+    assert kinds and all(a.kw["choices"] == ("walkthrough", "orbit") for a in kinds)

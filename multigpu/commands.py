@@ -1,0 +1,120 @@
+"""The subcommands beside ``walkthrough``, declared as data: each one's words, its arguments and
+the function it runs. ``cli.build_parser`` adds them all in one loop, so a flag's declaration lives
+here once (``--out``, ``--frames``, ``--quick``: one helper each) and the walkthrough's flags come
+from the declared options (``options.py``). No argparse here beyond its constants."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+
+from multigpu.scene.paths import GENERATORS
+
+
+@dataclass(frozen=True)
+class Arg:
+    """One argument: argparse's names and keywords."""
+
+    names: tuple[str, ...]
+    kw: dict
+
+
+def arg(*names: str, **kw) -> Arg:
+    return Arg(names, kw)
+
+
+def out(default: str | None, help: str) -> Arg:
+    """``--out``: where a command writes (required where ``default`` is None)."""
+    return arg("--out", help=help, **({"required": True} if default is None else {"default": default}))
+
+
+def frames(help: str = argparse.SUPPRESS, default: int | None = None) -> Arg:
+    """``--frames N``."""
+    return arg("--frames", type=int, default=default, help=help)
+
+
+def quick(help: str) -> Arg:
+    """``--quick``: small sizes, the same code."""
+    return arg("--quick", action="store_true", help=help)
+
+
+def path_kind(help: str = "generated path: walkthrough | orbit") -> Arg:
+    """``--path-kind``: the generated camera path (the walkthrough's choices)."""
+    return arg("--path-kind", default="walkthrough", choices=tuple(GENERATORS), help=help)
+
+
+@dataclass(frozen=True)
+class Command:
+    """A subcommand: its words (``("scene", "info")``), help, arguments, whether it takes the
+    scene's flags, and what it runs (``"module:function"``, imported when it runs)."""
+
+    words: tuple[str, ...]
+    help: str
+    run: str
+    args: tuple[Arg, ...] = ()
+    scene: bool = False
+    group_help: dict = field(default_factory=dict)  # the help of the group its first word opens
+
+
+COMMANDS: tuple[Command, ...] = (
+    Command(("scene", "info"), "print objects, triangles, bounds, memory and load time", "multigpu.tools:scene_info",
+            (arg("source", nargs="?", default="plant", help="built-in scene name or model file"),
+             arg("--grid", default="2x2", help="the wall the scene is prepared for (automatic clustering)"),
+             arg("--no-cache", action="store_true")), scene=True, group_help={"scene": "scene tools"}),
+    Command(("scene", "scan"), "write a scanned-style model: one closed surface of even triangles (binary PLY); "
+            "load it cut into parts with --model OUT --split grid:8", "multigpu.tools:scene_scan",
+            (arg("out", help="PLY file to write"),
+             arg("--triangles", type=int, default=1_000_000, help="about this many (default %(default)s)"),
+             arg("--seed", type=int, default=0))),
+    Command(("path", "make"), "write a camera path file", "multigpu.tools:path_make",
+            (arg("kind", choices=tuple(GENERATORS), help="walkthrough | orbit"), frames("frames of the path"),
+             arg("--fov", type=float, default=60.0), out(None, "path file to write (JSON)")), scene=True,
+            group_help={"path": "camera path tools"}),
+    Command(("wall", "check"), "validate a wall file and print its layout", "multigpu.tools:wall_check",
+            (arg("file", help="wall file (JSON: grid, tile, mullion, displays)"),
+             arg("--grid-only", action="store_true", help="print only ROWSxCOLS (for launch scripts)"),
+             arg("--hosts-only", action="store_true", help="print only the hosts as H:N,... (for launch scripts)"),
+             arg("--offline", action="store_true",
+                 help="check the file alone: no host name look-up, no X screen asked (a wall written elsewhere)")),
+            group_help={"wall": "wall file tools"}),
+    Command(("wall", "test"), "show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)",
+            "multigpu.tools:wall_test",
+            (arg("file", help="wall file (JSON)"), frames("stop after N frames (default: at Escape)"))),
+    Command(("monitor-view",), "the operator's view on a PC of its own (started by the launcher from the wall "
+            "file's monitor.host)", "multigpu.tools:monitor_view",
+            (arg("--display", help="X display (default $DISPLAY)"),
+             arg("--position", default="0x0", help="window position XxY on that display (default 0x0)"),
+             arg("--port", type=int, default=0, help="TCP port to listen on (default: any, printed)"),
+             arg("--listen", default="", help="address to listen on (default: every interface; a connection must "
+                                              "bring the token the launcher writes on standard input)"))),
+    Command(("tree",), "print the GPU tree of a ROWSxCOLS wall", "multigpu.tools:tree", (arg("grid"),)),
+    Command(("depth",), "depth complexity and overdraw of one frame (images + stats)", "multigpu.tools:depth",
+            (path_kind(), frames("frames of the generated path"),
+             arg("--frame", type=int, default=0, help="which frame of the path"),
+             arg("--size", default="1024x1024", help="display WxH in pixels"),
+             out("out/depth", "output directory")), scene=True),
+    Command(("experiment",), "the paper's evaluation: tables, plots, Markdown", "multigpu.cli:_experiment",
+            (arg("name", help="{experiments}"), quick("tiny sizes: the same code in a few minutes"),
+             out("out/experiments", "output directory"),
+             arg("--results", default=None, help="results page written by 'all' (default OUT/RESULTS.md)"),
+             arg("--rounds", type=int, default=None, help="alternated rounds of payoff, speedup and partition "
+                                                          "(default 3, 3 and 2; 1 with --quick)"))),
+    Command(("accuracy",), "measure every speed-for-accuracy trade (tables for docs/ACCURACY.md)",
+            "multigpu.cli:_accuracy",
+            (quick("tiny sizes: the same code in under a minute"), out("out/accuracy", "directory for the CSV tables"),
+             arg("--page", default=None, help="Markdown page to write (default OUT/ACCURACY.md)"))),
+    Command(("bench",), "benchmarks: print speed and memory figures", "multigpu.cli:_bench",
+            (arg("what", help="{benches}"), quick("small sizes, a few seconds"),
+             arg("--worker", action="store_true", help=argparse.SUPPRESS),  # floor: the MPI side
+             frames(), path_kind(argparse.SUPPRESS),
+             arg("--ranks", default="4", help="floor, peer: the rank counts to measure, e.g. 4,9,16 or 1,4 "
+                                              "(default 4)"),
+             arg("--rounds", type=int, default=2, help="peer, latency: alternated rounds (default 2)"),
+             arg("--tile", type=int, default=256, help="floor: the side of the region every rank renders, pixels "
+                                                       "(default 256)"),
+             arg("--display", type=int, default=None, help="floor: the side of the display that region is the "
+                                                           "centre of, pixels (default twice the tile)"),
+             out("out/peer", "peer, latency, simplify, timeline: where the runs and the results go (default "
+                             "out/peer, out/latency, out/simplify, out/timeline)")),
+            scene=True),  # bench floor's worker: the scene it renders
+)
