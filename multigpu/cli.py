@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from multigpu import exits
 from multigpu.core.memory import keep_heap
 from multigpu.errors import InputError, WriteFailed
 from multigpu.flags import WALKTHROUGH, scene_args, walk_config, walkthrough_args  # noqa: F401 (walk_config: tests)
@@ -27,7 +28,7 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message):
         """A bad flag in one line (``prog: error: ...``), exit 2: not the whole usage above it."""
-        self.exit(2, f"{self.prog}: error: {message} (--help lists the flags)\n")
+        self.exit(exits.BAD_INPUT, f"{self.prog}: error: {message} (--help lists the flags)\n")
 
     def _print_message(self, message, file=None):
         from multigpu.rank.job import launcher_rank
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         return args.run(args)  # the subcommand's own function (``set_defaults`` in ``build_parser``)
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
-        return 2
+        return exits.BAD_INPUT
 
 
 def _experiment(a) -> int:
@@ -172,7 +173,7 @@ def _walkthrough(a) -> int:
     except InputError as exc:  # agreed on every rank (a wall file one host cannot read): one line, all exit 2
         if MPI.COMM_WORLD.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
-        collective_exit(2)
+        collective_exit(exits.BAD_INPUT)
     job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else 30.0)
     job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:
@@ -185,7 +186,7 @@ def _walkthrough(a) -> int:
         job.close()
         if comm.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
-        collective_exit(2)
+        collective_exit(exits.BAD_INPUT)
     except BaseException as exc:  # noqa: BLE001 -- every other way a run can end early
         job.close()
         _end_failed_job(comm, job, exc)
@@ -215,11 +216,11 @@ def _end_failed_job(comm, job, exc: BaseException) -> None:
     if isinstance(exc, Interrupted):
         code, text = exc.code, f"multigpu: {exc}; ending the job"
     elif isinstance(exc, KeyboardInterrupt):
-        code, text = 130, "multigpu: interrupted; ending the job"
+        code, text = exits.INTERRUPTED, "multigpu: interrupted; ending the job"
     elif isinstance(exc, PeerStalled):
-        code, text = 1, f"multigpu: {exc}"
+        code, text = exits.FAILED, f"multigpu: {exc}"
     else:
-        code, text = 1, f"multigpu: rank {rank}: {exc.__class__.__name__}: {exc}"
+        code, text = exits.FAILED, f"multigpu: rank {rank}: {exc.__class__.__name__}: {exc}"
     if not consequence:
         if rank == 0 or not isinstance(exc, (Interrupted, KeyboardInterrupt)):
             print(text, file=sys.stderr, flush=True)

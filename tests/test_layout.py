@@ -218,3 +218,24 @@ def test_every_wait_is_bounded():
                 owner = ast.unparse(node.func.value)
                 if "comm" in owner.lower() or "node" in owner or "MPI" in owner:
                     assert (rel, node.func.attr) in BLOCKING_ALLOWED, f"{rel}:{node.lineno} {owner}.{node.func.attr}()"
+
+
+def test_exit_codes_come_from_one_place():
+    """The job's exit codes live in ``exits.py``: no ``128 +`` elsewhere, no literal non-zero code
+    returned or passed to an exit by the launcher, a rank or the entry point."""
+    from multigpu import exits
+
+    assert (exits.INTERRUPTED, exits.by_signal(15), exits.GAVE_UP, exits.BAD_INPUT) == (130, 143, 3, 2)
+    for f in [*_files("launcher"), *_files("rank"), PKG / "cli.py"]:
+        rel = f.relative_to(PKG).as_posix()
+        for node in ast.walk(ast.parse(f.read_text())):
+            assert not (isinstance(node, ast.BinOp) and 128 in [getattr(n, "value", None) for n in
+                                                                (node.left, node.right)]), f"{rel}:{node.lineno} 128 +"
+            value = None
+            if isinstance(node, ast.Return) and isinstance(node.value, ast.Constant):
+                value = node.value.value
+            elif (isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", "")) in
+                  ("collective_exit", "exit", "_exit") and node.args and isinstance(node.args[0], ast.Constant)):
+                value = node.args[0].value
+            assert not (isinstance(value, int) and not isinstance(value, bool) and value in (1, 2, 3, 130)), \
+                f"{rel}:{node.lineno} exits with a literal {value}"

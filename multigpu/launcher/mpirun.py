@@ -23,6 +23,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from multigpu import exits
 from multigpu.errors import InputError
 from multigpu.launcher.supervise import flag_value, out_dir, supervise
 
@@ -203,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     usage = "usage: python -m multigpu.launcher.mpirun -n RANKS [--hosts H:N,... | --hostfile FILE] MULTIGPU_ARGS..."
     if len(argv) < 2 or argv[0] != "-n" or not argv[1].isdigit() or int(argv[1]) < 1:
         print(usage, file=sys.stderr)
-        return 2
+        return exits.BAD_INPUT
     ranks, rest, hosts = int(argv[1]), argv[2:], None
     try:
         if rest and rest[0] in ("--hosts", "--hostfile"):
@@ -220,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
             probe(hosts, remote_shell())
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
-        return 2
+        return exits.BAD_INPUT
     from multigpu.launcher import operator
 
     view = None
@@ -234,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
         return supervise(cmd, launcher.environ(), out_dir(rest), Path(launcher.path).name)
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
-        return 2
+        return exits.BAD_INPUT
     finally:
         operator.stop_view(view)
 

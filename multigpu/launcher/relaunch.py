@@ -24,6 +24,7 @@ import threading
 import time
 from pathlib import Path
 
+from multigpu import exits
 from multigpu.launcher.hosts import remote_shell, survivors, unreachable
 from multigpu.launcher.supervise import flag_value, out_dir, read_summary, supervise
 from multigpu.records import recovery
@@ -64,13 +65,13 @@ def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
                     print(f"multigpu: giving up: {len(restarts) + 1} failures within {recovery.WINDOW / 60:.0f} "
                           f"minutes (--recover {bound}), the last: {reason}; {out}/ keeps every frame shown",
                           file=sys.stderr, flush=True)
-                    return recovery.GAVE_UP
+                    return exits.GAVE_UP
                 restarts.append(now)
                 gone = set(unreachable(hosts, rsh)) if hosts else set()
             place, dark = _placement(hosts, gone, argv, ranks)
             if hosts and not place:
                 print("multigpu: giving up: no host answers", file=sys.stderr, flush=True)
-                return recovery.GAVE_UP
+                return exits.GAVE_UP
             history = [h if "seconds" in h else {**h, "seconds": None}  # a restart that failed before a frame
                        for h in summary.get("recoveries", history)]
             shown_at = recovery.last_shown_at(out)
@@ -85,7 +86,7 @@ def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
             args = [*_without(_without(argv, "--resume-at"), "--dark-tiles"), "--resume-at", str(at),
                     *(["--dark-tiles", ",".join(map(str, dark))] if dark else [])]
     except KeyboardInterrupt:  # Ctrl-C between two jobs: nothing is running
-        return 130
+        return exits.INTERRUPTED
 
 
 def with_flight(argv: list[str], out: Path | None) -> list[str]:

@@ -11,6 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+from multigpu import exits
+
 
 def out_dir(argv: list[str]) -> Path | None:
     """The ``--out`` directory of a ``walkthrough`` command line (its default ``out``), else None."""
@@ -79,15 +81,15 @@ def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec"
             os.killpg(proc.pid, signal.SIGKILL)  # what is left of the job's session (a rank the runtime missed)
         except (ProcessLookupError, PermissionError):
             pass
-    code = 128 - code if code < 0 else code
-    if code == 0 or (code == 2 and not got):  # a signal during setup ends the ranks as they are: its own code
+    code = exits.by_signal(-code) if code < 0 else code
+    if code == exits.DONE or (code == exits.BAD_INPUT and not got):  # a signal during setup: the ranks' own code
         return code
     from multigpu.launcher.segments import sweep
 
     sweep(started)  # the shared-memory segments of ranks that never finished
     summary = read_summary(out)
     if got and summary is not None and str(summary.get("stopped_by", "")).startswith("signal "):
-        return 128 + got[0]
+        return exits.by_signal(got[0])
     if out is not None:
         from multigpu.records.record import salvage
 
@@ -96,7 +98,7 @@ def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec"
             print(f"multigpu: the job ended without rank 0 closing its record ({name} exited {code}: a rank or "
                   f"its host died); {out}/summary.json rewritten from the {frames} whole frames in timings.csv",
                   file=sys.stderr, flush=True)
-    return 128 + got[0] if got else 1
+    return exits.by_signal(got[0]) if got else exits.FAILED
 
 
 def read_summary(out: Path | None) -> dict | None:

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from multigpu import exits
 from multigpu.rank import exchange
 
 HEARTBEAT, FAILED, BYE = 1, 2, 3
@@ -71,7 +72,7 @@ class Interrupted(Exception):
 
     def __init__(self, signum: int):
         self.signum = signum
-        self.code = 128 + signum
+        self.code = exits.by_signal(signum)
         super().__init__(f"interrupted by {signal.Signals(signum).name}")
 
 

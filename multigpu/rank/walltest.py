@@ -20,6 +20,7 @@ import time
 
 import numpy as np
 
+from multigpu import exits
 from multigpu.errors import InputError
 from multigpu.rank.exchange import agree, barrier, wait_all
 
@@ -106,8 +107,8 @@ def main(path: str, frames: int | None) -> int:
     except InputError as exc:
         if MPI.COMM_WORLD.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
-        collective_exit(2)
-        return 2
+        collective_exit(exits.BAD_INPUT)
+        return exits.BAD_INPUT
     if got is not None:
         print(f"wall test ended with mullion {got[0]}x{got[1]}", flush=True)
     return 0

@@ -30,10 +30,12 @@ import sys
 import time
 from pathlib import Path
 
+from multigpu import exits
+
 #: restarts are counted over this many seconds (a wall failing once a day recovers every time)
 WINDOW = 600.0
 #: the launcher's exit code when it gives up (more than N restarts within WINDOW)
-GAVE_UP = 3
+GAVE_UP = exits.GAVE_UP  # the launcher's status when it gives up
 #: the environment variable carrying the recoveries so far to a restarted job
 ENV = "MULTIGPU_RECOVERIES"
 #: bytes of timings.csv's end read to find the last whole frame
