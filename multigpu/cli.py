@@ -164,6 +164,7 @@ def _bench(a) -> int:
 def _walkthrough(a) -> int:
     from mpi4py import MPI
 
+    from multigpu.config import DEFAULT_LIVENESS
     from multigpu.flags import dark_tiles
     from multigpu.rank.job import Interrupted, Job, collective_exit, teardown_barrier
     from multigpu.rank.tiles import tile_comm
@@ -174,7 +175,7 @@ def _walkthrough(a) -> int:
         if MPI.COMM_WORLD.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
         collective_exit(exits.BAD_INPUT)
-    job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else 30.0)
+    job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else DEFAULT_LIVENESS)
     job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:
         cfg = walk_config(a)

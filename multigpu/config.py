@@ -17,6 +17,14 @@ from multigpu.strategies import REGISTRY
 
 #: rank 0 rewrites summary.json every this many frames (and whenever the run ends)
 SUMMARY_EVERY = 50
+#: defaults that the launcher and the rank's job read before a WalkConfig exists (one place each)
+DEFAULT_OUT = "out"
+DEFAULT_LIVENESS = 30.0  # seconds a silent peer is taken for a dead one
+
+
+def default_recover(present: str) -> int:
+    """``--recover``'s default: 3 restarts with windows on a wall, none headless."""
+    return 3 if present == "window" else 0
 #: setup (building a scene cache, loading a big model) may take this long on a live rank;
 #: a stopped rank is caught by the liveness check long before
 SETUP_SECONDS = 1800.0
@@ -229,7 +237,8 @@ class WalkConfig:
         "full quality's level-of-detail bound: each object at its coarsest level whose error stays within PX "
         "pixels on the wall (0: as modelled)"))
     # -- outputs
-    out: str = option("out", group=OUTPUTS, metavar="DIR", help="output directory: timings.csv, summary.json, mosaic/")
+    out: str = option(DEFAULT_OUT, group=OUTPUTS, metavar="DIR",
+                      help="output directory: timings.csv, summary.json, mosaic/")
     mosaic_every: int = option(100, group=OUTPUTS, metavar="N", type=int, valid=lambda v: v >= 0,
                                must="must be >= 0 (0 = never)",
                                help="write the full wall as a PNG every N frames (0: never)")
@@ -248,7 +257,8 @@ class WalkConfig:
     # -- run control
     timeout: float = option(120.0, group=CONTROL, metavar="S", type=float, valid=lambda v: v > 0 and _finite(v),
                             must="must be > 0 seconds", help="seconds a rank waits for the others within a frame")
-    liveness: float = option(30.0, group=CONTROL, metavar="S", type=float, valid=lambda v: v >= 0 and _finite(v),
+    liveness: float = option(DEFAULT_LIVENESS, group=CONTROL, metavar="S", type=float,
+                             valid=lambda v: v >= 0 and _finite(v),
                              must="must be >= 0 seconds (0: off)", help=(
         "seconds without a heartbeat before a rank counts as stopped and the job ends (0: off)"))
     progress: bool = option(True, group=CONTROL, flag="--no-progress", negate=True, help="no progress bar")
@@ -273,7 +283,7 @@ class WalkConfig:
         if self.latency is None:
             object.__setattr__(self, "latency", 0 if self.present == "window" else 1)
         if self.recover is None:
-            object.__setattr__(self, "recover", 3 if self.present == "window" else 0)
+            object.__setattr__(self, "recover", default_recover(self.present))
         check(self)
         if self.partition == "broadcast" and self.decomposition != "screen":
             raise InputError.of("partition", "broadcast works with --decomposition screen (the balancer's "

@@ -245,9 +245,11 @@ def restart_bound(argv: list[str]) -> int:
     ``--present window``, 0 headless: ``WalkConfig.recover``); 0 for other commands."""
     if not argv or argv[0] != "walkthrough":
         return 0
+    from multigpu.config import default_recover
+
     value = flag_value(argv, "--recover")
     if value is None:
-        return 3 if flag_value(argv, "--present") == "window" else 0
+        return default_recover(flag_value(argv, "--present") or "headless")
     try:
         return max(0, int(value))
     except ValueError:

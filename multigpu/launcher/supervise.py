@@ -18,7 +18,9 @@ def out_dir(argv: list[str]) -> Path | None:
     """The ``--out`` directory of a ``walkthrough`` command line (its default ``out``), else None."""
     if not argv or argv[0] != "walkthrough":
         return None
-    out = "out"
+    from multigpu.config import DEFAULT_OUT
+
+    out = DEFAULT_OUT
     for i, a in enumerate(argv):
         if a == "--out" and i + 1 < len(argv):
             out = argv[i + 1]

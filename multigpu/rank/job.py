@@ -26,6 +26,7 @@ import time
 import numpy as np
 
 from multigpu import exits
+from multigpu.config import DEFAULT_LIVENESS
 from multigpu.rank import exchange
 
 HEARTBEAT, FAILED, BYE = 1, 2, 3
@@ -79,7 +80,7 @@ class Interrupted(Exception):
 class Job:
     """Liveness and interrupt state of one rank in a running job (see the module doc)."""
 
-    def __init__(self, comm, liveness: float = 30.0, interval: float = INTERVAL):
+    def __init__(self, comm, liveness: float = DEFAULT_LIVENESS, interval: float = INTERVAL):
         from mpi4py import MPI
 
         self.rank, self.size = comm.Get_rank(), comm.Get_size()
