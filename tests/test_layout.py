@@ -239,3 +239,14 @@ def test_exit_codes_come_from_one_place():
                 value = node.args[0].value
             assert not (isinstance(value, int) and not isinstance(value, bool) and value in (1, 2, 3, 130)), \
                 f"{rel}:{node.lineno} exits with a literal {value}"
+
+
+def test_studies_start_jobs_through_the_one_launcher():
+    """Every study's job goes through ``studies/runs.py`` (``walk``, ``job``, ``start``): no other
+    study calls the MPI launcher's command or runner, or starts ``multigpu.launcher.mpirun``."""
+    for f in _files("studies"):
+        if f.name == "runs.py":
+            continue
+        text = f.read_text()
+        for needle in ("run_multigpu", ".command(", "multigpu.launcher.mpirun\", \"-n", "find_launcher", "killpg"):
+            assert needle not in text, f"studies/{f.name} starts a job itself ({needle})"

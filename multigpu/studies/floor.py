@@ -22,14 +22,14 @@ def run(scenes: dict[str, list[str]] | None = None, ranks: int = 4, frames: int 
         timeout: float = 600, tile: int = 256, display: int | None = None) -> list[dict]:
     """Start the worker under mpiexec for each scene (name -> scene flags, and ``--path-kind``
     where not the walkthrough); the figures it printed, each with its ``scene`` name."""
-    from multigpu.launcher.mpirun import run_multigpu
+    from multigpu.studies.runs import job as run_job
     from multigpu.studies.runs import study_env
 
     rows = []
     for name, flags in (scenes or SCENES).items():
         size = ["--tile", str(tile)] + ([] if display is None else ["--display", str(display)])
-        job = run_multigpu(ranks, ["bench", "floor", "--worker", *flags, "--frames", str(frames), *size], timeout,
-                           env=study_env(), merge_stderr=True)
+        job = run_job(ranks, ["bench", "floor", "--worker", *flags, "--frames", str(frames), *size], timeout,
+                      env=study_env(), merge_stderr=True)
         lines = [ln for ln in job.stdout.splitlines() if ln.startswith(MARK)]
         if job.returncode != 0 or not lines:
             tail = "\n".join(job.stdout.strip().splitlines()[-5:])

@@ -13,7 +13,6 @@ runs, with the frames written then (summary.json's count). Prints figures, never
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import tempfile
 import threading
@@ -54,20 +53,16 @@ def bench_longrun(quick: bool) -> list[dict]:
 
 
 def _longrun(frames: int, extra: list[str]) -> dict:
-    from multigpu.launcher.mpirun import find_launcher
     from multigpu.records.report import COLUMNS, read_timings
-    from multigpu.studies.runs import study_env
+    from multigpu.studies.runs import end, start, study_env
 
     out = Path(tempfile.mkdtemp(prefix="longrun-"))
     extra = [str(out / a) if a == "flight.json" else a for a in extra]
     args = ["walkthrough", "--grid", "1x2", "--tile", "64x64", "--triangles", "2000", "--frames", str(frames),
             "--mosaic-every", "0", "--no-progress", *extra, "--out", str(out)]
-    launcher = find_launcher()
-    env = launcher.environ(study_env())
     print(f"\nbench longrun: 2 ranks, 1x2 wall of 64x64 tiles, {frames} frames, with {' '.join(extra)}; "
           "frame period = wall time (mean over ranks), rank 0's memory = VmRSS")
-    proc = subprocess.Popen(launcher.command(2, args, env=env), env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    proc = start(2, args, study_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     samples: list[tuple[int, int]] = []  # (frames written, rank 0's resident bytes)
     stop = threading.Event()
 
@@ -90,8 +85,7 @@ def _longrun(frames: int, extra: list[str]) -> dict:
     finally:
         stop.set()
         t.join()
-        if proc.poll() is None:
-            os.killpg(proc.pid, 9)
+        end(proc)
     if proc.returncode != 0:
         raise RuntimeError(f"bench longrun: the run failed (exit {proc.returncode}): {log.strip().splitlines()[-1:]}")
     rows = read_timings(out / "timings.csv")

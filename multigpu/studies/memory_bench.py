@@ -81,17 +81,14 @@ def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: fl
     the scene's flags, e.g. ``--model FILE``, instead of the plant of ``triangles``; ``env``: more
     environment for the job), with the
     run's scene load time and median emulated frame (per-rank CPU time) from its summary."""
-    from multigpu.launcher.mpirun import find_launcher
+    from multigpu.studies.runs import end, start
 
     rows, cols = (1, ranks) if ranks < 4 else (2, ranks // 2)
-    launcher = find_launcher()
-    env = launcher.environ({"MULTIGPU_CACHE": cache, **(env or {})})
     out = tempfile.mkdtemp(prefix="mem-")
     args = ["walkthrough", *(scene_flags(triangles) if scene is None else scene), "--frames", str(frames),
             "--grid", f"{rows}x{cols}",
             "--tile", "256x256", "--mosaic-every", "0", "--no-progress", "--out", out, *extra]
-    proc = subprocess.Popen(launcher.command(ranks, args, env=env), env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = start(ranks, args, {"MULTIGPU_CACHE": cache, **(env or {})}, as_users=True)  # as users launch
     peak_each: dict[int, int] = {}
     peak_sum = 0
     stop = threading.Event()
@@ -113,8 +110,7 @@ def measure(ranks: int, triangles: int, cache: str, frames: int = 8, timeout: fl
     finally:
         stop.set()
         t.join()
-        if proc.poll() is None:
-            os.killpg(proc.pid, 9)
+        end(proc)
         summary = Path(out) / "summary.json"
         got = json.loads(summary.read_text()) if summary.exists() else {"config": {"scene": {}}}
         subprocess.run(["rm", "-rf", out], check=False)

@@ -14,8 +14,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -46,11 +44,11 @@ def rank_pids(out) -> list[int]:
 def one_round(cache: str, tmp: str, k: int, kill: bool = True) -> dict:
     """One run, killed once after ``KILL_AFTER`` frames (``kill``); its summary."""
     out = os.path.join(tmp, f"run-{k}")
-    args = [sys.executable, "-m", "multigpu.launcher.mpirun", "-n", "4", "walkthrough", "--frames", str(FRAMES),
-            "--mosaic-every", "0", "--no-progress", "--out", out, "--recover", "1"]
-    env = {**os.environ, "MULTIGPU_CACHE": cache}
-    proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    from multigpu.studies.runs import end, start
+
+    args = ["walkthrough", "--frames", str(FRAMES), "--mosaic-every", "0", "--no-progress", "--out", out,
+            "--recover", "1"]
+    proc = start(4, args, {"MULTIGPU_CACHE": cache}, as_users=True)
     try:
         csv, t = Path(out) / "timings.csv", time.monotonic()
         while kill and not (csv.exists() and csv.read_text().count("\n") > 1 + 4 * KILL_AFTER):
@@ -61,8 +59,7 @@ def one_round(cache: str, tmp: str, k: int, kill: bool = True) -> dict:
             os.kill(rank_pids(out)[-1], signal.SIGKILL)
         _, err = proc.communicate(timeout=600)
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+        end(proc)
     if proc.returncode != 0:
         raise RuntimeError(f"bench recovery: exit {proc.returncode}: {err.strip().splitlines()[-1:]}")
     return json.loads((Path(out) / "summary.json").read_text())

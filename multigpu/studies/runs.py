@@ -1,5 +1,6 @@
 """What the experiments share: their settings, the walkthrough jobs they launch (each under a
-hard timeout, through ``parallel.mpirun``), reading a run's timings back, the paper's figures
+hard timeout, through ``launcher.mpirun``: ``walk``, ``job`` and, for a job watched while it runs,
+``start``; no study starts a job another way), reading a run's timings back, the paper's figures
 quoted for comparison, and the matplotlib setup.
 
 Figures and what they are (see records/report.py): component columns are wall-clock means per
@@ -11,6 +12,9 @@ speedups and efficiencies are computed from emulated figures only.
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -107,20 +111,55 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str
     args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
             "--no-progress", *args]
     try:
-        job = run_multigpu(k, args, timeout, env={**({} if as_run else study_env()), **(env or {})}, merge_stderr=True,
-                           launcher=launcher)
+        done = job(k, args, timeout, env={**({} if as_run else study_env()), **(env or {})}, launcher=launcher,
+                   merge_stderr=True)
     except JobTimeout:
         raise RuntimeError(f"experiment job timed out after {timeout} s: multigpu {' '.join(args)}") from None
-    log = job.stdout
+    log = done.stdout
     (out / "log.txt").write_text(log)
-    if job.returncode != 0:
+    if done.returncode != 0:
         tail = "\n".join(log.strip().splitlines()[-5:])
-        raise RuntimeError(f"experiment job failed (exit {job.returncode}): multigpu {' '.join(args)}\n{tail}")
+        raise RuntimeError(f"experiment job failed (exit {done.returncode}): multigpu {' '.join(args)}\n{tail}")
     summary = json.loads((out / "summary.json").read_text())
     rows = read_timings(out / "timings.csv")
     rows = rows[np.lexsort((rows[:, 1], rows[:, 0]))]
     frames = rows.shape[0] // k
     return Run(summary, rows[: frames * k].reshape(frames, k, len(COLUMNS)), out)
+
+
+def job(ranks: int, args: list[str], timeout: float, env: dict | None = None, launcher=None,
+        merge_stderr: bool = False) -> subprocess.CompletedProcess:
+    """A multigpu job of ``ranks`` ranks (``args``: its command line after ``multigpu``) under the
+    MPI's mpiexec, waited for and killed whole after ``timeout`` s."""
+    return run_multigpu(ranks, args, timeout, env=env, launcher=launcher, merge_stderr=merge_stderr)
+
+
+def start(ranks: int, args: list[str], env: dict | None = None, as_users: bool = False,
+          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) -> subprocess.Popen:
+    """A multigpu job started in a session of its own, returned at once, for a study that watches
+    it run (memory, a long run, recovery): under the MPI's mpiexec, or (``as_users``) as users
+    start it, through ``python -m multigpu.launcher.mpirun`` (which supervises and recovers).
+    ``env`` goes over this process's environment; ``end`` stops what is left of it."""
+    from multigpu.launcher.mpirun import find_launcher
+
+    if as_users:
+        cmd, job_env = [sys.executable, "-m", "multigpu.launcher.mpirun", "-n", str(ranks), *args], {
+            **os.environ, **(env or {})}
+    else:
+        launcher = find_launcher()
+        job_env = launcher.environ(env)
+        cmd = launcher.command(ranks, args, env=job_env)
+    return subprocess.Popen(cmd, env=job_env, stdout=stdout, stderr=stderr, text=True, start_new_session=True)
+
+
+def end(proc: subprocess.Popen) -> None:
+    """Stop what is left of a job ``start`` made (its whole session)."""
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait(30)
 
 
 def _scene_args(s: Settings, copies: int = 1) -> list[str]:
