@@ -127,3 +127,71 @@ def test_an_interactive_flight_that_can_restart_records_itself(tmp_path):
     assert with_flight(fly, tmp_path) == [*fly, "--record", str(tmp_path / "flight.json")]
     assert with_flight([*fly, "--record", "mine.json"], tmp_path) == [*fly, "--record", "mine.json"]
     assert with_flight(["walkthrough"], tmp_path) == ["walkthrough"]
+
+
+def _job_of_two_ranks(tmp_path, summary: dict):
+    """A stand-in job: a session whose two children carry ``mpi4py`` on their command line, an
+    output folder with a fresh timings.csv and ``summary``."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "o"
+    out.mkdir()
+    started = time.time()
+    (out / "timings.csv").write_text("frame\n0\n")
+    (out / "summary.json").write_text(json.dumps(summary))
+    sleeper = f"{sys.executable} -c 'import time; time.sleep(30)' mpi4py"
+    proc = subprocess.Popen(["bash", "-c", f"{sleeper} & {sleeper} & wait"], start_new_session=True)
+    return proc, out, started
+
+
+def test_the_launcher_ends_a_job_whose_local_rank_died(tmp_path):
+    """A rank of this host gone while the frames run and rank 0's record open: the launcher kills
+    the job's session itself (Open MPI's own teardown took 2.6 s), and only then."""
+    import signal
+    import threading
+
+    from multigpu.launcher.supervise import _local_ranks, _wait
+
+    proc, out, started = _job_of_two_ranks(tmp_path, {"complete": False})
+    try:
+        for _ in range(100):
+            ranks = _local_ranks(proc.pid)
+            if len(ranks) == 2:
+                break
+            time.sleep(0.05)
+        assert len(ranks) == 2
+        threading.Timer(0.5, lambda: os.kill(ranks[0], signal.SIGKILL)).start()
+        t = time.monotonic()
+        code = _wait(proc, out, started)
+        assert time.monotonic() - t < 10 and code == -signal.SIGKILL
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+def test_the_launcher_leaves_a_job_whose_record_is_closed(tmp_path):
+    """After rank 0 closed its record (a stop, the end), ranks leave in their own time: a rank
+    gone then ends nothing."""
+    import os
+    import signal
+    import threading
+
+    from multigpu.launcher.supervise import _gone, _local_ranks, _wait
+
+    proc, out, started = _job_of_two_ranks(tmp_path, {"complete": False, "stopped_by": "escape key"})
+    try:
+        for _ in range(100):
+            ranks = _local_ranks(proc.pid)
+            if len(ranks) == 2:
+                break
+            time.sleep(0.05)
+        os.kill(ranks[0], signal.SIGKILL)
+        waiting = threading.Thread(target=_wait, args=(proc, out, started), daemon=True)
+        waiting.start()
+        time.sleep(1.5)
+        assert proc.poll() is None and not _gone(ranks[1])  # nothing killed
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
