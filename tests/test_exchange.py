@@ -128,3 +128,41 @@ def test_exchange_bench_runs_both_backends(egl):
     for r in rows:
         assert r["emulated_ms"] > 0 and r["wall_ms"] >= r["exchange_ms"] > 0 and r["exchange_cpu_ms"] > 0
         assert (r["bytes_sent"] == 0) == (r["balance"] == "none"), r
+
+
+def test_a_jobs_checks_watch_its_own_threads_waits_only():
+    """``exchange.watch``: a job's check runs in the bounded waits of the thread that set it
+    (ranks as threads each have their own), and ``unwatch`` ends it."""
+    import threading
+
+    from multigpu.rank.exchange import PeerTimeout, unwatch, wait_all, watch
+
+    class Never:
+        @classmethod
+        def Testall(cls, requests):  # noqa: N802
+            return False
+
+    class Stop(Exception):
+        pass
+
+    def check():
+        raise Stop
+
+    token = watch(check)
+    with pytest.raises(Stop):
+        wait_all([Never()], 5.0, "test")
+    other = []
+
+    def elsewhere():
+        try:
+            wait_all([Never()], 0.05, "test")
+        except Exception as exc:  # noqa: BLE001
+            other.append(type(exc))
+
+    t = threading.Thread(target=elsewhere)
+    t.start()
+    t.join()
+    assert other == [PeerTimeout]  # not this thread's check
+    unwatch(token)
+    with pytest.raises(PeerTimeout):
+        wait_all([Never()], 0.05, "test")

@@ -9,13 +9,28 @@ that died or hangs turns into ``PeerTimeout`` instead of a frozen wall.
 from __future__ import annotations
 
 import time
+from contextvars import ContextVar, Token
 
 import numpy as np
 
 TAG = 7
-#: checks every bounded wait runs while it polls (``job.Job.check``: stalled or failed peers,
-#: interrupts); each raises to end the wait
-WATCH: list = []
+#: checks every bounded wait of this thread runs while it polls (``job.Job.check``: stalled or
+#: failed peers, interrupts); each raises to end the wait. A context variable, set by ``watch``:
+#: a job watches its own waits only (ranks as threads of one process each have theirs)
+_WATCH: ContextVar[tuple] = ContextVar("multigpu_watch", default=())
+
+
+def watch(check) -> Token:
+    """Run ``check`` in every bounded wait from now on (in this thread); ``unwatch`` the token."""
+    return _WATCH.set((*_WATCH.get(), check))
+
+
+def unwatch(token: Token) -> None:
+    """Stop what ``watch`` started (in the thread that started it)."""
+    try:
+        _WATCH.reset(token)
+    except ValueError:  # another thread's token: nothing of this thread's to undo
+        pass
 #: a wait runs the checks only once it has lasted this long (s): a frame's waits are mostly
 #: shorter, and the checks (a few numpy calls) cost ~10 us of CPU per poll with cold caches,
 #: while what they look for (a peer silent for seconds, a failure, an interrupt's grace) is
@@ -49,7 +64,7 @@ def wait_all(requests, timeout: float, what: str, most: float | None = None) -> 
         if now > deadline:
             raise PeerTimeout(f"{what}: no answer from other ranks within {timeout:g} s")
         if now > checks:
-            for check in WATCH:
+            for check in _WATCH.get():
                 check()
         time.sleep(sleep)
         sleep = min(sleep * 2, most)

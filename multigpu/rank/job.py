@@ -88,6 +88,7 @@ class Job:
         self.interval = float(interval)
         self.signum: int | None = None
         self.signal_time = 0.0
+        self._watching = None  # the token of this job's check in every bounded wait (``__enter__``)
         self.failed: tuple[int, str] | None = None
         self.in_frames = False  # set by the frame loop: signals then stop after the frame
         start = time.monotonic()
@@ -203,7 +204,7 @@ class Job:
         return self.signum is not None
 
     def __enter__(self) -> "Job":
-        exchange.WATCH.append(self.check)
+        self._watching = exchange.watch(self.check)
         return self
 
     def __exit__(self, kind, *exc) -> None:
@@ -212,8 +213,9 @@ class Job:
     def close(self, drain: bool = False) -> None:
         """Stop the heartbeat, unhook from waits, restore the signal handlers. ``drain`` (a run
         every rank ended alike): take the peers' last heartbeats first (``_drain``)."""
-        if self.check in exchange.WATCH:
-            exchange.WATCH.remove(self.check)
+        if self._watching is not None:
+            exchange.unwatch(self._watching)
+            self._watching = None
         for s, h in self._old_handlers.items():
             signal.signal(s, h)
         self._old_handlers.clear()
