@@ -50,7 +50,7 @@ def reference(tmp_path_factory):
             "held": _walk(base / "c", (1, 1), (120, 96), frames=HELD)}
 
 
-@pytest.mark.parametrize("latency", [0, 1])
+@pytest.mark.parametrize("latency", [0, 1, 2])
 @pytest.mark.parametrize("name,grid", [(n, g) for n, (_, grids) in CASES.items() for g in grids],
                          ids=lambda v: v if isinstance(v, str) else f"{v[0]}x{v[1]}")
 def test_threads_compose_what_one_rank_renders(tmp_path, reference, name, grid, latency):
