@@ -138,7 +138,9 @@ def _job_of_two_ranks(tmp_path, summary: dict):
     out = tmp_path / "o"
     out.mkdir()
     started = time.time()
-    (out / "timings.csv").write_text("frame\n0\n")
+    from multigpu.records.report import COLUMNS
+
+    (out / "timings.csv").write_text(",".join(COLUMNS) + "\n" + ",".join("0" * len(COLUMNS)) + "\n")
     (out / "summary.json").write_text(json.dumps(summary))
     sleeper = f"{sys.executable} -c 'import time; time.sleep(30)' mpi4py"
     proc = subprocess.Popen(["bash", "-c", f"{sleeper} & {sleeper} & wait"], start_new_session=True)
@@ -192,6 +194,42 @@ def test_the_launcher_leaves_a_job_whose_record_is_closed(tmp_path):
         waiting.start()
         time.sleep(1.5)
         assert proc.poll() is None and not _gone(ranks[1])  # nothing killed
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def test_a_ranks_own_child_ending_or_a_job_before_its_frames_ends_nothing(tmp_path):
+    """A fork of a rank (it carries the rank's command line until it execs: ctypes' library
+    search, an encoder) that ends is no rank's death; nor is a rank gone before any row."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import threading
+
+    from multigpu.launcher.supervise import _frames_running, _local_ranks, _wait
+    from multigpu.records.report import COLUMNS
+
+    out = tmp_path / "o"
+    out.mkdir()
+    started = time.time()
+    (out / "timings.csv").write_text(",".join(COLUMNS) + "\n")
+    (out / "summary.json").write_text(json.dumps({"complete": False}))
+    assert not _frames_running(out, started)  # the header alone: setup, not frames
+    (out / "timings.csv").write_text(",".join(COLUMNS) + "\n" + ",".join("0" * len(COLUMNS)) + "\n")
+    assert _frames_running(out, started)
+    code = "import os, time\nif os.fork() == 0:\n    time.sleep(0.6)\n    os._exit(0)\ntime.sleep(30)\n"
+    proc = subprocess.Popen(["bash", "-c", f"{sys.executable} -c '{code}' mpi4py & wait"], start_new_session=True)
+    try:
+        for _ in range(100):
+            if _local_ranks(proc.pid):
+                break
+            time.sleep(0.05)
+        assert len(_local_ranks(proc.pid)) == 1  # the rank, not its fork
+        threading.Thread(target=_wait, args=(proc, out, started), daemon=True).start()
+        time.sleep(1.5)  # the fork has ended
+        assert proc.poll() is None  # nothing killed
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()

@@ -124,6 +124,11 @@ def _wait(proc: subprocess.Popen, out: Path | None, started: float) -> int:
             continue
         now = set(_local_ranks(proc.pid))
         if any(_gone(p) for p in seen - now) and _frames_running(out, started):
+            for pid in now:  # the ranks first: a runtime may start them in sessions of their own
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
             try:
                 os.killpg(proc.pid, signal.SIGKILL)
             except ProcessLookupError:
@@ -133,7 +138,8 @@ def _wait(proc: subprocess.Popen, out: Path | None, started: float) -> int:
 
 
 def _local_ranks(root: int) -> list[int]:
-    """Pids of this host's rank processes (``python -m mpi4py ...``) descended from ``root``."""
+    """Pids of this host's rank processes (``python -m mpi4py ...``) descended from ``root``; not
+    a rank's own children (a fork carries its parent's command line until it execs)."""
     parent = {}
     for d in os.listdir("/proc"):
         if d.isdigit():
@@ -142,7 +148,7 @@ def _local_ranks(root: int) -> list[int]:
                     parent[int(d)] = int(fh.read().rsplit(b")", 1)[1].split()[1])
             except (OSError, IndexError, ValueError):
                 continue
-    out = []
+    under = []
     for pid in parent:
         p, hops = pid, 0
         while p in parent and p != root and hops < 16:
@@ -150,9 +156,17 @@ def _local_ranks(root: int) -> list[int]:
         if p == root and pid != root:
             try:
                 if b"mpi4py" in Path(f"/proc/{pid}/cmdline").read_bytes():
-                    out.append(pid)
+                    under.append(pid)
             except OSError:
                 continue
+    ranks = set(under)
+    out = []
+    for pid in under:  # a handful
+        p, hops = parent.get(pid), 0
+        while p is not None and p != root and p not in ranks and hops < 16:
+            p, hops = parent.get(p), hops + 1
+        if p not in ranks:
+            out.append(pid)
     return out
 
 
@@ -165,12 +179,15 @@ def _gone(pid: int) -> bool:
 
 
 def _frames_running(out: Path, started: float) -> bool:
-    """Whether this job has shown frames (timings.csv written since it started) and rank 0 has
-    not closed its record (summary.json neither complete nor stopped)."""
+    """Whether this job has shown frames (rows in timings.csv written since it started, beyond
+    the header) and rank 0 has not closed its record (summary.json neither complete nor stopped)."""
+    from multigpu.records.report import COLUMNS
+
     try:
-        if (out / "timings.csv").stat().st_mtime < started:
-            return False
+        st = (out / "timings.csv").stat()
     except OSError:
+        return False
+    if st.st_mtime < started or st.st_size <= len(",".join(COLUMNS)) + 1:
         return False
     summary = read_summary(out)
     return summary is not None and not summary.get("complete") and not summary.get("stopped_by")
