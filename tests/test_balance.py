@@ -245,10 +245,7 @@ def test_an_inverted_rect_is_refused_by_either_path(compiled, bad, tiles):
     """The compiled walk checks inverted rows in its own pass over the rects, the numpy
     reference before it starts: the same refusal, wherever the row is, NaN rows allowed
     (the balancer and the tiles of ``none`` alike)."""
-    from multigpu.core import jit
 
-    if compiled and not jit.available():
-        pytest.skip("numba is not installed")
     run = _balancer(tiles, compiled)
     rects = np.array([[0.1, 0.1, 0.3, 0.3], [np.nan] * 4, [0.2, 0.2, 0.9, 0.8]] * 50)
     tris = np.arange(1, len(rects) + 1)
@@ -264,10 +261,7 @@ def test_bad_weights_are_refused_by_either_path_in_the_same_order(compiled, tile
     """The compiled walk checks the weights in its pass over the objects, the numpy reference
     before it starts: the same refusal for a weight that is negative or not finite, for a
     total past 2**62, and the weights' refusal before an inverted row's."""
-    from multigpu.core import jit
 
-    if compiled and not jit.available():
-        pytest.skip("numba is not installed")
     rects = np.array([[0.1, 0.1, 0.3, 0.3], [np.nan] * 4, [0.2, 0.2, 0.9, 0.8]] * 20)
     n = len(rects)
     run = _balancer(tiles, compiled)

@@ -179,10 +179,7 @@ def test_silhouette_coverage_fraction():
 @pytest.mark.parametrize("which", ["view", "proj"])
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_matrices_that_are_not_finite_are_refused_by_both_paths(compiled, which, bad):
-    from multigpu.core import jit
 
-    if compiled and not jit.available():
-        pytest.skip("numba is not installed")
     bmin, bmax = random_boxes(20)
     box = BoxProjector(bmin, bmax, compiled=compiled)
     view, proj = V.copy(), P.copy()

@@ -147,21 +147,29 @@ def _job_of_two_ranks(tmp_path, summary: dict):
     return proc, out, started
 
 
+def _two_ranks(root: int) -> list[int]:
+    """The stand-in job's two rank pids, once both have started (bounded)."""
+    from multigpu.launcher.supervise import _local_ranks
+
+    for _ in range(100):
+        ranks = _local_ranks(root)
+        if len(ranks) == 2:
+            return ranks
+        time.sleep(0.05)
+    return ranks
+
+
 def test_the_launcher_ends_a_job_whose_local_rank_died(tmp_path):
     """A rank of this host gone while the frames run and rank 0's record open: the launcher kills
     the job's session itself (Open MPI's own teardown took 2.6 s), and only then."""
     import signal
     import threading
 
-    from multigpu.launcher.supervise import _local_ranks, _wait
+    from multigpu.launcher.supervise import _wait
 
     proc, out, started = _job_of_two_ranks(tmp_path, {"complete": False})
     try:
-        for _ in range(100):
-            ranks = _local_ranks(proc.pid)
-            if len(ranks) == 2:
-                break
-            time.sleep(0.05)
+        ranks = _two_ranks(proc.pid)
         assert len(ranks) == 2
         threading.Timer(0.5, lambda: os.kill(ranks[0], signal.SIGKILL)).start()
         t = time.monotonic()
@@ -180,15 +188,11 @@ def test_the_launcher_leaves_a_job_whose_record_is_closed(tmp_path):
     import signal
     import threading
 
-    from multigpu.launcher.supervise import _gone, _local_ranks, _wait
+    from multigpu.launcher.supervise import _gone, _wait
 
     proc, out, started = _job_of_two_ranks(tmp_path, {"complete": False, "stopped_by": "escape key"})
     try:
-        for _ in range(100):
-            ranks = _local_ranks(proc.pid)
-            if len(ranks) == 2:
-                break
-            time.sleep(0.05)
+        ranks = _two_ranks(proc.pid)
         os.kill(ranks[0], signal.SIGKILL)
         waiting = threading.Thread(target=_wait, args=(proc, out, started), daemon=True)
         waiting.start()
