@@ -212,9 +212,14 @@ def _end_failed_job(comm, job, exc: BaseException) -> None:
     from multigpu.rank.exchange import PeerTimeout
     from multigpu.rank.job import ABORT_PAUSE, FAILURE_GRACE, Interrupted, PeerFailed, PeerStalled
 
+    from multigpu.rank.composite import CorruptPiece
+
     rank = comm.Get_rank()
     consequence = isinstance(exc, (PeerTimeout, PeerFailed))
-    if isinstance(exc, Interrupted):
+    corrupt = isinstance(exc, PeerFailed) and exc.kind == CorruptPiece.__name__
+    if isinstance(exc, CorruptPiece) or corrupt:  # pixels that arrived wrong: bad data, exit 2
+        code, text = exits.BAD_INPUT, f"multigpu: error: {exc}"
+    elif isinstance(exc, Interrupted):
         code, text = exc.code, f"multigpu: {exc}; ending the job"
     elif isinstance(exc, KeyboardInterrupt):
         code, text = exits.INTERRUPTED, "multigpu: interrupted; ending the job"

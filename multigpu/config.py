@@ -33,6 +33,21 @@ PRESENTERS = ("headless", "window")
 #: frame exchange backends (``auto``: a shared segment per host where it can be made, messages
 #: between hosts; else messages alone)
 EXCHANGES = ("auto", "messages", "shared")
+
+
+def _codec(text: str) -> bool:
+    """``--compress``: auto, or a codec ``core.wire.parse`` reads."""
+    from multigpu.core.wire import parse
+
+    if text == "auto":
+        return True
+    try:
+        parse(text)
+    except ValueError:
+        return False
+    return True
+
+
 #: who projects the object bounds (``each``: every rank all of them; ``shared``: the host's ranks a
 #: slice each, into one shared array, where it can be made: it pays on scenes of 50k objects and
 #: more, docs/USAGE.md)
@@ -222,6 +237,14 @@ class WalkConfig:
     exchange: str = option("auto", group=BALANCING, choices=lambda: EXCHANGES, help=(
         "frame exchange: auto = a shared-memory segment per machine where it can be made, messages between "
         "machines; shared = the same, an error where it cannot; messages = point to point"))
+    compress: str = option("auto", group=BALANCING, metavar="auto|none|lz4|zstd[:L]", valid=_codec, must=(
+        "must be auto, none, lz4, zstd or zstd:LEVEL (1..19)"), help=(
+        "pixels on the wire: auto = zstd between PCs, none within one; a codec = that codec on every link that "
+        "carries messages (docs/USAGE.md, \"A wall of PCs\")"))
+    compress_moving: int = option(0, group=QUALITY, metavar="BITS", type=int, valid=lambda v: 0 <= v <= 7,
+                                  must="must be 0..7 bits", help=(
+        "while the camera moves, drop this many low bits of each colour byte of pixels crossing compressed links "
+        "(smaller messages; the first frame the camera stops is exact again; 0: always lossless)"))
     # -- speed for accuracy (core/quality.py)
     target_fps: float | None = option(
         None, group=QUALITY, metavar="F", type=float, valid=lambda v: v is None or (v > 0 and _finite(v)),

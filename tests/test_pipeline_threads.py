@@ -137,8 +137,8 @@ def test_a_setup_that_fails_after_the_exchange_lets_it_go(tmp_path, monkeypatch)
     closed = []
     made = frame_setup.make_exchange
 
-    def exchange(cfg, comm, planner):
-        backend, why = made(cfg, comm, planner)
+    def exchange(cfg, comm, planner, hosts):
+        backend, why = made(cfg, comm, planner, hosts)
         monkeypatch.setattr(backend, "close", lambda collective=True: closed.append(collective), raising=False)
         return backend, why
 
@@ -178,3 +178,52 @@ def test_a_wall_file_one_host_cannot_read_is_every_ranks_error(tmp_path, monkeyp
     monkeypatch.setattr(wall, "load_wall", load)
     got = run_ranks(2, lambda comm: tile_comm(comm, str(path)) is comm)  # read everywhere, no renumbering
     assert got == [True, True]
+
+
+@pytest.mark.parametrize("latency", [0, 2])
+@pytest.mark.parametrize("name", ["screen", "cross", "db", "hybrid"])
+def test_compressed_messages_compose_one_ranks_render(tmp_path, reference, monkeypatch, name, latency):
+    """Every message framed and compressed (``--compress zstd``, no piece too small for it): the
+    composite is one rank's render bit for bit, and the messages took fewer bytes than the pixels."""
+    from multigpu.core import wire
+
+    monkeypatch.setattr(wire, "LEAST", 0)
+    fields = {"hybrid": {"decomposition": "hybrid"}}.get(name, CASES.get(name, ({},))[0])
+    got = _walk(tmp_path / name, (2, 2), (60, 48), latency=latency, compress="zstd", **fields)
+    for f, (a, b) in enumerate(zip(got, reference[(120, 96)])):
+        assert (a == b).all(), f"frame {f}: {(a != b).any(axis=2).sum()} pixels differ"
+    s = json.loads((tmp_path / name / "summary.json").read_text())
+    assert s["config"]["compress"] == "zstd:1 on every message"
+    assert 0 < s["wire"]["bytes_per_frame"] < s["bytes_sent_per_frame"]
+    assert s["wire"]["lossy_frames"] == 0
+
+
+def test_a_lossy_wire_while_moving_is_marked_and_exact_once_the_camera_stops(tmp_path, reference, monkeypatch):
+    """``--compress-moving 3``: frames whose camera moved drop three colour bits on the wire (marked
+    in lossy_bits, each pixel within 4 of the exact one); a frame whose camera stopped is exact."""
+    from multigpu.core import wire
+    from multigpu.records.report import COLUMNS, read_timings
+
+    monkeypatch.setattr(wire, "LEAST", 0)
+    from dataclasses import asdict
+
+    from multigpu.scene.models import load_scene
+    from multigpu.scene.paths import walkthrough as walk_path
+
+    walked = walk_path(load_scene(SceneSpec(triangles=20_000))[0], frames=40)
+    cams = [asdict(walked.camera(f)) for f in (10, 20, 20, 20)]
+    path = tmp_path / "path.json"
+    path.write_text(json.dumps({"version": 1, "cameras": [{k: list(v) if isinstance(v, tuple) else v
+                                                           for k, v in c.items()} for c in cams]}))
+    one = _walk(tmp_path / "one", (1, 1), (120, 96), path=str(path))
+    got = _walk(tmp_path / "lossy", (2, 2), (60, 48), path=str(path), compress="zstd", compress_moving=3)
+    rows = read_timings(tmp_path / "lossy" / "timings.csv")
+    bits = rows[:, COLUMNS.index("lossy_bits")].reshape(FRAMES, 4).max(axis=1)
+    assert list(bits) == [3, 3, 0, 0]  # frames 0 and 1 moved (the first from nothing); 2 and 3 stood still
+    for f in (0, 1):
+        diff = np.abs(got[f].astype(int) - one[f].astype(int))
+        assert diff.max() <= 4 and (diff > 0).any(), f"frame {f}"
+    for f in (2, 3):
+        assert (got[f] == one[f]).all(), f"frame {f}: {(got[f] != one[f]).any(axis=2).sum()} pixels differ"
+    s = json.loads((tmp_path / "lossy" / "summary.json").read_text())
+    assert s["wire"]["lossy_frames"] == 2 and "3 colour bits dropped while moving" in s["config"]["compress"]

@@ -82,8 +82,9 @@ class ThreadComm:
                 posted.popleft()
             out = buf.reshape(-1).view(np.uint8)
             data = msg.reshape(-1).view(np.uint8)
-            assert out.size == data.size, f"message of {data.size} bytes into a {out.size}-byte receive"
-            out[:] = data
+            # as MPI: a message may be shorter than its receive (a compressed one), never longer
+            assert data.size <= out.size, f"message of {data.size} bytes truncated by a {out.size}-byte receive"
+            out[:data.size] = data
             return True
 
         return Request(test)

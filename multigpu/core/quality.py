@@ -51,12 +51,14 @@ WARMUP = 2
 
 @dataclass(frozen=True)
 class Quality:
-    """One frame's choice: its render scale, its level-of-detail bound (pixels) and whether it is
-    full quality (what the run renders without a target)."""
+    """One frame's choice: its render scale, its level-of-detail bound (pixels), whether it is
+    full quality (what the run renders without a target) and whether its camera moved since the
+    last frame (a lossy wire is allowed only then: ``--compress-moving``)."""
 
     scale: float
     lod_px: float
     full: bool
+    moving: bool = True
 
 
 class Controller:
@@ -110,7 +112,7 @@ class Fidelity:
         still = camera == self.last_camera
         self.last_camera = camera
         if self.controller is None or still:
-            q = Quality(self.scale, self.lod_error, True)
+            q = Quality(self.scale, self.lod_error, True, not still)
         else:
             q = self.controller.quality(self.scale, self.lod_error)
         if not still and self.controller is not None and f >= WARMUP:

@@ -19,11 +19,13 @@ class Exchange(Protocol):
     """Pieces to their tile owners, in three calls a frame: ``start`` as soon as the frame's
     pixels are read (parts out), ``wait`` until every peer's parts are there (the frame's
     ``sync``), ``finish`` to compose the tile (copy or depth-merge into ``color``/``depth``;
-    returns bytes sent and of which depth); ``close`` at the end (``collective``: every rank
+    returns what it cost: ``composite.Sent``); ``close`` at the end (``collective``: every rank
     together). Strictly in order (``--latency 0``) the three run back to back; frames in
     flight run them a stage apart."""
 
     name: str
+    links: dict  # the codec (``core.wire.Codec``) of each peer whose messages travel compressed
+    bits: int  # colour bits the frames started from now on drop on those links (a lossy frame)
 
     def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool): ...
 

@@ -9,17 +9,44 @@ merged in ascending sender order, each fragment replacing the tile's only where 
 strictly nearer: ranks own ascending ranges of the draw order, so a tie keeps the lower rank's
 fragment, as a one-rank GL_LESS render keeps the first drawn. IceT calls this strategy
 "direct"; binary swap and radix-k pay off with many ranks per tile, not at one rank per tile.
+
+A message to a rank on another PC travels compressed where the link's codec says so
+(``core/wire.py``): packed for the codec (every part's colour, then its depth as byte planes),
+framed, and checked where it lands. Composing never sees a compressed buffer; a message that does
+not decode ends the job (``CorruptPiece``: the rank, the frame and the sender, exit 2).
 """
 
 from __future__ import annotations
 
+import time
+from typing import NamedTuple
+
 import numpy as np
 
+from multigpu.core import wire
 from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
 from multigpu.rank.exchange import wait_all
 
 TAG = 8
+
+
+class CorruptPiece(RuntimeError):
+    """A compressed piece that does not decode: the job ends with this line, exit 2."""
+
+
+class Sent(NamedTuple):
+    """What a frame's exchange cost this rank: the bytes others get from it (colour and depth,
+    of which depth: raw, as composed), the bytes its messages took on the wire (framed and
+    compressed), the CPU ms it spent compressing and decompressing, and the colour bits a lossy
+    frame dropped."""
+
+    bytes: int
+    depth: int
+    wire: int = 0
+    compress_ms: float = 0.0
+    decompress_ms: float = 0.0
+    bits: int = 0
 
 
 def _part(piece_px: np.ndarray, origin, rect) -> np.ndarray:
@@ -33,17 +60,19 @@ class Posted:
     """A frame's messages on their way: the sends and receives ``post`` started; ``complete``
     waits for them and composes the tile."""
 
-    def __init__(self, me, rects, rendered, incoming, requests, keep, inbox, sent, zbytes, with_depth, near):
+    def __init__(self, me, rects, rendered, incoming, requests, keep, inbox, sent: Sent, with_depth, near,
+                 frame: int = 0, links: dict | None = None):
         self.me, self.rects, self.rendered, self.incoming = me, rects, rendered, incoming
         self.requests, self.keep, self.inbox = requests, keep, inbox
-        self.sent, self.zbytes, self.with_depth, self.near = sent, zbytes, with_depth, near
+        self.sent, self.with_depth, self.near = sent, with_depth, near
+        self.frame, self.links = frame, links or {}
 
     def complete(self, tile, timeout: float, color: np.ndarray, depth: np.ndarray | None = None,
-                 read=None) -> tuple[int, int]:
+                 read=None) -> Sent:
         """Compose rank ``me``'s tile into ``color`` (th, tw, 3) [and ``depth`` (th, tw), which
         must hold the background at depth 1.0 on entry]: its own parts, the messages once they
         are in, and the parts of ``near`` ranks as ``read(sender, parts)`` gives their views
-        (``shared.py``: its own host's ranks). Returns (bytes sent as messages, of which depth)."""
+        (``shared.py``: its own host's ranks). Returns what the messages cost (``Sent``)."""
         me, rects, rendered, incoming = self.me, self.rects, self.rendered, self.incoming
         # colour parts tile the display, so their order is free: this rank's own go in while the
         # messages travel (fewer polls of the wait); depth parts merge in ascending sender order
@@ -52,24 +81,42 @@ class Posted:
             _merge(color, depth, tile, [(p, *_local(p, rects[me], rendered)) for p in incoming[me]])
         wait_all(self.requests, timeout, "frame exchange")
         self.keep = None
+        spent = 0.0
         for s in sorted(incoming):  # ascending sender: the depth tie rule
             if s == me and early:
                 continue
             parts = incoming[s]
             if s == me:
                 views = [(p, *_local(p, rects[me], rendered)) for p in parts]
+            elif s in self.near:
+                views = read(s, parts)
+            elif s in self.links:
+                t0 = time.thread_time()
+                views = self._decoded(s, parts)
+                spent += time.thread_time() - t0
             else:
-                views = read(s, parts) if s in self.near else _unpack(self.inbox[s], parts, self.with_depth)
+                views = _unpack(self.inbox[s], parts, self.with_depth)
             _merge(color, depth, tile, views)
-        return self.sent, self.zbytes
+        return self.sent._replace(decompress_ms=spent * 1e3) if spent else self.sent
+
+    def _decoded(self, s: int, parts: list[Piece]) -> list:
+        """Views of the parts in rank ``s``'s compressed message; CorruptPiece where it does not decode."""
+        raw = sum(p.pixels for p in parts) * (7 if self.with_depth else 3)
+        try:
+            packed, bits = wire.decode(self.inbox[s], raw)
+        except wire.WireError as exc:
+            raise CorruptPiece(f"rank {self.me}: frame {self.frame}: the pieces from rank {s}: {exc}") from None
+        return _unpack_planar(packed, parts, self.with_depth, bits)
 
 
 def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool,
-         near: frozenset = frozenset()) -> Posted:
+         near: frozenset = frozenset(), frame: int = 0, links: dict | None = None, bits: int = 0) -> Posted:
     """Start a frame's exchange: this rank's parts for other ranks' tiles packed and sent, its
     receives posted (nothing for ``near`` ranks, read from shared memory). ``rects`` are every
     rank's pieces (``Work.rects``), ``rendered[j]`` rank ``me``'s piece j as ``(rgb, z)`` (z
-    None without depth), ``plan`` the frame's ``transfers``."""
+    None without depth), ``plan`` the frame's ``transfers``. ``links``: the codec of each peer
+    whose messages travel framed and compressed (``core/wire.py``; the others raw); ``bits``: the
+    colour bits a lossy frame drops on those links."""
     per_px = 7 if with_depth else 3
     outgoing: dict[int, list[Piece]] = {}
     incoming: dict[int, list[Piece]] = {}
@@ -81,21 +128,34 @@ def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bo
     away = near | {me}  # parts that travel by no message
     sends = {r: parts for r, parts in outgoing.items() if r not in away}
     recvs = {s: parts for s, parts in incoming.items() if s not in away}
+    links = links or {}
     requests, keep = [], []
-    sent = zbytes = 0
+    sent = zbytes = onwire = 0
+    spent = 0.0
     for r, parts in sends.items():
-        buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
-        _pack(buf, parts, rects[me], rendered, with_depth)
-        keep.append(buf)
-        requests.append(comm.Isend(buf, dest=r, tag=TAG))
+        px = sum(p.pixels for p in parts)
+        buf = np.empty(px * per_px, dtype=np.uint8)
+        if r in links:
+            t0 = time.thread_time()
+            _pack_planar(buf, parts, rects[me], rendered, with_depth)
+            msg = wire.encode(buf, links[r], 3 * px, bits)
+            spent += time.thread_time() - t0
+        else:
+            _pack(buf, parts, rects[me], rendered, with_depth)
+            msg = buf
+        keep.append(msg)
+        requests.append(comm.Isend(msg, dest=r, tag=TAG))
         sent += buf.nbytes
-        zbytes += 4 * sum(p.pixels for p in parts) if with_depth else 0
+        onwire += msg.nbytes
+        zbytes += 4 * px if with_depth else 0
     inbox = {}
     for s, parts in recvs.items():
-        buf = np.empty(sum(p.pixels for p in parts) * per_px, dtype=np.uint8)
+        raw = sum(p.pixels for p in parts) * per_px
+        buf = np.empty(wire.bound(raw) if s in links else raw, dtype=np.uint8)
         inbox[s] = buf
         requests.append(comm.Irecv(buf, source=s, tag=TAG))
-    return Posted(me, rects, rendered, incoming, requests, keep, inbox, sent, zbytes, with_depth, near)
+    cost = Sent(sent, zbytes, onwire, spent * 1e3, 0.0, bits if any(r in links for r in sends) else 0)
+    return Posted(me, rects, rendered, incoming, requests, keep, inbox, cost, with_depth, near, frame, links)
 
 
 def _merge(color, depth, tile, views) -> None:
@@ -111,19 +171,21 @@ class Messages:
 
     name = "messages"
 
-    def __init__(self, comm, timeout: float, sync: bool = True):
-        self.comm, self.timeout, self.sync = comm, timeout, sync
+    def __init__(self, comm, timeout: float, sync: bool = True, links: dict | None = None):
+        self.comm, self.timeout, self.sync, self.links = comm, timeout, sync, links or {}
+        self.bits = 0  # colour bits the next frames drop on compressed links (a lossy frame)
 
     def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool):
         """The frame's messages on their way (and the barrier posted, where there is one)."""
-        return post(self.comm, me, rects, rendered, plan, with_depth), self.comm.Ibarrier() if self.sync else None
+        return (post(self.comm, me, rects, rendered, plan, with_depth, frame=frame, links=self.links, bits=self.bits),
+                self.comm.Ibarrier() if self.sync else None)
 
     def wait(self, started) -> None:
         """Until every rank has read its frame (``sync``; else at once: the messages are the wait)."""
         if started[1] is not None:
             wait_all([started[1]], self.timeout, "synchronization")
 
-    def finish(self, started, tile, color: np.ndarray, depth: np.ndarray | None = None) -> tuple[int, int]:
+    def finish(self, started, tile, color: np.ndarray, depth: np.ndarray | None = None) -> Sent:
         """Wait for the frame's messages and compose its tile (``Posted.complete``)."""
         return started[0].complete(tile, self.timeout, color, depth)
 
@@ -161,5 +223,41 @@ def _unpack(buf: np.ndarray, parts: list[Piece], with_depth: bool):
         if with_depth:
             z = buf[at:at + 4 * n].view(np.float32).reshape(h, w)
             at += 4 * n
+        out.append((p, rgb, z))
+    return out
+
+
+def _pack_planar(buf: np.ndarray, parts: list[Piece], my_rects, rendered, with_depth: bool) -> None:
+    """``_pack`` laid out for a codec: every part's colour, then every part's depth as four byte
+    planes (byte 0 of every pixel's float, then byte 1, ...)."""
+    total = sum(p.pixels for p in parts)
+    planes = buf[3 * total:].reshape(4, total) if with_depth else None
+    at = 0
+    for p in parts:
+        rgb, z = _local(p, my_rects, rendered)
+        n = p.pixels
+        buf[3 * at:3 * (at + n)] = rgb.reshape(-1)
+        if with_depth:
+            planes[:, at:at + n] = np.ascontiguousarray(z, dtype=np.float32).view(np.uint8).reshape(n, 4).T
+        at += n
+
+
+def _unpack_planar(buf: np.ndarray, parts: list[Piece], with_depth: bool, bits: int = 0):
+    """The parts ``_pack_planar`` packed, as ``(part, rgb, z)``; ``bits``: the colour bits the
+    sender dropped, given back as the middle of the range they span."""
+    total = sum(p.pixels for p in parts)
+    planes = buf[3 * total:].reshape(4, total) if with_depth else None
+    at, out = 0, []
+    for p in parts:
+        x0, y0, x1, y1 = p.rect
+        h, w = y1 - y0, x1 - x0
+        n = h * w
+        rgb = buf[3 * at:3 * (at + n)].reshape(h, w, 3)
+        if bits:
+            rgb = rgb | np.uint8(1 << (bits - 1))
+        z = None
+        if with_depth:
+            z = np.ascontiguousarray(planes[:, at:at + n].T).view(np.float32).reshape(h, w)
+        at += n
         out.append((p, rgb, z))
     return out

@@ -15,6 +15,7 @@ import numpy as np
 
 from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core.camera import unshifted
+from multigpu.core import wire
 from multigpu.core.inflight import slots
 from multigpu.planner import Planner
 from multigpu.rank.backends import Exchange, Projection
@@ -60,15 +61,18 @@ def clear_colour(renderer, n_objects: int) -> np.ndarray:
                            np.zeros(n_objects, dtype=bool))[0, 0]
 
 
-def make_exchange(cfg: WalkConfig, comm, planner: Planner) -> tuple[Exchange, str | None]:
+def make_exchange(cfg: WalkConfig, comm, planner: Planner, hosts: list[str]) -> tuple[Exchange, str | None]:
     """The exchange backend: a node-shared segment where asked for and possible, else messages
-    (and why not the segment). Every rank the same (collective)."""
+    (and why not the segment), its messages compressed on the links ``--compress`` chooses
+    (``hosts``: every rank's). Every rank the same (collective)."""
     shared, why = None, None
     d = planner.decomposition
     if cfg.exchange != "messages":
         shared, why = SharedPieces.make(comm, cfg.canvas.size, d.depth, cfg.timeout, cfg.exchange == "shared",
                                         slots=slots(cfg.latency), layers=d.layers)
-    return shared or Messages(comm, cfg.timeout, sync=cfg.latency == 0), why
+    exchange = shared or Messages(comm, cfg.timeout, sync=cfg.latency == 0)
+    exchange.links = wire.links(cfg.compress, hosts, comm.Get_rank())
+    return exchange, why
 
 
 def _live(cfg: WalkConfig, comm, scene, path, planner: Planner, presenter, monitor):
@@ -90,13 +94,17 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
     """Every part of the frame loop for this rank (collective: every rank calls it)."""
     rank = comm.Get_rank()
     planner = Planner(cfg, scene, rank)  # MPI-free: projection, strategy, decomposition
-    exchange, why = make_exchange(cfg, comm, planner)
+    hosts = [p["host"] for p in placement]
+    exchange, why = make_exchange(cfg, comm, planner, hosts)
     setup = FrameSetup(planner, exchange, None, np.zeros(3, dtype=np.uint8), {})
     try:  # from here on, whatever fails lets go of what was made (the exchange's segments first)
         setup.projection, projection_why = make_projection(cfg, comm, planner, scene.n_objects)
         n_frames = planned_frames(cfg, path)
         doc = setup.doc = config_doc(cfg, scene, load_info, n_frames, placement, renderer.method)
         doc["exchange"] = exchange.name
+        doc["compress"] = wire.describe(cfg.compress, hosts)
+        if cfg.compress_moving:
+            doc["compress"] += f", {cfg.compress_moving} colour bits dropped while moving"
         if why:
             doc["exchange_why"] = f"messages: no shared segment ({why})"
         doc["projection"] = setup.projection.name

@@ -50,7 +50,7 @@ class FrameLog:
         self._beat_cpu = job.thread_cpu
         self.timeline = deque(maxlen=TIMELINE_FRAMES) if cfg.timeline else None  # (frame, phase spans)
 
-    def row(self, x, sent: tuple[int, int], swapped: float) -> dict:
+    def row(self, x, sent, swapped: float) -> dict:
         """This rank's row of frame ``x`` (``frames.InFlight``) by column name."""
         t, work = x.t, x.work
         box = work.bounds(self.rank)
@@ -69,8 +69,8 @@ class FrameLog:
                 "learning_cpu_ms": t.cpu_ms("learn"), "projection_cpu_ms": t.cpu_ms("project"),
                 "planning_cpu_ms": t.cpu_ms("plan"),
                 "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
-                "bytes_sent": sent[0], "objects": x.objects, "pieces": len(work.rects[self.rank]),
-                "depth_bytes": sent[1], "load_cv": work.load_cv, "present_ms": t.ms("display"),
+                "bytes_sent": sent.bytes, "objects": x.objects, "pieces": len(work.rects[self.rank]),
+                "depth_bytes": sent.depth, "load_cv": work.load_cv, "present_ms": t.ms("display"),
                 "swap_wait_ms": t.ms("swap_wait"), "swap_ms": swapped if self.window else 0.0,
                 "input_ms": t.ms("input"), "heartbeat_cpu_ms": self._heartbeat_cpu(),
                 "render_scale": x.quality.scale, "lod_error_px": x.quality.lod_px,
@@ -78,7 +78,9 @@ class FrameLog:
                 "load_balancing_waited_ms": t.waited_ms(*BALANCE_PHASES, "input"),
                 "rendering_waited_ms": t.waited_ms(*RENDER_PHASES), "synchronization_waited_ms": t.waited_ms("sync"),
                 "frame_exchange_waited_ms": t.waited_ms("exchange"),
-                "display_waited_ms": t.waited_ms("display", "swap_wait"), "restarts": restarts()}
+                "display_waited_ms": t.waited_ms("display", "swap_wait"), "restarts": restarts(),
+                "wire_bytes": sent.wire, "compress_cpu_ms": sent.compress_ms, "decompress_cpu_ms": sent.decompress_ms,
+                "lossy_bits": sent.bits}
 
     def _heartbeat_cpu(self) -> float:
         """CPU ms of this rank's heartbeat thread since the last frame's row."""

@@ -198,6 +198,7 @@ class Frames:
             x.rendered = x.pending.read()
             x.pending = None
         with x.t.phase("exchange"):  # parts for peers out: into the shared segment, or as messages
+            self.exchange.bits = self.cfg.compress_moving if x.quality.moving else 0  # lossy only while moving
             x.started = self.exchange.start(x.f, self.rank, x.work.rects, x.rendered, x.plan, x.work.depth)
 
     def deliver(self, x: "InFlight") -> None:

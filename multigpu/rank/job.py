@@ -65,6 +65,7 @@ class PeerFailed(RuntimeError):
 
     def __init__(self, rank: int, message: str):
         self.rank = rank
+        self.kind = message.split(":", 1)[0]  # the failure's class name (``announce_failure``)
         super().__init__(f"rank {rank} failed: {message}")
 
 

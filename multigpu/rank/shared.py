@@ -37,7 +37,7 @@ import numpy as np
 
 from multigpu.core.work import Piece
 from multigpu.errors import InputError
-from multigpu.rank.composite import _pack, _unpack, post
+from multigpu.rank.composite import Sent, _pack, _unpack, post
 from multigpu.rank.exchange import agree, allgather_text, wait_all
 
 #: the most bytes a host's segment may hold (its ranks, both halves) before the job uses messages
@@ -144,6 +144,8 @@ class SharedPieces:
     def __init__(self, comm, timeout: float, segments: dict[int, np.ndarray], slot: int, with_depth: bool,
                  slots: int = 2):
         self.comm, self.timeout, self.me = comm, timeout, comm.Get_rank()
+        self.links: dict = {}  # the codec of each rank on another host whose messages travel compressed
+        self.bits = 0  # colour bits the next frames drop on those links (a lossy frame)
         self.segments, self.slot, self.depth, self.slots = segments, slot, with_depth, slots
         self.host = frozenset(segments)  # the job ranks on this rank's host, itself included
         self.near = self.host - {self.me}
@@ -216,32 +218,33 @@ class SharedPieces:
         """The frame's parts published, its messages to other hosts posted, and a barrier that
         completes once every rank has published it (``wait``)."""
         self._publish(frame, me, rects, rendered, plan)
-        posted = post(self.comm, me, rects, rendered, plan, with_depth, self.near)
+        posted = post(self.comm, me, rects, rendered, plan, with_depth, self.near, frame, self.links, self.bits)
         return frame, plan, posted, self.comm.Ibarrier()
 
     def wait(self, started) -> None:
         """Until every rank has published the frame (bounded)."""
         wait_all([started[3]], self.timeout, "synchronization")
 
-    def finish(self, started, tile, color: np.ndarray, depth: np.ndarray | None = None) -> tuple[int, int]:
+    def finish(self, started, tile, color: np.ndarray, depth: np.ndarray | None = None) -> Sent:
         """Compose rank ``me``'s tile (after ``wait``) from its own pieces, the parts this host's
         ranks published and messages from other hosts: the same result as messages alone,
         parts in ascending sender order. Returns the bytes others get from this rank (colour
         and depth, of which depth)."""
         frame, plan, posted, _ = started
         views = self._views(frame, self.me, plan, depth is not None)
-        sent, zbytes = posted.complete(tile, self.timeout, color, depth, lambda s, parts: views[s])
-        return self._counted(plan, sent, zbytes, depth is not None)
+        sent = posted.complete(tile, self.timeout, color, depth, lambda s, parts: views[s])
+        return self._counted(plan, sent, depth is not None)
 
     def close(self, collective: bool = True) -> None:
         """Let the mapping go (the memory is the system's again once every rank on the host has)."""
         self.segments = {}
 
-    def _counted(self, plan: list[Piece], sent: int, zbytes: int, with_depth: bool) -> tuple[int, int]:
-        """Bytes others get from this rank: by message, and read from its segment."""
+    def _counted(self, plan: list[Piece], sent: Sent, with_depth: bool) -> Sent:
+        """Bytes others get from this rank: by message, and read from its segment (never on a wire)."""
         me, near = self.me, self.near
         px = sum(p.pixels for p in plan if p.sender == me and p.receiver in near)  # read by this host's ranks
-        return sent + px * (7 if with_depth else 3), zbytes + (4 * px if with_depth else 0)
+        return sent._replace(bytes=sent.bytes + px * (7 if with_depth else 3),
+                             depth=sent.depth + (4 * px if with_depth else 0))
 
     def _views(self, frame: int, me: int, plan: list[Piece], with_depth: bool) -> dict[int, list]:
         """Views ``(part, rgb, z)`` of the parts this host's other ranks published for rank

@@ -55,7 +55,7 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms",
            "latency_ms", "load_balancing_waited_ms", "rendering_waited_ms", "synchronization_waited_ms",
            "frame_exchange_waited_ms", "display_waited_ms", "render_scale", "lod_error_px", "choosing_cpu_ms",
-           "balance", "restarts"]
+           "balance", "restarts", "wire_bytes", "compress_cpu_ms", "decompress_cpu_ms", "lossy_bits"]
 #: the load balancing CPU time's four phases (learn, project, choose, plan), adding up to it
 BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
@@ -66,7 +66,7 @@ BALANCE_NAMES = (*STRATEGIES, *(d for d in DECOMPOSITIONS if d != "screen"))
 #: a frame holds a frame-rate target when its period lies within this share of the target's
 TARGET_BAND = 0.10
 INT_COLUMNS = {"frame", "rank", "triangles", "x0", "y0", "x1", "y1", "bytes_sent", "objects", "pieces", "depth_bytes",
-               "planned_triangles", "restarts"}
+               "planned_triangles", "restarts", "wire_bytes", "lossy_bits"}
 
 
 class TimingWriter:
@@ -152,7 +152,7 @@ def table(summary: dict, title: str = "") -> str:
               f"culling {100 * summary.get('balancing_share', 0.0):.1f} % of it",
               f"Imbalance max/mean: triangles {_fmt(summary['imbalance_triangles'])}, render CPU time "
               f"{_fmt(summary['imbalance_render_cpu'])}{_empty(summary)}; bytes exchanged per frame "
-              f"{summary['bytes_sent_per_frame']:.0f}"]
+              f"{summary['bytes_sent_per_frame']:.0f}{_wire(summary)}"]
     if "target" in summary:
         t, q = summary["target"], summary.get("quality", {})
         lines.append(f"Target {t['target_fps']:.1f} FPS: {100 * t['within_band']:.0f} % of {t['frames_judged']} frames "
@@ -162,6 +162,16 @@ def table(summary: dict, title: str = "") -> str:
                      f"{q.get('render_scale_mean', 1.0):.2f}, LOD bound {q.get('lod_error_px_mean', 0.0):.2f} px "
                      "on average)")
     return "\n".join(lines)
+
+
+def _wire(summary: dict) -> str:
+    """What crossed the wire between PCs, where anything did."""
+    w = summary.get("wire", {})
+    if not w.get("bytes_per_frame"):
+        return ""
+    lossy = f", {w['lossy_frames']} frames lossy" if w.get("lossy_frames") else ""
+    return (f", in messages {w['bytes_per_frame']:.0f} (compress {w['compress_cpu_ms']:.2f} ms, decompress "
+            f"{w['decompress_cpu_ms']:.2f} ms CPU per rank{lossy})")
 
 
 def _waits(summary: dict) -> str:

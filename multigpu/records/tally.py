@@ -84,7 +84,7 @@ class RunningSummary:
         self.frames = 0
         self.sums = np.zeros(len(COLUMNS))  # over frames and ranks
         self.rank0 = np.zeros(len(COLUMNS))  # rank 0's column over frames (per-frame values on every row)
-        self.s = dict.fromkeys(("emulated", "render_max", "outside", "latency", "imb_tri", "imb_rend"), 0.0)
+        self.s = dict.fromkeys(("emulated", "render_max", "outside", "latency", "imb_tri", "imb_rend", "lossy"), 0.0)
         self.drawn = 0
         self.balance = np.zeros(len(BALANCE_NAMES), dtype=np.int64)
         self.q = {k: Quantiles() for k in ("emulated", "period", "present", "skew", "input")}
@@ -111,6 +111,7 @@ class RunningSummary:
         s["render_max"] += rend.max(axis=1).sum()
         s["outside"] += np.maximum(g("frame_ms") - per[:, :, [_C[c] for c in COMPONENTS]].sum(axis=2), 0.0).sum()
         s["latency"] += g("latency_ms").max(axis=1).sum()
+        s["lossy"] += (g("lossy_bits").max(axis=1) > 0).sum()  # frames some rank sent lossy
         for key, a in (("imb_tri", tri), ("imb_rend", rend)):  # frames that drew nothing have no balance
             a = a[drawn]
             s[key] += (a.max(axis=1) / np.maximum(a.mean(axis=1), 1e-12)).sum()
@@ -168,6 +169,9 @@ class RunningSummary:
             "triangles_per_frame": per_frame("triangles"),
             "planned_triangles_per_frame": per_frame("planned_triangles"),
             "bytes_sent_per_frame": per_frame("bytes_sent"), "depth_bytes_per_frame": per_frame("depth_bytes"),
+            # what travelled as messages (framed and compressed between PCs) and what that cost each rank
+            "wire": {"bytes_per_frame": per_frame("wire_bytes"), "compress_cpu_ms": mean("compress_cpu_ms"),
+                     "decompress_cpu_ms": mean("decompress_cpu_ms"), "lossy_frames": int(s["lossy"])},
             "load_cv": first("load_cv"),  # std/mean of per-rank triangles (Kerbl's c_v)
             "present": {"present_ms_median": q["present"].quantile(50), "present_ms_p99": q["present"].quantile(99),
                         "swap_skew_ms_median": q["skew"].quantile(50), "swap_skew_ms_p99": q["skew"].quantile(99),
