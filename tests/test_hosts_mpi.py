@@ -1,5 +1,5 @@
-"""Across hosts: two simulated hosts (namespaces with their own hostname and /dev/shm, see
-simhosts.py) of two ranks each, started through each MPI's own host placement and a remote
+"""Across hosts: two simulated hosts (namespaces with their own hostname, /dev/shm, IPC and network,
+joined by shaped links: ``multigpu.studies.simhosts``) of two ranks each, started through each MPI's own host placement and a remote
 shell. The wall equals the one-rank render bit for bit and the run ends with no MPI/UCX
 warnings; the summary says where each rank ran; a scene cache every host shares is built
 once; the default exchange shares memory within a host and sends messages between hosts;
@@ -29,7 +29,7 @@ def launcher(request):
 
 @pytest.fixture
 def hosts(tmp_path):
-    with SimHosts([h for h, _ in HOSTS], tmp_path / "hosts") as h:
+    with SimHosts([h for h, _ in HOSTS], tmp_path / "hosts", network=True) as h:
         yield h
 
 
@@ -150,3 +150,39 @@ def test_a_host_dying_mid_run_ends_the_job_with_every_whole_frame_kept(tmp_path,
     s = json.loads((out / "summary.json").read_text())
     assert s["complete"] is False and s["frames"] == s["frames_written"] == len(rows) // 4 > 60
     assert "ended abnormally" in s["stopped_by"]
+
+
+@pytest.mark.parametrize("extra", [["--balance", "cross", "--mullion", "6x4", "--latency", "2"],
+                                   ["--decomposition", "db", "--latency", "0"],
+                                   ["--decomposition", "hybrid", "--mullion", "6x4"]])
+def test_pixels_between_hosts_cross_the_link_compressed_and_compose_exactly(tmp_path, hosts, launcher, extra):
+    """What crosses PCs crosses their links (the links' own counters), zstd-compressed by default,
+    and the wall is the one-rank render bit for bit: with bezels and frames in flight, sort-first
+    and sort-last; ``--compress none`` puts the raw pixels on the same links."""
+    cache = {"MULTIGPU_CACHE": str(tmp_path / "cache")}
+    walls, onlink = {}, {}
+    for compress in ("auto", "none"):
+        out = tmp_path / compress
+        before = hosts.wire()
+        res = run_mpi(4, args(out, extra=[*extra, "--compress", compress]), env={**hosts.env, **cache},
+                      launcher=launcher, hosts=HOSTS, timeout=180)
+        assert res.returncode == 0, res.stderr[-3000:]
+        after = hosts.wire()
+        onlink[compress] = sum(after[h][0] - before[h][0] for h in after)  # what the hosts sent on their links
+        walls[compress] = json.loads((out / "summary.json").read_text())
+    auto, raw = walls["auto"], walls["none"]
+    assert auto["config"]["compress"] == "zstd:1 between PCs" and raw["config"]["compress"] == "none"
+    assert 0 < auto["wire"]["bytes_per_frame"] < raw["wire"]["bytes_per_frame"] / 2
+    sent_raw = raw["wire"]["bytes_per_frame"] * raw["frames"]
+    assert onlink["none"] >= sent_raw  # the messages took the network, not this machine's shared memory
+    assert onlink["auto"] < onlink["none"] - sent_raw / 2
+    mull = extra[extra.index("--mullion") + 1] if "--mullion" in extra else "0x0"
+    mx, my = (int(v) for v in mull.split("x"))
+    ref = run_mpi(1, [*args(tmp_path / "one"), "--grid", "1x1", "--tile", f"{W + mx}x{H + my}"], env=cache)
+    assert ref.returncode == 0, ref.stderr[-3000:]
+    shown = np.ones((H + my, W + mx), bool)  # the canvas but the pixels behind the bezels (black on the wall)
+    shown[:, W // 2:W // 2 + mx] = shown[H // 2:H // 2 + my, :] = False
+    for compress in ("auto", "none"):
+        for f, (got, want) in enumerate(zip(frames_of(tmp_path / compress), frames_of(tmp_path / "one"))):
+            assert got.shape == want.shape and (got[shown] == want[shown]).all(), \
+                f"{compress} frame {f}: {(got != want)[shown].any(axis=-1).sum()} px"

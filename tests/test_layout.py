@@ -248,5 +248,6 @@ def test_studies_start_jobs_through_the_one_launcher():
         if f.name == "runs.py":
             continue
         text = f.read_text()
-        for needle in ("run_multigpu", ".command(", "multigpu.launcher.mpirun\", \"-n", "find_launcher", "killpg"):
+        needles = ("run_multigpu", ".command(", "multigpu.launcher.mpirun\", \"-n", "find_launcher", "killpg")
+        for needle in needles if f.name != "simhosts.py" else needles[:-1]:  # it kills its namespaces' holders
             assert needle not in text, f"studies/{f.name} starts a job itself ({needle})"
