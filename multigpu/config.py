@@ -237,10 +237,11 @@ class WalkConfig:
     exchange: str = option("auto", group=BALANCING, choices=lambda: EXCHANGES, help=(
         "frame exchange: auto = a shared-memory segment per machine where it can be made, messages between "
         "machines; shared = the same, an error where it cannot; messages = point to point"))
-    compress: str = option("auto", group=BALANCING, metavar="auto|none|lz4|zstd[:L]", valid=_codec, must=(
-        "must be auto, none, lz4, zstd or zstd:LEVEL (1..19)"), help=(
+    compress: str | None = option(None, group=BALANCING, metavar="auto|none|lz4|zstd[:L]",
+                                  valid=lambda v: v is None or _codec(v),
+                                  must="must be auto, none, lz4, zstd or zstd:LEVEL (1..19)", help=(
         "pixels on the wire: auto = zstd between PCs, none within one; a codec = that codec on every link that "
-        "carries messages (docs/USAGE.md, \"A wall of PCs\")"))
+        "carries messages (default: the wall file's compress, else auto; docs/USAGE.md, \"A wall of PCs\")"))
     compress_moving: int = option(0, group=QUALITY, metavar="BITS", type=int, valid=lambda v: 0 <= v <= 7,
                                   must="must be 0..7 bits", help=(
         "while the camera moves, drop this many low bits of each colour byte of pixels crossing compressed links "
@@ -307,6 +308,8 @@ class WalkConfig:
             object.__setattr__(self, "latency", 0 if self.present == "window" else 1)
         if self.recover is None:
             object.__setattr__(self, "recover", default_recover(self.present))
+        if self.compress is None:
+            object.__setattr__(self, "compress", "auto")
         check(self)
         if self.partition == "broadcast" and self.decomposition != "screen":
             raise InputError.of("partition", "broadcast works with --decomposition screen (the balancer's "

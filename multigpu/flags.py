@@ -92,8 +92,8 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
 
 def walk_config(a):
     """The walkthrough's flags as a validated configuration (no MPI: testable in one process):
-    each flag's value as its field declares it; the wall file's grid, tile, mullions, displays
-    and monitor where the flags leave them out."""
+    each flag's value as its field declares it; the wall file's grid, tile, mullions, displays,
+    monitor and compression where the flags leave them out."""
     from multigpu.config import MONITOR_BESIDE, WalkConfig
     from multigpu.options import from_flags
     from multigpu.wall import Wall, bezel_mullion, check_ranks, load_wall
@@ -111,6 +111,8 @@ def walk_config(a):
     mullion = given.pop("mullion", None) or wall.mullion or bezel_mullion(wall, tile) or WalkConfig.mullion
     if given.get("monitor") == MONITOR_BESIDE and wall.monitor:
         given["monitor"] = wall.monitor
+    if given.get("compress") is None and wall.compress:
+        given["compress"] = wall.compress
     return WalkConfig(scene=spec(a), grid=grid, tile=tile, mullion=mullion, **given,
                       displays=tuple(wall.displays.get(r) for r in ranks) if wall.displays else (),
                       positions=tuple(wall.positions.get(r) for r in ranks) if wall.positions else (),

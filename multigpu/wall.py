@@ -48,6 +48,7 @@ class Wall:
     bezel: dict | None = None  # the file's bezel (millimetres), where it gives one instead of mullion pixels
     monitor: tuple[int, int] | None = None  # where --monitor opens the operator's view (rank 0's display or its own)
     monitor_on: dict = field(default_factory=dict)  # the view's own PC: "host", "display", "address" (the file's)
+    compress: str | None = None  # how pixels cross between PCs (--compress), where the file says
 
 
 def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
@@ -141,7 +142,7 @@ def load_wall(path: str) -> Wall:
     monitor = tuple(doc["monitor"]["position"]) if "monitor" in doc else None
     on = {k: v for k, v in doc.get("monitor", {}).items() if k in ("host", "display", "address")}
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
-                on)
+                on, doc.get("compress"))
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:

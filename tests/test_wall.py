@@ -203,3 +203,17 @@ def test_the_wall_file_places_the_operators_view(tmp_path):
     assert parse("--monitor").monitor == (100, 800)
     assert parse("--monitor", "5,6").monitor == (5, 6)
     assert parse().monitor is None  # the file places the view; the flag asks for it
+
+
+def test_the_wall_file_chooses_compression_and_the_flag_wins(tmp_path):
+    """The wall file's ``compress`` reaches the configuration where no flag is given; ``--compress``
+    overrides it; neither given: auto. A value the wire does not know is one line naming the key."""
+    from multigpu.cli import build_parser
+    from multigpu.flags import walk_config
+
+    parse = lambda path, *extra: walk_config(build_parser().parse_args(["walkthrough", "--wall", path, *extra]))
+    path = _wall(tmp_path, {"grid": "1x2", "compress": "zstd:3"})
+    assert parse(path).compress == "zstd:3" and parse(path, "--compress", "none").compress == "none"
+    assert parse(_wall(tmp_path, {"grid": "1x2"})).compress == "auto"
+    with pytest.raises(InputError, match=r"compress must be auto, none, lz4, zstd or zstd:LEVEL.*got \"gzip\""):
+        load_wall(_wall(tmp_path, {"grid": "1x2", "compress": "gzip"}))

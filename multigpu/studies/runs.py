@@ -98,12 +98,12 @@ class Run:
 
 
 def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str], timeout: float,
-         env: dict | None = None, launcher=None, as_run: bool = False) -> Run:
+         env: dict | None = None, launcher=None, as_run: bool = False, hosts: list[tuple[str, int]] | None = None) -> Run:
     """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``, in the studies'
     environment (``study_env``; ``as_run``: the walkthrough's own, each rank choosing its raster
     threads as a user's run does, for studies of what a user's wall time is; ``env`` over either)
-    under ``launcher`` (None: the one found); kill it on timeout. Every study's walkthrough job
-    goes through here."""
+    under ``launcher`` (None: the one found), on ``hosts`` [(host, ranks)] where given (simulated
+    hosts: ``simhosts.py``); kill it on timeout. Every study's walkthrough job goes through here."""
     import json
 
     k = grid[0] * grid[1]
@@ -112,7 +112,7 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str
             "--no-progress", *args]
     try:
         done = job(k, args, timeout, env={**({} if as_run else study_env()), **(env or {})}, launcher=launcher,
-                   merge_stderr=True)
+                   merge_stderr=True, hosts=hosts)
     except JobTimeout:
         raise RuntimeError(f"experiment job timed out after {timeout} s: multigpu {' '.join(args)}") from None
     log = done.stdout
@@ -128,10 +128,10 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str
 
 
 def job(ranks: int, args: list[str], timeout: float, env: dict | None = None, launcher=None,
-        merge_stderr: bool = False) -> subprocess.CompletedProcess:
+        merge_stderr: bool = False, hosts: list[tuple[str, int]] | None = None) -> subprocess.CompletedProcess:
     """A multigpu job of ``ranks`` ranks (``args``: its command line after ``multigpu``) under the
-    MPI's mpiexec, waited for and killed whole after ``timeout`` s."""
-    return run_multigpu(ranks, args, timeout, env=env, launcher=launcher, merge_stderr=merge_stderr)
+    MPI's mpiexec (on ``hosts`` where given), waited for and killed whole after ``timeout`` s."""
+    return run_multigpu(ranks, args, timeout, env=env, launcher=launcher, merge_stderr=merge_stderr, hosts=hosts)
 
 
 def start(ranks: int, args: list[str], env: dict | None = None, as_users: bool = False,

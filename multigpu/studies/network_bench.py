@@ -1,0 +1,206 @@
+"""``multigpu bench network``: pixels between PCs, on simulated PCs joined by a shaped network.
+
+Two parts.
+
+**Codecs.** Frames of the default walk rendered in this process (the plant, and the textured pump),
+full-HD and 4K: a screen tile's colour, and a sort-last piece (a quarter of the objects, colour and
+depth) packed as the wire packs it (``rank/composite.py``: colour, then depth in byte planes). Each
+codec of ``core/wire.py`` (and zstd at level 3) compresses them: the size against raw, and the CPU
+speed of compressing and decompressing (GB/s of raw pixels, one thread). This is what chose the
+default (zstd level 1) and the size below which a piece goes raw.
+
+**Walls.** K simulated PCs (``simhosts.py``: each its own network and IPC namespaces, a veth link
+to a bridge shaped by ``tc`` to 1 Gbit/s, or 10), one rank each on a 1xK wall; the plant and the
+pump; screen and db; ``--compress none`` and ``auto``. Per run, from the links' own byte counters
+(every byte the PCs sent, setup included) and the run's summary:
+- MB per frame on the wire, all links together, and on the busiest PC's link;
+- the codec's CPU ms per frame per rank (compress and decompress) and its share of the rank's CPU
+  frame;
+- the frame: the emulated frame (slowest rank's CPU time), the wall-clock frame, and of it the
+  exchange and synchronization;
+- the frame-rate cap the link puts on that wall: gigabit's 117 MB/s of payload (10 Gbit/s: 1170)
+  over the busiest link's bytes per frame (in or out);
+- whether the compressed wall's mosaics equal the raw one's, pixel for pixel.
+It prints figures and asserts nothing; ``--quick``: 4 PCs at full HD, the plant, few frames.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.studies.tables import Columns
+
+#: payload bytes per second a link carries (Ethernet with TCP/IP headers: about 94 % of the line rate)
+PAYLOAD = {"1gbit": 117e6, "10gbit": 1170e6}
+SCENES = {"plant": ["--triangles", "1000000"], "pump": ["--model", "models/pump.glb"]}
+TILES = {"full-HD": (1920, 1080), "4K": (3840, 2160)}
+CODECS = ("lz4", "zstd", "zstd:3")
+
+
+#: where the results go (codecs.csv, walls.csv): docs/results/network/ holds the published ones
+OUT = Path("out/network")
+
+
+def bench_network(quick: bool) -> list[dict]:
+    from multigpu.studies.tables import write_csv
+
+    codec_rows = bench_codecs(quick)
+    OUT.mkdir(parents=True, exist_ok=True)
+    write_csv(OUT / "codecs.csv", codec_rows)
+    wall_rows = bench_walls(quick)
+    write_csv(OUT / "walls.csv", wall_rows)
+    print(f"results in {OUT}/ (codecs.csv, walls.csv)")
+    return codec_rows + wall_rows
+
+
+# -- codecs, in this process
+def _frames(scene_args: list[str], size: tuple[int, int], picks: tuple[int, ...]):
+    """(colour of the whole view, sort-last piece packed as on the wire) of frames ``picks`` of
+    the default walk (sampled at 40 frames) of the scene, at ``size``."""
+    from multigpu.core.camera import frame_matrices
+    from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import walkthrough
+
+    spec = (SceneSpec(model=scene_args[1]) if scene_args[0] == "--model"
+            else SceneSpec(triangles=int(scene_args[1])))
+    scene, _ = load_scene(spec)
+    path = walkthrough(scene, frames=40)
+    ctx = create_context()[0]
+    renderer = RegionRenderer(ctx, scene, size, "scissor")
+    quarter = np.zeros(scene.n_objects, bool)
+    quarter[: scene.n_objects // 4] = True
+    out = []
+    for f in picks:
+        view, proj, light = frame_matrices(path.camera(f), size)
+        colour = renderer.render(view, proj, light, (0, 0, *size), None)
+        rgb, z = renderer.render(view, proj, light, (0, 0, *size), quarter, depth=True)
+        n = size[0] * size[1]
+        piece = np.empty(7 * n, np.uint8)
+        piece[:3 * n] = rgb.reshape(-1)
+        piece[3 * n:].reshape(4, n)[:] = z.view(np.uint8).reshape(n, 4).T
+        out.append((np.ascontiguousarray(colour).reshape(-1), piece))
+    renderer.release()
+    return out
+
+
+def bench_codecs(quick: bool) -> list[dict]:
+    from multigpu.core import wire
+
+    picks = (8, 20) if quick else (4, 12, 20, 28, 36)
+    sizes = {"full-HD": TILES["full-HD"]} if quick else TILES
+    table = Columns(("scene", "scene", "<6"), ("size", "size", "<8"), ("kind", "pixels", "<17"),
+                    ("codec", "codec", "<7"), ("ratio", "raw/sent", "9.1f"), ("ratio_min", "worst", "7.1f"),
+                    ("compress_gbs", "comp GB/s", "10.2f"), ("decompress_gbs", "decomp GB/s", "12.2f"))
+    print(f"bench network, codecs: frames {', '.join(map(str, picks))} of the default walk (at 40 frames), "
+          "one thread; raw/sent = mean over frames (worst: the least), speeds in GB/s of raw pixels (CPU time)")
+    print(table.header())
+    rows = []
+    for scene, args in SCENES.items():
+        for size_name, size in sizes.items():
+            frames = _frames(args, size, picks)
+            for kind, which in (("screen tile (rgb)", 0), ("sort-last rgb+z", 1)):
+                for name in CODECS:
+                    codec = wire.parse(name)
+                    ratios, ct, dt, raw_total = [], 0.0, 0.0, 0
+                    for pair in frames:
+                        raw = pair[which]
+                        t0 = time.process_time()
+                        msg = wire.encode(raw.copy(), codec)
+                        t1 = time.process_time()
+                        back, _ = wire.decode(msg, raw.nbytes)
+                        t2 = time.process_time()
+                        assert (back == raw).all()
+                        ratios.append(raw.nbytes / msg.nbytes)
+                        ct, dt, raw_total = ct + (t1 - t0), dt + (t2 - t1), raw_total + raw.nbytes
+                    row = {"part": "codec", "scene": scene, "size": size_name, "kind": kind, "codec": name,
+                           "ratio": float(np.mean(ratios)), "ratio_min": float(np.min(ratios)),
+                           "compress_gbs": raw_total / max(ct, 1e-9) / 1e9,
+                           "decompress_gbs": raw_total / max(dt, 1e-9) / 1e9}
+                    rows.append(row)
+                    print(table.row(row), flush=True)
+    return rows
+
+
+# -- walls, on simulated PCs
+def _mosaics(out: Path) -> list[np.ndarray]:
+    from PIL import Image
+
+    return [np.asarray(Image.open(p)) for p in sorted((out / "mosaic").glob("frame_*.png"))]
+
+
+def bench_walls(quick: bool) -> list[dict]:
+    from multigpu.launcher.mpirun import find_launcher
+    from multigpu.studies.runs import walk
+    from multigpu.studies.simhosts import SimHosts
+
+    frames = 6 if quick else 12
+    if quick:
+        cases = [(4, "full-HD", "plant", d, "1gbit") for d in ("screen", "db")]
+    else:
+        cases = [(pcs, tile, scene, d, "1gbit") for tile, pcs_list in (("full-HD", (2, 4)), ("4K", (4,)))
+                 for pcs in pcs_list for scene in SCENES for d in ("screen", "db")]
+        cases += [(4, "full-HD", "plant", d, "10gbit") for d in ("screen", "db")]
+    table = Columns(("pcs", "PCs", "3d"), ("tile", "tile", "<8"), ("scene", "scene", "<6"),
+                    ("decomposition", "decomp", "<7"), ("link", "link", "<7"), ("compress", "compress", "<9"),
+                    ("mb_frame", "MB/frame", "9.2f"), ("mb_busiest", "busiest", "8.2f"),
+                    ("codec_ms", "codec ms", "9.2f"), ("codec_share", "of CPU", "7.1%"),
+                    ("emulated_ms", "emulated", "9.1f"), ("frame_ms", "frame", "8.1f"),
+                    ("exchange_ms", "exchange", "9.1f"), ("sync_ms", "sync", "7.1f"), ("cap_fps", "cap fps", "8.1f"),
+                    ("exact", "exact", ">6"))
+    print(f"\nbench network, walls: 1xK walls of one rank per simulated PC, {frames} frames of the default walk "
+          "(mosaic every 3rd); MB per frame on the links (all PCs sent, setup included; busiest: one PC's link, in or "
+          "out); codec = compress + decompress CPU ms per rank per frame and its share of the rank's CPU frame; "
+          "emulated = slowest rank's CPU frame; frame, exchange, sync: wall-clock ms per rank; cap = the link's "
+          "payload rate over the busiest link's bytes per frame; exact: the mosaics equal the raw run's")
+    print(table.header(), flush=True)
+    launcher = find_launcher()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for pcs, tile_name, scene, decomposition, link in cases:
+            names = [f"pc{i}" for i in range(pcs)]
+            raw_mosaics = None
+            with SimHosts(names, Path(tmp) / "hosts", network=True, rate=link) as hosts:
+                for compress in ("none", "auto"):
+                    out = Path(tmp) / f"{pcs}-{tile_name}-{scene}-{decomposition}-{link}-{compress}"
+                    before = hosts.wire()
+                    run = walk(out, (1, pcs), TILES[tile_name],
+                               [*SCENES[scene], "--frames", str(frames), "--decomposition", decomposition,
+                                "--compress", compress, "--mosaic-every", "3", "--no-overlay"], 3600,
+                               env={**hosts.env, "MULTIGPU_CACHE": os.environ.get("MULTIGPU_CACHE", str(Path(tmp) / "c"))},
+                               launcher=launcher, hosts=[(n, 1) for n in names])
+                    after = hosts.wire()
+                    sent = {h: after[h][0] - before[h][0] for h in after}
+                    got = {h: after[h][1] - before[h][1] for h in after}
+                    mosaics = _mosaics(out)
+                    if compress == "none":
+                        raw_mosaics, exact = mosaics, "-"
+                    else:
+                        exact = "yes" if len(mosaics) == len(raw_mosaics) and all(
+                            (a == b).all() for a, b in zip(mosaics, raw_mosaics)) else "NO"
+                    rows.append(_row(run, pcs, tile_name, scene, decomposition, link, compress, sent, got, frames,
+                                     exact))
+                    print(table.row(rows[-1]), flush=True)
+    return rows
+
+
+def _row(run, pcs, tile, scene, decomposition, link, compress, sent, got, frames, exact) -> dict:
+    s = run.summary
+    n = s["frames"]
+    total = sum(sent.values()) / n
+    busiest = max(max(sent.values()), max(got.values())) / n
+    codec = s["wire"]["compress_cpu_ms"] + s["wire"]["decompress_cpu_ms"]
+    cpu = run.col("load_balancing_cpu_ms") + run.col("rendering_cpu_ms") + run.col("frame_exchange_cpu_ms") + \
+        run.col("display_cpu_ms")
+    return {"part": "wall", "pcs": pcs, "tile": tile, "scene": scene, "decomposition": decomposition, "link": link,
+            "compress": compress, "frames": n, "mb_frame": total / 1e6, "mb_busiest": busiest / 1e6,
+            "codec_ms": codec, "codec_share": codec / max(float(cpu.mean()), 1e-9),
+            "emulated_ms": s["emulated_frame_ms"], "frame_ms": s["frame_ms"],
+            "exchange_ms": s["wall"]["frame_exchange_ms"], "sync_ms": s["wall"]["synchronization_ms"],
+            "cap_fps": PAYLOAD[link] / max(busiest, 1.0), "exact": exact,
+            "compress_chosen": s["config"].get("compress", "")}
