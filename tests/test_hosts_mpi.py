@@ -160,6 +160,8 @@ def test_pixels_between_hosts_cross_the_link_compressed_and_compose_exactly(tmp_
     and the wall is the one-rank render bit for bit: with bezels and frames in flight, sort-first
     and sort-last; ``--compress none`` puts the raw pixels on the same links."""
     cache = {"MULTIGPU_CACHE": str(tmp_path / "cache")}
+    tw, th = 160, 120  # pieces above the size below which they go raw (core/wire.py: LEAST)
+    extra = [*extra, "--tile", f"{tw}x{th}"]
     walls, onlink = {}, {}
     for compress in ("auto", "none"):
         out = tmp_path / compress
@@ -178,10 +180,10 @@ def test_pixels_between_hosts_cross_the_link_compressed_and_compose_exactly(tmp_
     assert onlink["auto"] < onlink["none"] - sent_raw / 2
     mull = extra[extra.index("--mullion") + 1] if "--mullion" in extra else "0x0"
     mx, my = (int(v) for v in mull.split("x"))
-    ref = run_mpi(1, [*args(tmp_path / "one"), "--grid", "1x1", "--tile", f"{W + mx}x{H + my}"], env=cache)
+    ref = run_mpi(1, [*args(tmp_path / "one"), "--grid", "1x1", "--tile", f"{2 * tw + mx}x{2 * th + my}"], env=cache)
     assert ref.returncode == 0, ref.stderr[-3000:]
-    shown = np.ones((H + my, W + mx), bool)  # the canvas but the pixels behind the bezels (black on the wall)
-    shown[:, W // 2:W // 2 + mx] = shown[H // 2:H // 2 + my, :] = False
+    shown = np.ones((2 * th + my, 2 * tw + mx), bool)  # the canvas but the pixels behind the bezels (black)
+    shown[:, tw:tw + mx] = shown[th:th + my, :] = False
     for compress in ("auto", "none"):
         for f, (got, want) in enumerate(zip(frames_of(tmp_path / compress), frames_of(tmp_path / "one"))):
             assert got.shape == want.shape and (got[shown] == want[shown]).all(), \

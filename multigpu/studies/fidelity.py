@@ -3,7 +3,9 @@
 For the plant walk, the city drive, the 4-plant orbit and a large model (4.3 M triangles in 130k
 objects), on a 2x2 wall of 512x512 tiles: a full-quality run records its cameras; the same
 cameras then run at fixed render scales and level-of-detail bounds, with ``--target-fps`` at 1.5x
-and 2x the full run's frame rate, and at half of it (a target already met). Time is the wall's
+and 2x the full run's frame rate, and at half of it (a target already met), and with a lossy wire while the camera moves
+(``--compress-moving`` 2, 3 and 4 bits, every piece between ranks a zstd message; its error from
+the mosaics against the same run lossless). Time is the wall's
 frame period (wall time, the mean over ranks) and the emulated frame (the slowest rank's CPU
 time). Error is measured in one process against the full-quality replay of the same camera:
 the frame each run showed is rendered again (a scaled, levelled composite is bit for bit one
@@ -32,6 +34,9 @@ from multigpu.studies.tables import write_csv
 
 #: fixed settings measured: (render scale, LOD bound px)
 FIXED = ((0.75, 0.0), (0.5, 0.0), (0.25, 0.0), (1.0, 1.0), (1.0, 4.0), (0.5, 4.0))
+#: colour bits a lossy wire drops while the camera moves (``--compress-moving``), each measured with
+#: every piece between ranks a zstd message (``--exchange messages --compress zstd``)
+WIRE_BITS = (2, 3, 4)
 #: targets, as multiples of the full run's frame rate (0.5: a target already met)
 TARGETS = (1.5, 2.0, 0.5)
 #: frames in a window of the windowed target share
@@ -76,7 +81,30 @@ def _scene(s: Settings, out: Path, name: str, flags: list[str], n: int, tile) ->
         runs[(f"target {m:g}x", 1.0, 0.0, m * fps)] = walk(out / f"t{m:g}", (2, 2), tile,
                                                           [*path, "--target-fps", f"{m * fps:.3f}"], s.timeout)
     errors = _errors(flags, rec, runs, (2 * tile[0], 2 * tile[1]), sample=1 if s.quick else 6)
+    every = 1 if s.quick else 6
+    wire = [*path, "--mosaic-every", str(every), "--no-overlay", "--exchange", "messages", "--compress", "zstd"]
+    exact = walk(out / "wire-exact", (2, 2), tile, wire, s.timeout)
+    for bits in WIRE_BITS:
+        key = (f"wire lossy {bits} bits", 1.0, 0.0, None)
+        runs[key] = walk(out / f"w{bits}", (2, 2), tile, [*wire, "--compress-moving", str(bits)], s.timeout)
+        errors[key] = _mosaic_errors(runs[key].out, exact.out)
     return _rows(name, runs, errors, base)
+
+
+def _mosaic_errors(run: Path, exact: Path) -> list[tuple]:
+    """[(frame, psnr, share of pixels that differ, 1.0, 0.0)] of a run's mosaics against the same
+    frames' exact ones (a lossy wire: the frames as shown, composed from what crossed)."""
+    from PIL import Image
+
+    got = []
+    for png in sorted((exact / "mosaic").glob("frame_*.png")):
+        want = np.asarray(Image.open(png)).astype(np.int16)
+        mine = np.asarray(Image.open(run / "mosaic" / png.name)).astype(np.int16)
+        diff = mine - want
+        mse = float((diff.astype(np.float64) ** 2).mean())
+        psnr = 99.0 if mse == 0 else min(99.0, 10 * math.log10(255.0 ** 2 / mse))
+        got.append((int(png.stem.split("_")[1]), psnr, float(diff.any(axis=2).mean()), 1.0, 0.0))
+    return got
 
 
 def _errors(flags: list[str], rec: Path, runs: dict, size, sample: int) -> dict:
