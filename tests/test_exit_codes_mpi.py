@@ -20,7 +20,7 @@ from multigpu.launcher.mpirun import find_launcher, launcher_for, openmpi_on_pat
 
 pytestmark = pytest.mark.mpi
 ENTRIES = ["script", "module", "raw"]
-EVENTS = {"bad flag": 2, "failing rank": 1, "SIGINT": 130, "SIGTERM": 143}
+EVENTS = {"bad flag": 2, "failing rank": 1, "corrupt piece": 2, "SIGINT": 130, "SIGTERM": 143}
 
 
 @pytest.fixture(params=["default", "openmpi"], scope="module")
@@ -55,10 +55,12 @@ def expected(entry: str, launcher, event: str) -> int:
 def test_exit_code(tmp_path, launcher, entry, event):
     out = tmp_path / "o"
     args = [*SMALL, "--grid", "1x2", "--tile", "64x48", "--mosaic-every", "0", "--out", str(out)]
-    args += {"bad flag": ["--balance", "nope", "--frames", "5"], "failing rank": ["--frames", "100000"]}.get(
-        event, ["--frames", "100000"])
+    args += {"bad flag": ["--balance", "nope", "--frames", "5"], "failing rank": ["--frames", "100000"],
+             "corrupt piece": ["--frames", "100000", "--decomposition", "db", "--exchange", "messages",
+                               "--compress", "zstd"]}.get(event, ["--frames", "100000"])
+    fault = {"failing rank": "1:8", "corrupt piece": "1:8:corrupt"}
     env = launcher.environ({"LP_NUM_THREADS": "1", "MULTIGPU_MPIEXEC": launcher.path,
-                            **({"MULTIGPU_FAULT": "1:8"} if event == "failing rank" else {})})
+                            **({"MULTIGPU_FAULT": fault[event]} if event in fault else {})})
     proc = subprocess.Popen(command(entry, launcher, args), cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
@@ -83,6 +85,12 @@ def test_exit_code(tmp_path, launcher, entry, event):
         shown = 8 - WalkConfig().latency
         assert s["frames"] == shown and "injected fault at frame 8" in s["stopped_by"], s["stopped_by"]
         assert err.count("injected fault at frame 8") == 1, err[-2000:]
+    elif event == "corrupt piece":  # rank 0 finds frame 8's pieces from rank 1 spoilt: one line, the frames before kept
+        lines = [ln for ln in err.splitlines() if "frame 8: the pieces from rank 1" in ln]
+        assert len(lines) == 1 and lines[0].startswith("multigpu: error: rank 0: frame 8: the pieces from rank 1: "), \
+            err[-2000:]
+        # every frame before it whole (frame 7's row lands as frame 8 is delivered, before its pieces are read)
+        assert s["frames"] == 8 and "CorruptPiece" in s["stopped_by"], s["stopped_by"]
     else:
         seen = "SIGTERM" if launcher.flavor == "openmpi" else event  # Open MPI forwards Ctrl-C as SIGTERM
         assert s["stopped_by"] == f"signal {seen}", s["stopped_by"]

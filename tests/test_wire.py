@@ -113,7 +113,7 @@ def test_a_corrupt_piece_names_the_rank_the_frame_and_the_sender():
     inbox = {1: np.zeros(wire.bound(raw), np.uint8)}  # nothing arrived but zeros
     posted = Posted(0, [rects, rects], rendered, {1: parts}, [], [], inbox, Sent(0, 0), False, frozenset(), 17,
                     {1: wire.AUTO})
-    with pytest.raises(CorruptPiece, match=r"rank 0: frame 17: the pieces from rank 1: .*not multigpu's"):
+    with pytest.raises(CorruptPiece, match=r"^rank 0: frame 17: the pieces from rank 1: .*not multigpu's"):
         posted._decoded(1, parts)
 
 

@@ -27,6 +27,7 @@ from multigpu.core import wire
 from multigpu.core.merge import merge_part
 from multigpu.core.work import Piece
 from multigpu.rank.exchange import wait_all
+from multigpu.rank.fault import FAULT_SPEC, corrupt
 
 TAG = 8
 
@@ -91,22 +92,30 @@ class Posted:
             elif s in self.near:
                 views = read(s, parts)
             elif s in self.links:
-                t0 = time.thread_time()
-                views = self._decoded(s, parts)
-                spent += time.thread_time() - t0
+                views, took = self._decoded(s, parts)
+                spent += took
             else:
                 views = _unpack(self.inbox[s], parts, self.with_depth)
             _merge(color, depth, tile, views)
         return self.sent._replace(decompress_ms=spent * 1e3) if spent else self.sent
 
-    def _decoded(self, s: int, parts: list[Piece]) -> list:
-        """Views of the parts in rank ``s``'s compressed message; CorruptPiece where it does not decode."""
+    def _decoded(self, s: int, parts: list[Piece]) -> tuple[list, float]:
+        """Views of the parts in rank ``s``'s compressed message, and the CPU seconds decoding it
+        took; CorruptPiece where it does not decode."""
         raw = sum(p.pixels for p in parts) * (7 if self.with_depth else 3)
-        try:
-            packed, bits = wire.decode(self.inbox[s], raw)
-        except wire.WireError as exc:
-            raise CorruptPiece(f"rank {self.me}: frame {self.frame}: the pieces from rank {s}: {exc}") from None
-        return _unpack_planar(packed, parts, self.with_depth, bits)
+        packed, bits, took = decoded(self.inbox[s], raw, f"rank {self.me}: frame {self.frame}: the pieces from rank {s}")
+        return _unpack_planar(packed, parts, self.with_depth, bits), took
+
+
+def decoded(message: np.ndarray, raw: int, what: str) -> tuple[np.ndarray, int, float]:
+    """``wire.decode`` of a message that must hold ``raw`` bytes, with the CPU seconds it took;
+    CorruptPiece beginning with ``what`` (the rank, the frame, the sender) where it does not decode."""
+    t0 = time.thread_time()
+    try:
+        packed, bits = wire.decode(message, raw)
+    except wire.WireError as exc:
+        raise CorruptPiece(f"{what}: {exc}") from None
+    return packed, bits, time.thread_time() - t0
 
 
 def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool,
@@ -136,10 +145,12 @@ def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bo
         px = sum(p.pixels for p in parts)
         buf = np.empty(px * per_px, dtype=np.uint8)
         if r in links:
-            t0 = time.thread_time()
             _pack_planar(buf, parts, rects[me], rendered, with_depth)
+            t0 = time.thread_time()
             msg = wire.encode(buf, links[r], 3 * px, bits)
             spent += time.thread_time() - t0
+            if FAULT_SPEC:
+                msg = corrupt(me, frame, msg)
         else:
             _pack(buf, parts, rects[me], rendered, with_depth)
             msg = buf

@@ -15,11 +15,12 @@ def fault(rank: int, where: int | str) -> None:
     at start) with WHERE a frame number or 'setup' raises there, or with ':stop' stops the rank
     (SIGSTOP: a frozen rank; if something continues it, it carries on as if nothing happened).
     'RANK:compose:sleep=S' holds the rank back S seconds in every frame, after the exchange's
-    wait and before it reads its peers' parts (where a peer running ahead could overwrite them)."""
+    wait and before it reads its peers' parts (where a peer running ahead could overwrite them).
+    'RANK:FRAME:corrupt' spoils the rank's framed messages of that frame instead (``corrupt``)."""
     spec = FAULT_SPEC
     if spec:
         r, w, *action = spec.split(":")
-        if int(r) == rank and w == str(where):
+        if int(r) == rank and w == str(where) and action != ["corrupt"]:
             if action and action[0].startswith("sleep="):
                 import time
 
@@ -31,3 +32,18 @@ def fault(rank: int, where: int | str) -> None:
                 os.kill(os.getpid(), signal.SIGSTOP)
                 return
             raise RuntimeError(f"injected fault at {'frame ' if isinstance(where, int) else ''}{where}")
+
+
+def corrupt(rank: int, frame: int, message):
+    """Test-only: ``message`` (a framed one, ``core/wire.py``) spoilt where MULTIGPU_FAULT is
+    'RANK:FRAME:corrupt' for this rank and frame: a compressed payload's second half flipped, a
+    raw one cut short; else ``message`` itself."""
+    if FAULT_SPEC != f"{rank}:{frame}:corrupt":
+        return message
+    from multigpu.core import wire
+
+    if wire.header(message)[0] == 0:
+        return message[:-max(1, (message.nbytes - wire.HEADER_BYTES) // 2)]
+    bad = message.copy()
+    bad[wire.HEADER_BYTES + (message.nbytes - wire.HEADER_BYTES) // 2:] ^= 0x5A
+    return bad

@@ -17,7 +17,9 @@ from collections import deque
 
 import numpy as np
 
+from multigpu.core import wire
 from multigpu.errors import WriteFailed
+from multigpu.rank.composite import decoded
 from multigpu.rank.exchange import allgather_text, wait_all
 from multigpu.records.mosaic import stitch
 from multigpu.records.recovery import restarts
@@ -30,6 +32,8 @@ from multigpu.records.stops import STOP_FLAG, STOPS
 BALANCE_PHASES = ("learn", "project", "choose", "plan")
 #: the phases of the Rendering column: the parts culled, the draw calls, the pixels read back
 RENDER_PHASES = ("cull", "render", "readback")
+#: the mosaic gather's messages (the frame exchange's are ``composite.TAG``)
+MOSAIC_TAG = 10
 #: the frames ``--timeline`` keeps: the run's last ones
 TIMELINE_FRAMES = 8
 
@@ -38,8 +42,10 @@ class FrameLog:
     """One rank's log of its frames; ``record`` (rank 0's ``RunRecord``, else None) is where
     rows, mosaics and the timeline go."""
 
-    def __init__(self, cfg, comm, job, record, col: dict, n_frames: int | None, window: bool):
+    def __init__(self, cfg, comm, job, record, col: dict, n_frames: int | None, window: bool,
+                 links: dict | None = None):
         self.cfg, self.comm, self.job, self.record, self.col = cfg, comm, job, record, col
+        self.links = links or {}  # the codec of each rank whose messages with this one travel compressed
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         self.n_frames, self.window = n_frames, window
         self.canvas = cfg.canvas
@@ -114,10 +120,27 @@ class FrameLog:
         mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or last)
         if not (mosaic_due or cfg.video):
             return
-        wait_all([self.comm.Igather(back, self.gathered, root=0)], cfg.timeout, "mosaic gather")
+        self._gather(f, back)
         if self.rank == 0:
             self.write(self.record.image, f, stitch(self.gathered, self.tiles, self.canvas.size, self.canvas.dark),
                        work.rects, mosaic_due)
+
+    def _gather(self, f: int, back: np.ndarray) -> None:
+        """Every rank's composed tile into rank 0's ``gathered``: one message each, compressed from
+        ranks on other PCs as the frame's pieces are (``core/wire.py``); a tile that does not
+        decode ends the job (``CorruptPiece``)."""
+        if self.rank != 0:
+            msg = wire.encode(back.reshape(-1).copy(), self.links[0]) if 0 in self.links else back
+            wait_all([self.comm.Isend(msg, dest=0, tag=MOSAIC_TAG)], self.cfg.timeout, "mosaic gather")
+            return
+        self.gathered[0] = back
+        boxes = {k: np.empty(wire.bound(back.nbytes), np.uint8) if k in self.links else self.gathered[k]
+                 for k in range(1, self.K)}
+        wait_all([self.comm.Irecv(b, source=k, tag=MOSAIC_TAG) for k, b in boxes.items()], self.cfg.timeout,
+                 "mosaic gather")
+        for k in self.links:
+            packed, _, _ = decoded(boxes[k], back.nbytes, f"rank 0: frame {f}: the tile of rank {k}")
+            self.gathered[k].reshape(-1)[:] = packed
 
     def write(self, write, *args) -> None:
         """Rank 0's outputs: the first write that fails is kept (``record.failed``) and stops every

@@ -87,7 +87,8 @@ class Frames:
         self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
         self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
         self.window = presenter.mode == "window"
-        self.log = FrameLog(cfg, comm, job, self.record, self.col, self.n_frames, self.window)
+        self.log = FrameLog(cfg, comm, job, self.record, self.col, self.n_frames, self.window,
+                            self.exchange.links)
 
     def _relay(self, partition):
         """``--partition broadcast``: rank 0 computes the partition, every rank receives it."""
