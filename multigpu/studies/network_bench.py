@@ -40,6 +40,8 @@ PAYLOAD = {"1gbit": 117e6, "10gbit": 1170e6}
 SCENES = {"plant": ["--triangles", "1000000"], "pump": ["--model", "models/pump.glb"]}
 TILES = {"full-HD": (1920, 1080), "4K": (3840, 2160)}
 CODECS = ("lz4", "zstd", "zstd:3")
+#: frames of the default walk a wall runs: (full, quick), by tile
+FRAMES = {"full-HD": {False: 16, True: 6}, "4K": {False: 8, True: 4}}
 
 
 #: where the results go (codecs.csv, walls.csv): docs/results/network/ holds the published ones
@@ -92,7 +94,7 @@ def _frames(scene_args: list[str], size: tuple[int, int], picks: tuple[int, ...]
 def bench_codecs(quick: bool) -> list[dict]:
     from multigpu.core import wire
 
-    picks = (8, 20) if quick else (4, 12, 20, 28, 36)
+    picks = (12, 28) if quick else (4, 12, 20, 28, 36)
     sizes = {"full-HD": TILES["full-HD"]} if quick else TILES
     table = Columns(("scene", "scene", "<6"), ("size", "size", "<8"), ("kind", "pixels", "<17"),
                     ("codec", "codec", "<7"), ("ratio", "raw/sent", "9.1f"), ("ratio_min", "worst", "7.1f"),
@@ -139,7 +141,6 @@ def bench_walls(quick: bool) -> list[dict]:
     from multigpu.studies.runs import walk
     from multigpu.studies.simhosts import SimHosts
 
-    frames = 6 if quick else 12
     if quick:
         cases = [(4, "full-HD", "plant", d, "1gbit") for d in ("screen", "db")]
     else:
@@ -148,16 +149,18 @@ def bench_walls(quick: bool) -> list[dict]:
         cases += [(4, "full-HD", "plant", d, "10gbit") for d in ("screen", "db")]
     table = Columns(("pcs", "PCs", "3d"), ("tile", "tile", "<8"), ("scene", "scene", "<6"),
                     ("decomposition", "decomp", "<7"), ("link", "link", "<7"), ("compress", "compress", "<9"),
-                    ("mb_frame", "MB/frame", "9.2f"), ("mb_busiest", "busiest", "8.2f"),
+                    ("mb_frame", "MB/frame", "9.2f"), ("mb_exchange", "exchange", "9.2f"), ("mb_busiest", "busiest", "8.2f"),
                     ("codec_ms", "codec ms", "9.2f"), ("codec_share", "of CPU", "7.1%"),
                     ("emulated_ms", "emulated", "9.1f"), ("frame_ms", "frame", "8.1f"),
-                    ("exchange_ms", "exchange", "9.1f"), ("sync_ms", "sync", "7.1f"), ("cap_fps", "cap fps", "8.1f"),
+                    ("exchange_ms", "exch ms", "8.1f"), ("sync_ms", "sync", "7.1f"), ("cap_fps", "cap fps", "8.1f"),
                     ("exact", "exact", ">6"))
-    print(f"\nbench network, walls: 1xK walls of one rank per simulated PC, {frames} frames of the default walk "
-          "(mosaic every 3rd); MB per frame on the links (all PCs sent, setup included; busiest: one PC's link, in or "
-          "out); codec = compress + decompress CPU ms per rank per frame and its share of the rank's CPU frame; "
-          "emulated = slowest rank's CPU frame; frame, exchange, sync: wall-clock ms per rank; cap = the link's "
-          "payload rate over the busiest link's bytes per frame; exact: the mosaics equal the raw run's")
+    print("\nbench network, walls: 1xK walls of one rank per simulated PC, the default walk at "
+          f"{FRAMES['full-HD'][quick]} frames (4K: {FRAMES['4K'][quick]}), as a user runs it (mosaics at its first "
+          "and last frame); MB per frame on the links (everything the PCs sent: setup, mosaics, heartbeats), of it "
+          "the frame exchange's messages, and on the busiest PC's link (in or out); codec = compress + decompress "
+          "CPU ms per rank per frame and its share of the rank's CPU frame; emulated = slowest rank's CPU frame; "
+          "frame, exch ms, sync: wall-clock ms per rank; cap = the link's payload rate over the busiest link's bytes "
+          "per frame; exact: the mosaics equal the raw run's (lossy: the frames moved, not expected)")
     print(table.header(), flush=True)
     launcher = find_launcher()
     rows = []
@@ -165,13 +168,17 @@ def bench_walls(quick: bool) -> list[dict]:
         for pcs, tile_name, scene, decomposition, link in cases:
             names = [f"pc{i}" for i in range(pcs)]
             raw_mosaics = None
+            frames = FRAMES[tile_name][quick]
+            variants = {"none": ["--compress", "none"], "auto": ["--compress", "auto"]}
+            if tile_name == "4K":  # frames in motion: 3 colour bits dropped on the wire
+                variants["lossy 3"] = ["--compress", "auto", "--compress-moving", "3"]
             with SimHosts(names, Path(tmp) / "hosts", network=True, rate=link) as hosts:
-                for compress in ("none", "auto"):
-                    out = Path(tmp) / f"{pcs}-{tile_name}-{scene}-{decomposition}-{link}-{compress}"
+                for compress, flags in variants.items():
+                    out = Path(tmp) / f"{pcs}-{tile_name}-{scene}-{decomposition}-{link}-{compress.replace(' ', '')}"
                     before = hosts.wire()
                     run = walk(out, (1, pcs), TILES[tile_name],
-                               [*SCENES[scene], "--frames", str(frames), "--decomposition", decomposition,
-                                "--compress", compress, "--mosaic-every", "3", "--no-overlay"], 3600,
+                               [*SCENES[scene], "--frames", str(frames), "--decomposition", decomposition, *flags,
+                                "--no-overlay"], 3600,
                                env={**hosts.env, "MULTIGPU_CACHE": os.environ.get("MULTIGPU_CACHE", str(Path(tmp) / "c"))},
                                launcher=launcher, hosts=[(n, 1) for n in names])
                     after = hosts.wire()
@@ -180,6 +187,8 @@ def bench_walls(quick: bool) -> list[dict]:
                     mosaics = _mosaics(out)
                     if compress == "none":
                         raw_mosaics, exact = mosaics, "-"
+                    elif compress.startswith("lossy"):
+                        exact = "-"
                     else:
                         exact = "yes" if len(mosaics) == len(raw_mosaics) and all(
                             (a == b).all() for a, b in zip(mosaics, raw_mosaics)) else "NO"
@@ -198,7 +207,8 @@ def _row(run, pcs, tile, scene, decomposition, link, compress, sent, got, frames
     cpu = run.col("load_balancing_cpu_ms") + run.col("rendering_cpu_ms") + run.col("frame_exchange_cpu_ms") + \
         run.col("display_cpu_ms")
     return {"part": "wall", "pcs": pcs, "tile": tile, "scene": scene, "decomposition": decomposition, "link": link,
-            "compress": compress, "frames": n, "mb_frame": total / 1e6, "mb_busiest": busiest / 1e6,
+            "compress": compress, "frames": n, "mb_frame": total / 1e6, "mb_exchange": s["wire"]["bytes_per_frame"] / 1e6,
+            "mb_busiest": busiest / 1e6,
             "codec_ms": codec, "codec_share": codec / max(float(cpu.mean()), 1e-9),
             "emulated_ms": s["emulated_frame_ms"], "frame_ms": s["frame_ms"],
             "exchange_ms": s["wall"]["frame_exchange_ms"], "sync_ms": s["wall"]["synchronization_ms"],
