@@ -6,8 +6,9 @@ Two parts.
 full-HD and 4K: a screen tile's colour, and a sort-last piece (a quarter of the objects, colour and
 depth) packed as the wire packs it (``rank/composite.py``: colour, then depth in byte planes). Each
 codec of ``core/wire.py`` (and zstd at level 3) compresses them: the size against raw, and the CPU
-speed of compressing and decompressing (GB/s of raw pixels, one thread). This is what chose the
-default (zstd level 1) and the size below which a piece goes raw.
+speed of compressing and decompressing (GB/s of raw pixels, one thread), beside a plain memory copy
+of the same pixels (``copy``: what the shared segment within a PC costs, which a codec there would
+have to beat). This is what chose the default (zstd level 1 between PCs, nothing within one).
 
 **Walls.** K simulated PCs (``simhosts.py``: each its own network and IPC namespaces, a veth link
 to a bridge shaped by ``tc`` to 1 Gbit/s, or 10), one rank each on a 1xK wall; the plant and the
@@ -107,6 +108,8 @@ def bench_codecs(quick: bool) -> list[dict]:
         for size_name, size in sizes.items():
             frames = _frames(args, size, picks)
             for kind, which in (("screen tile (rgb)", 0), ("sort-last rgb+z", 1)):
+                rows.append(_copy_row(scene, size_name, kind, [pair[which] for pair in frames]))
+                print(table.row(rows[-1]), flush=True)
                 for name in CODECS:
                     codec = wire.parse(name)
                     ratios, ct, dt, raw_total = [], 0.0, 0.0, 0
@@ -127,6 +130,20 @@ def bench_codecs(quick: bool) -> list[dict]:
                     rows.append(row)
                     print(table.row(row), flush=True)
     return rows
+
+
+def _copy_row(scene: str, size: str, kind: str, raws: list[np.ndarray]) -> dict:
+    """What a plain memory copy of the same pixels runs at (the shared segment's cost within a PC:
+    what a codec there would have to beat)."""
+    dst = [np.empty_like(r) for r in raws]
+    t0 = time.process_time()
+    for _ in range(5):
+        for a, b in zip(dst, raws):
+            np.copyto(a, b)
+    took = (time.process_time() - t0) / 5
+    speed = sum(r.nbytes for r in raws) / max(took, 1e-9) / 1e9
+    return {"part": "codec", "scene": scene, "size": size, "kind": kind, "codec": "copy", "ratio": 1.0,
+            "ratio_min": 1.0, "compress_gbs": speed, "decompress_gbs": speed}
 
 
 # -- walls, on simulated PCs
