@@ -4,7 +4,7 @@ codec, and checked when they arrive (DESIGN.md, "The wire").
 A message is a 24-byte header and a payload. The header says the codec, the low colour bits a lossy
 frame dropped, and the raw and payload lengths; the payload is the packed bytes as that codec
 leaves them. A payload no smaller than the raw bytes, or raw bytes below the codec's
-``least`` bytes, go raw (codec ``none``): compressing them costs more than it saves. Both codecs
+``least`` bytes, go raw (codec ``none``): compressing them saves nothing. Both codecs
 carry a checksum of the content (zstd's and LZ4 frame's), so a corrupt or short message is
 found, named and never composed. The receiver posts ``bound(raw)`` bytes, the largest message
 for ``raw`` packed bytes.
@@ -16,8 +16,9 @@ planes compress 10-20x with zstd where the interleaved floats compress 1-8x (mea
 bench network``, its codec table, on the plant and the textured pump).
 
 Chosen by that measurement on rendered frames (full-HD and 4K, colour, and sort-last colour and
-depth): zstd level 1 keeps 1.5-3x more than LZ4 at 0.3-2 GB/s on this machine, and blosc2's
-shuffle did no better than these planes with zstd. Pure: no MPI, no GL.
+depth): zstd level 1 leaves 1.5-3x fewer bytes than LZ4 at about the same speed on this machine,
+level 3 a few per cent fewer at half the speed, and blosc2's shuffle did no better than these
+planes with zstd (a one-off check, not in the benchmark). Pure: no MPI, no GL.
 """
 
 from __future__ import annotations
@@ -34,8 +35,9 @@ CODECS = ("none", "lz4", "zstd")
 HEADER = struct.Struct("<4sBBxxQQ")
 MAGIC = b"MGW1"
 HEADER_BYTES = HEADER.size  # 24
-#: raw bytes below which a message goes raw (measured, ``multigpu bench network``: below a few
-#: kilobytes a piece's compression saves less time on gigabit than it costs, as Equalizer found)
+#: raw bytes below which a message goes raw: one page. Not measured: such a piece takes gigabit
+#: about 35 us, the order of two codec calls' fixed cost, so compressing it saves next to nothing
+#: (Equalizer found small tiles not worth compressing)
 LEAST = 4096
 
 

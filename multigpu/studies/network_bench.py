@@ -1,6 +1,6 @@
 """``multigpu bench network``: pixels between PCs, on simulated PCs joined by a shaped network.
 
-Two parts.
+Three parts.
 
 **Codecs.** Frames of the default walk rendered in this process (the plant, and the textured pump),
 full-HD and 4K: a screen tile's colour, and a sort-last piece (a quarter of the objects, colour and
@@ -9,6 +9,10 @@ codec of ``core/wire.py`` (and zstd at level 3) compresses them: the size agains
 speed of compressing and decompressing (GB/s of raw pixels, one thread), beside a plain memory copy
 of the same pixels (``copy``: what the shared segment within a PC costs, which a codec there would
 have to beat). This is what chose the default (zstd level 1 between PCs, nothing within one).
+
+**The pixel path.** Each stage a tile's pixels go through (readback, packing, the codec, unpacking,
+composing, the mosaic's stitch), on the pipeline's own functions, in CPU ms per megapixel beside a
+plain memory copy of the same bytes.
 
 **Walls.** K simulated PCs (``simhosts.py``: each its own network and IPC namespaces, a veth link
 to a bridge shaped by ``tc`` to 1 Gbit/s, or 10), one rank each on a 1xK wall; the plant and the
@@ -55,10 +59,12 @@ def bench_network(quick: bool) -> list[dict]:
     codec_rows = bench_codecs(quick)
     OUT.mkdir(parents=True, exist_ok=True)
     write_csv(OUT / "codecs.csv", codec_rows)
+    path_rows = bench_pixel_path(quick)
+    write_csv(OUT / "path.csv", path_rows)
     wall_rows = bench_walls(quick)
     write_csv(OUT / "walls.csv", wall_rows)
-    print(f"results in {OUT}/ (codecs.csv, walls.csv)")
-    return codec_rows + wall_rows
+    print(f"results in {OUT}/ (codecs.csv, path.csv, walls.csv)")
+    return codec_rows + path_rows + wall_rows
 
 
 # -- codecs, in this process
@@ -144,6 +150,94 @@ def _copy_row(scene: str, size: str, kind: str, raws: list[np.ndarray]) -> dict:
     speed = sum(r.nbytes for r in raws) / max(took, 1e-9) / 1e9
     return {"part": "codec", "scene": scene, "size": size, "kind": kind, "codec": "copy", "ratio": 1.0,
             "ratio_min": 1.0, "compress_gbs": speed, "decompress_gbs": speed}
+
+
+# -- the pixel path, stage by stage, in this process
+def bench_pixel_path(quick: bool) -> list[dict]:
+    """Each stage a tile's pixels go through, timed on the pipeline's own functions over the plant's
+    frames, in CPU ms per megapixel (one thread), beside a memory copy of the same bytes (this
+    machine's limit): the readback (the GL's pixels into the rank's array, the draw already done),
+    packing a message (``composite._pack``: raw; ``_pack_planar``: for a codec), the codec
+    (``wire.encode``/``decode``), unpacking the planes (``_unpack_planar``), composing
+    (``merge.merge_part``: a colour copy, or a sort-last depth merge) and the mosaic's stitch."""
+    from multigpu.core import wire
+    from multigpu.core.camera import frame_matrices
+    from multigpu.core.merge import merge_part
+    from multigpu.core.work import Piece
+    from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.rank.composite import _pack, _pack_planar, _unpack_planar
+    from multigpu.records.mosaic import stitch
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import walkthrough
+
+    sizes = {"full-HD": TILES["full-HD"]} if quick else TILES
+    scene, _ = load_scene(SceneSpec(triangles=int(SCENES["plant"][1])))
+    path = walkthrough(scene, frames=40)
+    ctx = create_context()[0]
+    table = Columns(("size", "tile", "<8"), ("stage", "stage", "<34"), ("ms_per_mp", "ms/MP", "8.2f"),
+                    ("gbs", "GB/s", "7.2f"), ("of_copy", "x copy", "7.1f"))
+    print("\nbench network, the pixel path: CPU ms per megapixel of a tile (one thread, the plant, frames 12 and 28 "
+          "of the default walk at 40), GB/s of the bytes each stage writes, and its time over a plain copy of them")
+    print(table.header())
+    rows = []
+    for size_name, (w, h) in sizes.items():
+        mp, n = w * h / 1e6, w * h
+        renderer = RegionRenderer(ctx, scene, (w, h), "scissor")
+        spent: dict[str, list[float]] = {}
+
+        def timed(stage: str, nbytes: int, fn):
+            t0 = time.process_time()
+            out = fn()
+            spent.setdefault(stage, []).append(time.process_time() - t0)
+            sizes_of[stage] = nbytes
+            return out
+
+        sizes_of: dict[str, int] = {}
+        for f in (12, 28):
+            view, proj, light = frame_matrices(path.camera(f), (w, h))
+            rect = (0, 0, w, h)
+            for depth in (False, True):
+                tag = " (rgb+z)" if depth else " (rgb)"
+                pending = renderer.submit(view, proj, light, [(rect, None, None)], depth=depth, ahead=True)
+                (rgb, z), = pending.read()  # the draw done (llvmpipe draws at the read): now the read alone
+
+                def read_again():
+                    renderer.fbo.read_into(rgb, viewport=rect, components=3, alignment=1)
+                    if depth:
+                        renderer.fbo.read_into(z, viewport=rect, components=1, attachment=-1, dtype="f4", alignment=1)
+
+                timed("readback" + tag, n * (7 if depth else 3), read_again)
+                parts, rendered = [Piece(0, 1, 0, rect)], [(rgb, z)]
+                buf = np.empty(n * (7 if depth else 3), np.uint8)  # as the pipeline's: new each frame
+                timed("pack a message, raw" + tag, buf.nbytes, lambda: _pack(buf, parts, [rect], rendered, depth))
+                timed("pack a message, planes" + tag, buf.nbytes,
+                      lambda: _pack_planar(buf, parts, [rect], rendered, depth))
+                msg = timed("zstd:1 encode" + tag, buf.nbytes, lambda: wire.encode(buf, wire.AUTO))
+                got, _ = timed("zstd:1 decode" + tag, buf.nbytes, lambda: wire.decode(msg, buf.nbytes))
+                views = timed("unpack the planes" + tag, n * 4 if depth else 0,
+                              lambda: _unpack_planar(got, parts, depth))
+                tile = np.zeros((h, w, 3), np.uint8)  # a rank's tile: its pages long touched
+                tz = np.ones((h, w), np.float32) if depth else None
+                timed("compose (merge_part)" + tag, n * (7 if depth else 3),
+                      lambda: merge_part(tile, tz, (0, 0), rect, views[0][1], views[0][2]))
+                dst = np.zeros_like(buf)  # its pages touched: the copy alone
+                timed("memory copy" + tag, buf.nbytes, lambda: np.copyto(dst, buf))
+            tiles = np.stack([tile] * 4)
+            timed("mosaic stitch (4 tiles, per tile)", n * 3,
+                  lambda: stitch(tiles, [(i * w, 0, (i + 1) * w, h) for i in range(4)], (4 * w, h)))
+        renderer.release()
+        for stage, times in spent.items():
+            took = float(np.median(times))
+            if stage.startswith("mosaic"):
+                took /= 4
+            copy = float(np.median(spent["memory copy" + (" (rgb+z)" if "rgb+z" in stage else " (rgb)")]))
+            row = {"part": "path", "size": size_name, "stage": stage, "ms_per_mp": took * 1e3 / mp,
+                   "gbs": sizes_of[stage] / max(took, 1e-9) / 1e9 if sizes_of[stage] else 0.0,
+                   "of_copy": took / max(copy, 1e-9)}
+            rows.append(row)
+            print(table.row(row), flush=True)
+    ctx.release()
+    return rows
 
 
 # -- walls, on simulated PCs
