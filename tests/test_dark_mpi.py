@@ -52,7 +52,7 @@ def test_a_host_that_stays_down_leaves_its_tiles_dark_until_it_answers(tmp_path,
     import subprocess
 
     out, frames = tmp_path / "o", 4000
-    with SimHosts(["a", "b"], tmp_path / "hosts") as hosts:
+    with SimHosts(["a", "b"], tmp_path / "hosts", network=True) as hosts:
         env = {**os.environ, **hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache"), "MULTIGPU_MPIEXEC": launcher.path,
                "LP_NUM_THREADS": "1", "MULTIGPU_REJOIN_EVERY": "2"}
         cmd = [sys.executable, "-m", "multigpu.launcher.mpirun", "-n", "4", "--hosts", "a:2,b:2", "walkthrough",

@@ -30,11 +30,11 @@ def mpiexec_env(request):
 def _pcs(tmp_path, sizes):
     """Hosts a and b, each running its own Xvfb of the given size (started inside the host)."""
     need_tools()
-    with SimHosts(["a", "b"], tmp_path / "hosts") as hosts:
+    with SimHosts(["a", "b"], tmp_path / "hosts", network=True) as hosts:
         servers = []
         try:
             for name, size in zip("ab", sizes):
-                enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
+                enter = ("nsenter", "--target", str(hosts.pids[name]), *hosts.spaces, "--")
                 servers.append(start_xvfb(size, prefix=enter))  # tools present (need_tools): a failure fails
             yield hosts, [name for _, name in servers]
         finally:
@@ -158,18 +158,18 @@ def test_the_operators_view_on_a_pc_of_its_own(tmp_path, mpiexec_env):
     from multigpu.records.report import BALANCE_NAMES, read_timings
 
     need_tools()
-    with SimHosts(["a", "desk"], tmp_path / "hosts") as hosts:
+    with SimHosts(["a", "desk"], tmp_path / "hosts", network=True) as hosts:
         servers = []
         try:
             for name, size in (("a", (2 * TILE[0], TILE[1])), ("desk", (320, 240))):
-                enter = ("nsenter", "--target", str(hosts.pids[name]), "--uts", "--mount", "--")
+                enter = ("nsenter", "--target", str(hosts.pids[name]), *hosts.spaces, "--")
                 servers.append(start_xvfb(size, prefix=enter))  # tools present (need_tools): a failure fails
             xa, xd = (name for _, name in servers)
             wall = tmp_path / "wall.json"
             wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [
                 {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
                 {"rank": 1, "host": "a", "display": xa, "position": [TILE[0], 0]}],
-                "monitor": {"position": [10, 20], "host": "desk", "display": xd, "address": "127.0.0.1"}}))
+                "monitor": {"position": [10, 20], "host": "desk", "display": xd, "address": "desk"}}))
             out = tmp_path / "wall"
             proc = start_launcher(["-n", "2", "walkthrough", *SMALL, "--path", str(_still(tmp_path)), "--wall",
                                    str(wall), "--present", "window", "--monitor", "--mosaic-every", "100",
@@ -223,7 +223,7 @@ def test_a_hosts_x_server_that_dies_and_comes_back(tmp_path, two_pcs, mpiexec_en
         import time
 
         time.sleep(1.5)  # restarts fail meanwhile
-        enter = ("nsenter", "--target", str(hosts.pids["b"]), "--uts", "--mount", "--")
+        enter = ("nsenter", "--target", str(hosts.pids["b"]), *hosts.spaces, "--")
         revived = start_xvfb((80, 100), prefix=enter, display=xb)
         _, err = end_launcher(proc, 240)
     finally:

