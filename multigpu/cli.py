@@ -209,10 +209,9 @@ def _end_failed_job(comm, job, exc: BaseException) -> None:
     """
     import time
 
+    from multigpu.rank.composite import CorruptPiece
     from multigpu.rank.exchange import PeerTimeout
     from multigpu.rank.job import ABORT_PAUSE, FAILURE_GRACE, Interrupted, PeerFailed, PeerStalled
-
-    from multigpu.rank.composite import CorruptPiece
 
     rank = comm.Get_rank()
     consequence = isinstance(exc, (PeerTimeout, PeerFailed))

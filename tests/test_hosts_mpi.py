@@ -1,10 +1,10 @@
 """Across hosts: two simulated hosts (namespaces with their own hostname, /dev/shm, IPC and network,
-joined by shaped links: ``multigpu.studies.simhosts``) of two ranks each, started through each MPI's own host placement and a remote
-shell. The wall equals the one-rank render bit for bit and the run ends with no MPI/UCX
-warnings; the summary says where each rank ran; a scene cache every host shares is built
-once; the default exchange shares memory within a host and sends messages between hosts;
-``--exchange shared`` is refused across hosts. Every job runs under a hard timeout and
-every namespace process is killed by id."""
+joined by shaped links: ``multigpu.studies.simhosts``) of two ranks each, started through each MPI's
+own host placement and a remote shell. The wall equals the one-rank render bit for bit and the run
+ends with no MPI/UCX warnings; the summary says where each rank ran; a scene cache every host shares
+is built once; the default exchange shares memory within a host and sends messages between hosts;
+``--exchange shared`` is refused across hosts. Every job runs under a hard timeout and every
+namespace process is killed by id."""
 
 import json
 

@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from mpirun import ROOT, SMALL, end_launcher, mpi_named, read_png, start_launcher
@@ -27,6 +28,16 @@ def mpiexec_env(request):
     return {"MULTIGPU_MPIEXEC": mpi_named(request.param).path}
 
 
+def free_display() -> str:
+    """A display number no X server on this machine holds: hosts with their own network have their
+    own abstract sockets, so Xvfb's own choice would give each host :0, but they share
+    /tmp/.X11-unix, where the second server's socket would replace the first's."""
+    n = 0
+    while Path(f"/tmp/.X{n}-lock").exists() or Path(f"/tmp/.X11-unix/X{n}").exists():
+        n += 1
+    return f":{n}"
+
+
 def _pcs(tmp_path, sizes):
     """Hosts a and b, each running its own Xvfb of the given size (started inside the host)."""
     need_tools()
@@ -35,7 +46,8 @@ def _pcs(tmp_path, sizes):
         try:
             for name, size in zip("ab", sizes):
                 enter = ("nsenter", "--target", str(hosts.pids[name]), *hosts.spaces, "--")
-                servers.append(start_xvfb(size, prefix=enter))  # tools present (need_tools): a failure fails
+                # tools present (need_tools): a failure fails
+                servers.append(start_xvfb(size, prefix=enter, display=free_display()))
             yield hosts, [name for _, name in servers]
         finally:
             for proc, _ in servers:
@@ -163,7 +175,7 @@ def test_the_operators_view_on_a_pc_of_its_own(tmp_path, mpiexec_env):
         try:
             for name, size in (("a", (2 * TILE[0], TILE[1])), ("desk", (320, 240))):
                 enter = ("nsenter", "--target", str(hosts.pids[name]), *hosts.spaces, "--")
-                servers.append(start_xvfb(size, prefix=enter))  # tools present (need_tools): a failure fails
+                servers.append(start_xvfb(size, prefix=enter, display=free_display()))  # a failure fails
             xa, xd = (name for _, name in servers)
             wall = tmp_path / "wall.json"
             wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "displays": [

@@ -103,7 +103,8 @@ class Posted:
         """Views of the parts in rank ``s``'s compressed message, and the CPU seconds decoding it
         took; CorruptPiece where it does not decode."""
         raw = sum(p.pixels for p in parts) * (7 if self.with_depth else 3)
-        packed, bits, took = decoded(self.inbox[s], raw, f"rank {self.me}: frame {self.frame}: the pieces from rank {s}")
+        what = f"rank {self.me}: frame {self.frame}: the pieces from rank {s}"
+        packed, bits, took = decoded(self.inbox[s], raw, what)
         return _unpack_planar(packed, parts, self.with_depth, bits), took
 
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from multigpu.config import INTERACTIVE, WalkConfig
-from multigpu.core.camera import unshifted
 from multigpu.core import wire
+from multigpu.core.camera import unshifted
 from multigpu.core.inflight import slots
 from multigpu.planner import Planner
 from multigpu.rank.backends import Exchange, Projection

@@ -55,7 +55,7 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms",
            "latency_ms", "load_balancing_waited_ms", "rendering_waited_ms", "synchronization_waited_ms",
            "frame_exchange_waited_ms", "display_waited_ms", "render_scale", "lod_error_px", "choosing_cpu_ms",
-           "balance", "restarts", "wire_bytes", "compress_cpu_ms", "decompress_cpu_ms", "lossy_bits"]
+           "wire_bytes", "compress_cpu_ms", "decompress_cpu_ms", "lossy_bits", "balance", "restarts"]
 #: the load balancing CPU time's four phases (learn, project, choose, plan), adding up to it
 BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]

@@ -160,13 +160,7 @@ def bench_pixel_path(quick: bool) -> list[dict]:
     packing a message (``composite._pack``: raw; ``_pack_planar``: for a codec), the codec
     (``wire.encode``/``decode``), unpacking the planes (``_unpack_planar``), composing
     (``merge.merge_part``: a colour copy, or a sort-last depth merge) and the mosaic's stitch."""
-    from multigpu.core import wire
-    from multigpu.core.camera import frame_matrices
-    from multigpu.core.merge import merge_part
-    from multigpu.core.work import Piece
-    from multigpu.gpu.render import RegionRenderer, create_context
-    from multigpu.rank.composite import _pack, _pack_planar, _unpack_planar
-    from multigpu.records.mosaic import stitch
+    from multigpu.gpu.render import create_context
     from multigpu.scene.models import SceneSpec, load_scene
     from multigpu.scene.paths import walkthrough
 
@@ -180,63 +174,79 @@ def bench_pixel_path(quick: bool) -> list[dict]:
           "of the default walk at 40), GB/s of the bytes each stage writes, and its time over a plain copy of them")
     print(table.header())
     rows = []
-    for size_name, (w, h) in sizes.items():
-        mp, n = w * h / 1e6, w * h
-        renderer = RegionRenderer(ctx, scene, (w, h), "scissor")
-        spent: dict[str, list[float]] = {}
-
-        def timed(stage: str, nbytes: int, fn):
-            t0 = time.process_time()
-            out = fn()
-            spent.setdefault(stage, []).append(time.process_time() - t0)
-            sizes_of[stage] = nbytes
-            return out
-
-        sizes_of: dict[str, int] = {}
-        for f in (12, 28):
-            view, proj, light = frame_matrices(path.camera(f), (w, h))
-            rect = (0, 0, w, h)
-            for depth in (False, True):
-                tag = " (rgb+z)" if depth else " (rgb)"
-                pending = renderer.submit(view, proj, light, [(rect, None, None)], depth=depth, ahead=True)
-                (rgb, z), = pending.read()  # the draw done (llvmpipe draws at the read): now the read alone
-
-                def read_again():
-                    renderer.fbo.read_into(rgb, viewport=rect, components=3, alignment=1)
-                    if depth:
-                        renderer.fbo.read_into(z, viewport=rect, components=1, attachment=-1, dtype="f4", alignment=1)
-
-                timed("readback" + tag, n * (7 if depth else 3), read_again)
-                parts, rendered = [Piece(0, 1, 0, rect)], [(rgb, z)]
-                buf = np.empty(n * (7 if depth else 3), np.uint8)  # as the pipeline's: new each frame
-                timed("pack a message, raw" + tag, buf.nbytes, lambda: _pack(buf, parts, [rect], rendered, depth))
-                timed("pack a message, planes" + tag, buf.nbytes,
-                      lambda: _pack_planar(buf, parts, [rect], rendered, depth))
-                msg = timed("zstd:1 encode" + tag, buf.nbytes, lambda: wire.encode(buf, wire.AUTO))
-                got, _ = timed("zstd:1 decode" + tag, buf.nbytes, lambda: wire.decode(msg, buf.nbytes))
-                views = timed("unpack the planes" + tag, n * 4 if depth else 0,
-                              lambda: _unpack_planar(got, parts, depth))
-                tile = np.zeros((h, w, 3), np.uint8)  # a rank's tile: its pages long touched
-                tz = np.ones((h, w), np.float32) if depth else None
-                timed("compose (merge_part)" + tag, n * (7 if depth else 3),
-                      lambda: merge_part(tile, tz, (0, 0), rect, views[0][1], views[0][2]))
-                dst = np.zeros_like(buf)  # its pages touched: the copy alone
-                timed("memory copy" + tag, buf.nbytes, lambda: np.copyto(dst, buf))
-            tiles = np.stack([tile] * 4)
-            timed("mosaic stitch (4 tiles, per tile)", n * 3,
-                  lambda: stitch(tiles, [(i * w, 0, (i + 1) * w, h) for i in range(4)], (4 * w, h)))
-        renderer.release()
-        for stage, times in spent.items():
-            took = float(np.median(times))
-            if stage.startswith("mosaic"):
-                took /= 4
-            copy = float(np.median(spent["memory copy" + (" (rgb+z)" if "rgb+z" in stage else " (rgb)")]))
-            row = {"part": "path", "size": size_name, "stage": stage, "ms_per_mp": took * 1e3 / mp,
-                   "gbs": sizes_of[stage] / max(took, 1e-9) / 1e9 if sizes_of[stage] else 0.0,
-                   "of_copy": took / max(copy, 1e-9)}
+    for size_name, size in sizes.items():
+        for row in _path_rows(ctx, scene, path, size_name, size):
             rows.append(row)
             print(table.row(row), flush=True)
     ctx.release()
+    return rows
+
+
+def _path_rows(ctx, scene, path, size_name: str, size: tuple[int, int]) -> list[dict]:
+    """The pixel path's rows for one tile size (``bench_pixel_path``)."""
+    from multigpu.core import wire
+    from multigpu.core.camera import frame_matrices
+    from multigpu.core.merge import merge_part
+    from multigpu.core.work import Piece
+    from multigpu.gpu.render import RegionRenderer
+    from multigpu.rank.composite import _pack, _pack_planar, _unpack_planar
+    from multigpu.records.mosaic import stitch
+
+    w, h = size
+    rows, mp, n = [], w * h / 1e6, w * h
+    renderer = RegionRenderer(ctx, scene, (w, h), "scissor")
+    spent: dict[str, list[float]] = {}
+
+    def timed(stage: str, nbytes: int, fn):
+        t0 = time.process_time()
+        out = fn()
+        spent.setdefault(stage, []).append(time.process_time() - t0)
+        sizes_of[stage] = nbytes
+        return out
+
+    sizes_of: dict[str, int] = {}
+    for f in (12, 28):
+        view, proj, light = frame_matrices(path.camera(f), (w, h))
+        rect = (0, 0, w, h)
+        for depth in (False, True):
+            tag = " (rgb+z)" if depth else " (rgb)"
+            pending = renderer.submit(view, proj, light, [(rect, None, None)], depth=depth, ahead=True)
+            (rgb, z), = pending.read()  # the draw done (llvmpipe draws at the read): now the read alone
+
+            def read_again():
+                renderer.fbo.read_into(rgb, viewport=rect, components=3, alignment=1)
+                if depth:
+                    renderer.fbo.read_into(z, viewport=rect, components=1, attachment=-1, dtype="f4", alignment=1)
+
+            timed("readback" + tag, n * (7 if depth else 3), read_again)
+            parts, rendered = [Piece(0, 1, 0, rect)], [(rgb, z)]
+            buf = np.empty(n * (7 if depth else 3), np.uint8)  # as the pipeline's: new each frame
+            timed("pack a message, raw" + tag, buf.nbytes, lambda: _pack(buf, parts, [rect], rendered, depth))
+            timed("pack a message, planes" + tag, buf.nbytes,
+                  lambda: _pack_planar(buf, parts, [rect], rendered, depth))
+            msg = timed("zstd:1 encode" + tag, buf.nbytes, lambda: wire.encode(buf, wire.AUTO))
+            got, _ = timed("zstd:1 decode" + tag, buf.nbytes, lambda: wire.decode(msg, buf.nbytes))
+            views = timed("unpack the planes" + tag, n * 4 if depth else 0,
+                          lambda: _unpack_planar(got, parts, depth))
+            tile = np.zeros((h, w, 3), np.uint8)  # a rank's tile: its pages long touched
+            tz = np.ones((h, w), np.float32) if depth else None
+            timed("compose (merge_part)" + tag, n * (7 if depth else 3),
+                  lambda: merge_part(tile, tz, (0, 0), rect, views[0][1], views[0][2]))
+            dst = np.zeros_like(buf)  # its pages touched: the copy alone
+            timed("memory copy" + tag, buf.nbytes, lambda: np.copyto(dst, buf))
+        tiles = np.stack([tile] * 4)
+        timed("mosaic stitch (4 tiles, per tile)", n * 3,
+              lambda: stitch(tiles, [(i * w, 0, (i + 1) * w, h) for i in range(4)], (4 * w, h)))
+    renderer.release()
+    for stage, times in spent.items():
+        took = float(np.median(times))
+        if stage.startswith("mosaic"):
+            took /= 4
+        copy = float(np.median(spent["memory copy" + (" (rgb+z)" if "rgb+z" in stage else " (rgb)")]))
+        row = {"part": "path", "size": size_name, "stage": stage, "ms_per_mp": took * 1e3 / mp,
+               "gbs": sizes_of[stage] / max(took, 1e-9) / 1e9 if sizes_of[stage] else 0.0,
+               "of_copy": took / max(copy, 1e-9)}
+        rows.append(row)
     return rows
 
 
@@ -248,7 +258,6 @@ def _mosaics(out: Path) -> list[np.ndarray]:
 
 
 def bench_walls(quick: bool) -> list[dict]:
-    from multigpu.launcher.mpirun import find_launcher
     from multigpu.studies.runs import walk
     from multigpu.studies.simhosts import SimHosts
 
@@ -260,7 +269,8 @@ def bench_walls(quick: bool) -> list[dict]:
         cases += [(4, "full-HD", "plant", d, "10gbit") for d in ("screen", "db")]
     table = Columns(("pcs", "PCs", "3d"), ("tile", "tile", "<8"), ("scene", "scene", "<6"),
                     ("decomposition", "decomp", "<7"), ("link", "link", "<7"), ("compress", "compress", "<9"),
-                    ("mb_frame", "MB/frame", "9.2f"), ("mb_exchange", "exchange", "9.2f"), ("mb_busiest", "busiest", "8.2f"),
+                    ("mb_frame", "MB/frame", "9.2f"), ("mb_exchange", "exchange", "9.2f"),
+                    ("mb_busiest", "busiest", "8.2f"),
                     ("codec_ms", "codec ms", "9.2f"), ("codec_share", "of CPU", "7.1%"),
                     ("emulated_ms", "emulated", "9.1f"), ("frame_ms", "frame", "8.1f"),
                     ("exchange_ms", "exch ms", "8.1f"), ("sync_ms", "sync", "7.1f"), ("cap_fps", "cap fps", "8.1f"),
@@ -273,7 +283,6 @@ def bench_walls(quick: bool) -> list[dict]:
           "frame, exch ms, sync: wall-clock ms per rank; cap = the link's payload rate over the busiest link's bytes "
           "per frame; exact: the mosaics equal the raw run's (lossy: the frames moved, not expected)")
     print(table.header(), flush=True)
-    launcher = find_launcher()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for pcs, tile_name, scene, decomposition, link in cases:
@@ -290,8 +299,9 @@ def bench_walls(quick: bool) -> list[dict]:
                     run = walk(out, (1, pcs), TILES[tile_name],
                                [*SCENES[scene], "--frames", str(frames), "--decomposition", decomposition, *flags,
                                 "--no-overlay"], 3600,
-                               env={**hosts.env, "MULTIGPU_CACHE": os.environ.get("MULTIGPU_CACHE", str(Path(tmp) / "c"))},
-                               launcher=launcher, hosts=[(n, 1) for n in names])
+                               env={**hosts.env, "MULTIGPU_CACHE": os.environ.get("MULTIGPU_CACHE",
+                                                                                  str(Path(tmp) / "c"))},
+                               hosts=[(n, 1) for n in names])
                     after = hosts.wire()
                     sent = {h: after[h][0] - before[h][0] for h in after}
                     got = {h: after[h][1] - before[h][1] for h in after}
@@ -318,7 +328,8 @@ def _row(run, pcs, tile, scene, decomposition, link, compress, sent, got, frames
     cpu = run.col("load_balancing_cpu_ms") + run.col("rendering_cpu_ms") + run.col("frame_exchange_cpu_ms") + \
         run.col("display_cpu_ms")
     return {"part": "wall", "pcs": pcs, "tile": tile, "scene": scene, "decomposition": decomposition, "link": link,
-            "compress": compress, "frames": n, "mb_frame": total / 1e6, "mb_exchange": s["wire"]["bytes_per_frame"] / 1e6,
+            "compress": compress, "frames": n, "mb_frame": total / 1e6,
+            "mb_exchange": s["wire"]["bytes_per_frame"] / 1e6,
             "mb_busiest": busiest / 1e6,
             "codec_ms": codec, "codec_share": codec / max(float(cpu.mean()), 1e-9),
             "emulated_ms": s["emulated_frame_ms"], "frame_ms": s["frame_ms"],

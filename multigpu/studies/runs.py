@@ -98,7 +98,8 @@ class Run:
 
 
 def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str], timeout: float,
-         env: dict | None = None, launcher=None, as_run: bool = False, hosts: list[tuple[str, int]] | None = None) -> Run:
+         env: dict | None = None, launcher=None, as_run: bool = False,
+         hosts: list[tuple[str, int]] | None = None) -> Run:
     """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``, in the studies'
     environment (``study_env``; ``as_run``: the walkthrough's own, each rank choosing its raster
     threads as a user's run does, for studies of what a user's wall time is; ``env`` over either)

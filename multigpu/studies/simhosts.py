@@ -155,7 +155,8 @@ class SimHosts:
         _ip("link", "set", inside, "netns", str(self.pids[name]))
         _ip("link", "set", outside, "master", self.bridge, "up")
         pid = str(self.pids[name])
-        for step in (["link", "set", inside, "name", "eth0"], ["addr", "add", f"{self.addresses[name]}/24", "dev", "eth0"],
+        for step in (["link", "set", inside, "name", "eth0"],
+                     ["addr", "add", f"{self.addresses[name]}/24", "dev", "eth0"],
                      ["link", "set", "eth0", "up"], ["link", "set", "lo", "up"]):
             self._in(pid, "ip", *step)
         self._shape(None, outside)
