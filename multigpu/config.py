@@ -120,6 +120,16 @@ def read_monitor(text: str) -> tuple[int, int]:
     return int(x), int(y)
 
 
+def read_panel(text: str) -> tuple[str, int]:
+    """``--panel [ADDRESS:]PORT`` as (address, port): 127.0.0.1 unless an address is given; port 0:
+    any free one (the console prints the URL)."""
+    address, _, port = str(text).rpartition(":")
+    address = address.strip("[]") or "127.0.0.1"
+    if not port.strip().isdigit() or int(port) > 65535:
+        raise InputError(f"must look like [ADDRESS:]PORT with a port 0..65535, got '{text}'")
+    return address, int(port)
+
+
 def read_labels(text: str) -> tuple[int, ...]:
     """``--dark-tiles 2,3`` as tile labels."""
     try:
@@ -286,6 +296,11 @@ class WalkConfig:
                              must="must be >= 0 seconds (0: off)", help=(
         "seconds without a heartbeat before a rank counts as stopped and the job ends (0: off)"))
     progress: bool = option(True, group=CONTROL, flag="--no-progress", negate=True, help="no progress bar")
+    panel: tuple[str, int] | None = option(None, group=CONTROL, metavar="[ADDRESS:]PORT", read=read_panel,
+                                           show=lambda v: "none" if v is None else f"{v[0]}:{v[1]}", help=(
+        "serve the operator's page for this run from rank 0: the wall live, its plots, its controls (listens on "
+        "127.0.0.1 unless an ADDRESS is given; port 0: any; the console prints the URL with its token; "
+        "docs/USAGE.md, \"Run the wall from a browser\")"))
     # recovery by relaunch (records/recovery.py): restarts allowed within its WINDOW (None: 3 with windows, an
     # unattended wall heals; 0 headless, where a failure should end a measurement), and the path frame a restart
     # resumes at, continuing the run in --out
@@ -314,9 +329,9 @@ class WalkConfig:
         if self.partition == "broadcast" and self.decomposition != "screen":
             raise InputError.of("partition", "broadcast works with --decomposition screen (the balancer's "
                                 f"partition), got --decomposition {self.decomposition}")
-        if self.path == INTERACTIVE and self.present != "window":
-            raise InputError.of("path", "interactive needs --present window: the keyboard and mouse are read from "
-                                f"rank 0's window (got --present {self.present})")
+        if self.path == INTERACTIVE and self.present != "window" and self.panel is None:
+            raise InputError.of("path", "interactive needs --present window or --panel: the keyboard and mouse are "
+                                f"read from rank 0's window or the panel's page (got --present {self.present})")
         if self.monitor is not None and self.present != "window":
             raise InputError.of("monitor", f"needs --present window (got --present {self.present})")
         if any(not 0 <= k < self.ranks for k in self.dark) or len(set(self.dark)) >= self.ranks:
@@ -336,7 +351,7 @@ class WalkConfig:
     def _scene_as_drawn(self) -> None:
         """The scene prepared with levels of detail only where the run can draw them
         (``--lod-error``, ``--target-fps``): built, cached and held for nothing otherwise."""
-        lods = self.lod_error > 0 or self.target_fps is not None
+        lods = self.lod_error > 0 or self.target_fps is not None or self.panel is not None  # the page may ask
         if self.scene.lods != lods:
             object.__setattr__(self, "scene", replace(self.scene, lods=lods))
 

@@ -93,7 +93,7 @@ def walkthrough_args(w: argparse.ArgumentParser) -> None:
 def walk_config(a):
     """The walkthrough's flags as a validated configuration (no MPI: testable in one process):
     each flag's value as its field declares it; the wall file's grid, tile, mullions, displays,
-    monitor and compression where the flags leave them out."""
+    monitor, compression and panel where the flags leave them out."""
     from multigpu.config import MONITOR_BESIDE, WalkConfig
     from multigpu.options import from_flags
     from multigpu.wall import Wall, bezel_mullion, check_ranks, load_wall
@@ -113,6 +113,13 @@ def walk_config(a):
         given["monitor"] = wall.monitor
     if given.get("compress") is None and wall.compress:
         given["compress"] = wall.compress
+    if given.get("panel") is None and wall.panel is not None:
+        from multigpu.config import read_panel
+
+        try:
+            given["panel"] = read_panel(wall.panel)
+        except InputError as exc:
+            raise InputError(f"{wall.path}: panel {exc}") from None
     return WalkConfig(scene=spec(a), grid=grid, tile=tile, mullion=mullion, **given,
                       displays=tuple(wall.displays.get(r) for r in ranks) if wall.displays else (),
                       positions=tuple(wall.positions.get(r) for r in ranks) if wall.positions else (),

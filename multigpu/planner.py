@@ -26,6 +26,12 @@ from multigpu.strategies import REGISTRY as STRATEGIES
 KEEP = 8
 
 
+def balances_of(cfg) -> list[str]:
+    """What an operator cycles through (B, the page): every strategy of the screen decomposition,
+    else just that decomposition."""
+    return list(STRATEGIES) if cfg.decomposition == "screen" else [cfg.decomposition]
+
+
 class Planner:
     """Plans frames for one rank of a ``WalkConfig`` wall (``rank`` None: every rank's masks)."""
 
@@ -34,8 +40,7 @@ class Planner:
         self.canvas = cfg.canvas
         self.bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
         screen = cfg.decomposition == "screen"
-        # what an operator cycles through: every strategy of the screen decomposition, else just that one
-        self.balances = list(STRATEGIES) if screen else [cfg.decomposition]
+        self.balances = balances_of(cfg)
         self.using = self.balances.index(cfg.balance) if screen else 0
         self._built: dict[int, object] = {}
         self._d = None  # the decomposition in use, once built (``use`` clears it): no lookups per frame

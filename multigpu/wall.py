@@ -49,6 +49,7 @@ class Wall:
     monitor: tuple[int, int] | None = None  # where --monitor opens the operator's view (rank 0's display or its own)
     monitor_on: dict = field(default_factory=dict)  # the view's own PC: "host", "display", "address" (the file's)
     compress: str | None = None  # how pixels cross between PCs (--compress), where the file says
+    panel: str | None = None  # where the operator's page is served ([ADDRESS:]PORT, --panel), where the file says
 
 
 def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
@@ -142,7 +143,7 @@ def load_wall(path: str) -> Wall:
     monitor = tuple(doc["monitor"]["position"]) if "monitor" in doc else None
     on = {k: v for k, v in doc.get("monitor", {}).items() if k in ("host", "display", "address")}
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
-                on, doc.get("compress"))
+                on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]))
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:

@@ -96,10 +96,24 @@ class Fidelity:
     def __init__(self, scene, height: int, target_fps: float | None, scale: float = 1.0, lod_error: float = 0.0,
                  lag: int = 2):
         self.scale, self.lod_error = float(scale), float(lod_error)
+        self.target_fps, self.lag = target_fps, lag
         self.controller = Controller(target_fps, lag) if target_fps else None
         self.chooser = LevelChooser(scene, height)
         self.last_camera = None
         self.chosen: dict[int, Quality] = {}  # frame -> its quality, until its time is observed
+
+    def settings(self) -> tuple[float | None, float, float]:
+        """(frame-rate target, render scale, level-of-detail bound) as set now."""
+        return self.target_fps, self.scale, self.lod_error
+
+    def set(self, target_fps: float | None, scale: float, lod_error: float) -> None:
+        """New settings from the next frame on (the operator's page; every rank at the same
+        frame): a new target starts its controller afresh."""
+        if target_fps != self.target_fps:
+            self.target_fps = target_fps
+            self.controller = Controller(target_fps, self.lag) if target_fps else None
+            self.chosen.clear()
+        self.scale, self.lod_error = float(scale), float(lod_error)
 
     @property
     def active(self) -> bool:

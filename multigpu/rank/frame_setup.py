@@ -34,7 +34,7 @@ def planned_frames(cfg: WalkConfig, path) -> int | None:
 @dataclass(slots=True)
 class FrameSetup:
     """The frame loop's parts. ``record`` and ``live`` are None where there is none (``record``:
-    rank 0 only; ``live``: window runs only); ``doc`` is the run's configuration as
+    rank 0 only; ``live``: window and panel runs only); ``doc`` is the run's configuration as
     summary.json has it."""
 
     planner: Planner
@@ -75,22 +75,24 @@ def make_exchange(cfg: WalkConfig, comm, planner: Planner, hosts: list[str]) -> 
     return exchange, why
 
 
-def _live(cfg: WalkConfig, comm, scene, path, planner: Planner, presenter, monitor):
-    """A window run's input and statistics: rank 0's windows take the keyboard and mouse."""
+def _live(cfg: WalkConfig, comm, scene, path, planner: Planner, presenter, monitor, panel):
+    """A window run's input and statistics, or a panel's: rank 0's windows take the keyboard and
+    mouse, its page (``--panel``) the operator's actions."""
     from multigpu.rank.live import Live
 
     controls = start = None
     if comm.Get_rank() == 0:
-        from multigpu.display import take_input
+        if presenter.mode == "window":
+            from multigpu.display import take_input
 
-        controls = take_input(presenter, *([monitor.window] if monitor is not None else []))
+            controls = take_input(presenter, *([monitor.window] if monitor is not None else []))
         if cfg.path == INTERACTIVE:
             start = unshifted(path.camera(0), cfg.offset)
-    return Live(cfg, comm, scene, planner.balances, planner.using, controls, monitor, start)
+    return Live(cfg, comm, scene, planner.balances, planner.using, controls, monitor, start, panel)
 
 
 def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDir | None, load_info: dict,
-          placement: list[dict], monitor=None) -> FrameSetup:
+          placement: list[dict], monitor=None, panel=None) -> FrameSetup:
     """Every part of the frame loop for this rank (collective: every rank calls it)."""
     rank = comm.Get_rank()
     planner = Planner(cfg, scene, rank)  # MPI-free: projection, strategy, decomposition
@@ -111,8 +113,8 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
         if projection_why:
             doc["projection_why"] = projection_why
         setup.background = clear_colour(renderer, scene.n_objects)
-        if presenter.mode == "window":
-            setup.live = _live(cfg, comm, scene, path, planner, presenter, monitor)
+        if presenter.mode == "window" or cfg.panel is not None:
+            setup.live = _live(cfg, comm, scene, path, planner, presenter, monitor, panel)
         if rank == 0:
             setup.record = RunRecord(out, comm.Get_size(), n_frames, doc, planner.report, cfg.video, cfg.progress,
                                      cfg.overlay, cfg.record, cfg.resume_at)

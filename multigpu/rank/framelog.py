@@ -56,6 +56,11 @@ class FrameLog:
         self._beat_cpu = job.thread_cpu
         self.timeline = deque(maxlen=TIMELINE_FRAMES) if cfg.timeline else None  # (frame, phase spans)
 
+    def paused(self, seconds: float) -> None:
+        """The run stood paused ``seconds``: the next frame's period leaves them out."""
+        if self.shown_at is not None:
+            self.shown_at += seconds
+
     def row(self, x, sent, swapped: float) -> dict:
         """This rank's row of frame ``x`` (``frames.InFlight``) by column name."""
         t, work = x.t, x.work

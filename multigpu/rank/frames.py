@@ -87,6 +87,7 @@ class Frames:
         self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
         self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
         self.window = presenter.mode == "window"
+        self.flight: dict[int, InFlight] = {}  # the frames between their stages (``loop``)
         self.log = FrameLog(cfg, comm, job, self.record, self.col, self.n_frames, self.window,
                             self.exchange.links)
 
@@ -143,7 +144,7 @@ class Frames:
             if self.live is not None:
                 seen = self.live.show_monitor(self.back, work, control, rows)
                 if seen and not why:
-                    return swapped, STOP_FLAG.get(f"{seen} (the monitor)", STOP_FLAG["window closed (the monitor)"])
+                    return swapped, STOP_FLAG.get(seen, STOP_FLAG["window closed (the monitor)"])
         return swapped, STOP_FLAG.get(why, 0)
 
     def _camera(self, f: int, t: Timer):
@@ -153,8 +154,15 @@ class Frames:
         if self.live is not None:
             with t.phase("input"):
                 control = self.live.control()
+            if control.paused_s:  # the page paused the run: no frame's time holds the pause
+                t.paused(control.paused_s, "input")
+                for x in self.flight.values():
+                    x.t.paused(control.paused_s)
+                self.log.paused(control.paused_s)
             if control.balance != self.planner.using:  # every rank switches at this frame
                 self.planner.use(control.balance)
+            if control.quality != self.fidelity.settings():  # the page's settings: every rank at this frame
+                self.fidelity.set(*control.quality)
         camera = control.camera if control is not None and control.camera is not None else self.path.camera(f)
         return camera, control
 
@@ -186,7 +194,7 @@ class Frames:
         with t.phase("exchange"):
             plan = transfers(work, self.tiles)
         recorded = None
-        if self.cfg.record and self.rank == 0:  # the camera the frame was made with, in path-file coordinates
+        if (self.cfg.record or self.cfg.panel) and self.rank == 0:  # the frame's camera, in path-file coordinates
             live = self.live.recorded() if self.live is not None and self.interactive else None
             recorded = live if live is not None else unshifted(camera, self.cfg.offset)
         return InFlight(f, t, control, work, plan, pending, self.drawn, work.objects(self.rank),
@@ -228,7 +236,9 @@ class Frames:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
         self.learn.append((f, every[:, self.col["rendering_cpu_ms"]].copy()))
         self.fidelity.landed(f, float(every[:, self.col["frame_ms"]].mean()))  # a frame-rate target learns
-        self.log.landed(f, every, recorded)  # rank 0's records
+        self.log.landed(f, every, recorded if self.cfg.record else None)  # rank 0's records
+        if self.live is not None and self.rank == 0:  # the page's plots (and its recording)
+            self.live.landed(f, every, recorded, self.fidelity)
         self.done = f + 1
         if every[:, -1].any():
             self.stopping = True
@@ -237,7 +247,7 @@ class Frames:
         """Every frame through its three stages (``core/inflight.py``). A stop flag in a landed
         row (a rank interrupted, a window closed, a write failed) ends the run on every rank
         after the same frame: the last one submitted, once it is shown."""
-        flight: dict[int, InFlight] = {}
+        flight = self.flight
         last = None if self.n_frames is None else self.n_frames - 1
         for k in itertools.count(self.cfg.resume_at):
             stages = step(k, last, self.latency, self.cfg.resume_at)

@@ -48,7 +48,7 @@ class Live:
     only; ``start`` (rank 0, ``--path interactive``) is where the hand-flown camera begins."""
 
     def __init__(self, cfg, comm, scene, balances: list[str], balance: int, controls=None, monitor=None,
-                 start=None):
+                 start=None, panel=None):
         self.comm, self.cfg = comm, cfg
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         self.balances = balances
@@ -57,11 +57,13 @@ class Live:
             off = np.asarray(cfg.offset, dtype=np.float64)
             lo, hi = scene.bounds
             navigator = Navigator(lo - off, hi - off, start)
-        self.steering = Steering(comm, cfg.timeout, len(balances), balance, controls, navigator, cfg.offset,
-                                 interactive=cfg.path == INTERACTIVE)
-        self.monitor = monitor
+        self.steering = Steering(comm, cfg.timeout, balances, balance, controls, navigator, cfg.offset,
+                                 interactive=cfg.path == INTERACTIVE, panel=panel,
+                                 quality=(cfg.target_fps, cfg.render_scale, cfg.lod_error))
+        self.monitor, self.panel = monitor, panel
         self.tiles = cfg.canvas.tiles()
-        self.scale = monitor_scale(cfg.canvas.size) if cfg.monitor is not None else 0
+        # the shrunk wall travels to rank 0 for the monitor's window and the panel's thumbnail
+        self.scale = monitor_scale(cfg.canvas.size) if cfg.monitor is not None or cfg.panel is not None else 0
         if self.scale:
             s = self.scale
             tw, th = cfg.tile
@@ -79,7 +81,8 @@ class Live:
 
     def control(self) -> Control:
         """The input phase: this frame's camera and settings, the same on every rank."""
-        return self.steering.next()
+        control = self.steering.last_control = self.steering.next()
+        return control
 
     def recorded(self):
         """Rank 0: the hand-flown camera of this frame in path-file coordinates (or None)."""
@@ -122,17 +125,29 @@ class Live:
             np.copyto(self.small, back[::s, ::s])
             self.pending = [self.mcomm.Isend(self.small, dest=0, tag=1)]
             return None
-        if self.last_rects is not None:  # the last frame, whole
-            img = overlay(stitch(self.small_tiles, self.small_rects, self.monitor_size, self.cfg.canvas.dark),
-                          self.last_rects, scale=s)
-            shown = img[::-1]
-            if control.stats:
-                shown = paste(shown, self._panel(control, rows))
-            self.monitor.present(shown)
+        thumb = self.panel is not None and self.panel.wants()  # only while a page looks, a few times a second
+        if self.last_rects is not None and (self.monitor is not None or thumb):  # the last frame, whole
+            img = stitch(self.small_tiles, self.small_rects, self.monitor_size, self.cfg.canvas.dark)
+            if thumb:
+                self.panel.thumbnail(img, self.last_rects, s)
+            if self.monitor is not None:
+                shown = overlay(img, self.last_rects, scale=s)[::-1]
+                if control.stats:
+                    shown = paste(shown, self._panel(control, rows))
+                self.monitor.present(shown)
         np.copyto(self.small_tiles[0], back[::s, ::s])
         self.pending = [self.mcomm.Irecv(self.small_tiles[k], source=k, tag=1) for k in range(1, self.K)]
         self.last_rects = work.rects
-        return self.monitor.poll()
+        why = self.monitor.poll() if self.monitor is not None else None
+        if why:
+            return f"{why} (the monitor)"
+        return self.panel.poll() if self.panel is not None else None
+
+    def landed(self, f: int, every: np.ndarray, recorded, fidelity) -> None:
+        """Rank 0: a frame's rows, every rank's, to the page (plots, status, a recording)."""
+        if self.panel is not None:
+            self.panel.landed(f, every, self.col, self.balances, recorded)
+            self.panel.status(self.steering.last_control, self.balances, fidelity)
 
     def close(self, finished: bool) -> None:
         """Complete the monitor's last messages after a run every rank finished (nothing is

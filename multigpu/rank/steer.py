@@ -17,10 +17,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from multigpu.core.camera import Camera
+from multigpu.core.navigate import Input
+from multigpu.display.controls import Taken
 from multigpu.rank.exchange import wait_all
 
-#: position 3, target 3, up 3, fov, near, far, strategy index, partition, stats, orbiting
-SIZE = 16
+#: position 3, target 3, up 3, fov, near, far, strategy index, partition, stats, orbiting, paused, frame-rate
+#: target (0: none), render scale, level-of-detail bound
+SIZE = 20
+#: seconds between the input phase's broadcasts while the run is paused (the page's commands read each time)
+PAUSE_TICK = 0.05
 
 
 @dataclass(frozen=True)
@@ -32,27 +37,56 @@ class Control:
     partition: bool
     stats: bool
     orbiting: bool
+    quality: tuple = (None, 1.0, 0.0)  # frame-rate target (None: none), render scale, level-of-detail bound
+    paused_s: float = 0.0  # seconds the run stood paused before this frame (no frame's time counts them)
 
 
 class Steering:
-    """The input phase on one rank; ``controls`` and ``navigator`` exist on rank 0 only
-    (``navigator`` only for ``--path interactive``)."""
+    """The input phase on one rank; ``controls``, ``panel`` and ``navigator`` exist on rank 0
+    only (``controls``: window runs; ``panel``: ``--panel``; ``navigator``: ``--path
+    interactive``). ``balances``: the strategies cycled; ``quality``: the frame-rate target,
+    render scale and level-of-detail bound at the start."""
 
-    def __init__(self, comm, timeout: float, n_balance: int, balance: int, controls=None, navigator=None,
-                 offset=(0.0, 0.0, 0.0), interactive: bool = False):
+    def __init__(self, comm, timeout: float, balances, balance: int, controls=None, navigator=None,
+                 offset=(0.0, 0.0, 0.0), interactive: bool = False, panel=None, quality=(None, 1.0, 0.0)):
         self.comm, self.timeout = comm, timeout
-        self.controls, self.navigator = controls, navigator
+        self.controls, self.navigator, self.panel = controls, navigator, panel
         self.interactive = interactive
         self.offset = np.asarray(offset, dtype=np.float64)
-        self.n_balance = max(n_balance, 1)
+        self.balances = list(balances)
+        self.n_balance = max(len(self.balances), 1)
         self.state = np.zeros(SIZE)
         self.state[12] = balance
+        target, scale, lod = quality
+        self.state[17:20] = (target or 0.0, scale, lod)
         self.last = time.perf_counter()
         self.recorded: Camera | None = None  # rank 0: this frame's camera in path-file coordinates
+        self.last_control: Control | None = None  # the newest agreed control (what the page shows)
+
+    def _taken(self) -> Taken:
+        """Rank 0: the windows' input and the page's, as one."""
+        taken = self.controls.take() if self.controls is not None else Taken(Input())
+        if self.panel is None:
+            return taken
+        p = self.panel
+        p.read()
+        fly, a = p.flight(), taken.input
+        taken.input = Input(a.moves | fly.moves, (a.drag[0] + fly.drag[0], a.drag[1] + fly.drag[1]), a.fast,
+                            a.speed_steps + fly.speed_steps, a.orbit != fly.orbit, a.reset or fly.reset)
+        s = self.state
+        if p.balance is not None:
+            s[12] = self.balances.index(p.balance)  # checked by the page's protocol: one of these
+            p.balance = None
+        for i, name in enumerate(("target_fps", "render_scale", "lod_error")):
+            if name in p.settings:
+                value = p.settings.pop(name)
+                s[17 + i] = 0.0 if value is None else value
+        s[16] = float(p.paused)
+        return taken
 
     def _read(self) -> None:
         """Rank 0: the input since the last frame into ``state``."""
-        taken = self.controls.take()
+        taken = self._taken()
         now = time.perf_counter()
         dt, self.last = now - self.last, now
         s = self.state
@@ -63,7 +97,7 @@ class Steering:
             from multigpu.display.controls import HELP
 
             print(f"multigpu keys: {HELP}", flush=True)
-        if self.navigator is not None:
+        if self.navigator is not None and not s[16]:  # paused: the camera stands (and no time passes for it)
             cam = self.navigator.step(taken.input, dt)
             self.recorded = cam
             s[0:3] = np.asarray(cam.position) + self.offset  # as CameraPath.translated does
@@ -72,13 +106,24 @@ class Steering:
             s[15] = float(self.navigator.orbiting)
 
     def next(self) -> Control:
-        """This frame's control, agreed by every rank (one broadcast from rank 0)."""
-        if self.comm.Get_rank() == 0:
-            self._read()
-        if self.comm.Get_size() > 1:
-            wait_all([self.comm.Ibcast(self.state, root=0)], self.timeout, "input broadcast")
+        """This frame's control, agreed by every rank (one broadcast from rank 0). While the page
+        has the run paused, every rank waits here, a broadcast each ``PAUSE_TICK``, until it
+        resumes or stops it (the frames in flight wait with it)."""
+        began = None
+        while True:
+            if self.comm.Get_rank() == 0:
+                self._read()
+            if self.comm.Get_size() > 1:
+                wait_all([self.comm.Ibcast(self.state, root=0)], self.timeout, "input broadcast")
+            if not self.state[16]:
+                break
+            began = began or time.perf_counter()
+            if self.comm.Get_rank() == 0:
+                time.sleep(PAUSE_TICK)
+        paused = time.perf_counter() - began if began else 0.0
         s = self.state
         camera = None
         if self.interactive:
             camera = Camera(tuple(s[0:3]), tuple(s[3:6]), tuple(s[6:9]), float(s[9]), float(s[10]), float(s[11]))
-        return Control(camera, int(s[12]), bool(s[13]), bool(s[14]), bool(s[15]))
+        quality = (float(s[17]) or None, float(s[18]), float(s[19]))
+        return Control(camera, int(s[12]), bool(s[13]), bool(s[14]), bool(s[15]), quality, paused)

@@ -72,6 +72,14 @@ class Timer:
         for the GL's pixels, or for a core."""
         return sum(max(self.wall.get(n, 0.0) - self.ran.get(n, 0.0), 0.0) for n in names)
 
+    def paused(self, seconds: float, name: str | None = None) -> None:
+        """The run stood paused ``seconds`` (the operator's page) during this frame, in phase
+        ``name`` if given: the frame's span, and that phase's wall time, leave it out."""
+        if self.start is not None:
+            self.start += seconds
+        if name is not None and name in self.wall:
+            self.wall[name] = max(self.wall[name] - seconds * 1e3, 0.0)
+
     @property
     def total_ms(self) -> float:
         return 0.0 if self.start is None else (self.end - self.start) * 1e3

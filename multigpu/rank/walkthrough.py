@@ -127,7 +127,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
     wait = setup_timeout(cfg)
     # -- setup: rank 0 takes the output directory and builds the scene cache first
     error, out, scene, path, load_info, shared = _first(cfg) if rank == 0 else (None,) * 6
-    presenter = renderer = monitor = None
+    presenter = renderer = monitor = panel = None
     try:
         fault(rank, "setup")
         error = agree(comm, error, wait)
@@ -145,6 +145,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             presenter = _presenter(cfg, rank)
             if rank == 0 and cfg.monitor is not None:
                 monitor = _monitor(cfg, presenter)
+            if rank == 0 and cfg.panel is not None:
+                panel = _panel(cfg, scene, out)
             if presenter.context is not None:  # render in the window's context
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:
@@ -168,14 +170,16 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             {"host": socket.gethostname(), "node_rank": local, "egl_device": device,
              "gl_renderer": ctx.info.get("GL_RENDERER"), "gl_buffers": renderer.storage}), wait, "setup")]
     except BaseException:
-        _close(renderer, presenter, monitor)
+        _close(renderer, presenter, monitor, panel)
         if out is not None:
             out.abandon()
         raise
     setup = None
     try:
-        setup = build(cfg, comm, scene, path, renderer, presenter, out, load_info, placement, monitor)
+        setup = build(cfg, comm, scene, path, renderer, presenter, out, load_info, placement, monitor, panel)
         summary = Frames(cfg, comm, job, scene, path, renderer, presenter, setup).run()
+        if panel is not None:
+            panel.finish(summary)
         setup.release(collective=True)  # every rank left the frame loop after the same frame
         return summary
     except BaseException:
@@ -183,7 +187,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             setup.release(collective=False)  # a failing rank must not wait in a collective free
         raise
     finally:
-        _close(renderer, presenter, monitor)
+        _close(renderer, presenter, monitor, panel)
         if out is not None:
             out.release()
 
@@ -278,7 +282,25 @@ def check_record(record: str) -> None:
         raise InputError.of("record", f"{record}: cannot write in {where.parent} ({exc.strerror or exc})") from None
 
 
-def _close(renderer, presenter, monitor=None) -> None:
+def _panel(cfg: WalkConfig, scene, out):
+    """Rank 0's operator page (``--panel``), serving once this returns (its URL printed)."""
+    from multigpu.planner import balances_of
+    from multigpu.rank.panel_link import PanelLink
+    from multigpu.records.record import run_title
+
+    events = [f"restart {restarts()}: resumed at frame {cfg.resume_at}"] if cfg.resume_at else []
+    if cfg.dark:
+        events.append(f"dark tiles (their PC gone): {', '.join(map(str, cfg.dark))}")
+    try:
+        return PanelLink.open(cfg, run_title(cfg, scene), balances_of(cfg), out.path, events)
+    except OSError as exc:
+        address, port = cfg.panel
+        raise InputError.of("panel", f"cannot serve the page on {address}:{port} ({exc})") from None
+
+
+def _close(renderer, presenter, monitor=None, panel=None) -> None:
+    if panel is not None:
+        panel.close()
     if renderer is not None:
         renderer.release()
     if monitor is not None:

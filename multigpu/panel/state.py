@@ -1,0 +1,90 @@
+"""What the operator's page shows and what it asked for: the one place the frame loop and the
+page's server thread meet.
+
+The frame loop only ever hands things over (a row of numbers, a reference to a shrunk wall, a
+status) under a lock held for a copy, and takes the page's commands from a queue that never
+waits; the server thread reads at its own pace. So a page that is slow, gone, or hostile costs
+the wall at most those copies. Pure: threads only, no sockets, no MPI.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+
+import numpy as np
+
+#: frames of plot history the page gets when it connects (the plots scroll over the newest)
+HISTORY = 600
+#: the plotted series besides each rank's frame time: frame, fps, balance id, swap skew, imbalance
+SERIES = ("frame", "fps", "balance", "swap_skew_ms", "imbalance")
+
+
+class PanelState:
+    """The run as the page sees it. ``header``: the run's facts (scene, wall, strategy, ...);
+    ``balances``: the strategies the page may switch between; ``ranks``: the wall's ranks."""
+
+    def __init__(self, header: dict, balances: tuple[str, ...], ranks: int, events: list[str] | None = None):
+        self.header, self.balances, self.K = header, tuple(balances), ranks
+        self.lock = threading.Lock()
+        self.plot = np.full((HISTORY, len(SERIES) + ranks), np.nan)
+        self.seq = 0  # plot rows ever added
+        self.thumb: tuple[int, np.ndarray, object, int] | None = None  # (seq, image top row first, rects, shrink)
+        self.thumb_seq = 0
+        self.status: dict = {}
+        self.events: list[tuple[float, str]] = [(time.time(), e) for e in (events or [])]
+        self.summary: dict | None = None
+        self.commands: queue.SimpleQueue = queue.SimpleQueue()
+        self.clients = 0  # pages connected now (the server's count)
+        self.changed = threading.Condition(self.lock)
+
+    # -- the frame loop's side (rank 0)
+
+    def add_row(self, values: np.ndarray) -> None:
+        """One landed frame: ``SERIES`` then each rank's frame time (ms)."""
+        with self.lock:
+            self.plot[self.seq % HISTORY] = values
+            self.seq += 1
+
+    def set_thumb(self, img: np.ndarray, rects, shrink: int) -> None:
+        """The newest whole wall, shrunk ``shrink`` times (kept by reference: the caller made it
+        for this and lets go of it), with the partition's ``rects`` in full-size pixels."""
+        with self.lock:
+            self.thumb_seq += 1
+            self.thumb = (self.thumb_seq, img, rects, shrink)
+
+    def set_status(self, **status) -> None:
+        with self.lock:
+            self.status = {**self.status, **status}
+
+    def event(self, text: str) -> None:
+        """Something the operator should see as it happens (a recovery, a dark tile, a refusal)."""
+        with self.lock:
+            self.events.append((time.time(), text))
+            del self.events[:-200]
+
+    def finish(self, summary: dict) -> None:
+        """The run's end: its summary, for the page to show."""
+        with self.changed:
+            self.summary = summary
+            self.changed.notify_all()
+
+    def take_commands(self) -> list:
+        """The page's checked commands since the last call (never waits)."""
+        got = []
+        while True:
+            try:
+                got.append(self.commands.get_nowait())
+            except queue.Empty:
+                return got
+
+    # -- the server's side
+
+    def rows_since(self, seq: int) -> tuple[int, np.ndarray]:
+        """The plot rows added after row ``seq`` (at most ``HISTORY``), and the newest count."""
+        with self.lock:
+            n = self.seq
+            first = max(seq, n - HISTORY)
+            idx = np.arange(first, n) % HISTORY
+            return n, self.plot[idx].copy()
