@@ -19,7 +19,7 @@ import numpy as np
 
 from multigpu.core.projectors import make_projector
 from multigpu.core.work import Work
-from multigpu.decompositions import make_decomposition
+from multigpu.decompositions import REGISTRY
 from multigpu.strategies import REGISTRY as STRATEGIES
 
 #: planned frames kept for ``observe`` (a frame's times arrive one frame later)
@@ -28,8 +28,40 @@ KEEP = 8
 
 def balances_of(cfg) -> list[str]:
     """What an operator cycles through (B, the page): every strategy of the screen decomposition,
-    else just that decomposition."""
-    return list(STRATEGIES) if cfg.decomposition == "screen" else [cfg.decomposition]
+    else just that decomposition; with ``--panel``, every strategy and every other decomposition
+    this wall can run (``records.report.BALANCE_NAMES``' order), so the page switches either."""
+    if cfg.panel is None or cfg.partition != "redundant":
+        return list(STRATEGIES) if cfg.decomposition == "screen" else [cfg.decomposition]
+    import dataclasses
+
+    from multigpu.decompositions import REGISTRY
+    from multigpu.errors import InputError
+
+    modes = list(STRATEGIES)
+    for name in REGISTRY:
+        if name == "screen":
+            continue
+        try:  # a decomposition this wall cannot run (too few bins) is left out
+            dataclasses.replace(cfg, decomposition=name)
+        except InputError:
+            continue
+        modes.append(name)
+    return modes
+
+
+def mode_of(cfg, name: str) -> tuple[str, str]:
+    """(decomposition, strategy) of an entry of ``balances_of``: a strategy balances the screen
+    decomposition; a decomposition balances with ``--balance`` (where it balances)."""
+    return ("screen", name) if name in STRATEGIES else (name, cfg.balance)
+
+
+def most_of(cfg, balances) -> tuple[bool, int]:
+    """Whether any of ``balances`` composites by depth, and the most layers any needs: what the
+    exchange must make room for when the operator may switch between them."""
+    from multigpu.decompositions import REGISTRY
+
+    kinds = [REGISTRY[mode_of(cfg, b)[0]] for b in balances]
+    return any(k.depth for k in kinds), max(k.layers for k in kinds)
 
 
 class Planner:
@@ -39,9 +71,9 @@ class Planner:
         self.cfg, self.scene, self.rank = cfg, scene, rank
         self.canvas = cfg.canvas
         self.bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
-        screen = cfg.decomposition == "screen"
         self.balances = balances_of(cfg)
-        self.using = self.balances.index(cfg.balance) if screen else 0
+        self.using = self.balances.index(cfg.balance if cfg.decomposition == "screen" else cfg.decomposition)
+        self.depth, self.layers = most_of(cfg, self.balances)  # the room the exchange makes
         self._built: dict[int, object] = {}
         self._d = None  # the decomposition in use, once built (``use`` clears it): no lookups per frame
         self.size = self.canvas.size
@@ -57,9 +89,8 @@ class Planner:
         """The decomposition planning with the strategy in use (built at its first use)."""
         d = self._built.get(self.using)
         if d is None:
-            cfg = self.cfg
-            balance = self.balances[self.using] if cfg.decomposition == "screen" else cfg.balance
-            d = self._built[self.using] = make_decomposition(cfg, self.scene, balance, self.rank)
+            name, balance = mode_of(self.cfg, self.balances[self.using])
+            d = self._built[self.using] = REGISTRY[name].from_config(self.cfg, self.scene, balance, self.rank)
         self._d = d
         return d
 

@@ -227,3 +227,37 @@ def test_a_lossy_wire_while_moving_is_marked_and_exact_once_the_camera_stops(tmp
         assert (got[f] == one[f]).all(), f"frame {f}: {(got[f] != one[f]).any(axis=2).sum()} pixels differ"
     s = json.loads((tmp_path / "lossy" / "summary.json").read_text())
     assert s["wire"]["lossy_frames"] == 2 and "3 colour bits dropped while moving" in s["config"]["compress"]
+
+
+@pytest.mark.parametrize("exchange_as,latency", [("messages", 0), ("messages", 2), ("shared", 1), ("shared", 3)])
+def test_the_panel_switches_decomposition_mid_run_exactly(tmp_path, reference, shared_in_memory, monkeypatch,
+                                                         exchange_as, latency):
+    """The operator's page switches the strategy and the decomposition every other frame
+    (screen, db, hybrid, bins, cross), pauses and changes nothing else: every rank switches at
+    the same frame (the CSV's balance column), and every mosaic is one rank's render bit for bit,
+    whatever backend and frames in flight (the exchange has room for the deepest of them)."""
+    from multigpu.panel.protocol import Command
+    from multigpu.rank.panel_link import PanelLink
+    from multigpu.records.report import BALANCE_NAMES, COLUMNS, read_timings
+
+    script = {2: [("balance", {"name": "db"})], 4: [("balance", {"name": "hybrid"}), ("pause", {})],
+              5: [("resume", {})], 7: [("balance", {"name": "bins"})], 9: [("balance", {"name": "cross"})]}
+    calls = []  # the page's commands are read once a frame, and once a tick while paused (frame 4: twice)
+    read = PanelLink.read
+
+    def scripted(self):
+        for do, args in script.get(len(calls), []):
+            self.state.commands.put(Command(do, args))
+        calls.append(1)
+        read(self)
+
+    monkeypatch.setattr(PanelLink, "read", scripted)
+    got = _walk(tmp_path / "p", (2, 2), (60, 48), latency=latency, exchange_as=exchange_as, frames=HELD,
+                balance="strips", panel=("127.0.0.1", 0), bin_size=16)
+    for f, (a, b) in enumerate(zip(got, reference["held"])):
+        assert (a == b).all(), f"frame {f}: {(a != b).any(axis=2).sum()} pixels differ"
+    rows = read_timings(tmp_path / "p" / "timings.csv")
+    balance = rows[:, COLUMNS.index("balance")].reshape(HELD, 4)
+    assert (balance == balance[:, :1]).all()  # every rank the same at every frame
+    names = [BALANCE_NAMES[int(b)] for b in balance[:, 0]]
+    assert names == ["strips"] * 2 + ["db"] * 2 + ["hybrid"] * 2 + ["bins"] * 2 + ["cross"] * 2

@@ -45,6 +45,7 @@ class World:
         self.mail: dict[tuple, deque] = {}  # (source, dest, tag): messages in the order sent
         self.waiting: dict[tuple, deque] = {}  # (source, dest, tag): receives in the order posted
         self.rounds: dict[int, list] = {}  # collective number: each rank's part, then how many took it
+        self.dups: dict[int, "World"] = {}  # the n-th Dup's world, made by the first rank to call it
 
     def comms(self) -> list["ThreadComm"]:
         return [ThreadComm(self, r) for r in range(self.size)]
@@ -58,6 +59,17 @@ class ThreadComm:
 
     def Get_rank(self) -> int:  # noqa: N802
         return self.rank
+
+    def Dup(self) -> "ThreadComm":  # noqa: N802
+        """As MPI's: the same ranks, with messages of their own (the n-th Dup of every rank meets)."""
+        w = self.world
+        self.duped = getattr(self, "duped", 0) + 1
+        with w.lock:
+            world = w.dups.setdefault(self.duped, World(w.size))
+        return ThreadComm(world, self.rank)
+
+    def Free(self) -> None:  # noqa: N802
+        pass
 
     def Get_size(self) -> int:  # noqa: N802
         return self.world.size

@@ -66,10 +66,9 @@ def make_exchange(cfg: WalkConfig, comm, planner: Planner, hosts: list[str]) -> 
     (and why not the segment), its messages compressed on the links ``--compress`` chooses
     (``hosts``: every rank's). Every rank the same (collective)."""
     shared, why = None, None
-    d = planner.decomposition
-    if cfg.exchange != "messages":
-        shared, why = SharedPieces.make(comm, cfg.canvas.size, d.depth, cfg.timeout, cfg.exchange == "shared",
-                                        slots=slots(cfg.latency), layers=d.layers)
+    if cfg.exchange != "messages":  # room for every decomposition the operator may switch to
+        shared, why = SharedPieces.make(comm, cfg.canvas.size, planner.depth, cfg.timeout, cfg.exchange == "shared",
+                                        slots=slots(cfg.latency), layers=planner.layers)
     exchange = shared or Messages(comm, cfg.timeout, sync=cfg.latency == 0)
     exchange.links = wire.links(cfg.compress, hosts, comm.Get_rank())
     return exchange, why

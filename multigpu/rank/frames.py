@@ -76,7 +76,7 @@ class Frames:
         self.balance_ids = [BALANCE_NAMES.index(b) for b in self.planner.balances]  # the CSV's balance column
         self.relay = self._relay if cfg.partition == "broadcast" and self.K > 1 else None  # screen only (door)
         self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
-        self.zback = np.ones((th, tw), dtype=np.float32) if self.planner.decomposition.depth else None
+        self.zback = np.ones((th, tw), dtype=np.float32) if self.planner.depth else None
         self.latency, self.ahead = cfg.latency, read_lag(cfg.latency) > 0
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")

@@ -205,19 +205,19 @@ class SharedPieces:
     def _base(self, frame: int) -> int:
         return (frame % self.slots) * self.slot
 
-    def _publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece]) -> None:
+    def _publish(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool) -> None:
         """Copy the parts of this rank's rendered pieces ``(rgb, z or None)`` that tiles of this
         host's other ranks need into the frame's slot, in ``plan`` order (its own tile's parts
         stay where they are; parts for other hosts leave as messages)."""
         near = self.near
         out = [p for p in plan if p.sender == me and p.receiver in near]  # parts, not objects
         if out:
-            _pack(self.segments[me][self._base(frame):], out, rects[me], rendered, self.depth)
+            _pack(self.segments[me][self._base(frame):], out, rects[me], rendered, with_depth)
 
     def start(self, frame: int, me: int, rects, rendered: list, plan: list[Piece], with_depth: bool):
         """The frame's parts published, its messages to other hosts posted, and a barrier that
         completes once every rank has published it (``wait``)."""
-        self._publish(frame, me, rects, rendered, plan)
+        self._publish(frame, me, rects, rendered, plan, with_depth)  # this frame's: the room may hold depth
         posted = post(self.comm, me, rects, rendered, plan, with_depth, self.near, frame, self.links, self.bits)
         return frame, plan, posted, self.comm.Ibarrier()
 
