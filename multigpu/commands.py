@@ -87,6 +87,11 @@ COMMANDS: tuple[Command, ...] = (
              arg("--port", type=int, default=0, help="TCP port to listen on (default: any, printed)"),
              arg("--listen", default="", help="address to listen on (default: every interface; a connection must "
                                               "bring the token the launcher writes on standard input)"))),
+    Command(("view",), "serve the operator's page over a finished run's outputs: its plots, summary and mosaics",
+            "multigpu.tools:view",
+            (arg("out", help="the run's output directory (summary.json, timings.csv, mosaic/)"),
+             arg("--panel", default="127.0.0.1:0", help="[ADDRESS:]PORT to serve on (default 127.0.0.1, any port; "
+                                                        "the URL with its token is printed)"))),
     Command(("tree",), "print the GPU tree of a ROWSxCOLS wall", "multigpu.tools:tree", (arg("grid"),)),
     Command(("depth",), "depth complexity and overdraw of one frame (images + stats)", "multigpu.tools:depth",
             (path_kind(), frames("frames of the generated path"),

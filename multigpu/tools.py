@@ -28,6 +28,18 @@ def monitor_view(a) -> int:
     return 0
 
 
+def view(a) -> int:
+    from multigpu.config import read_panel
+    from multigpu.errors import InputError
+    from multigpu.panel.finished import serve
+
+    try:
+        address, port = read_panel(a.panel)
+    except InputError as exc:
+        raise InputError(f"--panel {exc}") from None
+    return serve(a.out, address, port)
+
+
 def depth(a) -> int:
     from pathlib import Path
 

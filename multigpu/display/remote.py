@@ -80,7 +80,11 @@ class RemoteMonitor:
         self.refused = 0  # lines refused so far
 
     def take_input(self, controls) -> None:
+        """Where the view's events go: each checked event name to its one ``Controls`` method
+        (a table, not a look-up by name)."""
         self.controls = controls
+        self.handlers = {"on_key": controls.on_key, "_on_button": controls._on_button,
+                         "_on_cursor": controls._on_cursor, "_on_scroll": controls._on_scroll}
 
     def present(self, img: np.ndarray) -> None:
         """Send ``img`` (bottom row first); a viewer gone ends the monitor (``poll`` says so)."""
@@ -116,7 +120,7 @@ class RemoteMonitor:
                 self.closed = self.closed or value
             elif kind == "event" and self.controls is not None:
                 name, args = value
-                getattr(self.controls, name)(None, *args)
+                self.handlers[name](None, *args)
             elif kind == "refused":
                 self.refused += 1
                 print(f"multigpu: the operator's view sent a message refused ({value}); the wall goes on",

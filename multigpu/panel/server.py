@@ -58,8 +58,9 @@ def jpeg(img: np.ndarray, quality: int = 80) -> bytes:
 class PanelServer:
     """Serves ``state`` on ``address``:``port`` (0: any free port) to pages that bring ``token``."""
 
-    def __init__(self, state: PanelState, address: str, port: int, token: str):
+    def __init__(self, state: PanelState, address: str, port: int, token: str, readonly: bool = False):
         self.state, self.address, self.port, self.token = state, address, port, token
+        self.readonly = readonly  # a finished run's page (``multigpu view``): nothing to control
         self.loop: asyncio.AbstractEventLoop | None = None
         self.thread: threading.Thread | None = None
         self.ready = threading.Event()
@@ -172,7 +173,9 @@ class PanelServer:
         try:
             async for message in ws:
                 got = command(message, state.balances)
-                if isinstance(got, Command):
+                if isinstance(got, Command) and self.readonly and got.do != "partition":
+                    await ws.send(json.dumps({"error": f"{got.do}: a finished run, nothing to control"}))
+                elif isinstance(got, Command):
                     if got.do == "partition":  # the thumbnail's overlay: this page's own
                         view["overlay"] = got.args["on"]
                     else:

@@ -25,10 +25,12 @@ class PanelState:
     """The run as the page sees it. ``header``: the run's facts (scene, wall, strategy, ...);
     ``balances``: the strategies the page may switch between; ``ranks``: the wall's ranks."""
 
-    def __init__(self, header: dict, balances: tuple[str, ...], ranks: int, events: list[str] | None = None):
+    def __init__(self, header: dict, balances: tuple[str, ...], ranks: int, events: list[str] | None = None,
+                 history: int = HISTORY):
         self.header, self.balances, self.K = header, tuple(balances), ranks
         self.lock = threading.Lock()
-        self.plot = np.full((HISTORY, len(SERIES) + ranks), np.nan)
+        self.history = history
+        self.plot = np.full((history, len(SERIES) + ranks), np.nan)
         self.seq = 0  # plot rows ever added
         self.thumb: tuple[int, np.ndarray, object, int] | None = None  # (seq, image top row first, rects, shrink)
         self.thumb_seq = 0
@@ -44,7 +46,7 @@ class PanelState:
     def add_row(self, values: np.ndarray) -> None:
         """One landed frame: ``SERIES`` then each rank's frame time (ms)."""
         with self.lock:
-            self.plot[self.seq % HISTORY] = values
+            self.plot[self.seq % self.history] = values
             self.seq += 1
 
     def set_thumb(self, img: np.ndarray, rects, shrink: int) -> None:
@@ -82,9 +84,9 @@ class PanelState:
     # -- the server's side
 
     def rows_since(self, seq: int) -> tuple[int, np.ndarray]:
-        """The plot rows added after row ``seq`` (at most ``HISTORY``), and the newest count."""
+        """The plot rows added after row ``seq`` (at most ``history``), and the newest count."""
         with self.lock:
             n = self.seq
-            first = max(seq, n - HISTORY)
-            idx = np.arange(first, n) % HISTORY
+            first = max(seq, n - self.history)
+            idx = np.arange(first, n) % self.history
             return n, self.plot[idx].copy()

@@ -128,6 +128,7 @@ function showStatus(s) {
     if (document.activeElement !== $(k)) $(k).value = s[k] == null ? "" : s[k];
   }
   $("fly").hidden = !s.interactive;
+  $("controls").hidden = !!s.view;  // a finished run (multigpu view): nothing to control
 }
 
 function addEvent(t, text) {
@@ -188,7 +189,9 @@ view.addEventListener("pointerdown", (e) => { view.focus(); dragAt = [e.clientX,
 view.addEventListener("pointermove", (e) => {
   if (!dragAt) return;
   const k = wallWidth && $("thumb").clientWidth ? wallWidth / $("thumb").clientWidth : 1;
-  pending[0] += (e.clientX - dragAt[0]) * k; pending[1] += (e.clientY - dragAt[1]) * k;
+  const clamp = (v) => Math.max(-9999, Math.min(9999, v));
+  pending[0] = clamp(pending[0] + (e.clientX - dragAt[0]) * k);
+  pending[1] = clamp(pending[1] + (e.clientY - dragAt[1]) * k);
   dragAt = [e.clientX, e.clientY];
   if (!flush) flush = setTimeout(() => {
     send({ do: "drag", dx: pending[0], dy: pending[1] });

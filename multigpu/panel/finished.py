@@ -1,0 +1,119 @@
+"""``multigpu view OUT``: the operator's page over a finished run's outputs, so a run can be looked
+at rather than read: its facts and summary (summary.json), every frame in the plots
+(timings.csv), and its mosaics shown in turn as the wall's thumbnail. Nothing here controls
+anything: the page's actions get an error reply. No MPI, no GL.
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.errors import InputError
+from multigpu.panel.server import PanelServer
+from multigpu.panel.state import SERIES, PanelState
+
+#: seconds each mosaic is shown before the next
+SLIDE = 1.0
+#: the largest thumbnail side (pixels) a mosaic is shrunk to
+THUMB = 640
+
+
+def plot_rows(timings: np.ndarray, ranks: int) -> np.ndarray:
+    """timings.csv's rows (``records.report.read_timings``) as the page's plot rows: ``SERIES`` then
+    each rank's frame time, one row a frame."""
+    from multigpu.records.report import COLUMNS
+
+    col = {c: i for i, c in enumerate(COLUMNS)}
+    if len(timings) < ranks:
+        return np.zeros((0, len(SERIES) + ranks))
+    order = np.lexsort((timings[:, col["rank"]], timings[:, col["frame"]]))
+    rows = timings[order]
+    n = len(rows) // ranks
+    per = rows[: n * ranks].reshape(n, ranks, -1)
+    frame_ms, render = per[:, :, col["frame_ms"]], per[:, :, col["rendering_cpu_ms"]]
+    mean = render.mean(axis=1)
+    out = np.empty((n, len(SERIES) + ranks))
+    out[:, 0] = per[:, 0, col["frame"]]
+    out[:, 1] = 1e3 / np.maximum(frame_ms.max(axis=1), 1e-9)
+    out[:, 2] = per[:, 0, col["balance"]]
+    out[:, 3] = per[:, :, col["swap_skew_ms"]].max(axis=1)
+    out[:, 4] = np.where(mean > 0, render.max(axis=1) / np.where(mean > 0, mean, 1.0), 1.0)
+    out[:, len(SERIES):] = frame_ms
+    return out
+
+
+def load(out: Path) -> tuple[PanelState, list[Path]]:
+    """The page's state for the run in ``out`` and its mosaics in frame order."""
+    from multigpu.records.report import read_timings
+
+    summary_file, timings_file = out / "summary.json", out / "timings.csv"
+    if not summary_file.is_file() or not timings_file.is_file():
+        raise InputError(f"{out}: not a run's outputs (needs summary.json and timings.csv)")
+    try:
+        summary = json.loads(summary_file.read_text())
+        timings = read_timings(timings_file)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{out}: cannot read the run's outputs ({exc})") from None
+    config = summary.get("config", {})
+    ranks = int(summary.get("ranks") or config.get("ranks") or 1)
+    header = {"title": f"multigpu view: {out}", "run": str(out), **{k: v for k, v in config.items()
+                                                                    if not isinstance(v, (dict, list))}}
+    events = [f"{'complete' if summary.get('complete') else 'not complete'}: {summary.get('frames_written', 0)} "
+              "frames written"]
+    if summary.get("stopped_by"):
+        events.append(f"stopped by {summary['stopped_by']}")
+    state = PanelState(header, (), ranks, events, history=max(len(timings) // max(ranks, 1), 1))
+    rows = plot_rows(timings, ranks)
+    for row in rows:  # once, at the start
+        state.add_row(row)
+    state.set_status(state="finished run", view=True)
+    state.finish(summary)
+    mosaics = sorted(p for p in (out / "mosaic").glob("frame_*.png") if not p.stem.endswith("_partition"))
+    return state, mosaics
+
+
+def _slides(state: PanelState, mosaics: list[Path], stop: threading.Event) -> None:
+    """Show the mosaics in turn as the thumbnail, over and over, while a page is connected."""
+    from PIL import Image
+
+    i = 0
+    while mosaics and not stop.is_set():
+        if (state.clients and len(mosaics) > 1) or state.thumb is None:
+            path = mosaics[i % len(mosaics)]
+            try:
+                with Image.open(path) as im:
+                    im.thumbnail((THUMB, THUMB))
+                    state.set_thumb(np.asarray(im.convert("RGB")), None, 1)
+            except OSError:
+                pass
+            i += 1
+        stop.wait(SLIDE)
+
+
+def serve(out: str, address: str, port: int) -> int:
+    """Serve the page over ``out`` until interrupted; prints its URL."""
+    state, mosaics = load(Path(out))
+    server = PanelServer(state, address, port, secrets.token_urlsafe(24), readonly=True)
+    try:
+        url = server.start()
+    except OSError as exc:
+        raise InputError.of("panel", f"cannot serve the page on {address}:{port} ({exc})") from None
+    print(f"multigpu view: {url}  ({len(mosaics)} mosaics; Ctrl-C ends it)", flush=True)
+    stop = threading.Event()
+    slides = threading.Thread(target=_slides, args=(state, mosaics, stop), daemon=True)
+    slides.start()
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        stop.set()
+        server.close()
+    return 0

@@ -1,0 +1,256 @@
+"""The operator's page in one process: its protocol (every message checked, fuzzed), the server's
+token, origin and file rules, a page that stops reading, the finished run's view, and the flag
+and wall-file entry. The real run in a real browser is test_panel_mpi.py."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from multigpu.config import WalkConfig, read_panel
+from multigpu.errors import InputError
+from multigpu.panel.protocol import ACTIONS, MOST_MESSAGE, Command, Refused, admitted, command, same_origin
+from multigpu.panel.server import PanelServer
+from multigpu.panel.state import SERIES, PanelState
+
+BALANCES = ("strips", "cost", "db")
+VALID = [{"do": "pause"}, {"do": "resume"}, {"do": "stop"}, {"do": "balance", "name": "db"},
+         {"do": "target_fps", "value": 30}, {"do": "target_fps", "value": None}, {"do": "render_scale", "value": 0.5},
+         {"do": "lod_error", "value": 2.5}, {"do": "keys", "held": ["forward", "left"]}, {"do": "keys", "held": []},
+         {"do": "drag", "dx": -12.5, "dy": 3}, {"do": "speed", "steps": -2}, {"do": "orbit"}, {"do": "reset"},
+         {"do": "partition", "on": True}, {"do": "record", "on": False}]
+TAMPERED = ['{"do": "exec", "cmd": "rm -rf /"}', "not json", "[1, 2]", '"pause"', '{"do": "pause", "x": 1}',
+            '{"do": "balance", "name": "../etc/passwd"}', '{"do": "render_scale", "value": 1e9}',
+            '{"do": "render_scale", "value": "NaN"}', '{"do": "render_scale", "value": true}',
+            '{"do": "drag", "dx": Infinity, "dy": 0}', '{"do": "keys", "held": ["forward", "__class__"]}',
+            '{"do": "speed", "steps": 1.5}', '{"do": "lod_error"}', '{"do": null}', '{"do": {"do": "stop"}}',
+            "x" * (MOST_MESSAGE + 1)]
+
+
+def test_every_action_is_declared_and_accepted_with_its_fields():
+    assert {m["do"] for m in VALID} == set(ACTIONS)
+    for msg in VALID:
+        got = command(json.dumps(msg), BALANCES)
+        assert isinstance(got, Command) and got.do == msg["do"], (msg, got)
+        assert got.args == {k: v for k, v in msg.items() if k != "do"}
+
+
+@pytest.mark.parametrize("text", TAMPERED)
+def test_tampered_messages_are_refused_with_a_reason(text):
+    got = command(text, BALANCES)
+    assert isinstance(got, Refused) and got.why
+
+
+def test_a_binary_message_is_refused():
+    assert isinstance(command(b'{"do": "stop"}', BALANCES), Refused)
+
+
+_json = st.recursive(st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True) | st.text(max_size=20),
+                     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=10), inner,
+                                                                                  max_size=4), max_leaves=12)
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.one_of(_json.map(json.dumps), st.text(max_size=300),
+                 st.fixed_dictionaries({"do": st.sampled_from(sorted(ACTIONS))}, optional={
+                     "name": _json, "value": _json, "held": _json, "dx": _json, "dy": _json, "steps": _json,
+                     "on": _json}).map(json.dumps)))
+def test_no_message_raises_and_every_command_is_in_range(text):
+    got = command(text, BALANCES)
+    assert isinstance(got, (Command, Refused))
+    if isinstance(got, Command):
+        a = got.args
+        if got.do == "render_scale":
+            assert 0.25 <= a["value"] <= 1.0
+        if got.do == "balance":
+            assert a["name"] in BALANCES
+        if got.do == "keys":
+            assert all(isinstance(m, str) for m in a["held"])
+
+
+def test_tokens_and_origins():
+    assert admitted("abc", "abc") and not admitted("abd", "abc") and not admitted(None, "abc")
+    assert same_origin("http://127.0.0.1:8000", "127.0.0.1:8000")
+    assert same_origin(None, "127.0.0.1:8000")  # not a browser: the token decides
+    assert not same_origin("http://evil.example", "127.0.0.1:8000")
+    assert not same_origin("http://127.0.0.1:8001", "127.0.0.1:8000")
+    assert not same_origin("file://", "127.0.0.1:8000")
+
+
+def test_the_flag_and_the_wall_file(tmp_path):
+    assert read_panel("8080") == ("127.0.0.1", 8080)  # safe by default
+    assert read_panel("0.0.0.0:0") == ("0.0.0.0", 0)
+    assert read_panel("[::1]:9000") == ("::1", 9000)
+    for bad in ("", "x", "1.2.3.4:", "70000", "host:-1"):
+        with pytest.raises(InputError):
+            read_panel(bad)
+    from multigpu.cli import build_parser
+    from multigpu.flags import walk_config
+
+    wall = tmp_path / "w.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": "64x64", "panel": "127.0.0.1:8765"}))
+    cfg = walk_config(build_parser().parse_args(["walkthrough", "--wall", str(wall)]))
+    assert cfg.panel == ("127.0.0.1", 8765)
+    cfg = walk_config(build_parser().parse_args(["walkthrough", "--wall", str(wall), "--panel", "9000"]))
+    assert cfg.panel == ("127.0.0.1", 9000)  # the flag wins
+    wall.write_text(json.dumps({"grid": "1x2", "panel": "nope"}))
+    with pytest.raises(InputError, match="panel"):
+        walk_config(build_parser().parse_args(["walkthrough", "--wall", str(wall)]))
+    with pytest.raises(InputError, match="--path"):
+        WalkConfig(path="interactive")  # no window and no page to fly from
+    assert WalkConfig(path="interactive", panel=("127.0.0.1", 0)).panel is not None
+
+
+@pytest.fixture
+def served():
+    state = PanelState({"title": "t", "wall_pixels": [64, 32]}, BALANCES, 2)
+    server = PanelServer(state, "127.0.0.1", 0, "tok")
+    url = server.start()
+    yield state, server, url
+    server.close()
+
+
+def _get(url: str, headers: dict | None = None) -> tuple[int, bytes, dict]:
+    req = urllib.request.Request(url, headers=headers or {})
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status, r.read(), dict(r.headers)
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read(), dict(exc.headers)
+
+
+def test_the_server_wants_the_token_for_everything(served):
+    state, server, url = served
+    base = url.split("?")[0]
+    assert url.endswith("?token=tok") and url.startswith("http://127.0.0.1:")
+    assert _get(base)[0] == 403
+    assert _get(base + "?token=nope")[0] == 403
+    assert _get(base + "static/panel.js")[0] == 403
+    code, body, headers = _get(url)
+    assert code == 200 and b"panel.js" in body and "HttpOnly" in headers["Set-Cookie"]
+    cookie = {"Cookie": headers["Set-Cookie"].split(";")[0]}
+    assert _get(base + "static/panel.js", cookie)[0] == 200  # the page's own files, with its cookie
+    assert _get(base + "static/uPlot.iife.min.js", cookie)[0] == 200
+    for other in ("static/../server.py", "static/server.py", "static/%2e%2e/server.py", "etc/passwd", "ws2"):
+        assert _get(base + other, cookie)[0] in (403, 404), other
+
+
+def _ws(url: str, origin: str | None = None):
+    from websockets.asyncio.client import connect
+
+    base = url.split("?")[0].replace("http", "ws") + "ws?" + url.split("?")[1]
+    return connect(base, origin=origin, open_timeout=10)
+
+
+def test_a_page_gets_the_run_and_its_commands_reach_the_loop(served):
+    state, server, url = served
+    state.add_row(np.arange(len(SERIES) + 2, dtype=float))
+    state.set_thumb(np.full((8, 16, 3), 200, np.uint8), [np.array([[0, 0, 32, 32]]), np.array([[32, 0, 64, 32]])], 4)
+    state.set_status(paused=False)
+
+    async def talk():
+        async with _ws(url) as ws:
+            got = {"bin": 0}
+            while not ({"hello", "rows", "status"} <= set(got) and got["bin"]):
+                m = await asyncio.wait_for(ws.recv(), 10)
+                if isinstance(m, bytes):
+                    got["bin"] += 1
+                    assert m[:2] == b"\xff\xd8"  # a JPEG
+                else:
+                    got.update(json.loads(m))
+            await ws.send(json.dumps({"do": "balance", "name": "cost"}))
+            await ws.send('{"do": "exec"}')
+            replies = []
+            while len(replies) < 2:
+                m = await asyncio.wait_for(ws.recv(), 10)
+                m = json.loads(m) if isinstance(m, str) else {}
+                if "ok" in m or "error" in m:
+                    replies.append(m)
+            return got, replies
+
+    got, replies = asyncio.run(talk())
+    assert got["hello"]["balances"] == list(BALANCES) and got["hello"]["ranks"] == 2
+    assert got["rows"][0] == list(range(len(SERIES) + 2))
+    assert replies[0] == {"ok": "balance"} and "unknown action" in replies[1]["error"]
+    cmds = state.take_commands()
+    assert cmds == [Command("balance", {"name": "cost"})] and state.take_commands() == []
+
+
+def test_a_page_of_another_origin_is_refused(served):
+    state, server, url = served
+    from websockets.exceptions import InvalidStatus
+
+    async def attempt():
+        async with _ws(url, origin="http://evil.example"):
+            pass
+
+    with pytest.raises(InvalidStatus) as exc:
+        asyncio.run(attempt())
+    assert exc.value.response.status_code == 403
+
+
+def test_a_page_that_stops_reading_costs_the_loop_nothing(served):
+    """A page connects and never reads while the loop hands over thousands of rows and large
+    thumbnails: every hand-over returns (the server only fills that page's buffer)."""
+    state, server, url = served
+    done = threading.Event()
+
+    def loop():
+        img = np.random.default_rng(0).integers(0, 255, (480, 640, 3), dtype=np.uint8)
+        for i in range(3000):
+            state.add_row(np.full(len(SERIES) + 2, float(i)))
+            if i % 10 == 0:
+                state.set_thumb(img.copy(), None, 1)
+        done.set()
+
+    async def stall():
+        async with _ws(url) as ws:
+            ws.transport.pause_reading() if hasattr(ws, "transport") else None
+            t = threading.Thread(target=loop)
+            t.start()
+            await asyncio.get_running_loop().run_in_executor(None, done.wait, 60)
+            assert state.clients == 1
+            t.join(10)
+
+    asyncio.run(stall())
+    assert done.is_set() and state.seq == 3000
+
+
+def test_a_finished_run_is_served_read_only(tmp_path):
+    from PIL import Image
+
+    from multigpu.panel.finished import load, plot_rows
+    from multigpu.records.report import COLUMNS, TimingWriter
+
+    out = tmp_path / "run"
+    (out / "mosaic").mkdir(parents=True)
+    rows = np.zeros((6, len(COLUMNS)))
+    rows[:, COLUMNS.index("frame")] = [0, 0, 1, 1, 2, 2]
+    rows[:, COLUMNS.index("rank")] = [1, 0, 0, 1, 1, 0]
+    rows[:, COLUMNS.index("frame_ms")] = [10, 20, 30, 40, 50, 60]
+    rows[:, COLUMNS.index("rendering_cpu_ms")] = [1, 3, 2, 2, 4, 4]
+    writer = TimingWriter(out / "timings.csv")
+    for f in range(3):
+        writer.write(rows[2 * f:2 * f + 2])
+    writer.close()
+    (out / "summary.json").write_text(json.dumps({"complete": True, "frames_written": 3, "ranks": 2,
+                                                  "config": {"decomposition": "screen", "grid": [1, 2]}}))
+    Image.new("RGB", (64, 32), (9, 9, 9)).save(out / "mosaic" / "frame_00000.png")
+    state, mosaics = load(out)
+    assert [p.name for p in mosaics] == ["frame_00000.png"]
+    n, got = state.rows_since(0)
+    assert n == 3 and got[:, 0].tolist() == [0, 1, 2]
+    assert got[:, len(SERIES):].tolist() == [[20, 10], [30, 40], [60, 50]]  # each rank's frame time, by rank
+    assert got[0, 4] == pytest.approx(1.5)  # imbalance: slowest render over the mean
+    assert state.summary["frames_written"] == 3 and state.status["view"]
+    assert plot_rows(np.zeros((0, len(COLUMNS))), 2).shape == (0, len(SERIES) + 2)
+    with pytest.raises(InputError, match="not a run"):
+        load(tmp_path / "nothing")
