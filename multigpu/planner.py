@@ -35,15 +35,14 @@ def balances_of(cfg) -> list[str]:
     import dataclasses
 
     from multigpu.decompositions import REGISTRY
-    from multigpu.errors import InputError
 
     modes = list(STRATEGIES)
     for name in REGISTRY:
         if name == "screen":
             continue
-        try:  # a decomposition this wall cannot run (too few bins) is left out
+        try:  # a decomposition this wall cannot run (too few bins) is left out: the door's InputError
             dataclasses.replace(cfg, decomposition=name)
-        except InputError:
+        except ValueError:
             continue
         modes.append(name)
     return modes

@@ -70,7 +70,8 @@ def test_gl_and_mpi_live_at_their_edges():
 
 #: where code runs, told by its folder: each may not import the folders named here
 APART = {"rank": ("multigpu.launcher",), "launcher": ("multigpu.rank",),
-         "records": ("multigpu.rank", "multigpu.launcher", "mpi4py", "moderngl")}
+         "records": ("multigpu.rank", "multigpu.launcher", "mpi4py", "moderngl"),
+         "panel": ("multigpu.rank", "multigpu.launcher", "mpi4py", "moderngl", "glfw")}
 
 
 @pytest.mark.parametrize("sub", list(APART))
@@ -251,3 +252,10 @@ def test_studies_start_jobs_through_the_one_launcher():
         needles = ("run_multigpu", ".command(", "multigpu.launcher.mpirun\", \"-n", "find_launcher", "killpg")
         for needle in needles if f.name != "simhosts.py" else needles[:-1]:  # it kills its namespaces' holders
             assert needle not in text, f"studies/{f.name} starts a job itself ({needle})"
+
+
+def test_websockets_only_at_the_web_edge():
+    for f in _files():
+        rel = f.relative_to(PKG)
+        if "websockets" in {m.split(".")[0] for m in _imports(f)}:
+            assert rel.parts[0] in ("panel", "studies"), f"{rel} imports websockets"

@@ -228,6 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         on = None if help_only(rest) else operator.own_pc(rest)
         view = operator.start_view(on) if on else None  # the operator's view on a PC of its own
+        operator.panel_token()  # the page's token outlives a restart of the wall
         if bound and not help_only(rest):
             from multigpu.launcher.relaunch import recovering
 

@@ -24,6 +24,8 @@ from multigpu.launcher.supervise import flag_value
 ENV = "MULTIGPU_MONITOR"
 #: seconds the view has to start and say its port
 START = 30.0
+#: the operator's page's token (``rank/panel_link.py`` reads it; MULTIGPU_* reaches every rank)
+PANEL_TOKEN_ENV = "MULTIGPU_PANEL_TOKEN"
 
 
 def own_pc(argv: list[str]) -> dict | None:
@@ -69,6 +71,12 @@ def start_view(on: dict) -> subprocess.Popen:
     os.environ[ENV] = f"{on.get('address', host)}:{line[1]}"
     os.environ[TOKEN_ENV] = token
     return proc
+
+
+def panel_token() -> None:
+    """The operator's page (``--panel``) token for every run of this job, restarts included (rank
+    0 takes it from ``PANEL_TOKEN_ENV``), unless the user gave one."""
+    os.environ.setdefault(PANEL_TOKEN_ENV, secrets.token_urlsafe(24))
 
 
 def stop_view(proc: subprocess.Popen | None) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from time import process_time
 
 import numpy as np
 
@@ -278,6 +279,7 @@ class Frames:
     def run(self) -> dict | None:
         complete, stopped_by = False, None
         self.job.in_frames = True
+        began, shown = process_time(), self.done
         try:
             self.loop()
             for landed in self.rows.land():  # frames in flight: the last frame's row
@@ -294,6 +296,8 @@ class Frames:
             raise
         finally:
             if self.rank == 0:
+                # rank 0's whole process (every thread: heartbeat, the panel's server) per frame of the loop
+                self.record.extra["rank0_process_cpu_ms"] = (process_time() - began) * 1e3 / max(self.done - shown, 1)
                 summary = self.record.close(complete, stopped_by)
         # every rank learns whether rank 0's outputs were all written (a bounded agreement)
         failed = agree(self.comm, str(self.record.failed) if self.rank == 0 and self.record.failed else None,

@@ -97,6 +97,7 @@ class RunRecord:
             self.path = PathAppender(self.record_to)
         self.cameras: list = []  # (12,) position, target, up, fov, near, far of the frames not yet in the path file
         self.failed: WriteFailed | None = None  # the first output that could not be written
+        self.extra: dict = {}  # figures the frame loop adds to summary.json at the end
         self.done = resume_at
         self.recovery = Recovery.resumed(resume_at)  # a restarted run goes on with the same files
         if not resume_at:
@@ -168,7 +169,7 @@ class RunRecord:
             self.batch.clear()
         summary = self.tally.result()
         doc = {"complete": complete, "frames_written": self.done, "config": self.config,
-               "decomposition": self.report(), **summary, **self.recovery.doc()}
+               "decomposition": self.report(), **summary, **self.recovery.doc(), **self.extra}
         if stopped_by:
             doc["stopped_by"] = stopped_by
         write_json(self.out.path / "summary.json", doc)
