@@ -116,19 +116,23 @@ class Live:
 
     def show_monitor(self, back: np.ndarray, work: Work, control: Control, rows: np.ndarray) -> str | None:
         """``--monitor``: every rank's shrunk tile to rank 0, which shows the wall with the
-        partition over it; rank 0 returns why the monitor wants the run to stop, or None."""
+        partition over it; ``--panel``: the same, on the frames the page wants a thumbnail (the
+        one before: the last gather's); rank 0 returns why the monitor or the page wants the run
+        to stop, or None."""
         if not self.scale:
             return None
+        thumb = control.thumb  # a page looks at rank 0's: a few frames a second, agreed by every rank
+        if self.cfg.monitor is None and not thumb:
+            return self.panel.poll() if self.panel is not None else None
         s = self.scale
-        wait_all(self.pending, self.cfg.timeout, "monitor tiles")  # the last frame's: long arrived
+        wait_all(self.pending, self.cfg.timeout, "monitor tiles")  # the last gather's: long arrived
         if self.rank != 0:
             np.copyto(self.small, back[::s, ::s])
             self.pending = [self.mcomm.Isend(self.small, dest=0, tag=1)]
             return None
-        thumb = self.panel is not None and self.panel.wants()  # only while a page looks, a few times a second
         if self.last_rects is not None and (self.monitor is not None or thumb):  # the last frame, whole
             img = stitch(self.small_tiles, self.small_rects, self.monitor_size, self.cfg.canvas.dark)
-            if thumb:
+            if thumb and self.panel is not None:
                 self.panel.thumbnail(img, self.last_rects, s)
             if self.monitor is not None:
                 shown = overlay(img, self.last_rects, scale=s)[::-1]

@@ -22,8 +22,8 @@ from multigpu.display.controls import Taken
 from multigpu.rank.exchange import wait_all
 
 #: position 3, target 3, up 3, fov, near, far, strategy index, partition, stats, orbiting, paused, frame-rate
-#: target (0: none), render scale, level-of-detail bound
-SIZE = 20
+#: target (0: none), render scale, level-of-detail bound, the page's thumbnail wanted this frame
+SIZE = 21
 #: seconds between the input phase's broadcasts while the run is paused (the page's commands read each time)
 PAUSE_TICK = 0.05
 
@@ -39,6 +39,7 @@ class Control:
     orbiting: bool
     quality: tuple = (None, 1.0, 0.0)  # frame-rate target (None: none), render scale, level-of-detail bound
     paused_s: float = 0.0  # seconds the run stood paused before this frame (no frame's time counts them)
+    thumb: bool = False  # the operator's page wants a thumbnail of this frame (every rank sends its tile shrunk)
 
 
 class Steering:
@@ -82,6 +83,7 @@ class Steering:
                 value = p.settings.pop(name)
                 s[17 + i] = 0.0 if value is None else value
         s[16] = float(p.paused)
+        s[20] = float(p.wants())
         return taken
 
     def _read(self) -> None:
@@ -126,4 +128,4 @@ class Steering:
         if self.interactive:
             camera = Camera(tuple(s[0:3]), tuple(s[3:6]), tuple(s[6:9]), float(s[9]), float(s[10]), float(s[11]))
         quality = (float(s[17]) or None, float(s[18]), float(s[19]))
-        return Control(camera, int(s[12]), bool(s[13]), bool(s[14]), bool(s[15]), quality, paused)
+        return Control(camera, int(s[12]), bool(s[13]), bool(s[14]), bool(s[15]), quality, paused, bool(s[20]))
