@@ -150,6 +150,8 @@ def test_panel_in_chromium(tmp_path):
                 at = page.evaluate("() => window.multigpu.rows")
                 _until(page, f"window.multigpu.rows > {at + 5}")  # the wall went on
                 assert job.proc.poll() is None
+                page.check("#overlay")  # the partition, drawn by the page over the next thumbnail
+                _until(page, "!document.getElementById('parts').hidden")
                 page.screenshot(path=str(tmp_path / "panel.png"))
                 # stop: the run ends as by Escape, every whole frame kept
                 page.click("#stop")
@@ -176,6 +178,38 @@ def test_panel_in_chromium(tmp_path):
     if os.environ.get("MULTIGPU_DOC_FIGURES"):
         SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(tmp_path / "panel.png", SCREENSHOT)
+    _view_in_chromium(sync_playwright, out, n)
+
+
+def _view_in_chromium(sync_playwright, out, frames: int) -> None:
+    """``multigpu view OUT`` over the run just stopped: the same page, every frame in the plots, the
+    summary, nothing to control."""
+    import subprocess
+    import sys
+
+    view = subprocess.Popen([sys.executable, "-m", "multigpu", "view", str(out)], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        line = view.stdout.readline()
+        assert "multigpu view: http" in line, line + view.stdout.read()
+        url = line.split("multigpu view: ", 1)[1].split()[0]
+        assert _status(url.split("?")[0]) == 403
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+            try:
+                page = browser.new_page()
+                page.goto(url)
+                _until(page, "window.multigpu.summary !== null")
+                assert page.evaluate("() => window.multigpu.rows") == frames
+                assert page.evaluate("() => window.multigpu.summary.frames_written") == frames
+                assert page.is_hidden("#controls")
+                page.evaluate("() => document.getElementById('stop').click()")  # hidden, and refused anyway
+                _until(page, "window.multigpu.errors.length === 1")
+            finally:
+                browser.close()
+    finally:
+        os.killpg(view.pid, 9)
+        view.wait(30)
 
 
 def test_panel_address_taken_is_bad_input(tmp_path):
@@ -191,3 +225,81 @@ def test_panel_address_taken_is_bad_input(tmp_path):
         code = job.wait(180)
     assert code == 2, job.output[-3000:]
     assert "--panel" in job.output and "cannot serve the page" in job.output
+
+
+def test_fly_record_and_set_quality_from_the_page(tmp_path):
+    """A headless interactive run flown from the page alone (no window): held keys and a drag
+    move the camera, a recording started and stopped on the page replays as a path file, and a
+    render scale set on the page reaches every rank at the same frame."""
+    import asyncio
+    import json
+
+    from websockets.asyncio.client import connect
+
+    from multigpu.scene.paths import load_path
+
+    out = tmp_path / "out"
+    job = Job(["walkthrough", "--grid", "1x2", "--tile", "96x64", *SMALL, "--path", "interactive",
+               "--mosaic-every", "0", "--panel", "127.0.0.1:0", "--out", str(out)])
+
+    async def drive(url: str) -> dict:
+        base, query = url.split("?", 1)
+        async with connect(base.replace("http", "ws", 1) + "ws?" + query, open_timeout=60) as ws:
+            seen = {"rows": 0, "summary": None, "errors": [], "status": {}}
+
+            async def until(cond, timeout=90.0):
+                deadline = asyncio.get_running_loop().time() + timeout
+                while not cond():
+                    left = deadline - asyncio.get_running_loop().time()
+                    assert left > 0, f"timed out: {seen['rows']} rows, {seen['status']}"
+                    try:
+                        m = await asyncio.wait_for(ws.recv(), left)
+                    except asyncio.TimeoutError:
+                        continue
+                    if isinstance(m, str):
+                        m = json.loads(m)
+                        seen["rows"] += len(m.get("rows", []))
+                        seen["status"].update(m.get("status", {}))
+                        seen["summary"] = m.get("summary", seen["summary"])
+                        if "error" in m:
+                            seen["errors"].append(m["error"])
+
+            await until(lambda: seen["rows"] >= 5 and seen["status"].get("interactive"))
+            await ws.send(json.dumps({"do": "record", "on": True}))
+            await until(lambda: seen["status"].get("recording"))
+            await ws.send(json.dumps({"do": "keys", "held": ["forward"]}))
+            at = seen["rows"]
+            await until(lambda: seen["rows"] >= at + 10)
+            await ws.send(json.dumps({"do": "keys", "held": []}))
+            await ws.send(json.dumps({"do": "drag", "dx": 300, "dy": 0}))
+            await ws.send(json.dumps({"do": "render_scale", "value": 0.5}))
+            await until(lambda: seen["status"].get("render_scale") == 0.5)
+            at = seen["rows"]
+            await until(lambda: seen["rows"] >= at + 5)
+            await ws.send(json.dumps({"do": "record", "on": False}))
+            await until(lambda: not seen["status"].get("recording"))
+            await ws.send(json.dumps({"do": "stop"}))
+            await until(lambda: seen["summary"] is not None)
+            return seen
+
+    try:
+        seen = asyncio.run(drive(job.url()))
+        code = job.wait(120)
+    finally:
+        if job.proc.poll() is None:
+            job.kill()
+            job.wait(30)
+    assert code == 0 and not seen["errors"], job.output[-3000:]
+    assert "stop (the panel)" in job.output
+    flown = load_path(out / "recorded-01.json")
+    assert len(flown) >= 15
+    pos, tgt = np.asarray(flown.position), np.asarray(flown.target)
+    assert np.linalg.norm(pos[-1] - pos[0]) > 0  # the held key moved it
+    look = (tgt - pos) / np.linalg.norm(tgt - pos, axis=1, keepdims=True)
+    assert np.abs(look[-1] - look[0]).max() > 1e-3  # the drag turned it
+    rows = read_timings(out / "timings.csv")
+    col = {c: rows[:, i] for i, c in enumerate(COLUMNS)}
+    frames, scale = col["frame"].astype(int), col["render_scale"]
+    assert scale[frames == 0].tolist() == [1.0, 1.0]
+    first = {r: int(frames[(col["rank"] == r) & (scale == 0.5)].min()) for r in (0, 1)}
+    assert first[0] == first[1]  # every rank from the same frame

@@ -55,7 +55,6 @@ ACTIONS: dict[str, dict] = {
                         "a whole number -10..10")},
     "orbit": {},
     "reset": {},
-    "partition": {"on": (_flag, "true or false")},
     "record": {"on": (_flag, "true or false")},
 }
 

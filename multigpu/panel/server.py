@@ -67,7 +67,7 @@ class PanelServer:
         self.error: str | None = None
         self.logged: list[float] = []
         self.unlogged = 0
-        self.thumbs: dict = {}  # (seq, overlay) -> JPEG of the newest thumbnail
+        self.thumbs: dict = {}  # the newest thumbnail as sent: its seq, pieces (JSON) and JPEG
         self.delivered = threading.Event()  # every page connected got the summary
 
     # -- life
@@ -108,6 +108,16 @@ class PanelServer:
         self.ready.set()
         async with server:
             await self.stopping.wait()
+
+    def cpu_s(self) -> float:
+        """CPU seconds the server's thread has used so far (its own clock: what the page costs rank 0
+        beside the frame loop's hand-overs)."""
+        if self.thread is None or self.thread.ident is None or not self.thread.is_alive():
+            return 0.0
+        try:
+            return time.clock_gettime(time.pthread_getcpuclockid(self.thread.ident))
+        except (OSError, AttributeError):  # a platform without per-thread clocks
+            return 0.0
 
     def close(self, linger: float = 0.0) -> None:
         """Stop serving; ``linger``: seconds at most to let connected pages get the summary first."""
@@ -168,18 +178,14 @@ class PanelServer:
         state = self.state
         state.clients += 1
         self.delivered.clear()
-        view = {"overlay": False}
-        pusher = asyncio.create_task(self._push(ws, view))
+        pusher = asyncio.create_task(self._push(ws))
         try:
             async for message in ws:
                 got = command(message, state.balances)
-                if isinstance(got, Command) and self.readonly and got.do != "partition":
+                if isinstance(got, Command) and self.readonly:
                     await ws.send(json.dumps({"error": f"{got.do}: a finished run, nothing to control"}))
                 elif isinstance(got, Command):
-                    if got.do == "partition":  # the thumbnail's overlay: this page's own
-                        view["overlay"] = got.args["on"]
-                    else:
-                        state.commands.put(got)
+                    state.commands.put(got)
                     await ws.send(json.dumps({"ok": got.do}))
                 else:
                     self._refused(f"a message from {_peer(ws)} ({got.why})")
@@ -190,7 +196,7 @@ class PanelServer:
             pusher.cancel()
             state.clients -= 1
 
-    async def _push(self, ws, view: dict) -> None:
+    async def _push(self, ws) -> None:
         state = self.state
         hello = {"hello": {"header": state.header, "balances": list(state.balances), "ranks": state.K,
                            "series": [*SERIES, *(f"rank {k}" for k in range(state.K))]}}
@@ -210,9 +216,11 @@ class PanelServer:
                     await ws.send(json.dumps({"status": status}))
                 if new_events:
                     await ws.send(json.dumps({"events": [[round(t, 3), e] for t, e in new_events]}))
-                if got is not None and (got[0], view["overlay"]) != thumb:
-                    thumb = (got[0], view["overlay"])
-                    await ws.send(self._thumb(got, view["overlay"]))
+                if got is not None and got[0] != thumb:
+                    thumb = got[0]
+                    pieces, picture = self._thumb(got)
+                    await ws.send(pieces)  # where each rank's pieces lie (the page draws them on request)
+                    await ws.send(picture)
                 if state.summary is not None and not summary:
                     summary = True
                     await ws.send(json.dumps({"summary": state.summary}, default=str))
@@ -221,17 +229,18 @@ class PanelServer:
         except Exception:  # noqa: BLE001 - the page went away
             pass
 
-    def _thumb(self, got, overlay: bool) -> bytes:
+    def _thumb(self, got) -> tuple[str, bytes]:
+        """The newest thumbnail as the page gets it: its pieces (JSON: each rank's rects in the
+        thumbnail's pixels, top row first) and the picture (JPEG), made once for every page."""
         seq, img, rects, shrink = got
-        key = (seq, overlay)
-        if key not in self.thumbs:
-            if overlay and rects is not None:
-                from multigpu.display.hud import overlay as tint
-
-                img = tint(img[::-1], rects, scale=shrink)[::-1]
-            self.thumbs = {k: v for k, v in self.thumbs.items() if k[0] == seq}
-            self.thumbs[key] = jpeg(img)
-        return self.thumbs[key]
+        if self.thumbs.get("seq") != seq:
+            h, w = img.shape[:2]
+            pieces = [] if rects is None else [
+                [k, x0 / shrink, h - y1 / shrink, x1 / shrink, h - y0 / shrink]
+                for k, r in enumerate(rects) for x0, y0, x1, y1 in np.asarray(r, dtype=float).reshape(-1, 4).tolist()]
+            self.thumbs = {"seq": seq, "pieces": json.dumps({"thumb": {"width": w, "height": h, "pieces": pieces}}),
+                           "jpeg": jpeg(img)}
+        return self.thumbs["pieces"], self.thumbs["jpeg"]
 
     def _refused(self, what: str) -> None:
         """One log line per refusal, at most ``MOST_LOG`` a minute (the others counted)."""

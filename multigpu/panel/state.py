@@ -51,7 +51,8 @@ class PanelState:
 
     def set_thumb(self, img: np.ndarray, rects, shrink: int) -> None:
         """The newest whole wall, shrunk ``shrink`` times (kept by reference: the caller made it
-        for this and lets go of it), with the partition's ``rects`` in full-size pixels."""
+        for this and lets go of it), with the partition's ``rects`` in full-size pixels, bottom row
+        first (the page draws them)."""
         with self.lock:
             self.thumb_seq += 1
             self.thumb = (self.thumb_seq, img, rects, shrink)

@@ -279,7 +279,8 @@ class Frames:
     def run(self) -> dict | None:
         complete, stopped_by = False, None
         self.job.in_frames = True
-        began, shown = process_time(), self.done
+        panel = self.live.panel if self.live is not None else None
+        began, shown, served = process_time(), self.done, panel.server.cpu_s() if panel is not None else 0.0
         try:
             self.loop()
             for landed in self.rows.land():  # frames in flight: the last frame's row
@@ -297,7 +298,10 @@ class Frames:
         finally:
             if self.rank == 0:
                 # rank 0's whole process (every thread: heartbeat, the panel's server) per frame of the loop
-                self.record.extra["rank0_process_cpu_ms"] = (process_time() - began) * 1e3 / max(self.done - shown, 1)
+                frames = max(self.done - shown, 1)
+                self.record.extra["rank0_process_cpu_ms"] = (process_time() - began) * 1e3 / frames
+                if panel is not None:  # the page's server thread, on its own clock
+                    self.record.extra["panel_server_cpu_ms"] = (panel.server.cpu_s() - served) * 1e3 / frames
                 summary = self.record.close(complete, stopped_by)
         # every rank learns whether rank 0's outputs were all written (a bounded agreement)
         failed = agree(self.comm, str(self.record.failed) if self.rank == 0 and self.record.failed else None,

@@ -11,7 +11,8 @@ const $ = (id) => document.getElementById(id);
 const seen = window.multigpu = { rows: 0, thumbs: [], replies: [], errors: [], status: {}, summary: null,
                                  closed: false };
 
-let ws = null, series = [], ranks = 0, data = null, plots = [], wallWidth = 0, status = {};
+let ws = null, series = [], ranks = 0, data = null, plots = [], wallWidth = 0, status = {}, pieces = null;
+const COLOURS = ["#e41a1c", "#377eb8", "#4daf4a", "#984ea3", "#ff7f00", "#ffff33", "#a65628", "#f781bf"];
 const held = new Set();
 
 function send(msg) {
@@ -38,6 +39,7 @@ function connect() {
     if (msg.status) showStatus(msg.status);
     if (msg.events) for (const [t, text] of msg.events) addEvent(t, text);
     if (msg.summary) showSummary(msg.summary);
+    if (msg.thumb) pieces = msg.thumb;  // the next picture's partition
     if (msg.ok) { seen.replies.push(msg.ok); $("reply").textContent = ""; }
     if (msg.error) { seen.errors.push(msg.error); $("reply").textContent = "refused: " + msg.error; }
   };
@@ -69,7 +71,7 @@ function makePlots() {
   const box = $("plots");
   box.replaceChildren();
   const width = Math.min(640, Math.max(320, window.innerWidth - 40));
-  const colours = ["#e41a1c", "#377eb8", "#4daf4a", "#984ea3", "#ff7f00", "#ffff33", "#a65628", "#f781bf"];
+  const colours = COLOURS;
   const rankSeries = [];
   for (let k = 0; k < ranks; k++) rankSeries.push({ label: `rank ${k}`, stroke: colours[k % colours.length] });
   const make = (title, cols, lines) => {
@@ -115,6 +117,22 @@ function thumbnail(buf) {
   const old = img.src;
   img.src = URL.createObjectURL(new Blob([bytes], { type: "image/jpeg" }));
   if (old && old.startsWith("blob:")) URL.revokeObjectURL(old);
+  drawParts(pieces);
+}
+
+// the partition over the thumbnail, drawn here (not on the wall's rank 0): each rank's pieces tinted
+function drawParts(p) {
+  const c = $("parts"), on = $("overlay").checked && p;
+  c.hidden = !on;
+  if (!on) return;
+  c.width = p.width; c.height = p.height;
+  const g = c.getContext("2d");
+  g.clearRect(0, 0, c.width, c.height);
+  for (const [k, x0, y0, x1, y1] of p.pieces) {
+    const colour = COLOURS[k % COLOURS.length];
+    g.globalAlpha = 0.18; g.fillStyle = colour; g.fillRect(x0, y0, x1 - x0, y1 - y0);
+    g.globalAlpha = 1.0; g.strokeStyle = colour; g.strokeRect(x0 + 0.5, y0 + 0.5, x1 - x0 - 1, y1 - y0 - 1);
+  }
 }
 
 function showStatus(s) {
@@ -155,7 +173,7 @@ function showSummary(s) {
 $("pause").onclick = () => send({ do: status.paused ? "resume" : "pause" });
 $("stop").onclick = () => send({ do: "stop" });
 $("record").onclick = () => send({ do: "record", on: !status.recording });
-$("overlay").onchange = (e) => send({ do: "partition", on: e.target.checked });
+$("overlay").onchange = () => drawParts(pieces);
 $("balance").onchange = (e) => send({ do: "balance", name: e.target.value });
 $("target_fps").onchange = (e) => send({ do: "target_fps", value: e.target.value === "" ? null : +e.target.value });
 $("render_scale").onchange = (e) => send({ do: "render_scale", value: +e.target.value });
