@@ -19,7 +19,7 @@ from multigpu.config import WalkConfig, read_panel
 from multigpu.errors import InputError
 from multigpu.panel.protocol import ACTIONS, MOST_MESSAGE, Command, Refused, admitted, command, same_origin
 from multigpu.panel.server import PanelServer
-from multigpu.panel.state import SERIES, PanelState
+from multigpu.panel.state import SERIES, PanelState, names, width
 
 BALANCES = ("strips", "cost", "db")
 VALID = [{"do": "pause"}, {"do": "resume"}, {"do": "stop"}, {"do": "balance", "name": "db"},
@@ -152,7 +152,7 @@ def _ws(url: str, origin: str | None = None):
 
 def test_a_page_gets_the_run_and_its_commands_reach_the_loop(served):
     state, server, url = served
-    state.add_row(np.arange(len(SERIES) + 2, dtype=float))
+    state.add_row(np.arange(width(2), dtype=float))
     state.set_thumb(np.full((8, 16, 3), 200, np.uint8), [np.array([[0, 0, 32, 32]]), np.array([[32, 0, 64, 32]])], 4)
     state.set_status(paused=False)
 
@@ -178,7 +178,7 @@ def test_a_page_gets_the_run_and_its_commands_reach_the_loop(served):
 
     got, replies = asyncio.run(talk())
     assert got["hello"]["balances"] == list(BALANCES) and got["hello"]["ranks"] == 2
-    assert got["rows"][0] == list(range(len(SERIES) + 2))
+    assert got["rows"][0] == list(range(width(2))) and got["hello"]["series"] == names(2)
     assert replies[0] == {"ok": "balance"} and "unknown action" in replies[1]["error"]
     cmds = state.take_commands()
     assert cmds == [Command("balance", {"name": "cost"})] and state.take_commands() == []
@@ -206,7 +206,7 @@ def test_a_page_that_stops_reading_costs_the_loop_nothing(served):
     def loop():
         img = np.random.default_rng(0).integers(0, 255, (480, 640, 3), dtype=np.uint8)
         for i in range(3000):
-            state.add_row(np.full(len(SERIES) + 2, float(i)))
+            state.add_row(np.full(width(2), float(i)))
             if i % 10 == 0:
                 state.set_thumb(img.copy(), None, 1)
         done.set()
@@ -248,9 +248,10 @@ def test_a_finished_run_is_served_read_only(tmp_path):
     assert [p.name for p in mosaics] == ["frame_00000.png"]
     n, got = state.rows_since(0)
     assert n == 3 and got[:, 0].tolist() == [0, 1, 2]
-    assert got[:, len(SERIES):].tolist() == [[20, 10], [30, 40], [60, 50]]  # each rank's frame time, by rank
+    assert got[:, len(SERIES):len(SERIES) + 2].tolist() == [[20, 10], [30, 40], [60, 50]]  # frame time, by rank
+    assert got[:, len(SERIES) + 2:].tolist() == [[3, 1], [2, 2], [4, 4]]  # render CPU time, by rank
     assert got[0, 4] == pytest.approx(1.5)  # imbalance: slowest render over the mean
     assert state.summary["frames_written"] == 3 and state.status["view"]
-    assert plot_rows(np.zeros((0, len(COLUMNS))), 2).shape == (0, len(SERIES) + 2)
+    assert plot_rows(np.zeros((0, len(COLUMNS))), 2).shape == (0, width(2))
     with pytest.raises(InputError, match="not a run"):
         load(tmp_path / "nothing")

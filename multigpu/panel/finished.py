@@ -16,7 +16,7 @@ import numpy as np
 
 from multigpu.errors import InputError
 from multigpu.panel.server import PanelServer
-from multigpu.panel.state import SERIES, PanelState
+from multigpu.panel.state import SERIES, PanelState, width
 
 #: seconds each mosaic is shown before the next
 SLIDE = 1.0
@@ -25,26 +25,27 @@ THUMB = 640
 
 
 def plot_rows(timings: np.ndarray, ranks: int) -> np.ndarray:
-    """timings.csv's rows (``records.report.read_timings``) as the page's plot rows: ``SERIES`` then
-    each rank's frame time, one row a frame."""
+    """timings.csv's rows (``records.report.read_timings``) as the page's plot rows, one a frame
+    (``panel.state.names``)."""
     from multigpu.records.report import COLUMNS
 
     col = {c: i for i, c in enumerate(COLUMNS)}
     if len(timings) < ranks:
-        return np.zeros((0, len(SERIES) + ranks))
+        return np.zeros((0, width(ranks)))
     order = np.lexsort((timings[:, col["rank"]], timings[:, col["frame"]]))
     rows = timings[order]
     n = len(rows) // ranks
     per = rows[: n * ranks].reshape(n, ranks, -1)
     frame_ms, render = per[:, :, col["frame_ms"]], per[:, :, col["rendering_cpu_ms"]]
     mean = render.mean(axis=1)
-    out = np.empty((n, len(SERIES) + ranks))
+    out = np.empty((n, width(ranks)))
     out[:, 0] = per[:, 0, col["frame"]]
     out[:, 1] = 1e3 / np.maximum(frame_ms.max(axis=1), 1e-9)
     out[:, 2] = per[:, 0, col["balance"]]
     out[:, 3] = per[:, :, col["swap_skew_ms"]].max(axis=1)
     out[:, 4] = np.where(mean > 0, render.max(axis=1) / np.where(mean > 0, mean, 1.0), 1.0)
-    out[:, len(SERIES):] = frame_ms
+    out[:, len(SERIES):len(SERIES) + ranks] = frame_ms
+    out[:, len(SERIES) + ranks:] = render
     return out
 
 

@@ -29,7 +29,7 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from multigpu.panel.protocol import Command, admitted, command, same_origin
-from multigpu.panel.state import SERIES, PanelState
+from multigpu.panel.state import PanelState, names
 
 PAGE = Path(__file__).parent / "page"
 #: the files the page may fetch, by name, with their types (nothing else is ever read)
@@ -199,7 +199,7 @@ class PanelServer:
     async def _push(self, ws) -> None:
         state = self.state
         hello = {"hello": {"header": state.header, "balances": list(state.balances), "ranks": state.K,
-                           "series": [*SERIES, *(f"rank {k}" for k in range(state.K))]}}
+                           "series": names(state.K)}}
         await ws.send(json.dumps(hello))
         seq, thumb, status, events, summary = 0, 0, None, 0, False
         try:

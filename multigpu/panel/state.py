@@ -17,8 +17,19 @@ import numpy as np
 
 #: frames of plot history the page gets when it connects (the plots scroll over the newest)
 HISTORY = 600
-#: the plotted series besides each rank's frame time: frame, fps, balance id, swap skew, imbalance
+#: the plotted series before the per-rank ones: frame, fps, balance id, swap skew, imbalance; then each
+#: rank's frame time (ms), then each rank's render CPU time (ms: how evenly the work was balanced)
 SERIES = ("frame", "fps", "balance", "swap_skew_ms", "imbalance")
+
+
+def width(ranks: int) -> int:
+    """Numbers in one plot row of a ``ranks``-rank wall."""
+    return len(SERIES) + 2 * ranks
+
+
+def names(ranks: int) -> list[str]:
+    """The plot row's numbers, by name."""
+    return [*SERIES, *(f"frame_ms {k}" for k in range(ranks)), *(f"render_cpu_ms {k}" for k in range(ranks))]
 
 
 class PanelState:
@@ -30,7 +41,7 @@ class PanelState:
         self.header, self.balances, self.K = header, tuple(balances), ranks
         self.lock = threading.Lock()
         self.history = history
-        self.plot = np.full((history, len(SERIES) + ranks), np.nan)
+        self.plot = np.full((history, width(ranks)), np.nan)
         self.seq = 0  # plot rows ever added
         self.thumb: tuple[int, np.ndarray, object, int] | None = None  # (seq, image top row first, rects, shrink)
         self.thumb_seq = 0
@@ -44,7 +55,7 @@ class PanelState:
     # -- the frame loop's side (rank 0)
 
     def add_row(self, values: np.ndarray) -> None:
-        """One landed frame: ``SERIES`` then each rank's frame time (ms)."""
+        """One landed frame: ``SERIES``, each rank's frame time, each rank's render CPU time (ms)."""
         with self.lock:
             self.plot[self.seq % self.history] = values
             self.seq += 1

@@ -132,14 +132,17 @@ class PanelLink:
     # -- records (rank 0's landed rows)
 
     def landed(self, f: int, every: np.ndarray, col: dict, balances, recorded) -> None:
-        """Frame ``f``'s rows, every rank's: one plot row; its camera while recording."""
+        """Frame ``f``'s rows, every rank's: one plot row (``panel.state.names``); its camera while
+        recording."""
         frame_ms = every[:, col["frame_ms"]]
         render = every[:, col["rendering_cpu_ms"]]
         mean = float(render.mean())
-        row = np.empty(5 + len(frame_ms))
+        K = len(frame_ms)
+        row = np.empty(5 + 2 * K)
         row[:5] = (f, 1e3 / max(float(frame_ms.max()), 1e-9), every[0, col["balance"]],
                    float(every[:, col["swap_skew_ms"]].max()), float(render.max()) / mean if mean > 0 else 1.0)
-        row[5:] = frame_ms
+        row[5:5 + K] = frame_ms
+        row[5 + K:] = render
         self.state.add_row(row)
         if self.recording is not None and recorded is not None:
             cam = recorded

@@ -83,9 +83,10 @@ function makePlots() {
     p.cols = cols;
     plots.push(p);
   };
-  const rankCols = [];
-  for (let k = 0; k < ranks; k++) rankCols.push(5 + k);
+  const rankCols = [], renderCols = [];
+  for (let k = 0; k < ranks; k++) { rankCols.push(5 + k); renderCols.push(5 + ranks + k); }
   make("frame time per rank (ms)", rankCols, rankSeries);
+  make("render CPU per rank (ms): the balance", renderCols, rankSeries.map((s) => ({ ...s })));
   make("frames per second", [1], [{ label: "fps", stroke: "#8c8" }]);
   make("imbalance (slowest / mean render)", [4], [{ label: "imbalance", stroke: "#c96" }]);
   make("swap skew (ms)", [3], [{ label: "skew", stroke: "#69c" }]);
