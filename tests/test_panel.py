@@ -255,3 +255,28 @@ def test_a_finished_run_is_served_read_only(tmp_path):
     assert plot_rows(np.zeros((0, len(COLUMNS))), 2).shape == (0, width(2))
     with pytest.raises(InputError, match="not a run"):
         load(tmp_path / "nothing")
+
+
+def test_a_page_that_floods_is_refused_beyond_its_rate(served):
+    """A page that sends thousands of valid commands at once: the loop's queue gets at most the
+    burst, the rest get an error reply."""
+    from multigpu.panel.server import MOST_RATE
+
+    state, server, url = served
+
+    async def flood():
+        async with _ws(url) as ws:
+            for _ in range(1000):
+                await ws.send('{"do": "orbit"}')
+            got = {"ok": 0, "error": 0}
+            while got["ok"] + got["error"] < 1000:
+                m = await asyncio.wait_for(ws.recv(), 10)
+                if isinstance(m, str):
+                    m = json.loads(m)
+                    for k in got:
+                        got[k] += k in m
+            return got
+
+    got = asyncio.run(flood())
+    queued = len(state.take_commands())
+    assert queued == got["ok"] and queued <= 2 * MOST_RATE + 10 and got["error"] >= 1000 - 2 * MOST_RATE - 10

@@ -28,7 +28,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from multigpu.panel.protocol import Command, admitted, command, same_origin
+from multigpu.panel.protocol import Command, Refused, admitted, command, same_origin
 from multigpu.panel.state import PanelState, names
 
 PAGE = Path(__file__).parent / "page"
@@ -40,6 +40,9 @@ COOKIE = "multigpu-panel"
 PERIOD = 0.2
 #: log lines about refused messages, at most this many a minute (the rest are counted)
 MOST_LOG = 20
+#: messages a page may send a second (a burst of twice as many): beyond, refused, so that a page
+#: that floods cannot fill the queue the frame loop drains
+MOST_RATE = 60.0
 
 
 def _log(text: str) -> None:
@@ -179,9 +182,17 @@ class PanelServer:
         state.clients += 1
         self.delivered.clear()
         pusher = asyncio.create_task(self._push(ws))
+        allowance, last = 2 * MOST_RATE, time.monotonic()  # a token bucket per page
         try:
             async for message in ws:
-                got = command(message, state.balances)
+                now = time.monotonic()
+                allowance = min(2 * MOST_RATE, allowance + (now - last) * MOST_RATE)
+                last = now
+                if allowance < 1.0:
+                    got = Refused(f"more than {MOST_RATE:g} messages a second")
+                else:
+                    allowance -= 1.0
+                    got = command(message, state.balances)
                 if isinstance(got, Command) and self.readonly:
                     await ws.send(json.dumps({"error": f"{got.do}: a finished run, nothing to control"}))
                 elif isinstance(got, Command):
