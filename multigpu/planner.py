@@ -29,16 +29,21 @@ KEEP = 8
 def balances_of(cfg) -> list[str]:
     """What an operator cycles through (B, the page): every strategy of the screen decomposition,
     else just that decomposition; with ``--panel``, every strategy and every other decomposition
-    this wall can run (``records.report.BALANCE_NAMES``' order), so the page switches either."""
+    this wall can run (``records.report.BALANCE_NAMES``' order), so the page switches either.
+    Where the exchange may be a shared segment, sized once for the decomposition the run starts
+    with, only those that fit its room are offered (no depth in a screen run's; a hybrid's holds
+    them all): a page never costs the wall memory it did not ask for."""
     if cfg.panel is None or cfg.partition != "redundant":
         return list(STRATEGIES) if cfg.decomposition == "screen" else [cfg.decomposition]
     import dataclasses
 
     from multigpu.decompositions import REGISTRY
 
-    modes = list(STRATEGIES)
-    for name in REGISTRY:
-        if name == "screen":
+    own = REGISTRY[cfg.decomposition]
+    fits = lambda k: cfg.exchange == "messages" or (k.depth <= own.depth and k.layers <= own.layers)  # noqa: E731
+    modes = list(STRATEGIES) if fits(REGISTRY["screen"]) else []
+    for name, kind in REGISTRY.items():
+        if name == "screen" or not fits(kind):
             continue
         try:  # a decomposition this wall cannot run (too few bins) is left out: the door's InputError
             dataclasses.replace(cfg, decomposition=name)

@@ -280,3 +280,28 @@ def test_a_page_that_floods_is_refused_beyond_its_rate(served):
     got = asyncio.run(flood())
     queued = len(state.take_commands())
     assert queued == got["ok"] and queued <= 2 * MOST_RATE + 10 and got["error"] >= 1000 - 2 * MOST_RATE - 10
+
+
+def test_the_page_offers_the_decompositions_the_exchange_has_room_for():
+    """A shared segment is sized for the decomposition a run starts with: a screen run's page
+    offers the strategies and bins (no depth), a db run's db too, a hybrid's every one; over
+    messages, every one. Without a panel, B cycles what it always did."""
+    from multigpu.planner import balances_of, most_of
+    from multigpu.strategies import REGISTRY as STRATEGIES
+
+    panel = ("127.0.0.1", 0)
+    strategies = list(STRATEGIES)
+    assert balances_of(WalkConfig()) == strategies
+    assert balances_of(WalkConfig(decomposition="db")) == ["db"]
+    assert balances_of(WalkConfig(panel=panel)) == [*strategies, "bins"]
+    assert balances_of(WalkConfig(panel=panel, decomposition="db")) == [*strategies, "db", "bins"]
+    assert balances_of(WalkConfig(panel=panel, decomposition="hybrid")) == [*strategies, "db", "bins", "hybrid"]
+    assert balances_of(WalkConfig(panel=panel, exchange="messages")) == [*strategies, "db", "bins", "hybrid"]
+    for cfg in (WalkConfig(panel=panel), WalkConfig(panel=panel, decomposition="db"),
+                WalkConfig(panel=panel, decomposition="hybrid")):
+        from multigpu.decompositions import REGISTRY
+
+        own = REGISTRY[cfg.decomposition]
+        assert most_of(cfg, balances_of(cfg)) == (own.depth, own.layers)  # no more room than it asked for
+    tiny = WalkConfig(panel=panel, exchange="messages", grid=(2, 2), tile=(8, 8), bin_size=64)
+    assert "bins" not in balances_of(tiny)  # fewer bins than ranks: left out

@@ -235,12 +235,14 @@ def test_the_panel_switches_decomposition_mid_run_exactly(tmp_path, reference, s
     """The operator's page switches the strategy and the decomposition every other frame
     (screen, db, hybrid, bins, cross), pauses and changes nothing else: every rank switches at
     the same frame (the CSV's balance column), and every mosaic is one rank's render bit for bit,
-    whatever backend and frames in flight (the exchange has room for the deepest of them)."""
+    whatever backend and frames in flight. A shared segment has the room of the decomposition a
+    run starts with, so those runs start as hybrid (the page offers only what fits)."""
     from multigpu.panel.protocol import Command
     from multigpu.rank.panel_link import PanelLink
     from multigpu.records.report import BALANCE_NAMES, COLUMNS, read_timings
 
-    script = {2: [("balance", {"name": "db"})], 4: [("balance", {"name": "hybrid"}), ("pause", {})],
+    script = {0: [("balance", {"name": "strips"})], 2: [("balance", {"name": "db"})],
+              4: [("balance", {"name": "hybrid"}), ("pause", {})],
               5: [("resume", {})], 7: [("balance", {"name": "bins"})], 9: [("balance", {"name": "cross"})]}
     calls = []  # the page's commands are read once a frame, and once a tick while paused (frame 4: twice)
     read = PanelLink.read
@@ -252,8 +254,10 @@ def test_the_panel_switches_decomposition_mid_run_exactly(tmp_path, reference, s
         read(self)
 
     monkeypatch.setattr(PanelLink, "read", scripted)
+    # a shared segment has the room of the decomposition the run starts with: a hybrid's holds them all
+    start = {"decomposition": "hybrid"} if exchange_as == "shared" else {}
     got = _walk(tmp_path / "p", (2, 2), (60, 48), latency=latency, exchange_as=exchange_as, frames=HELD,
-                balance="strips", panel=("127.0.0.1", 0), bin_size=16)
+                balance="strips", panel=("127.0.0.1", 0), bin_size=16, **start)
     for f, (a, b) in enumerate(zip(got, reference["held"])):
         assert (a == b).all(), f"frame {f}: {(a != b).any(axis=2).sum()} pixels differ"
     rows = read_timings(tmp_path / "p" / "timings.csv")
