@@ -16,7 +16,8 @@ import numpy as np
 
 from multigpu.errors import InputError
 from multigpu.panel.server import PanelServer
-from multigpu.panel.state import SERIES, PanelState, width
+from multigpu.panel.state import PanelState, width
+from multigpu.panel.state import plot_rows as plot_rows_of
 
 #: seconds each mosaic is shown before the next
 SLIDE = 1.0
@@ -35,18 +36,7 @@ def plot_rows(timings: np.ndarray, ranks: int) -> np.ndarray:
     order = np.lexsort((timings[:, col["rank"]], timings[:, col["frame"]]))
     rows = timings[order]
     n = len(rows) // ranks
-    per = rows[: n * ranks].reshape(n, ranks, -1)
-    frame_ms, render = per[:, :, col["frame_ms"]], per[:, :, col["rendering_cpu_ms"]]
-    mean = render.mean(axis=1)
-    out = np.empty((n, width(ranks)))
-    out[:, 0] = per[:, 0, col["frame"]]
-    out[:, 1] = 1e3 / np.maximum(frame_ms.max(axis=1), 1e-9)
-    out[:, 2] = per[:, 0, col["balance"]]
-    out[:, 3] = per[:, :, col["swap_skew_ms"]].max(axis=1)
-    out[:, 4] = np.where(mean > 0, render.max(axis=1) / np.where(mean > 0, mean, 1.0), 1.0)
-    out[:, len(SERIES):len(SERIES) + ranks] = frame_ms
-    out[:, len(SERIES) + ranks:] = render
-    return out
+    return plot_rows_of(rows[: n * ranks].reshape(n, ranks, -1), col)
 
 
 def load(out: Path) -> tuple[PanelState, list[Path]]:

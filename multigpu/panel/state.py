@@ -32,6 +32,23 @@ def names(ranks: int) -> list[str]:
     return [*SERIES, *(f"frame_ms {k}" for k in range(ranks)), *(f"render_cpu_ms {k}" for k in range(ranks))]
 
 
+def plot_rows(per: np.ndarray, col: dict) -> np.ndarray:
+    """Frames' timing rows, (F, K, columns) in rank order (``col``: column name to index), as the
+    page's plot rows (F, ``width(K)``), named by ``names``: the live run's and a finished one's."""
+    n, ranks = per.shape[:2]
+    frame_ms, render = per[:, :, col["frame_ms"]], per[:, :, col["rendering_cpu_ms"]]
+    mean = render.mean(axis=1)
+    out = np.empty((n, width(ranks)))
+    out[:, 0] = per[:, 0, col["frame"]]
+    out[:, 1] = 1e3 / np.maximum(frame_ms.max(axis=1), 1e-9)
+    out[:, 2] = per[:, 0, col["balance"]]
+    out[:, 3] = per[:, :, col["swap_skew_ms"]].max(axis=1)
+    out[:, 4] = np.where(mean > 0, render.max(axis=1) / np.where(mean > 0, mean, 1.0), 1.0)
+    out[:, len(SERIES):len(SERIES) + ranks] = frame_ms
+    out[:, len(SERIES) + ranks:] = render
+    return out
+
+
 class PanelState:
     """The run as the page sees it. ``header``: the run's facts (scene, wall, strategy, ...);
     ``balances``: the strategies the page may switch between; ``ranks``: the wall's ranks."""

@@ -104,11 +104,12 @@ class FrameLog:
         failed = self.record is not None and self.record.failed is not None
         return float(self.job.signum or window_event or (STOP_FLAG[STOPS[-5]] if failed else 0))
 
-    def landed(self, f: int, every: np.ndarray, recorded) -> None:
+    def landed(self, f: int, every: np.ndarray, recorded) -> np.ndarray | None:
         """Rank 0: every rank's landed row of frame ``f`` into the records (rows first: the
-        summary always matches the CSV; the camera before them: the path file never lags)."""
+        summary always matches the CSV; the camera before them: the path file never lags); the
+        rows as recorded (the swap skew on each), None on other ranks."""
         if self.rank != 0:
-            return
+            return None
         rows = every[:, :len(COLUMNS)].copy()
         if self.window:  # swap moments after the frame's first swap; the skew on every row
             at = rows[:, self.col["swap_ms"]].copy()
@@ -117,6 +118,7 @@ class FrameLog:
         if recorded is not None:
             self.record.camera(recorded)
         self.write(self.record.rows, f, rows)
+        return rows
 
     def show(self, f: int, work, back: np.ndarray) -> None:
         """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""

@@ -237,9 +237,9 @@ class Frames:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
         self.learn.append((f, every[:, self.col["rendering_cpu_ms"]].copy()))
         self.fidelity.landed(f, float(every[:, self.col["frame_ms"]].mean()))  # a frame-rate target learns
-        self.log.landed(f, every, recorded if self.cfg.record else None)  # rank 0's records
-        if self.live is not None and self.rank == 0:  # the page's plots (and its recording)
-            self.live.landed(f, every, recorded, self.fidelity)
+        rows = self.log.landed(f, every, recorded if self.cfg.record else None)  # rank 0's records
+        if self.live is not None and rows is not None:  # the page's plots (and its recording)
+            self.live.landed(f, rows, recorded, self.fidelity)
         self.done = f + 1
         if every[:, -1].any():
             self.stopping = True

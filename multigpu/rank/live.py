@@ -147,10 +147,10 @@ class Live:
             return f"{why} (the monitor)"
         return self.panel.poll() if self.panel is not None else None
 
-    def landed(self, f: int, every: np.ndarray, recorded, fidelity) -> None:
-        """Rank 0: a frame's rows, every rank's, to the page (plots, status, a recording)."""
+    def landed(self, f: int, rows: np.ndarray, recorded, fidelity) -> None:
+        """Rank 0: a frame's rows, every rank's as recorded, to the page (plots, status, a recording)."""
         if self.panel is not None:
-            self.panel.landed(f, every, self.col, self.balances, recorded)
+            self.panel.landed(f, rows, self.col, recorded)
             self.panel.status(self.steering.last_control, self.balances, fidelity)
 
     def close(self, finished: bool) -> None:

@@ -20,7 +20,7 @@ import numpy as np
 from multigpu.core.navigate import Input
 from multigpu.panel.protocol import Command
 from multigpu.panel.server import PERIOD, PanelServer
-from multigpu.panel.state import PanelState
+from multigpu.panel.state import PanelState, plot_rows
 
 #: where the launcher puts a token that outlives a restart of the wall (else each run makes its own)
 TOKEN_ENV = "MULTIGPU_PANEL_TOKEN"
@@ -31,7 +31,7 @@ SETTINGS = ("target_fps", "render_scale", "lod_error")
 def header(cfg, title: str, balances) -> dict:
     """The run's facts, as the page's table shows them."""
     W, H = cfg.canvas.size
-    return {"title": title, "scene": cfg.scene.name if hasattr(cfg.scene, "name") else str(cfg.scene),
+    return {"title": title, "scene": cfg.scene.model or cfg.scene.scene,
             "wall": f"{cfg.grid[0]}x{cfg.grid[1]} tiles of {cfg.tile[0]}x{cfg.tile[1]}",
             "wall_pixels": [W, H], "ranks": cfg.ranks, "decomposition": cfg.decomposition,
             "balance": cfg.balance, "strategies": list(balances), "latency": cfg.latency,
@@ -131,19 +131,10 @@ class PanelLink:
 
     # -- records (rank 0's landed rows)
 
-    def landed(self, f: int, every: np.ndarray, col: dict, balances, recorded) -> None:
-        """Frame ``f``'s rows, every rank's: one plot row (``panel.state.names``); its camera while
-        recording."""
-        frame_ms = every[:, col["frame_ms"]]
-        render = every[:, col["rendering_cpu_ms"]]
-        mean = float(render.mean())
-        K = len(frame_ms)
-        row = np.empty(5 + 2 * K)
-        row[:5] = (f, 1e3 / max(float(frame_ms.max()), 1e-9), every[0, col["balance"]],
-                   float(every[:, col["swap_skew_ms"]].max()), float(render.max()) / mean if mean > 0 else 1.0)
-        row[5:5 + K] = frame_ms
-        row[5 + K:] = render
-        self.state.add_row(row)
+    def landed(self, f: int, rows: np.ndarray, col: dict, recorded) -> None:
+        """Frame ``f``'s rows, every rank's as rank 0 records them (the swap skew on each): one plot
+        row (``panel.state.names``); its camera while recording."""
+        self.state.add_row(plot_rows(rows[None], col)[0])
         if self.recording is not None and recorded is not None:
             cam = recorded
             self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far])
