@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import json
 import threading
+import time
 import urllib.error
 import urllib.request
 
@@ -259,10 +260,12 @@ def test_a_finished_run_is_served_read_only(tmp_path):
 
 def test_a_page_that_floods_is_refused_beyond_its_rate(served):
     """A page that sends thousands of valid commands at once: the loop's queue gets at most the
-    burst, the rest get an error reply."""
+    burst and what the rate refills while they arrive (timed here: a slow machine takes longer),
+    the rest get an error reply."""
     from multigpu.panel.server import MOST_RATE
 
     state, server, url = served
+    began = time.monotonic()
 
     async def flood():
         async with _ws(url) as ws:
@@ -278,8 +281,9 @@ def test_a_page_that_floods_is_refused_beyond_its_rate(served):
             return got
 
     got = asyncio.run(flood())
+    most = 2 * MOST_RATE + MOST_RATE * (time.monotonic() - began) + 1
     queued = len(state.take_commands())
-    assert queued == got["ok"] and queued <= 2 * MOST_RATE + 10 and got["error"] >= 1000 - 2 * MOST_RATE - 10
+    assert queued == got["ok"] and queued <= most and got["error"] >= 1000 - most, (got, most)
 
 
 def test_the_page_offers_the_decompositions_the_exchange_has_room_for():
