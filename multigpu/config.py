@@ -7,6 +7,7 @@ import re
 from dataclasses import dataclass, field, replace
 
 from multigpu.core.canvas import Canvas
+from multigpu.core.eyes import EYE_SEPARATION
 from multigpu.core.inflight import MOST
 from multigpu.core.resample import MIN_SCALE
 from multigpu.errors import InputError
@@ -33,6 +34,12 @@ PRESENTERS = ("headless", "window")
 #: frame exchange backends (``auto``: a shared segment per host where it can be made, messages
 #: between hosts; else messages alone)
 EXCHANGES = ("auto", "messages", "shared")
+
+
+def _stereo_modes() -> tuple:
+    from multigpu.core.stereo import MODES, UNSHOWN
+
+    return (*MODES, *UNSHOWN)
 
 
 def _codec(text: str) -> bool:
@@ -162,10 +169,50 @@ def _frames() -> str:
 
 
 _finite = lambda v: math.isfinite(v)  # noqa: E731
-PATH, WALL, BALANCING, QUALITY, OUTPUTS, CONTROL = ("camera path", "wall and display", "balancing",
-                                                   "speed for accuracy", "outputs", "run control")
+PATH, WALL, STEREO, BALANCING, QUALITY, OUTPUTS, CONTROL = ("camera path", "wall and display",
+                                                           "stereo and the viewer", "balancing",
+                                                           "speed for accuracy", "outputs", "run control")
 #: the walkthrough's flag groups, in the help's order (the scene's come first, the launcher's hosts last)
-GROUPS = [PATH, WALL, BALANCING, QUALITY, OUTPUTS, CONTROL]
+GROUPS = [PATH, WALL, STEREO, BALANCING, QUALITY, OUTPUTS, CONTROL]
+#: a wall's pixel pitch where neither --screen-size nor the wall file's screen_m or bezel gives its size (mm)
+DEFAULT_PITCH_MM = 0.5
+
+
+def read_size_m(text: str) -> tuple[float, float]:
+    """``--screen-size W,H`` in metres."""
+    try:
+        v = tuple(float(t) for t in str(text).split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 2:
+        raise InputError(f"must look like W,H (the wall's width and height in metres), got '{text}'")
+    return v
+
+
+def read_poses(path: str) -> tuple:
+    """A head pose file (docs/USAGE.md, "A stereo wall"): JSON, a list (or ``{"poses": [...]}``)
+    with a pose per frame, each [x, y, z] or [x, y, z, yaw, pitch, roll] (metres, degrees)."""
+    import json
+
+    from multigpu.core.eyes import Pose
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"--head-poses {path}: {exc.__class__.__name__}: {exc}") from None
+    rows = doc.get("poses") if isinstance(doc, dict) else doc
+    if not isinstance(rows, list) or not rows:
+        raise InputError(f"--head-poses {path}: must be a non-empty list of poses (or {{\"poses\": [...]}})")
+    out = []
+    for i, row in enumerate(rows):  # the file's poses, read once at the door
+        ok = (isinstance(row, list) and len(row) in (3, 6)
+              and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in row))
+        if not ok:
+            raise InputError(f"--head-poses {path}: pose {i} must be [x, y, z] or [x, y, z, yaw, pitch, roll] "
+                             f"(finite numbers), got {json.dumps(row)[:80]}")
+        out.append(Pose(tuple(float(v) for v in row[:3]), *(float(v) for v in row[3:])))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -215,6 +262,32 @@ class WalkConfig:
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place (wall file)
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     gpus: tuple = ()  # per rank label: its EGL device (wall file "gpu"), or None for --device / the default
+    screen_m: tuple[float, float] | None = option(
+        None, group=WALL, flag="--screen-size", metavar="W,H", read=read_size_m,
+        valid=lambda v: v is None or (all(_finite(x) and x > 0 for x in v)), must="must be two sizes > 0 metres",
+        help=("the wall's width and height in metres, bezels included: where the viewer's eyes look through it "
+              f"(default: the wall file's screen_m, else from its bezel's pixel pitch, else {DEFAULT_PITCH_MM:g} mm "
+              "a pixel)"))
+    # -- stereo and the viewer (core/eyes.py, core/stereo.py)
+    stereo: str = option("mono", group=STEREO, choices=lambda: _stereo_modes(), help=(
+        "show both eyes on every display: side-by-side (each eye half the tile's width), top-bottom (the left eye "
+        "above), anaglyph (red left, cyan right); quad needs a stereo GL visual (docs/USAGE.md, \"A stereo "
+        "wall\")"))
+    eye_separation: float = option(EYE_SEPARATION, group=STEREO, metavar="M", type=float,
+                                   valid=lambda v: v >= 0 and _finite(v), must="must be >= 0 metres",
+                                   help="metres between the viewer's eyes (default: {default})")
+    swap_eyes: bool = option(False, group=STEREO, switch=True, help="each eye's picture in the other's place")
+    head: tuple[float, float, float] | None = option(None, group=STEREO, metavar="X,Y,Z", read=read_vec3, help=(
+        "the viewer's head in metres from the wall's centre (x right, y up, z out of the wall): each tile shows "
+        "the scene through the wall from there (default: on the wall's axis, where the wall spans the camera's "
+        "field of view)"))
+    head_poses: str | None = option(None, group=STEREO, metavar="FILE", help=(
+        "the head's pose for every frame, beside the camera path: a JSON list of [x, y, z] or [x, y, z, yaw, "
+        "pitch, roll] (metres, degrees)"))
+    world_per_metre: float = option(1.0, group=STEREO, metavar="U", type=float,
+                                    valid=lambda v: v > 0 and _finite(v), must="must be > 0",
+                                    help="scene units a metre of head motion moves the eye (default: {default})")
+    poses: tuple = ()  # the head pose file's poses, read at the door
     # -- balancing
     balance: str = option("auto", group=BALANCING, choices=lambda: REGISTRY, help=_strategies)
     decomposition: str = option("screen", group=BALANCING, choices=_names("multigpu.decompositions", "REGISTRY"), help=(
@@ -326,6 +399,7 @@ class WalkConfig:
         if self.compress is None:
             object.__setattr__(self, "compress", "auto")
         check(self)
+        self._viewer_checked()
         if self.partition == "broadcast" and self.decomposition != "screen":
             raise InputError.of("partition", "broadcast works with --decomposition screen (the balancer's "
                                 f"partition), got --decomposition {self.decomposition}")
@@ -347,6 +421,49 @@ class WalkConfig:
             if bins > 65536:
                 raise InputError.of("bin_size", f"{self.bin_size}: {bins} bins on a {self.size[0]}x{self.size[1]} "
                                     "wall (at most 65536: every bin is a draw per frame)")
+
+    def _viewer_checked(self) -> None:
+        """Stereo and the viewer at the door: a mode the presenters can show, packing that fits
+        the tile, an eye separation narrower than the wall, every head pose in front of it."""
+        from multigpu.core.eyes import Pose, head_problem
+        from multigpu.core.stereo import UNSHOWN
+
+        if self.stereo in UNSHOWN:
+            raise InputError.of("stereo", f"{self.stereo}: {UNSHOWN[self.stereo]}")
+        tw, th = self.tile
+        if self.stereo == "side-by-side" and tw % 2:
+            raise InputError.of("tile", f"{tw}x{th}: side-by-side stereo needs an even tile width (each eye half)")
+        if self.stereo == "top-bottom" and th % 2:
+            raise InputError.of("tile", f"{tw}x{th}: top-bottom stereo needs an even tile height (each eye half)")
+        if self.screen_m is None:
+            object.__setattr__(self, "screen_m", tuple(v * DEFAULT_PITCH_MM / 1000.0 for v in self.canvas.size))
+        if self.head_poses and not self.poses:
+            object.__setattr__(self, "poses", read_poses(self.head_poses))
+        viewer = self.viewer
+        if viewer is None:
+            return
+        if self.eye_separation >= self.screen_m[0]:
+            raise InputError.of("eye_separation", f"{self.eye_separation:g} m is as wide as the wall or wider "
+                                f"({self.screen_m[0]:g} m: --screen-size)")
+        if self.head is not None:
+            why = head_problem(Pose(self.head), viewer)
+            if why:
+                raise InputError.of("head", f"{','.join(f'{v:g}' for v in self.head)}: {why}")
+        for i, pose in enumerate(self.poses):  # the file's poses, once at the door
+            why = head_problem(pose, viewer)
+            if why:
+                raise InputError(f"--head-poses {self.head_poses}: pose {i}: {why}")
+
+    @property
+    def viewer(self):
+        """Who looks at the wall (``core/eyes.Viewer``), where a run places one: stereo, a head or
+        head poses; None: the camera's own frustum, as always."""
+        if self.stereo == "mono" and self.head is None and not self.poses:
+            return None
+        from multigpu.core.eyes import Pose, Viewer
+
+        return Viewer(self.screen_m, self.eye_separation if self.stereo != "mono" else 0.0,
+                      None if self.head is None else Pose(self.head), self.world_per_metre, self.swap_eyes)
 
     def _scene_as_drawn(self) -> None:
         """The scene prepared with levels of detail only where the run can draw them

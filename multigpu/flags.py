@@ -120,11 +120,31 @@ def walk_config(a):
             given["panel"] = read_panel(wall.panel)
         except InputError as exc:
             raise InputError(f"{wall.path}: panel {exc}") from None
+    stereo_keys = {"mode": "stereo", "eye_separation_m": "eye_separation", "swap_eyes": "swap_eyes",
+                   "head_m": "head", "world_per_metre": "world_per_metre"}
+    unset = defaults(WalkConfig)
+    for key, name in stereo_keys.items():  # the file's stereo where the flags leave it at its default
+        if key in wall.stereo and given.get(name) in (None, unset[name]):
+            given[name] = tuple(wall.stereo[key]) if key == "head_m" else wall.stereo[key]
+    if given.get("screen_m") is None:
+        given["screen_m"] = wall.screen_m or screen_of_bezel(wall, grid, tile, mullion)
     return WalkConfig(scene=spec(a), grid=grid, tile=tile, mullion=mullion, **given,
                       displays=tuple(wall.displays.get(r) for r in ranks) if wall.displays else (),
                       positions=tuple(wall.positions.get(r) for r in ranks) if wall.positions else (),
                       fullscreen=tuple(r in wall.fullscreen for r in ranks) if wall.fullscreen else (),
                       gpus=tuple(wall.gpus.get(r) for r in ranks) if wall.gpus else ())
+
+
+def screen_of_bezel(wall, grid, tile, mullion) -> tuple[float, float] | None:
+    """The wall's size in metres from its bezel's pixel pitch (None: the file gives none)."""
+    b = wall.bezel
+    if not b:
+        return None
+    two = lambda v: (float(v), float(v)) if not isinstance(v, list) else (float(v[0]), float(v[1]))  # noqa: E731
+    pitch = two(b["pixel_pitch_mm"]) if "pixel_pitch_mm" in b else (b["panel_mm"][0] / tile[0],
+                                                                     b["panel_mm"][1] / tile[1])
+    (rows, cols), (tw, th), (mx, my) = grid, tile, mullion
+    return ((cols * tw + (cols - 1) * mx) * pitch[0] / 1000.0, (rows * th + (rows - 1) * my) * pitch[1] / 1000.0)
 
 
 def dark_tiles(a) -> tuple[int, ...]:

@@ -17,7 +17,9 @@ from typing import Callable
 
 import numpy as np
 
+from multigpu.core.eyes import eye_frames
 from multigpu.core.projectors import make_projector
+from multigpu.core.stereo import make_stereo
 from multigpu.core.work import Work
 from multigpu.decompositions import REGISTRY
 from multigpu.strategies import REGISTRY as STRATEGIES
@@ -68,12 +70,26 @@ def most_of(cfg, balances) -> tuple[bool, int]:
     return any(k.depth for k in kinds), max(k.layers for k in kinds)
 
 
+def eye_config(cfg, stereo):
+    """``cfg`` as one eye's wall: its tile and bezels at the eye's pixels, mono (what the
+    decompositions plan from)."""
+    import dataclasses
+
+    return dataclasses.replace(cfg, tile=stereo.eye.tile, mullion=stereo.eye.mullion, stereo="mono", head=None,
+                               head_poses=None, poses=())
+
+
 class Planner:
     """Plans frames for one rank of a ``WalkConfig`` wall (``rank`` None: every rank's masks)."""
 
     def __init__(self, cfg, scene, rank: int | None = None):
         self.cfg, self.scene, self.rank = cfg, scene, rank
-        self.canvas = cfg.canvas
+        # a stereo wall plans on one eye's canvas and both eyes render the plan (core/stereo.py)
+        self.stereo = make_stereo(cfg.stereo, cfg.canvas)
+        self.plan_cfg = cfg if self.stereo is None else eye_config(cfg, self.stereo)
+        self.canvas = self.plan_cfg.canvas
+        self.viewer = cfg.viewer  # None: the camera's own frustum
+        self.views: list = []  # the last frame's (view, proj, light) of every eye, where there is a viewer
         self.bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
         self.balances = balances_of(cfg)
         self.using = self.balances.index(cfg.balance if cfg.decomposition == "screen" else cfg.decomposition)
@@ -94,7 +110,7 @@ class Planner:
         d = self._built.get(self.using)
         if d is None:
             name, balance = mode_of(self.cfg, self.balances[self.using])
-            d = self._built[self.using] = REGISTRY[name].from_config(self.cfg, self.scene, balance, self.rank)
+            d = self._built[self.using] = REGISTRY[name].from_config(self.plan_cfg, self.scene, balance, self.rank)
         self._d = d
         return d
 
@@ -103,13 +119,31 @@ class Planner:
         self.using = int(i)
         self._d = None
 
-    def frame(self, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def frame(self, camera, f: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(view, proj, light, rects) of ``camera`` on the canvas: the (N, 4) normalized object
         rects in the visible space (NaN: not seen), and the coverage too where the
         decomposition in use wants it. Compiled, matrices and rects come from one kernel call,
-        into the projector's own arrays: valid through the next call, not longer."""
+        into the projector's own arrays: valid through the next call, not longer. With a viewer
+        (``f``: the frame, for its head pose) see ``_viewed``."""
         d = self._d or self.decomposition
+        if self.viewer is not None:
+            return self._viewed(camera, f, d)
         view, proj, light, rects = self.project.frame(camera, self.size, self.coverage if d.needs_coverage else None)
+        return view, proj, light, self.canvas.to_visible(rects) if self.bezels else rects
+
+    def _viewed(self, camera, f: int, d):
+        """A viewer's frame: each eye's off-axis matrices (``views``, the first returned), and
+        every object's rect over all eyes (their union: a region's objects are those either eye
+        sees in it, so one plan serves both)."""
+        poses = self.cfg.poses
+        pose = poses[min(f, len(poses) - 1)] if poses else None
+        self.views = eye_frames(camera, self.viewer, pose, 1 if self.stereo is None else 2)
+        rects = None
+        for view, proj, _ in self.views:  # eyes
+            r = self.project(view, proj, self.coverage if d.needs_coverage and rects is None else None)
+            rects = r if rects is None else np.concatenate([np.fmin(rects[:, :2], r[:, :2]),
+                                                            np.fmax(rects[:, 2:], r[:, 2:])], axis=1)
+        view, proj, light = self.views[0]
         return view, proj, light, self.canvas.to_visible(rects) if self.bezels else rects
 
     def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None,
@@ -134,7 +168,7 @@ class Planner:
 
     def plan(self, frame: int, camera, relay: Callable | None = None) -> tuple[Work, tuple]:
         """Frame ``frame``'s work and its (view, proj, light)."""
-        view, proj, light, rects = self.frame(camera)
+        view, proj, light, rects = self.frame(camera, frame)
         return self.work(frame, rects, relay), (view, proj, light)
 
     def observe(self, frame: int, times: np.ndarray) -> None:

@@ -50,6 +50,8 @@ class Wall:
     monitor_on: dict = field(default_factory=dict)  # the view's own PC: "host", "display", "address" (the file's)
     compress: str | None = None  # how pixels cross between PCs (--compress), where the file says
     panel: str | None = None  # where the operator's page is served ([ADDRESS:]PORT, --panel), where the file says
+    screen_m: tuple[float, float] | None = None  # the wall's width and height in metres (--screen-size)
+    stereo: dict = field(default_factory=dict)  # the file's stereo and viewer (--stereo, --eye-separation, ...)
 
 
 def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
@@ -143,7 +145,8 @@ def load_wall(path: str) -> Wall:
     monitor = tuple(doc["monitor"]["position"]) if "monitor" in doc else None
     on = {k: v for k, v in doc.get("monitor", {}).items() if k in ("host", "display", "address")}
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
-                on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]))
+                on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]),
+                None if "screen_m" not in doc else tuple(float(v) for v in doc["screen_m"]), doc.get("stereo", {}))
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:

@@ -67,7 +67,8 @@ def make_exchange(cfg: WalkConfig, comm, planner: Planner, hosts: list[str]) -> 
     (``hosts``: every rank's). Every rank the same (collective)."""
     shared, why = None, None
     if cfg.exchange != "messages":  # room for every decomposition the operator may switch to
-        shared, why = SharedPieces.make(comm, cfg.canvas.size, planner.depth, cfg.timeout, cfg.exchange == "shared",
+        composed = cfg.canvas if planner.stereo is None else planner.stereo.composed  # where tiles are composed
+        shared, why = SharedPieces.make(comm, composed.size, planner.depth, cfg.timeout, cfg.exchange == "shared",
                                         slots=slots(cfg.latency), layers=planner.layers)
     exchange = shared or Messages(comm, cfg.timeout, sync=cfg.latency == 0)
     exchange.links = wire.links(cfg.compress, hosts, comm.Get_rank())

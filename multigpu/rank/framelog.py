@@ -18,6 +18,7 @@ from collections import deque
 import numpy as np
 
 from multigpu.core import wire
+from multigpu.core.stereo import make_stereo
 from multigpu.errors import WriteFailed
 from multigpu.rank.composite import decoded
 from multigpu.rank.exchange import allgather_text, wait_all
@@ -50,7 +51,8 @@ class FrameLog:
         self.n_frames, self.window = n_frames, window
         self.canvas = cfg.canvas
         self.tiles = self.canvas.tiles()
-        tw, th = cfg.tile
+        self.stereo = make_stereo(cfg.stereo, self.canvas)  # a stereo wall gathers composed tiles (both eyes)
+        tw, th = cfg.tile if self.stereo is None else self.stereo.composed.tile
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
         self.shown_at = None  # when this rank's last frame was shown (perf_counter): the frame period
         self._beat_cpu = job.thread_cpu
@@ -128,9 +130,20 @@ class FrameLog:
         if not (mosaic_due or cfg.video):
             return
         self._gather(f, back)
-        if self.rank == 0:
+        if self.rank != 0:
+            return
+        st = self.stereo
+        if st is None:
             self.write(self.record.image, f, stitch(self.gathered, self.tiles, self.canvas.size, self.canvas.dark),
                        work.rects, mosaic_due)
+            return
+        # the wall as its displays show it, and each eye's own mosaic (the partition over the left eye's)
+        shown = np.stack([st.pack(g) for g in self.gathered])  # tiles, not objects
+        ew = st.eye_tile[0]
+        eyes = [stitch(self.gathered[:, :, e * ew:(e + 1) * ew], st.eye.tiles(), st.eye.size, self.canvas.dark)
+                for e in range(2)]  # eyes
+        self.write(self.record.image, f, stitch(shown, self.tiles, self.canvas.size, self.canvas.dark), work.rects,
+                   mosaic_due, eyes)
 
     def _gather(self, f: int, back: np.ndarray) -> None:
         """Every rank's composed tile into rank 0's ``gathered``: one message each, compressed from

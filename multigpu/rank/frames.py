@@ -51,6 +51,8 @@ class InFlight:
     balance: int  # the CSV's balance column
     recorded: object  # rank 0 with --record: the camera, in path-file coordinates
     quality: Quality  # the frame's render scale and level-of-detail bound
+    composed: Work | None = None  # a stereo wall's: both eyes' parts where they are composed (core/stereo.py)
+    picks: list | None = None  # a stereo wall's: where each composed part comes from
     rendered: list | None = None
     started: object = None
 
@@ -63,10 +65,12 @@ class Frames:
         self.cfg, self.comm, self.job = cfg, comm, job
         self.scene, self.path, self.renderer, self.presenter = scene, path, renderer, presenter
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
-        tw, th = cfg.tile
-        self.canvas = cfg.canvas
-        self.tiles = self.canvas.tiles()
         self.planner, self.exchange, self.projection = setup.planner, setup.exchange, setup.projection
+        # where ranks plan and render (one eye's canvas on a stereo wall) and where tiles are composed
+        self.stereo, self.canvas = self.planner.stereo, self.planner.canvas
+        composed = self.canvas if self.stereo is None else self.stereo.composed
+        self.tiles = composed.tiles()
+        tw, th = composed.tile
         self.live, self.record, self.background = setup.live, setup.record, setup.background
         self.culler = PartCuller(scene) if renderer.draws.parts else None  # objects cut into parts
         # speed for accuracy: each frame's render scale and levels of detail (core/quality.py)
@@ -99,7 +103,7 @@ class Frames:
 
     # -- phases of one frame
 
-    def render(self, t: Timer, work: Work, view, proj, light, rects, scale: float, levels):
+    def render(self, t: Timer, work: Work, view, proj, light, rects, scale: float, levels, ahead: bool = True):
         """Every piece this rank renders, drawn (read later: ``Pending.read``). Of a scene cut
         into parts, the parts each piece needs are found first (the ``cull`` phase); ``drawn``
         counts the triangles the pieces drew. Below ``scale`` 1 a piece draws what reaches the
@@ -124,7 +128,7 @@ class Frames:
         else:
             pieces = [(rect, mask, None) for rect, mask, _ in mine]
         with t.phase("render"):
-            pending = self.renderer.submit(view, proj, light, pieces, work.depth, self.ahead, scale, levels)
+            pending = self.renderer.submit(view, proj, light, pieces, work.depth, self.ahead and ahead, scale, levels)
         self.drawn = self.renderer.last_triangles
         return pending
 
@@ -134,7 +138,8 @@ class Frames:
         the operator's monitor. Returns when the swap returned and the stop flag of a window
         event (0: none)."""
         with t.phase("display"):
-            shown = self.back if self.live is None else self.live.tile(self.back, work, control, rows)
+            tile = self.back if self.stereo is None else self.stereo.pack(self.back)  # what the display shows
+            shown = tile if self.live is None else self.live.tile(tile, work, control, rows)
             self.presenter.show(shown)
         if self.window:
             with t.phase("swap_wait"):
@@ -143,7 +148,7 @@ class Frames:
             swapped = self.presenter.swap()
             why = self.presenter.poll()
             if self.live is not None:
-                seen = self.live.show_monitor(self.back, work, control, rows)
+                seen = self.live.show_monitor(tile, work, control, rows)
                 if seen and not why:
                     return swapped, STOP_FLAG.get(seen, STOP_FLAG["window closed (the monitor)"])
         return swapped, STOP_FLAG.get(why, 0)
@@ -191,25 +196,37 @@ class Frames:
                 front = work.front or (0,) * work.ranks  # a hybrid's regions stay
                 work = work._replace(rects=tuple(grown(r, self.canvas.size, quality.scale, f)
                                                  for r, f in zip(work.rects, front)))
-        pending = self.render(t, work, view, proj, light, rects, quality.scale, levels)
+        if self.stereo is None:
+            pending = self.render(t, work, view, proj, light, rects, quality.scale, levels)
+        else:  # both eyes draw the plan, each with its own frustum (a ring of framebuffers holds one eye)
+            pending, drawn = [], 0
+            for eye_view, eye_proj, eye_light in self.planner.views:  # eyes
+                pending.append(self.render(t, work, eye_view, eye_proj, eye_light, rects, quality.scale, levels,
+                                           ahead=False))
+                drawn += self.drawn
+            self.drawn = drawn
         with t.phase("exchange"):
-            plan = transfers(work, self.tiles)
+            composed, picks = (work, None) if self.stereo is None else self.stereo.compose(work)
+            plan = transfers(composed, self.tiles)
         recorded = None
         if (self.cfg.record or self.cfg.panel) and self.rank == 0:  # the frame's camera, in path-file coordinates
             live = self.live.recorded() if self.live is not None and self.interactive else None
             recorded = live if live is not None else unshifted(camera, self.cfg.offset)
         return InFlight(f, t, control, work, plan, pending, self.drawn, work.objects(self.rank),
-                        self.balance_ids[self.planner.using], recorded, quality)
+                        self.balance_ids[self.planner.using], recorded, quality, composed, picks)
 
     def send(self, x: "InFlight") -> None:
         """A frame's second stage: its pixels read back (``readback``: waiting for the GL) and,
         with frames in flight, its parts on their way to their tiles' ranks."""
         with x.t.phase("readback"):
-            x.rendered = x.pending.read()
+            x.rendered = x.pending.read() if x.picks is None else [p.read() for p in x.pending]
             x.pending = None
         with x.t.phase("exchange"):  # parts for peers out: into the shared segment, or as messages
             self.exchange.bits = self.cfg.compress_moving if x.quality.moving else 0  # lossy only while moving
-            x.started = self.exchange.start(x.f, self.rank, x.work.rects, x.rendered, x.plan, x.work.depth)
+            rects, rendered = x.composed.rects, x.rendered
+            if x.picks is not None:  # each eye's pieces as the parts where they are composed (views)
+                rendered = self.stereo.parts(x.picks[self.rank], rects[self.rank], rendered)
+            x.started = self.exchange.start(x.f, self.rank, rects, rendered, x.plan, x.work.depth)
 
     def deliver(self, x: "InFlight") -> None:
         """A frame's last stage: the peers' parts (the ``sync`` wait), the tile composed and

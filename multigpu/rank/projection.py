@@ -31,7 +31,7 @@ class EachRank:
 
     def project(self, frame: int, camera, timer):
         with timer.phase("project"):
-            return self.planner.frame(camera)
+            return self.planner.frame(camera, frame)
 
     def close(self, collective: bool = True) -> None:
         """Nothing held."""
@@ -40,12 +40,13 @@ class EachRank:
 def make_projection(cfg, comm, planner, n_objects: int) -> "tuple[EachRank | SharedProjection, str | None]":
     """``--projection``'s backend for this job, and why not the shared one where it was asked for
     and cannot be (None otherwise): every rank of the job the same."""
-    if cfg.projection == "shared" and comm.Get_size() > 1 and cfg.bounds == "box":
+    if cfg.projection == "shared" and comm.Get_size() > 1 and cfg.bounds == "box" and planner.viewer is None:
         shared, why = SharedProjection.make(comm, planner, n_objects, cfg.timeout)
         if shared is not None:
             return shared, None
         return EachRank(planner), why
-    return EachRank(planner), None
+    why = "a viewer's eyes are projected whole" if cfg.projection == "shared" and planner.viewer is not None else None
+    return EachRank(planner), why
 
 
 class SharedProjection:

@@ -26,6 +26,7 @@ from multigpu.core.camera import frame_matrices
 from multigpu.core.memory import release_heap
 from multigpu.core.projectors import make_projector
 from multigpu.core.spheres import SphereProjector
+from multigpu.core.stereo import eye_canvas
 from multigpu.errors import InputError
 from multigpu.gpu.buffers import ensure_buffers
 from multigpu.rank.exchange import agree, allgather_text
@@ -153,7 +154,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 own = cfg.gpus and cfg.gpus[rank] is not None and rank not in cfg.dark  # a stand-in: any GPU
                 mine = cfg.gpus[rank] if own else cfg.device
                 ctx, device = create_context(mine, local_rank=local, host_ranks=host_ranks)
-            renderer = RegionRenderer(ctx, scene, cfg.canvas.size, cfg.subfrustum, shared, cfg.colors)
+            renderer = RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum, shared,
+                                      cfg.colors)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
             if rank == 0:
                 mark("gl")

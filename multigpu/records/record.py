@@ -152,13 +152,21 @@ class RunRecord:
             self.summary(complete=False)
             self._save_path()
 
-    def image(self, f: int, img: np.ndarray, rects, mosaic: bool) -> None:
+    def image(self, f: int, img: np.ndarray, rects, mosaic: bool, eyes: list | None = None) -> None:
         """The stitched wall of frame ``f``: a mosaic PNG (and its partition overlay) when
-        ``mosaic``, a video frame when recording one."""
+        ``mosaic``, a video frame when recording one. A stereo wall's ``eyes`` (left, right)
+        go beside it, in ``mosaic/left`` and ``mosaic/right``, the partition over the left eye's."""
         if mosaic:
-            save_png(img, self.out.path / "mosaic" / f"frame_{f:05d}.png")
+            folder = self.out.path / "mosaic"
+            save_png(img, folder / f"frame_{f:05d}.png")
+            for name, eye in zip(("left", "right"), eyes or ()):  # eyes
+                try:
+                    (folder / name).mkdir(exist_ok=True)
+                except OSError as exc:
+                    raise WriteFailed.of(folder / name, exc) from None
+                save_png(eye, folder / name / f"frame_{f:05d}.png")
             if self.overlay:
-                save_png(overlay(img, rects), self.out.path / "mosaic" / f"frame_{f:05d}_partition.png")
+                save_png(overlay(img if eyes is None else eyes[0], rects), folder / f"frame_{f:05d}_partition.png")
         if self.video is not None:
             self.video.append(img)
 

@@ -1,0 +1,128 @@
+"""Stereo walls: the two eyes' canvases, where their pixels travel, and how a display shows them.
+
+Three pixel spaces (origin bottom-left, rects half-open ``[x0, y0, x1, y1)``):
+
+* each **eye's canvas**: the whole wall as one eye sees it, at the eye's resolution (half the
+  tile's width side by side, half its height top and bottom, the whole tile for anaglyph), with
+  the wall's bezels; every plan is made here and both eyes render the same plan;
+* the **composed** space: every tile's two eye tiles side by side (left eye first), one rect per
+  rank, so each rank composes exactly its own tile of both eyes in one exchange;
+* the **display**: what a monitor shows, a tile packed from its composed tile (``pack``).
+
+``compose`` cuts a frame's work (planned on the eye canvas) at the eye tiles' borders and moves
+each part into the composed space once per eye, so the exchange, its backends and the merge of
+depth are those of a mono wall. Pure numpy, no MPI, no GL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from multigpu.core.canvas import Canvas
+from multigpu.core.work import Work
+
+#: the stereo modes a wall shows, packed per display (``--stereo``); ``mono`` is one eye
+MODES = ("mono", "side-by-side", "top-bottom", "anaglyph")
+#: modes that need what no presenter here has (a GL stereo visual), refused with this reason
+UNSHOWN = {"quad": "frame-sequential stereo needs a quad-buffered GL visual, which neither EGL nor this X "
+                   "server offers (use side-by-side, top-bottom or anaglyph)"}
+EYES = ("left", "right")
+
+
+@dataclass(frozen=True)
+class Stereo:
+    """A ``mode`` (not mono) on ``canvas`` (the displays' wall)."""
+
+    mode: str
+    canvas: Canvas
+
+    @cached_property
+    def eye_tile(self) -> tuple[int, int]:
+        """(w, h) of one eye's picture of a tile."""
+        tw, th = self.canvas.tile
+        return (tw // 2, th) if self.mode == "side-by-side" else (tw, th // 2) if self.mode == "top-bottom" else (tw, th)
+
+    @cached_property
+    def eye(self) -> Canvas:
+        """One eye's canvas: the wall's grid of eye tiles, its bezels at the eye's pixel pitch."""
+        (tw, th), (ew, eh), (mx, my) = self.canvas.tile, self.eye_tile, self.canvas.mullion
+        return Canvas(self.canvas.grid, (ew, eh), (round(mx * ew / tw), round(my * eh / th)), self.canvas.dark)
+
+    @cached_property
+    def composed(self) -> Canvas:
+        """The composed space: every tile's eye tiles side by side."""
+        ew, eh = self.eye_tile
+        return Canvas(self.canvas.grid, (2 * ew, eh), (0, 0), self.canvas.dark)
+
+    @cached_property
+    def _shifts(self) -> np.ndarray:
+        """(2, K, 2) offset from each eye tile on the eye canvas to its place in the composed space."""
+        eye, comp = self.eye.tiles()[:, :2], self.composed.tiles()[:, :2]
+        return np.stack([comp - eye, comp - eye + np.array([self.eye_tile[0], 0])])
+
+    def compose(self, work: Work) -> tuple[Work, list]:
+        """``work`` on the eye canvas, as both eyes' parts in the composed space (each piece cut at
+        the eye tiles it meets, its parts in piece order, each eye in turn: a hybrid's front
+        pieces stay first), and each rank's ``picks``: for every composed rect, (eye, piece,
+        x, y) of its lower-left pixel inside the eye piece it is cut from. Only the rects and the
+        front of the composed work are used (the exchange's)."""
+        tiles = self.eye.tiles()
+        rects, picks, front = [], [], None if work.front is None else [0] * work.ranks
+        for k in range(work.ranks):  # ranks, not objects
+            R = np.asarray(work.rects[k], dtype=np.int64).reshape(-1, 4)
+            lo = np.maximum(R[:, None, :2], tiles[None, :, :2])
+            hi = np.minimum(R[:, None, 2:], tiles[None, :, 2:])
+            p, t = np.nonzero((hi > lo).all(axis=-1))  # (piece, tile) pairs, by piece
+            cut = np.concatenate([lo[p, t], hi[p, t]], axis=1)
+            inside = cut[:, :2] - R[p, :2]
+            n = len(p)
+            both, eyes = np.tile(np.arange(n), 2), np.repeat([0, 1], n)
+            order = np.lexsort((both, eyes, np.tile(p, 2)))  # by piece, then eye, then cut
+            eye, src = eyes[order], both[order]
+            rects.append(cut[src] + np.tile(self._shifts[eye, t[src]], 2))
+            picks.append(np.column_stack([eye, p[src], inside[src]]).tolist())
+            if front is not None:
+                front[k] = int(np.count_nonzero(p[src] < work.front[k]))
+        return Work(tuple(rects), tuple(() for _ in rects), work.loads, work.depth, work.partition,
+                    None if front is None else tuple(front)), picks
+
+    @staticmethod
+    def parts(picks: list, rects: np.ndarray, rendered: list) -> list:
+        """This rank's composed parts as ``(rgb, depth or None)`` views of its eyes' rendered pieces
+        (``rendered[eye][piece]``), in the order of its composed ``rects``."""
+        out = []
+        for (eye, piece, x, y), (x0, y0, x1, y1) in zip(picks, rects.tolist()):  # parts, a few per rank
+            rgb, z = rendered[eye][piece]
+            rows, cols = slice(y, y + y1 - y0), slice(x, x + x1 - x0)
+            out.append((rgb[rows, cols], None if z is None else z[rows, cols]))
+        return out
+
+    def eyes(self, tile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A composed tile (bottom row first) as the (left, right) eye tiles (views)."""
+        ew = self.eye_tile[0]
+        return tile[:, :ew], tile[:, ew:]
+
+    def pack(self, tile: np.ndarray) -> np.ndarray:
+        """What the display shows of a composed tile: side by side as it is, the left eye above
+        the right, or red from the left eye with green and blue from the right."""
+        left, right = self.eyes(tile)
+        if self.mode == "side-by-side":
+            return tile
+        if self.mode == "top-bottom":  # bottom row first: the right eye's rows, then the left's
+            return np.concatenate([right, left], axis=0)
+        out = right.copy()
+        out[..., 0] = left[..., 0]
+        return out
+
+
+def make_stereo(mode: str, canvas: Canvas) -> Stereo | None:
+    """The stereo of ``--stereo`` on ``canvas`` (None: mono). The door has checked the mode."""
+    return None if mode == "mono" else Stereo(mode, canvas)
+
+
+def eye_canvas(mode: str, canvas: Canvas) -> Canvas:
+    """Where a wall's ranks render: one eye's canvas in stereo, else the wall's own."""
+    return canvas if mode == "mono" else Stereo(mode, canvas).eye
