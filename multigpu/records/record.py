@@ -272,9 +272,20 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
             "mullion": list(cfg.mullion), "canvas": list(cfg.canvas.size), "wall": cfg.wall, "record": cfg.record,
             "dark": list(cfg.dark),
             "monitor": cfg.monitor is not None,
+            "stereo": cfg.stereo, "viewer": _viewer_doc(cfg),
             "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
             "kernel": {"compiled": jit.available(),
                        "warm_seconds": round(load_info.get("kernel_seconds", 0.0), 3)}}
+
+
+def _viewer_doc(cfg) -> dict | None:
+    """Where the viewer stands and what the wall measures (None: the camera's own frustum)."""
+    v = cfg.viewer
+    if v is None:
+        return None
+    return {"screen_m": list(v.screen), "eye_separation_m": v.separation, "swap_eyes": v.swap,
+            "head_m": None if cfg.head is None else list(cfg.head), "head_poses": cfg.head_poses,
+            "world_per_metre": v.world_per_metre}
 
 
 def run_title(cfg, scene) -> str:
@@ -290,4 +301,5 @@ def run_title(cfg, scene) -> str:
     W, H = cfg.canvas.size
     (rows, cols), (tw, th) = cfg.grid, cfg.tile
     return (f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in {scene.n_objects} objects, "
-            f"{rows}x{cols} wall ({rows} row(s) x {cols} column(s) of {tw}x{th} tiles, canvas {W}x{H}), {what}")
+            f"{rows}x{cols} wall ({rows} row(s) x {cols} column(s) of {tw}x{th} tiles, canvas {W}x{H}), {what}"
+            + ("" if cfg.stereo == "mono" else f", stereo {cfg.stereo}"))

@@ -1,0 +1,340 @@
+"""Stereo walls and the viewer, in one process: where both eyes' parts go (``core/stereo.py``),
+each eye's off-axis frustum against an independent generalized perspective projection
+(``core/eyes.py``), bad input at the door, and the whole pipeline as threads (``threadcomm``):
+each eye's mosaic is one rank's render of that eye bit for bit, and the packed mosaic is the
+packing of those, for every decomposition, with bezels, frames in flight, render scale and
+levels of detail."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from mpirun import read_png
+from threadcomm import run_ranks
+
+from multigpu.config import WalkConfig
+from multigpu.core.camera import Camera
+from multigpu.core.canvas import Canvas
+from multigpu.core.eyes import Pose, Viewer, eye_frames
+from multigpu.core.stereo import Stereo
+from multigpu.core.work import Work, pieces_tile_display, transfers
+from multigpu.errors import InputError
+from multigpu.rank import walkthrough
+from multigpu.scene.models import SceneSpec
+
+FRAMES = 3
+SCREEN = (1.2, 0.96)  # metres: a centimetre a pixel of the 120x96 canvases here
+MODES = ("side-by-side", "top-bottom", "anaglyph")
+
+
+class _Job:
+    signum = None
+    in_frames = False
+    thread_cpu = 0.0
+
+
+# -- where the eyes' parts go
+
+
+def _screen_work(canvas: Canvas) -> Work:
+    """Two ranks' strips of the eye canvas: left and right halves."""
+    W, H = canvas.size
+    rects = (np.array([[0, 0, W // 2 + 3, H]]), np.array([[W // 2 + 3, 0, W, H]]))
+    return Work(rects, (np.ones((1, 5), bool), np.ones((1, 5), bool)), np.array([5, 5]))
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_both_eyes_parts_tile_the_composed_wall_once(mode):
+    st = Stereo(mode, Canvas((1, 2), (40, 30)))
+    work = _screen_work(st.eye)
+    composed, picks = st.compose(work)
+    assert pieces_tile_display(composed, st.composed.size)
+    for k in range(2):  # every part names its eye, its piece and where in that piece it starts
+        for (eye, piece, x, y), (x0, y0, x1, y1) in zip(picks[k], composed.rects[k].tolist()):
+            ex0, ey0 = work.rects[k][piece][:2] + np.array([x, y])
+            tile = int(np.searchsorted(st.composed.tiles()[:, 2], x0, side="right"))
+            cx0 = st.composed.tiles()[tile][0] + eye * st.eye_tile[0]
+            assert x0 - cx0 == ex0 - st.eye.tiles()[tile][0] and y0 == ey0  # same place in the eye's tile
+    plan = transfers(composed, st.composed.tiles())
+    assert {p.receiver for p in plan} == {0, 1}
+
+
+def test_a_hybrids_regions_stay_first_once_composed():
+    st = Stereo("side-by-side", Canvas((1, 2), (40, 30)))
+    W, H = st.eye.size
+    work = Work((np.array([[0, 0, W // 2, H], [0, 0, W, H]]), np.array([[W // 2, 0, W, H], [0, 0, W, H]])),
+                (np.ones((2, 3), bool),) * 2, np.array([1, 1]), True, None, (1, 1))
+    composed, picks = st.compose(work)
+    for k in range(2):
+        front = composed.front[k]
+        assert front == 2 and all(p[1] == 0 for p in picks[k][:front]) and all(p[1] == 1 for p in picks[k][front:])
+
+
+def test_packing_each_mode():
+    rng = np.random.default_rng(1)
+    for mode in MODES:
+        st = Stereo(mode, Canvas((1, 1), (8, 6)))
+        ew, eh = st.eye_tile
+        left, right = rng.integers(0, 255, (eh, ew, 3), np.uint8), rng.integers(0, 255, (eh, ew, 3), np.uint8)
+        got = st.pack(np.concatenate([left, right], axis=1))
+        assert got.shape == (6, 8, 3)
+        if mode == "side-by-side":
+            assert (got[:, :4] == left).all() and (got[:, 4:] == right).all()
+        elif mode == "top-bottom":  # bottom row first: the left eye on top
+            assert (got[3:] == left).all() and (got[:3] == right).all()
+        else:
+            assert (got[..., 0] == left[..., 0]).all() and (got[..., 1:] == right[..., 1:]).all()
+
+
+# -- each eye's frustum
+
+
+def _kooima(pa, pb, pc, pe, near, far):
+    """Kooima's generalized perspective projection, written from the paper: screen corners
+    lower-left ``pa``, lower-right ``pb``, upper-left ``pc``, eye ``pe`` (world); P @ M^T @ T."""
+    vr = (pb - pa) / np.linalg.norm(pb - pa)
+    vu = (pc - pa) / np.linalg.norm(pc - pa)
+    vn = np.cross(vr, vu)
+    vn /= np.linalg.norm(vn)
+    va, vb, vc = pa - pe, pb - pe, pc - pe
+    d = -va @ vn
+    l, r = (vr @ va) * near / d, (vr @ vb) * near / d
+    b, t = (vu @ va) * near / d, (vu @ vc) * near / d
+    P = np.array([[2 * near / (r - l), 0, (r + l) / (r - l), 0], [0, 2 * near / (t - b), (t + b) / (t - b), 0],
+                  [0, 0, -(far + near) / (far - near), -2 * far * near / (far - near)], [0, 0, -1, 0]])
+    M = np.eye(4)
+    M[:3, :3] = np.stack([vr, vu, vn])
+    T = np.eye(4)
+    T[:3, 3] = -pe
+    return P @ M @ T
+
+
+def _world_wall(camera: Camera, viewer: Viewer):
+    """The wall's corners in the world: in front of the camera, on its axes, at the distance
+    where its height spans the camera's fov (scaled by world_per_metre)."""
+    c = np.asarray(camera.position, float)
+    f = np.asarray(camera.target, float) - c
+    f /= np.linalg.norm(f)
+    s = np.cross(f, camera.up)
+    s /= np.linalg.norm(s)
+    u = np.cross(s, f)
+    W, H = viewer.screen
+    k = viewer.world_per_metre
+    d = H / 2 / math.tan(math.radians(camera.fov) / 2)
+    centre = c + f * d * k
+    room = lambda p: centre + k * (p[0] * s + p[1] * u + p[2] * -f)  # noqa: E731  room metres -> world
+    return room, [room(np.array(p)) for p in ((-W / 2, -H / 2, 0), (W / 2, -H / 2, 0), (-W / 2, H / 2, 0))]
+
+
+@pytest.mark.parametrize("pose", [Pose((0.3, -0.2, 1.5)), Pose((-0.5, 0.4, 0.7), yaw=20, pitch=-10, roll=15),
+                                  Pose((0.0, 0.0, 3.0), roll=90)])
+@pytest.mark.parametrize("scale", [1.0, 7.5])
+def test_each_eye_sees_through_the_wall_as_the_generalized_projection_says(pose, scale):
+    camera = Camera((3.0, -2.0, 1.5), (0.0, 1.0, 0.7), (0, 0, 1), 50.0, 0.05, 80.0)
+    viewer = Viewer((2.0, 1.2), 0.07, None, scale)
+    room, (pa, pb, pc) = _world_wall(camera, viewer)
+    frames = eye_frames(camera, viewer, pose, 2)
+    eyes = viewer.eyes(camera, pose, 2)
+    assert np.allclose(np.linalg.norm(eyes[1] - eyes[0]), 0.07)
+    for (view, proj, _), eye in zip(frames, eyes):
+        want = _kooima(pa, pb, pc, room(eye), camera.near, camera.far)
+        got = proj @ view
+        assert np.allclose(got, want, rtol=1e-9, atol=1e-9)
+    # a point on the wall lands where it is on the wall for either eye: the wall is the window
+    on_wall = room(np.array([0.25 * viewer.screen[0], -0.1 * viewer.screen[1], 0.0]))
+    for view, proj, _ in frames:
+        clip = proj @ view @ np.append(on_wall, 1.0)
+        assert np.allclose(clip[:2] / clip[3], [0.5, -0.2])
+
+
+def test_a_head_at_home_with_no_separation_sees_what_the_camera_sees():
+    camera = Camera((1.0, 2.0, 3.0), (0.0, 0.0, 0.0), fov=60.0)
+    viewer = Viewer((1.6, 0.9), 0.0)
+    from multigpu.core.camera import frame_matrices
+
+    view, proj, light = frame_matrices(camera, (1600, 900))
+    for v, p, li in eye_frames(camera, viewer, None, 2):
+        assert np.allclose(v, view) and np.allclose(p, proj, rtol=1e-12, atol=1e-12) and np.allclose(li, light)
+
+
+# -- bad input at the door
+
+
+@pytest.mark.parametrize("fields,words", [
+    ({"stereo": "quad"}, "--stereo quad: frame-sequential stereo needs a quad-buffered GL visual"),
+    ({"stereo": "side-by-side", "tile": (61, 48)}, "--tile 61x48: side-by-side stereo needs an even tile width"),
+    ({"stereo": "top-bottom", "tile": (60, 47)}, "--tile 60x47: top-bottom stereo needs an even tile height"),
+    ({"stereo": "anaglyph", "eye_separation": -0.01}, "--eye-separation must be >= 0 metres"),
+    ({"stereo": "anaglyph", "eye_separation": 2.0}, "--eye-separation 2 m is as wide as the wall or wider"),
+    ({"stereo": "anaglyph", "head": (0.0, 0.0, 0.0)}, "--head 0,0,0: a viewer at z = 0 m has an eye behind"),
+    ({"head": (0.1, 0.2, -1.0)}, "--head 0.1,0.2,-1: a viewer at z = -1 m"),
+    ({"stereo": "fourway"}, "--stereo must be one of mono, side-by-side, top-bottom, anaglyph, quad"),
+])
+def test_bad_stereo_input_is_one_line_naming_the_flag(fields, words):
+    with pytest.raises(InputError) as got:
+        WalkConfig(**{"grid": (2, 2), "tile": (60, 48), "screen_m": SCREEN, **fields})
+    assert str(got.value).startswith(words) and "\n" not in str(got.value), str(got.value)
+
+
+@pytest.mark.parametrize("text,words", [
+    ("not json", "JSONDecodeError"), ("[]", "must be a non-empty list of poses"),
+    ("[[0, 0, 1], [0, 1]]", "pose 1 must be [x, y, z] or [x, y, z, yaw, pitch, roll]"),
+    ('{"poses": [[0, 0, 1, 0, 0, "x"]]}', "pose 0 must be"),
+    ("[[0, 0, 1], [0, 0, -0.5]]", "pose 1: a viewer at z = -0.5 m has an eye behind the screen"),
+])
+def test_a_bad_head_pose_file_names_the_file_and_the_pose(tmp_path, text, words):
+    path = tmp_path / "head.json"
+    path.write_text(text)
+    with pytest.raises(InputError) as got:
+        WalkConfig(tile=(60, 48), screen_m=SCREEN, head_poses=str(path))
+    assert str(got.value).startswith(f"--head-poses {path}: ") and words in str(got.value), str(got.value)
+
+
+def test_a_wall_files_stereo_and_size_reach_the_run(tmp_path):
+    from multigpu.cli import build_parser, walk_config
+
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": "64x48", "screen_m": [2.4, 0.9],
+                                "stereo": {"mode": "anaglyph", "eye_separation_m": 0.05, "head_m": [0.1, 0.0, 2.0],
+                                           "swap_eyes": True}}))
+    p = build_parser()
+    cfg = walk_config(p.parse_args(["walkthrough", "--wall", str(wall)]))
+    assert (cfg.stereo, cfg.eye_separation, cfg.head, cfg.swap_eyes, cfg.screen_m) == (
+        "anaglyph", 0.05, (0.1, 0.0, 2.0), True, (2.4, 0.9))
+    cfg = walk_config(p.parse_args(["walkthrough", "--wall", str(wall), "--stereo", "top-bottom", "--eye-separation", "0.06"]))
+    assert (cfg.stereo, cfg.eye_separation) == ("top-bottom", 0.06)  # the flags win
+
+
+# -- the pipeline as threads
+
+
+def _walk(out, grid, tile, mullion=(0, 0), frames=FRAMES, **fields) -> list:
+    """Each frame's (display, left, right) mosaics."""
+    cfg = WalkConfig(scene=SceneSpec(triangles=20_000), frames=frames, grid=grid, tile=tile, mullion=mullion,
+                     mosaic_every=1, overlay=False, progress=False, exchange=fields.pop("exchange", "messages"),
+                     out=str(out), timeout=60.0, screen_m=SCREEN, **fields)
+    run_ranks(grid[0] * grid[1], lambda comm: walkthrough.run(cfg, comm, _Job()))
+    eyes = ("left/", "right/") if cfg.stereo != "mono" else ()
+    return [[read_png(out / "mosaic" / f"{d}frame_{f:05d}.png") for d in ("", *eyes)] for f in range(frames)]
+
+
+def _one_rank(base, mode, canvas: Canvas, **fields) -> list:
+    """One rank's eyes of ``canvas``'s eye canvas: a 1x1 wall whose one tile packs the whole eye canvas."""
+    E = Stereo(mode, canvas).eye
+    tile = (E.size[0] * (2 if mode == "side-by-side" else 1), E.size[1] * (2 if mode == "top-bottom" else 1))
+    return _walk(base, (1, 1), tile, stereo=mode, **fields)
+
+
+def _packed(left, right, canvas: Canvas, mode):
+    """What the wall's displays show, packed here tile by tile from the eyes' mosaics (top row first)."""
+    st = Stereo(mode, canvas)
+    (R, C), (tw, th) = canvas.grid, canvas.tile
+    out = np.zeros((*canvas.size[::-1], 3), np.uint8)
+    ex, ey = st.eye.tiles(), canvas.tiles()
+    for k in range(R * C):  # tiles
+        (a0, b0, a1, b1), (x0, y0, x1, y1) = ex[k], ey[k]
+        EH, H = st.eye.size[1], canvas.size[1]
+        L, Rt = left[EH - b1:EH - b0, a0:a1], right[EH - b1:EH - b0, a0:a1]
+        tile = (np.concatenate([L, Rt], 1) if mode == "side-by-side" else np.concatenate([L, Rt], 0)
+                if mode == "top-bottom" else np.concatenate([Rt[..., :1] * 0 + L[..., :1], Rt[..., 1:]], 2))
+        out[H - y1:H - y0, x0:x1] = tile
+    return out
+
+
+@pytest.fixture(scope="module")
+def references(tmp_path_factory):
+    base = tmp_path_factory.mktemp("one")
+    return {mode: _one_rank(base / mode, mode, Canvas((2, 2), (60, 48))) for mode in MODES}
+
+
+CASES = {
+    "side-by-side screen": ("side-by-side", {"balance": "strips"}),
+    "side-by-side cross": ("side-by-side", {"balance": "cross"}),
+    "side-by-side db": ("side-by-side", {"decomposition": "db"}),
+    "side-by-side hybrid latency 3": ("side-by-side", {"decomposition": "hybrid", "latency": 3}),
+    "anaglyph screen latency 0": ("anaglyph", {"latency": 0}),
+    "anaglyph db latency 2": ("anaglyph", {"decomposition": "db", "latency": 2}),
+    "top-bottom bins": ("top-bottom", {"decomposition": "bins", "bin_size": 16}),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_each_eye_composes_one_ranks_render_and_the_wall_shows_their_packing(tmp_path, references, case):
+    mode, fields = CASES[case]
+    canvas = Canvas((2, 2), (60, 48))
+    got = _walk(tmp_path / "w", canvas.grid, canvas.tile, stereo=mode, **fields)
+    for f, ((shown, left, right), (_, want_l, want_r)) in enumerate(zip(got, references[mode])):
+        for name, a, b in (("left", left, want_l), ("right", right, want_r)):
+            assert a.shape == b.shape and (a == b).all(), f"frame {f} {name}: {(a != b).any(axis=2).sum()} px differ"
+        want = _packed(want_l, want_r, canvas, mode)
+        assert (shown == want).all(), f"frame {f}: {(shown != want).any(axis=2).sum()} packed px differ"
+    s = json.loads((tmp_path / "w" / "summary.json").read_text())
+    assert s["config"]["stereo"] == mode and s["config"]["viewer"]["eye_separation_m"] == 0.064
+
+
+@pytest.mark.parametrize("mode,fields,mullion", [("top-bottom", {"balance": "strips"}, (6, 4)),
+                                                 ("side-by-side", {"decomposition": "hybrid", "render_scale": 0.5},
+                                                  (0, 0)),
+                                                 ("anaglyph", {"lod_error": 2.0, "balance": "cross"}, (6, 4))])
+def test_bezels_render_scale_and_levels_of_detail_in_stereo(tmp_path, mode, fields, mullion):
+    canvas = Canvas((2, 2), (60, 48), mullion)
+    quality = {k: v for k, v in fields.items() if k in ("render_scale", "lod_error")}
+    want = _one_rank(tmp_path / "one", mode, canvas, **quality)
+    got = _walk(tmp_path / "w", canvas.grid, canvas.tile, canvas.mullion, stereo=mode, **fields)
+    hidden = Stereo(mode, canvas).eye.hidden()
+    for f, (g, w) in enumerate(zip(got, want)):
+        for e in (1, 2):  # the eyes: the mullions' pixels black, the rest one rank's
+            ref = w[e].copy()
+            ref[hidden] = 0
+            assert (g[e] == ref).all(), f"frame {f} eye {e}: {(g[e] != ref).any(axis=2).sum()} px differ"
+
+
+def test_no_eye_separation_shows_one_picture_twice_and_the_default_two(tmp_path):
+    canvas = Canvas((2, 2), (60, 48))
+    same = _walk(tmp_path / "zero", canvas.grid, canvas.tile, stereo="side-by-side", eye_separation=0.0)
+    apart = _walk(tmp_path / "apart", canvas.grid, canvas.tile, stereo="side-by-side")
+    for f in range(FRAMES):
+        for shown, differ in ((same[f][0], False), (apart[f][0], True)):
+            halves = [(shown[y:y + 48, x:x + 30], shown[y:y + 48, x + 30:x + 60]) for y in (0, 48) for x in (0, 60)]
+            if differ:
+                assert sum(int((a != b).any(axis=2).sum()) for a, b in halves) > 100
+            else:
+                assert all((a == b).all() for a, b in halves), f"frame {f}: the halves of a tile differ"
+
+
+def test_swapped_eyes_trade_places(tmp_path, references):
+    got = _walk(tmp_path / "w", (2, 2), (60, 48), stereo="anaglyph", swap_eyes=True)
+    for f, (g, w) in enumerate(zip(got, references["anaglyph"])):
+        assert (g[1] == w[2]).all() and (g[2] == w[1]).all()
+
+
+def test_a_moving_head_changes_the_picture_as_its_frustum_says(tmp_path):
+    """Mono, a head pose per frame: each frame's mosaic is a one-rank render through that pose's
+    frustum, formed here by the generalized projection (within a few edge pixels: the matrices
+    agree to rounding), and frames whose poses differ differ."""
+    from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.rank.walkthrough import load_world
+
+    poses = [[0.0, 0.0, 1.0], [0.4, 0.1, 1.0], [-0.3, -0.2, 0.6, 25.0, 0.0, 0.0]]
+    (tmp_path / "head.json").write_text(json.dumps({"poses": poses}))
+    got = _walk(tmp_path / "w", (1, 2), (60, 96), head_poses=str(tmp_path / "head.json"))
+    cfg = WalkConfig(scene=SceneSpec(triangles=20_000), frames=FRAMES, grid=(1, 2), tile=(60, 96), screen_m=SCREEN,
+                     head_poses=str(tmp_path / "head.json"))
+    scene, path, _ = load_world(cfg)
+    ctx, _ = create_context()
+    renderer = RegionRenderer(ctx, scene, cfg.canvas.size, colors=cfg.colors)
+    viewer = cfg.viewer
+    for f, pose in enumerate(poses):
+        camera = path.camera(f)
+        room, (pa, pb, pc) = _world_wall(camera, viewer)
+        mvp = _kooima(pa, pb, pc, room(np.array(pose[:3])), camera.near, camera.far)
+        view, _, light = eye_frames(camera, viewer, None, 1)[0]
+        rgb = renderer.render(view, mvp @ np.linalg.inv(view), light, (0, 0, 120, 96), None)
+        want = rgb[::-1]
+        differ = int((got[f][0] != want).any(axis=2).sum())
+        assert differ <= 20, f"frame {f}: {differ} pixels differ from the generalized projection's render"
+    moved = int((got[1][0] != got[0][0]).any(axis=2).sum())
+    assert moved > 500, moved
+    renderer.release()
+    ctx.release()
