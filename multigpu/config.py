@@ -201,7 +201,7 @@ def read_poses(path: str) -> tuple:
             doc = json.load(fh)
     except (OSError, ValueError) as exc:
         raise InputError(f"--head-poses {path}: {exc.__class__.__name__}: {exc}") from None
-    rows = doc.get("poses") if isinstance(doc, dict) else doc
+    rows = doc.get("poses") if isinstance(doc, dict) else doc  # an object may carry a "comment" too
     if not isinstance(rows, list) or not rows:
         raise InputError(f"--head-poses {path}: must be a non-empty list of poses (or {{\"poses\": [...]}})")
     out = []

@@ -340,7 +340,15 @@ def check_command(path: str, grid_only: bool = False, hosts_only: bool = False,
     mullion = wall.mullion or derived or (0, 0)
     check_ranks(wall, grid[0] * grid[1])
     hosts = hosts_of(wall, grid[0] * grid[1])
-    WalkConfig(grid=grid, tile=tile, mullion=mullion)
+    st = wall.stereo
+    try:  # the run's own checks of its stereo and viewer (a mode the presenters show, a head in front)
+        cfg = WalkConfig(grid=grid, tile=tile, mullion=mullion, screen_m=wall.screen_m, stereo=st.get("mode", "mono"),
+                         eye_separation=st.get("eye_separation_m", WalkConfig.eye_separation),
+                         swap_eyes=st.get("swap_eyes", False),
+                         head=None if "head_m" not in st else tuple(st["head_m"]),
+                         world_per_metre=st.get("world_per_metre", 1.0))
+    except InputError as exc:
+        raise InputError(f"--wall {path}: stereo: {exc}") from None
     if grid_only:
         return f"{grid[0]}x{grid[1]}"
     if hosts_only:
@@ -352,4 +360,9 @@ def check_command(path: str, grid_only: bool = False, hosts_only: bool = False,
         raise InputError.of("wall", f"{path}: {found[0]}{more}")
     bezel = ([f"mullion {mullion[0]}x{mullion[1]} pixels from the bezel: {json.dumps(wall.bezel)}"]
              if derived else [])
-    return "\n".join([describe(wall, grid, tile, mullion), *bezel, *picture(wall, grid)])
+    viewer = cfg.viewer
+    seen = [] if viewer is None else [
+        f"stereo {cfg.stereo}: a {viewer.screen[0]:g} x {viewer.screen[1]:g} m wall, eyes {viewer.separation:g} m apart"
+        + ("" if cfg.head is None else f", the head at {', '.join(f'{v:g}' for v in cfg.head)} m")
+        + (", eyes swapped" if viewer.swap else "")]
+    return "\n".join([describe(wall, grid, tile, mullion), *bezel, *seen, *picture(wall, grid)])

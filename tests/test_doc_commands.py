@@ -21,7 +21,7 @@ START = re.compile(r"^(?:mpiexec -n \S+ (?:python -m mpi4py -m )?)?(multigpu|lau
 #: words that stand for something the reader fills in: such a line is a template, not a command
 PLACEHOLDERS = {"...", "K", "N", "F", "FILE", "ARGS", "NAME", "SCENE_OR_FILE", "RxC"}
 #: flags whose value is a file the command reads
-FILE_FLAGS = {"--model", "--wall", "--path", "--hostfile"}
+FILE_FLAGS = {"--model", "--wall", "--path", "--hostfile", "--head-poses"}
 RUNS = (("scene", "info"), ("wall", "check"), ("tree",))
 
 

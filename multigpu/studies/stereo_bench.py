@@ -1,0 +1,66 @@
+"""``multigpu bench stereo``: what a stereo frame costs beside a mono frame of the same wall.
+
+The plant on a 2x2 wall of 256x256 tiles (4 ranks, headless), mono and each stereo mode, in
+rotating order over the rounds (this machine is shared and noisy: ratios within a round, medians
+over rounds). Per-rank CPU time per frame is the sum of a rank's phase CPU times (balancing,
+rendering, exchange, display), averaged over ranks and frames; the emulated frame is the slowest
+rank's phase CPU time; wall is the wall-clock frame. Each stereo row gives its ratio to mono
+(the issue's goal: at most 1.7x in per-rank CPU time). Figures only, no asserts.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.studies.tables import Columns, write_csv
+
+ARMS = ("mono", "side-by-side", "top-bottom", "anaglyph")
+#: where the results go (stereo.csv); docs/results/stereo/ holds the published ones
+OUT = Path("out/stereo")
+PHASES = ("load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms")
+
+
+def _one(out: Path, arm: str, frames: int, scene: list[str]) -> dict:
+    from multigpu.studies.runs import walk
+
+    args = ["--frames", str(frames), "--mosaic-every", "0", "--screen-size", "1.6,1.6", *scene,
+            *(["--stereo", arm] if arm != "mono" else [])]
+    run = walk(out, (2, 2), (256, 256), args, 1800)
+    s = run.summary
+    cpu = s["cpu"]
+    return {"cpu_ms": sum(cpu[k] for k in PHASES), "render_cpu_ms": cpu["rendering_cpu_ms"],
+            "balance_cpu_ms": cpu["load_balancing_cpu_ms"], "exchange_cpu_ms": cpu["frame_exchange_cpu_ms"],
+            "emulated_ms": s["emulated_frame_ms"], "wall_ms": s["frame_ms"],
+            "bytes": s["bytes_sent_per_frame"]}
+
+
+def bench_stereo(quick: bool) -> list[dict]:
+    frames, rounds = (40, 1) if quick else (300, 3)
+    scene = ["--triangles", "20000"] if quick else []
+    print(f"bench stereo: the plant on a 2x2 wall of 256x256, {frames} frames, {rounds} alternated rounds; "
+          "cpu = per-rank CPU time per frame (ms, every phase), emulated = slowest rank's phase CPU (ms), wall = "
+          "wall-clock frame (ms); medians over rounds; x mono = the ratio of per-rank CPU to mono's in each round")
+    got: dict[str, list[dict]] = {a: [] for a in ARMS}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(rounds):
+            for arm in ARMS[r % len(ARMS):] + ARMS[:r % len(ARMS)]:
+                got[arm].append(_one(Path(tmp) / f"{arm}{r}", arm, frames, scene))
+    table = Columns(("arm", "stereo", "<13"), ("cpu_ms", "cpu", "7.2f"), ("ratio", "x mono", "7.2f"),
+                    ("render_cpu_ms", "render", "7.2f"), ("balance_cpu_ms", "balance", "8.2f"),
+                    ("exchange_cpu_ms", "exchange", "9.2f"), ("emulated_ms", "emulated", "9.2f"),
+                    ("wall_ms", "wall", "7.2f"), ("bytes", "bytes/frame", "12.0f"))
+    print(table.header())
+    rows = []
+    for arm in ARMS:
+        row = {k: float(np.median([x[k] for x in got[arm]])) for k in got[arm][0]}
+        row["ratio"] = float(np.median([a["cpu_ms"] / m["cpu_ms"] for a, m in zip(got[arm], got["mono"])]))
+        row["arm"] = arm
+        rows.append(row)
+        print(table.row(row))
+    OUT.mkdir(parents=True, exist_ok=True)
+    write_csv(OUT / "stereo.csv", [{"frames": frames, "rounds": rounds, **r} for r in rows])
+    print(f"results in {OUT}/stereo.csv")
+    return rows

@@ -1,0 +1,66 @@
+"""Stereo under mpiexec (each job under a hard timeout, killed by process id): a 2x2 side-by-side
+and anaglyph wall headless, each eye's mosaic one rank's render of that eye and the wall its
+packing; and a stereo wall in windows on one X server (Xvfb), the screen showing the packed tiles
+bit for bit."""
+
+import json
+
+import numpy as np
+import pytest
+from mpirun import SMALL, read_png, run_mpi, start_mpi
+from test_present_mpi import finish, rows_written, still_path  # noqa: F401 (a fixture)
+from test_stereo import _packed
+from xserver import Xvfb, escape, screenshot, wait_for, windows
+
+from multigpu.core.canvas import Canvas
+
+pytestmark = pytest.mark.mpi
+FRAMES = 3
+STEREO = ["--screen-size", "1.2,0.96"]
+
+
+def _walk(out, grid, tile, mode, extra=()):
+    args = ["walkthrough", *SMALL, "--frames", str(FRAMES), "--grid", f"{grid[0]}x{grid[1]}",
+            "--tile", f"{tile[0]}x{tile[1]}", "--mosaic-every", "1", "--no-overlay", "--out", str(out),
+            "--stereo", mode, *STEREO, *extra]
+    res = run_mpi(grid[0] * grid[1], args)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return [[read_png(out / "mosaic" / f"{d}frame_{f:05d}.png") for d in ("", "left/", "right/")]
+            for f in range(FRAMES)]
+
+
+@pytest.mark.parametrize("mode,one,extra", [("side-by-side", (120, 96), ["--decomposition", "db"]),
+                                            ("anaglyph", (120, 96), [])])
+def test_a_stereo_wall_under_mpiexec_composes_each_eye_bit_for_bit(tmp_path, mode, one, extra):
+    want = _walk(tmp_path / "one", (1, 1), one, mode)
+    got = _walk(tmp_path / "four", (2, 2), (60, 48), mode, extra)
+    canvas = Canvas((2, 2), (60, 48))
+    for f, (g, w) in enumerate(zip(got, want)):
+        assert (g[1] == w[1]).all() and (g[2] == w[2]).all(), f"frame {f}: an eye differs from one rank's"
+        assert (g[0] == _packed(w[1], w[2], canvas, mode)).all(), f"frame {f}: the packed wall differs"
+    assert (got[0][1] != got[0][2]).any()  # the eyes see differently
+    s = json.loads((tmp_path / "four" / "summary.json").read_text())
+    assert s["config"]["stereo"] == mode and s["complete"]
+
+
+def test_a_stereo_wall_in_windows_shows_the_packed_tiles(tmp_path, still_path):  # noqa: F811
+    with Xvfb((120, 96)) as x:
+        out = tmp_path / "win"
+        args = ["walkthrough", *SMALL, "--path", str(still_path), "--grid", "2x2", "--tile", "60x48",
+                "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out),
+                "--stereo", "side-by-side", *STEREO]
+        proc, kill = start_mpi(4, args, env={"DISPLAY": x.name})
+        try:
+            wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4)
+            shot = screenshot(x.name)
+            escape(x.name, windows(x.name)[0])
+            _, err = finish(proc, kill)
+        finally:
+            kill() if proc.poll() is None else None
+    assert proc.returncode == 0, err[-2000:]
+    mosaic = read_png(out / "mosaic" / "frame_00000.png")
+    assert shot.shape == mosaic.shape == (96, 120, 3)
+    assert (shot == mosaic).all(), f"{(shot != mosaic).any(axis=2).sum()} screen pixels differ from the packed wall"
+    left, right = (read_png(out / "mosaic" / d / "frame_00000.png") for d in ("left", "right"))
+    assert (mosaic == _packed(left, right, Canvas((2, 2), (60, 48)), "side-by-side")).all()
+    assert np.count_nonzero((left != right).any(axis=2)) > 50
