@@ -15,6 +15,7 @@ from multigpu.options import check, option, register
 from multigpu.scene.models import SceneSpec
 from multigpu.scene.paths import DEFAULT_FRAMES
 from multigpu.strategies import REGISTRY
+from multigpu.viewing import DEFAULT_PITCH_MM, check_viewer, read_size_m, viewer_of
 
 #: rank 0 rewrites summary.json every this many frames (and whenever the run ends)
 SUMMARY_EVERY = 50
@@ -174,45 +175,6 @@ PATH, WALL, STEREO, BALANCING, QUALITY, OUTPUTS, CONTROL = ("camera path", "wall
                                                            "speed for accuracy", "outputs", "run control")
 #: the walkthrough's flag groups, in the help's order (the scene's come first, the launcher's hosts last)
 GROUPS = [PATH, WALL, STEREO, BALANCING, QUALITY, OUTPUTS, CONTROL]
-#: a wall's pixel pitch where neither --screen-size nor the wall file's screen_m or bezel gives its size (mm)
-DEFAULT_PITCH_MM = 0.5
-
-
-def read_size_m(text: str) -> tuple[float, float]:
-    """``--screen-size W,H`` in metres."""
-    try:
-        v = tuple(float(t) for t in str(text).split(","))
-    except ValueError:
-        v = ()
-    if len(v) != 2:
-        raise InputError(f"must look like W,H (the wall's width and height in metres), got '{text}'")
-    return v
-
-
-def read_poses(path: str) -> tuple:
-    """A head pose file (docs/USAGE.md, "A stereo wall"): JSON, a list (or ``{"poses": [...]}``)
-    with a pose per frame, each [x, y, z] or [x, y, z, yaw, pitch, roll] (metres, degrees)."""
-    import json
-
-    from multigpu.core.eyes import Pose
-
-    try:
-        with open(path, encoding="utf-8") as fh:
-            doc = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"--head-poses {path}: {exc.__class__.__name__}: {exc}") from None
-    rows = doc.get("poses") if isinstance(doc, dict) else doc  # an object may carry a "comment" too
-    if not isinstance(rows, list) or not rows:
-        raise InputError(f"--head-poses {path}: must be a non-empty list of poses (or {{\"poses\": [...]}})")
-    out = []
-    for i, row in enumerate(rows):  # the file's poses, read once at the door
-        ok = (isinstance(row, list) and len(row) in (3, 6)
-              and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in row))
-        if not ok:
-            raise InputError(f"--head-poses {path}: pose {i} must be [x, y, z] or [x, y, z, yaw, pitch, roll] "
-                             f"(finite numbers), got {json.dumps(row)[:80]}")
-        out.append(Pose(tuple(float(v) for v in row[:3]), *(float(v) for v in row[3:])))
-    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -423,47 +385,14 @@ class WalkConfig:
                                     "wall (at most 65536: every bin is a draw per frame)")
 
     def _viewer_checked(self) -> None:
-        """Stereo and the viewer at the door: a mode the presenters can show, packing that fits
-        the tile, an eye separation narrower than the wall, every head pose in front of it."""
-        from multigpu.core.eyes import Pose, head_problem
-        from multigpu.core.stereo import UNSHOWN
-
-        if self.stereo in UNSHOWN:
-            raise InputError.of("stereo", f"{self.stereo}: {UNSHOWN[self.stereo]}")
-        tw, th = self.tile
-        if self.stereo == "side-by-side" and tw % 2:
-            raise InputError.of("tile", f"{tw}x{th}: side-by-side stereo needs an even tile width (each eye half)")
-        if self.stereo == "top-bottom" and th % 2:
-            raise InputError.of("tile", f"{tw}x{th}: top-bottom stereo needs an even tile height (each eye half)")
-        if self.screen_m is None:
-            object.__setattr__(self, "screen_m", tuple(v * DEFAULT_PITCH_MM / 1000.0 for v in self.canvas.size))
-        if self.head_poses and not self.poses:
-            object.__setattr__(self, "poses", read_poses(self.head_poses))
-        viewer = self.viewer
-        if viewer is None:
-            return
-        if self.eye_separation >= self.screen_m[0]:
-            raise InputError.of("eye_separation", f"{self.eye_separation:g} m is as wide as the wall or wider "
-                                f"({self.screen_m[0]:g} m: --screen-size)")
-        if self.head is not None:
-            why = head_problem(Pose(self.head), viewer)
-            if why:
-                raise InputError.of("head", f"{','.join(f'{v:g}' for v in self.head)}: {why}")
-        for i, pose in enumerate(self.poses):  # the file's poses, once at the door
-            why = head_problem(pose, viewer)
-            if why:
-                raise InputError(f"--head-poses {self.head_poses}: pose {i}: {why}")
+        """Stereo and the viewer at the door (``viewing.check_viewer``)."""
+        check_viewer(self)
 
     @property
     def viewer(self):
         """Who looks at the wall (``core/eyes.Viewer``), where a run places one: stereo, a head or
         head poses; None: the camera's own frustum, as always."""
-        if self.stereo == "mono" and self.head is None and not self.poses:
-            return None
-        from multigpu.core.eyes import Pose, Viewer
-
-        return Viewer(self.screen_m, self.eye_separation if self.stereo != "mono" else 0.0,
-                      None if self.head is None else Pose(self.head), self.world_per_metre, self.swap_eyes)
+        return viewer_of(self)
 
     def _scene_as_drawn(self) -> None:
         """The scene prepared with levels of detail only where the run can draw them

@@ -99,9 +99,9 @@ def _kooima(pa, pb, pc, pe, near, far):
     vn /= np.linalg.norm(vn)
     va, vb, vc = pa - pe, pb - pe, pc - pe
     d = -va @ vn
-    l, r = (vr @ va) * near / d, (vr @ vb) * near / d
+    lo, r = (vr @ va) * near / d, (vr @ vb) * near / d
     b, t = (vu @ va) * near / d, (vu @ vc) * near / d
-    P = np.array([[2 * near / (r - l), 0, (r + l) / (r - l), 0], [0, 2 * near / (t - b), (t + b) / (t - b), 0],
+    P = np.array([[2 * near / (r - lo), 0, (r + lo) / (r - lo), 0], [0, 2 * near / (t - b), (t + b) / (t - b), 0],
                   [0, 0, -(far + near) / (far - near), -2 * far * near / (far - near)], [0, 0, -1, 0]])
     M = np.eye(4)
     M[:3, :3] = np.stack([vr, vu, vn])
@@ -202,7 +202,8 @@ def test_a_wall_files_stereo_and_size_reach_the_run(tmp_path):
     cfg = walk_config(p.parse_args(["walkthrough", "--wall", str(wall)]))
     assert (cfg.stereo, cfg.eye_separation, cfg.head, cfg.swap_eyes, cfg.screen_m) == (
         "anaglyph", 0.05, (0.1, 0.0, 2.0), True, (2.4, 0.9))
-    cfg = walk_config(p.parse_args(["walkthrough", "--wall", str(wall), "--stereo", "top-bottom", "--eye-separation", "0.06"]))
+    cfg = walk_config(p.parse_args(["walkthrough", "--wall", str(wall), "--stereo", "top-bottom",
+                                    "--eye-separation", "0.06"]))
     assert (cfg.stereo, cfg.eye_separation) == ("top-bottom", 0.06)  # the flags win
 
 
@@ -229,7 +230,7 @@ def _one_rank(base, mode, canvas: Canvas, **fields) -> list:
 def _packed(left, right, canvas: Canvas, mode):
     """What the wall's displays show, packed here tile by tile from the eyes' mosaics (top row first)."""
     st = Stereo(mode, canvas)
-    (R, C), (tw, th) = canvas.grid, canvas.tile
+    R, C = canvas.grid
     out = np.zeros((*canvas.size[::-1], 3), np.uint8)
     ex, ey = st.eye.tiles(), canvas.tiles()
     for k in range(R * C):  # tiles
@@ -266,7 +267,7 @@ def test_each_eye_composes_one_ranks_render_and_the_wall_shows_their_packing(tmp
     got = _walk(tmp_path / "w", canvas.grid, canvas.tile, stereo=mode, **fields)
     for f, ((shown, left, right), (_, want_l, want_r)) in enumerate(zip(got, references[mode])):
         for name, a, b in (("left", left, want_l), ("right", right, want_r)):
-            assert a.shape == b.shape and (a == b).all(), f"frame {f} {name}: {(a != b).any(axis=2).sum()} px differ"
+            assert a.shape == b.shape and (a == b).all(), f"frame {f} {name}: {(a != b).any(axis=2).sum()} px"
         want = _packed(want_l, want_r, canvas, mode)
         assert (shown == want).all(), f"frame {f}: {(shown != want).any(axis=2).sum()} packed px differ"
     s = json.loads((tmp_path / "w" / "summary.json").read_text())

@@ -43,7 +43,9 @@ class Stereo:
     def eye_tile(self) -> tuple[int, int]:
         """(w, h) of one eye's picture of a tile."""
         tw, th = self.canvas.tile
-        return (tw // 2, th) if self.mode == "side-by-side" else (tw, th // 2) if self.mode == "top-bottom" else (tw, th)
+        if self.mode == "side-by-side":
+            return tw // 2, th
+        return (tw, th // 2) if self.mode == "top-bottom" else (tw, th)
 
     @cached_property
     def eye(self) -> Canvas:

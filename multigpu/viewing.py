@@ -1,0 +1,93 @@
+"""The walkthrough's stereo and viewer settings, read and checked at the door: the wall's size
+in metres, the head pose file, and what a mode, a separation and a head must be (``config.py``
+declares the flags; ``core/eyes.py`` and ``core/stereo.py`` compute with them)."""
+
+from __future__ import annotations
+
+import math
+
+from multigpu.errors import InputError
+
+#: a wall's pixel pitch where neither --screen-size nor the wall file's screen_m or bezel gives its size (mm)
+DEFAULT_PITCH_MM = 0.5
+
+
+def read_size_m(text: str) -> tuple[float, float]:
+    """``--screen-size W,H`` in metres."""
+    try:
+        v = tuple(float(t) for t in str(text).split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 2:
+        raise InputError(f"must look like W,H (the wall's width and height in metres), got '{text}'")
+    return v
+
+
+def read_poses(path: str) -> tuple:
+    """A head pose file (docs/USAGE.md, "A stereo wall"): JSON, a list (or ``{"poses": [...]}``)
+    with a pose per frame, each [x, y, z] or [x, y, z, yaw, pitch, roll] (metres, degrees)."""
+    import json
+
+    from multigpu.core.eyes import Pose
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"--head-poses {path}: {exc.__class__.__name__}: {exc}") from None
+    rows = doc.get("poses") if isinstance(doc, dict) else doc  # an object may carry a "comment" too
+    if not isinstance(rows, list) or not rows:
+        raise InputError(f"--head-poses {path}: must be a non-empty list of poses (or {{\"poses\": [...]}})")
+    out = []
+    for i, row in enumerate(rows):  # the file's poses, read once at the door
+        ok = (isinstance(row, list) and len(row) in (3, 6)
+              and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in row))
+        if not ok:
+            raise InputError(f"--head-poses {path}: pose {i} must be [x, y, z] or [x, y, z, yaw, pitch, roll] "
+                             f"(finite numbers), got {json.dumps(row)[:80]}")
+        out.append(Pose(tuple(float(v) for v in row[:3]), *(float(v) for v in row[3:])))
+    return tuple(out)
+
+
+def check_viewer(cfg) -> None:
+    """Stereo and the viewer at the door: a mode the presenters can show, packing that fits
+    the tile, an eye separation narrower than the wall, every head pose in front of it."""
+    from multigpu.core.eyes import Pose, head_problem
+    from multigpu.core.stereo import UNSHOWN
+
+    if cfg.stereo in UNSHOWN:
+        raise InputError.of("stereo", f"{cfg.stereo}: {UNSHOWN[cfg.stereo]}")
+    tw, th = cfg.tile
+    if cfg.stereo == "side-by-side" and tw % 2:
+        raise InputError.of("tile", f"{tw}x{th}: side-by-side stereo needs an even tile width (each eye half)")
+    if cfg.stereo == "top-bottom" and th % 2:
+        raise InputError.of("tile", f"{tw}x{th}: top-bottom stereo needs an even tile height (each eye half)")
+    if cfg.screen_m is None:
+        object.__setattr__(cfg, "screen_m", tuple(v * DEFAULT_PITCH_MM / 1000.0 for v in cfg.canvas.size))
+    if cfg.head_poses and not cfg.poses:
+        object.__setattr__(cfg, "poses", read_poses(cfg.head_poses))
+    viewer = cfg.viewer
+    if viewer is None:
+        return
+    if cfg.eye_separation >= cfg.screen_m[0]:
+        raise InputError.of("eye_separation", f"{cfg.eye_separation:g} m is as wide as the wall or wider "
+                            f"({cfg.screen_m[0]:g} m: --screen-size)")
+    if cfg.head is not None:
+        why = head_problem(Pose(cfg.head), viewer)
+        if why:
+            raise InputError.of("head", f"{','.join(f'{v:g}' for v in cfg.head)}: {why}")
+    for i, pose in enumerate(cfg.poses):  # the file's poses, once at the door
+        why = head_problem(pose, viewer)
+        if why:
+            raise InputError(f"--head-poses {cfg.head_poses}: pose {i}: {why}")
+
+
+def viewer_of(cfg):
+    """Who looks at the wall (``core/eyes.Viewer``), where a run places one: stereo, a head or
+    head poses; None: the camera's own frustum, as always."""
+    if cfg.stereo == "mono" and cfg.head is None and not cfg.poses:
+        return None
+    from multigpu.core.eyes import Pose, Viewer
+
+    return Viewer(cfg.screen_m, cfg.eye_separation if cfg.stereo != "mono" else 0.0,
+                  None if cfg.head is None else Pose(cfg.head), cfg.world_per_metre, cfg.swap_eyes)
