@@ -90,6 +90,7 @@ class Planner:
         self.canvas = self.plan_cfg.canvas
         self.viewer = cfg.viewer  # None: the camera's own frustum
         self.views: list = []  # the last frame's (view, proj, light) of every eye, where there is a viewer
+        self.canvas_rects = None  # the last frame's object rects on the canvas, where bezels make them differ
         self.bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
         self.balances = balances_of(cfg)
         self.using = self.balances.index(cfg.balance if cfg.decomposition == "screen" else cfg.decomposition)
@@ -129,7 +130,15 @@ class Planner:
         if self.viewer is not None:
             return self._viewed(camera, f, d)
         view, proj, light, rects = self.project.frame(camera, self.size, self.coverage if d.needs_coverage else None)
-        return view, proj, light, self.canvas.to_visible(rects) if self.bezels else rects
+        return view, proj, light, self.visible(rects)
+
+    def visible(self, rects: np.ndarray) -> np.ndarray:
+        """The canvas ``rects`` in the visible space (kept as ``canvas_rects`` where they differ:
+        a render scale below 1 widens by them, ``resample.Widen``)."""
+        if not self.bezels:
+            return rects
+        self.canvas_rects = rects
+        return self.canvas.to_visible(rects)
 
     def _viewed(self, camera, f: int, d):
         """A viewer's frame: each eye's off-axis matrices (``views``, the first returned), and
@@ -144,7 +153,7 @@ class Planner:
             rects = r if rects is None else np.concatenate([np.fmin(rects[:, :2], r[:, :2]),
                                                             np.fmax(rects[:, 2:], r[:, 2:])], axis=1)
         view, proj, light = self.views[0]
-        return view, proj, light, self.canvas.to_visible(rects) if self.bezels else rects
+        return view, proj, light, self.visible(rects)
 
     def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None,
              tris: np.ndarray | None = None) -> Work:

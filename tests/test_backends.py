@@ -29,7 +29,7 @@ def test_each_rank_projects_in_the_project_phase():
     from multigpu.rank.timer import Timer
 
     class Planner:
-        def frame(self, camera):
+        def frame(self, camera, f=0):
             return ("view", "proj", "light", camera)
 
     t = Timer()

@@ -71,12 +71,17 @@ class Widen:
     def __init__(self, canvas):
         self.canvas = canvas
 
-    def masks(self, rects: np.ndarray, masks, vrects: np.ndarray, scale: float) -> list:
+    def masks(self, rects: np.ndarray, masks, vrects: np.ndarray, scale: float, crects=None) -> list:
         """``masks`` of the canvas pieces ``rects`` (M, 4) widened for ``scale``; ``vrects``: this
-        frame's normalized visible object rects."""
+        frame's normalized visible object rects; ``crects``: the same on the canvas, where there are
+        bezels (then the widening is found there: a scaled pixel at a tile's edge may show an object
+        wholly behind the bezel beside it, which has no visible rect)."""
         canvas = self.canvas
         size, vis = canvas.size, canvas.visible
         ssize = scaled_size(size, scale)
+        if crects is not None:
+            spans, on = pixel_spans(crects, size)
+            return [mask | (on & overlaps(spans, covered(rect, size, ssize))) for rect, mask in zip(rects, masks)]
         spans, on = pixel_spans(vrects, vis)
         out = []
         for rect, mask in zip(rects, masks):  # pieces, not objects

@@ -116,7 +116,8 @@ class Frames:
             reach = [covered(r, size, small) for r in reach]  # pieces, not objects
             front = len(masks) if not work.depth else work.front[self.rank] if work.front else 0
             if front:  # screen regions widened; sort-last masks are the rank's objects wherever they fall
-                masks = [*self.widen.masks(work.rects[self.rank][:front], masks[:front], rects, scale),
+                masks = [*self.widen.masks(work.rects[self.rank][:front], masks[:front], rects, scale,
+                                           self.planner.canvas_rects),
                          *masks[front:]]
         mine = list(zip(work.rects[self.rank], masks, reach))
         if self.culler is not None:

@@ -105,7 +105,7 @@ class SharedProjection:
     def gathered(self, frame: int) -> np.ndarray:
         """The (N, 4) visible rects of frame ``frame``, once every slice is in."""
         out, planner = self.out(frame), self.planner
-        return planner.canvas.to_visible(out.T) if planner.bezels else out.T
+        return planner.visible(out.T)
 
     def wait(self) -> None:
         """Until every rank of the host has written its slice (bounded by the job's timeout)."""
