@@ -15,7 +15,7 @@ from multigpu.options import check, option, register
 from multigpu.scene.models import SceneSpec
 from multigpu.scene.paths import DEFAULT_FRAMES
 from multigpu.strategies import REGISTRY
-from multigpu.viewing import DEFAULT_PITCH_MM, check_viewer, read_size_m, viewer_of
+from multigpu.viewing import DEFAULT_PITCH_MM, check_viewer, read_size_m, read_tracker, viewer_of
 
 #: rank 0 rewrites summary.json every this many frames (and whenever the run ends)
 SUMMARY_EVERY = 50
@@ -246,6 +246,12 @@ class WalkConfig:
     head_poses: str | None = option(None, group=STEREO, metavar="FILE", help=(
         "the head's pose for every frame, beside the camera path: a JSON list of [x, y, z] or [x, y, z, yaw, "
         "pitch, roll] (metres, degrees)"))
+    head_tracker: tuple[str, int] | None = option(
+        None, group=STEREO, metavar="[ADDRESS:]PORT", read=lambda v: read_tracker(v),
+        show=lambda v: "none" if v is None else f"{v[0]}:{v[1]}", help=(
+            "rank 0 takes the head's pose from UDP datagrams on this port, the newest each frame (JSON: "
+            "{\"position\": [x, y, z], \"yaw\": .., \"pitch\": .., \"roll\": ..}; every interface unless an "
+            "ADDRESS is given; docs/USAGE.md, \"A stereo wall\")"))
     world_per_metre: float = option(1.0, group=STEREO, metavar="U", type=float,
                                     valid=lambda v: v > 0 and _finite(v), must="must be > 0",
                                     help="scene units a metre of head motion moves the eye (default: {default})")

@@ -91,6 +91,7 @@ class Planner:
         self.viewer = cfg.viewer  # None: the camera's own frustum
         self.views: list = []  # the last frame's (view, proj, light) of every eye, where there is a viewer
         self.canvas_rects = None  # the last frame's object rects on the canvas, where bezels make them differ
+        self.pose = None  # a tracked head's newest pose (``rank/head_link.py``): before the pose file's
         self.bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
         self.balances = balances_of(cfg)
         self.using = self.balances.index(cfg.balance if cfg.decomposition == "screen" else cfg.decomposition)
@@ -145,7 +146,7 @@ class Planner:
         every object's rect over all eyes (their union: a region's objects are those either eye
         sees in it, so one plan serves both)."""
         poses = self.cfg.poses
-        pose = poses[min(f, len(poses) - 1)] if poses else None
+        pose = self.pose or (poses[min(f, len(poses) - 1)] if poses else None)
         self.views = eye_frames(camera, self.viewer, pose, 1 if self.stereo is None else 2)
         rects = None
         for view, proj, _ in self.views:  # eyes

@@ -4,8 +4,6 @@ declares the flags; ``core/eyes.py`` and ``core/stereo.py`` compute with them)."
 
 from __future__ import annotations
 
-import math
-
 from multigpu.errors import InputError
 
 #: a wall's pixel pitch where neither --screen-size nor the wall file's screen_m or bezel gives its size (mm)
@@ -23,12 +21,21 @@ def read_size_m(text: str) -> tuple[float, float]:
     return v
 
 
+def read_tracker(text: str) -> tuple[str, int]:
+    """``--head-tracker [ADDRESS:]PORT``: where rank 0 listens for head poses over UDP (every
+    interface unless an address is given: the tracker is usually another PC)."""
+    address, _, port = str(text).rpartition(":")
+    if not port.strip().isdigit() or not 0 < int(port) <= 65535:
+        raise InputError(f"must look like [ADDRESS:]PORT with a port 1..65535, got '{text}'")
+    return address.strip("[]") or "0.0.0.0", int(port)
+
+
 def read_poses(path: str) -> tuple:
     """A head pose file (docs/USAGE.md, "A stereo wall"): JSON, a list (or ``{"poses": [...]}``)
     with a pose per frame, each [x, y, z] or [x, y, z, yaw, pitch, roll] (metres, degrees)."""
     import json
 
-    from multigpu.core.eyes import Pose
+    from multigpu.core.eyes import pose_of
 
     try:
         with open(path, encoding="utf-8") as fh:
@@ -40,12 +47,10 @@ def read_poses(path: str) -> tuple:
         raise InputError(f"--head-poses {path}: must be a non-empty list of poses (or {{\"poses\": [...]}})")
     out = []
     for i, row in enumerate(rows):  # the file's poses, read once at the door
-        ok = (isinstance(row, list) and len(row) in (3, 6)
-              and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in row))
-        if not ok:
-            raise InputError(f"--head-poses {path}: pose {i} must be [x, y, z] or [x, y, z, yaw, pitch, roll] "
-                             f"(finite numbers), got {json.dumps(row)[:80]}")
-        out.append(Pose(tuple(float(v) for v in row[:3]), *(float(v) for v in row[3:])))
+        pose = pose_of(row)
+        if isinstance(pose, str):
+            raise InputError(f"--head-poses {path}: pose {i} {pose}, got {json.dumps(row)[:80]}")
+        out.append(pose)
     return tuple(out)
 
 
@@ -85,7 +90,7 @@ def check_viewer(cfg) -> None:
 def viewer_of(cfg):
     """Who looks at the wall (``core/eyes.Viewer``), where a run places one: stereo, a head or
     head poses; None: the camera's own frustum, as always."""
-    if cfg.stereo == "mono" and cfg.head is None and not cfg.poses:
+    if cfg.stereo == "mono" and cfg.head is None and not cfg.poses and cfg.head_tracker is None:
         return None
     from multigpu.core.eyes import Pose, Viewer
 

@@ -352,3 +352,59 @@ def test_a_scaled_pixel_at_a_bezel_shows_what_is_behind_it(tmp_path):
         ref = w[0].copy()
         ref[canvas.hidden()] = 0
         assert (g[0] == ref).all(), f"frame {f}: {(g[0] != ref).any(axis=2).sum()} px differ"
+
+
+def test_a_tracked_head_over_udp_moves_every_rank_and_garbage_is_refused_once(tmp_path, capsys):
+    """``--head-tracker``: a tracker sends a pose over and over after a datagram of garbage and one
+    with an eye behind the wall; the wall goes on, says so once, and its last frame is the one a
+    run with that head renders; the summary counts the poses and their motion to photon."""
+    import socket
+    import threading
+
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    stop = threading.Event()
+
+    def send():
+        out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        out.sendto(b"\xff not a pose", ("127.0.0.1", port))
+        out.sendto(b'{"position": [0, 0, -1]}', ("127.0.0.1", port))
+        while not stop.is_set():
+            out.sendto(b'{"position": [0.2, -0.1, 0.7], "roll": 0}', ("127.0.0.1", port))
+            stop.wait(0.002)
+        out.close()
+
+    frames = 12
+    want = _walk(tmp_path / "fixed", (1, 2), (60, 96), frames=frames, stereo="anaglyph",
+                 head=(0.2, -0.1, 0.7))
+    sender = None
+
+    import multigpu.rank.head_link as head_link
+
+    listen = head_link.HeadLink.listen
+
+    def listen_then_send(address, p):  # the tracker starts once rank 0 listens
+        nonlocal sender
+        sock = listen(address, p)
+        sender = threading.Thread(target=send, daemon=True)
+        sender.start()
+        return sock
+
+    head_link.HeadLink.listen = staticmethod(listen_then_send)
+    try:
+        got = _walk(tmp_path / "tracked", (1, 2), (60, 96), frames=frames, stereo="anaglyph",
+                    head_tracker=("127.0.0.1", port))
+    finally:
+        head_link.HeadLink.listen = staticmethod(listen)
+        stop.set()
+        if sender is not None:
+            sender.join(5)
+    err = capsys.readouterr().err
+    assert err.count("head tracker: refused a pose") == 1, err
+    last = frames - 1
+    assert all((g == w).all() for g, w in zip(got[last], want[last])), "the last frame is not the tracked head's"
+    s = json.loads((tmp_path / "tracked" / "summary.json").read_text())
+    assert s["head_poses_received"] > 0 and s["head_poses_refused"] == 2
+    assert s["head_to_photon_ms_median"] > 0

@@ -108,3 +108,24 @@ def head_problem(pose: Pose, viewer: Viewer) -> str | None:
 def screen_size(canvas_size: tuple[int, int], pitch_mm: tuple[float, float]) -> tuple[float, float]:
     """The wall's (W, H) in metres from its canvas pixels (bezels included) and pixel pitch."""
     return canvas_size[0] * pitch_mm[0] / 1000.0, canvas_size[1] * pitch_mm[1] / 1000.0
+
+
+def pose_of(row) -> Pose | str:
+    """A pose from a file's row or a tracker's message (parsed JSON): ``[x, y, z]``, ``[x, y, z,
+    yaw, pitch, roll]`` or ``{"position": [x, y, z], "yaw": .., "pitch": .., "roll": ..}``
+    (orientation optional), metres and degrees; else why not (a string)."""
+    if isinstance(row, dict):
+        extra = set(row) - {"position", "yaw", "pitch", "roll", "t"}
+        if extra:
+            return f"unknown key '{sorted(extra)[0]}' (known: position, yaw, pitch, roll, t)"
+        at = row.get("position")
+        if not isinstance(at, list):
+            return "position must be [x, y, z]"
+        row = [*at, *(row.get(k, 0.0) for k in ("yaw", "pitch", "roll"))]
+        if len(row) != 6:
+            return "position must be [x, y, z]"
+    ok = (isinstance(row, list) and len(row) in (3, 6)
+          and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in row))
+    if not ok:
+        return "must be [x, y, z] or [x, y, z, yaw, pitch, roll] (finite numbers)"
+    return Pose(tuple(float(v) for v in row[:3]), *(float(v) for v in row[3:]))

@@ -44,15 +44,16 @@ class FrameSetup:
     doc: dict
     record: RunRecord | None = None
     live: object = None  # parallel.live.Live
+    head: object = None  # rank.head_link.HeadLink: the tracked head (--head-tracker)
 
     def release(self, collective: bool) -> None:
         """Let the shared segments and the live state go; ``collective``: every rank finished the
         run and does so together (on a failure the job ends anyway, and a collective step would
         wait on ranks that are gone or still in the frame loop)."""
-        for part in (self.exchange, self.live, self.projection):
+        for part in (self.exchange, self.live, self.projection, self.head):
             if part is not None:
                 part.close(collective)
-        self.exchange = self.live = self.projection = None
+        self.exchange = self.live = self.projection = self.head = None
 
 
 def clear_colour(renderer, n_objects: int) -> np.ndarray:
@@ -92,7 +93,7 @@ def _live(cfg: WalkConfig, comm, scene, path, planner: Planner, presenter, monit
 
 
 def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDir | None, load_info: dict,
-          placement: list[dict], monitor=None, panel=None) -> FrameSetup:
+          placement: list[dict], monitor=None, panel=None, tracker=None) -> FrameSetup:
     """Every part of the frame loop for this rank (collective: every rank calls it)."""
     rank = comm.Get_rank()
     planner = Planner(cfg, scene, rank)  # MPI-free: projection, strategy, decomposition
@@ -113,6 +114,10 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
         if projection_why:
             doc["projection_why"] = projection_why
         setup.background = clear_colour(renderer, scene.n_objects)
+        if cfg.head_tracker is not None:  # every rank takes rank 0's pose (``tracker``: its socket)
+            from multigpu.rank.head_link import HeadLink
+
+            setup.head = HeadLink(comm, tracker, planner.viewer, cfg.timeout)
         if presenter.mode == "window" or cfg.panel is not None:
             setup.live = _live(cfg, comm, scene, path, planner, presenter, monitor, panel)
         if rank == 0:

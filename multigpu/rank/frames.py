@@ -53,6 +53,7 @@ class InFlight:
     quality: Quality  # the frame's render scale and level-of-detail bound
     composed: Work | None = None  # a stereo wall's: both eyes' parts where they are composed (core/stereo.py)
     picks: list | None = None  # a stereo wall's: where each composed part comes from
+    head_at: float = 0.0  # rank 0, a tracked head: when the frame's pose arrived (perf_counter)
     rendered: list | None = None
     started: object = None
 
@@ -72,6 +73,7 @@ class Frames:
         self.tiles = composed.tiles()
         tw, th = composed.tile
         self.live, self.record, self.background = setup.live, setup.record, setup.background
+        self.head = setup.head  # the tracked head (--head-tracker), or None
         self.culler = PartCuller(scene) if renderer.draws.parts else None  # objects cut into parts
         # speed for accuracy: each frame's render scale and levels of detail (core/quality.py)
         self.fidelity = Fidelity(scene, self.canvas.size[1], cfg.target_fps, cfg.render_scale, cfg.lod_error,
@@ -186,6 +188,10 @@ class Frames:
             for landed in self.learn:  # the times of frames that landed, to what planned them
                 self.planner.observe(*landed)
             self.learn.clear()
+        head_at = 0.0
+        if self.head is not None:  # the newest pose, every rank the same from this frame
+            with t.phase("input"):
+                self.planner.pose, head_at = self.head.pose()
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
             quality, levels, tris = self.fidelity.frame(f, camera, rects)
@@ -214,7 +220,7 @@ class Frames:
             live = self.live.recorded() if self.live is not None and self.interactive else None
             recorded = live if live is not None else unshifted(camera, self.cfg.offset)
         return InFlight(f, t, control, work, plan, pending, self.drawn, work.objects(self.rank),
-                        self.balance_ids[self.planner.using], recorded, quality, composed, picks)
+                        self.balance_ids[self.planner.using], recorded, quality, composed, picks, head_at)
 
     def send(self, x: "InFlight") -> None:
         """A frame's second stage: its pixels read back (``readback``: waiting for the GL) and,
@@ -246,6 +252,8 @@ class Frames:
             sent = self.exchange.finish(x.started, self.tiles[self.rank], self.back, self.zback if depth else None)
         x.rendered = x.started = None
         swapped, stop = self.present(t, work, x.control, self.rows.allrows)
+        if self.head is not None:
+            self.head.shown(x.head_at)
         # a signal, a window event or a failed write seen here stops every rank after the same frame
         for landed in self.rows.post(x.f, self.log.row(x, sent, swapped), self.log.stop_flag(stop), x.recorded):
             self.landed(*landed)
@@ -318,6 +326,8 @@ class Frames:
                 # rank 0's whole process (every thread: heartbeat, the panel's server) per frame of the loop
                 frames = max(self.done - shown, 1)
                 self.record.extra["rank0_process_cpu_ms"] = (process_time() - began) * 1e3 / frames
+                if self.head is not None:  # the tracked head's poses and their motion to photon
+                    self.record.extra.update(self.head.report())
                 if panel is not None:  # the page's server thread, on its own clock
                     self.record.extra["panel_server_cpu_ms"] = (panel.server.cpu_s() - served) * 1e3 / frames
                 summary = self.record.close(complete, stopped_by)

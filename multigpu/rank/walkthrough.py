@@ -128,7 +128,7 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
     wait = setup_timeout(cfg)
     # -- setup: rank 0 takes the output directory and builds the scene cache first
     error, out, scene, path, load_info, shared = _first(cfg) if rank == 0 else (None,) * 6
-    presenter = renderer = monitor = panel = None
+    presenter = renderer = monitor = panel = tracker = None
     try:
         fault(rank, "setup")
         error = agree(comm, error, wait)
@@ -148,6 +148,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 monitor = _monitor(cfg, presenter)
             if rank == 0 and cfg.panel is not None:
                 panel = _panel(cfg, scene, out)
+            if rank == 0 and cfg.head_tracker is not None:
+                tracker = _tracker(cfg)
             if presenter.context is not None:  # render in the window's context
                 ctx, device = presenter.context, f"window on {presenter.display}"
             else:
@@ -173,12 +175,15 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
              "gl_renderer": ctx.info.get("GL_RENDERER"), "gl_buffers": renderer.storage}), wait, "setup")]
     except BaseException:
         _close(renderer, presenter, monitor, panel)
+        if tracker is not None:
+            tracker.close()
         if out is not None:
             out.abandon()
         raise
     setup = None
     try:
-        setup = build(cfg, comm, scene, path, renderer, presenter, out, load_info, placement, monitor, panel)
+        setup = build(cfg, comm, scene, path, renderer, presenter, out, load_info, placement, monitor, panel,
+                      tracker)
         summary = Frames(cfg, comm, job, scene, path, renderer, presenter, setup).run()
         if panel is not None:
             panel.finish(summary)
@@ -190,6 +195,8 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
         raise
     finally:
         _close(renderer, presenter, monitor, panel)
+        if tracker is not None:
+            tracker.close()
         if out is not None:
             out.release()
 
@@ -298,6 +305,17 @@ def _panel(cfg: WalkConfig, scene, out):
     except OSError as exc:
         address, port = cfg.panel
         raise InputError.of("panel", f"cannot serve the page on {address}:{port} ({exc})") from None
+
+
+def _tracker(cfg: WalkConfig):
+    """Rank 0's UDP socket for the head's poses (``--head-tracker``)."""
+    from multigpu.rank.head_link import HeadLink
+
+    address, port = cfg.head_tracker
+    try:
+        return HeadLink.listen(address, port)
+    except OSError as exc:
+        raise InputError.of("head_tracker", f"cannot listen on udp {address}:{port} ({exc})") from None
 
 
 def _close(renderer, presenter, monitor=None, panel=None) -> None:

@@ -1,0 +1,111 @@
+"""Head tracking from the network (``--head-tracker``): rank 0 reads the newest pose a tracker sent
+and every rank uses it from the same frame.
+
+The protocol is one JSON object (or list) per UDP datagram, a pose as ``core.eyes.pose_of`` reads
+it: ``{"position": [x, y, z], "yaw": .., "pitch": .., "roll": ..}`` in the room's metres and
+degrees (docs/USAGE.md, "A stereo wall"). Each frame rank 0 drains the socket without waiting
+and keeps the newest good pose; a datagram that does not parse, or puts an eye on or behind the
+wall, is refused with one warning (the first; the rest are counted) and the last good pose stays.
+The pose travels to the other ranks in one small broadcast a frame (bounded by ``--timeout``), so
+frames in flight each use the newest pose at their submit. Rank 0 keeps when each pose arrived,
+for the motion-to-photon figure in the summary (its frame shown on rank 0's display).
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import sys
+import time
+from collections import deque
+
+import numpy as np
+
+from multigpu.core.eyes import Pose, head_problem, pose_of
+from multigpu.rank.exchange import wait_all
+
+#: the frames whose motion to photon the summary's figures cover: the run's last ones (a run of days stays flat)
+PHOTON_KEPT = 10_000
+#: the longest datagram read (a pose is well under 200 bytes)
+MOST_BYTES = 2048
+
+
+class HeadLink:
+    """A run's tracked head: rank 0's socket (None elsewhere) and the pose every rank uses."""
+
+    def __init__(self, comm, sock: socket.socket | None, viewer, timeout: float):
+        self.comm, self.sock, self.viewer, self.timeout = comm, sock, viewer, timeout
+        self.buf = np.zeros(8)  # have, x, y, z, yaw, pitch, roll, arrival (rank 0's perf_counter)
+        self.received = self.refused = 0
+        self.photon_ms: deque = deque(maxlen=PHOTON_KEPT)  # rank 0: a pose's arrival to its frame shown
+
+    @staticmethod
+    def listen(address: str, port: int) -> socket.socket:
+        """Rank 0's UDP socket, bound and non-blocking (an OSError where it cannot be)."""
+        sock = socket.socket(socket.AF_INET6 if ":" in address else socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.bind((address, port))
+        except OSError:
+            sock.close()
+            raise
+        sock.setblocking(False)
+        print(f"multigpu: head tracker: listening for poses on udp {address}:{port}", flush=True)
+        return sock
+
+    def _drain(self) -> None:
+        """Every datagram waiting, the newest good pose kept (rank 0)."""
+        while True:
+            try:
+                data, sender = self.sock.recvfrom(MOST_BYTES)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                return
+            pose = _parsed(data)
+            if isinstance(pose, Pose):
+                why = head_problem(pose, self.viewer)
+                pose = why if why else pose
+            if isinstance(pose, str):
+                self.refused += 1
+                if self.refused == 1:
+                    print(f"multigpu: warning: head tracker: refused a pose from {sender[0]}:{sender[1]} ({pose}); "
+                          "the last good pose stays (further refusals are counted in summary.json)",
+                          file=sys.stderr, flush=True)
+                continue
+            self.received += 1
+            self.buf[:] = (1.0, *pose.position, pose.yaw, pose.pitch, pose.roll, time.perf_counter())
+
+    def pose(self) -> tuple[Pose | None, float]:
+        """This frame's pose (None until a good one came) and, on rank 0, when it arrived."""
+        if self.sock is not None:
+            self._drain()
+        if self.comm.Get_size() > 1:
+            wait_all([self.comm.Ibcast(self.buf, root=0)], self.timeout, "the head's pose")
+        b = self.buf
+        if not b[0]:
+            return None, 0.0
+        return Pose((float(b[1]), float(b[2]), float(b[3])), float(b[4]), float(b[5]), float(b[6])), float(b[7])
+
+    def shown(self, arrived: float) -> None:
+        """Rank 0: a frame whose pose arrived at ``arrived`` is on its display now."""
+        if self.sock is not None and arrived:
+            self.photon_ms.append((time.perf_counter() - arrived) * 1e3)
+
+    def report(self) -> dict:
+        """Rank 0's figures for summary.json."""
+        p = np.asarray(self.photon_ms)
+        return {"head_poses_received": self.received, "head_poses_refused": self.refused,
+                "head_to_photon_ms_median": float(np.median(p)) if len(p) else None,
+                "head_to_photon_ms_p99": float(np.percentile(p, 99)) if len(p) else None}
+
+    def close(self, collective: bool = True) -> None:
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+
+def _parsed(data: bytes) -> Pose | str:
+    try:
+        return pose_of(json.loads(data.decode("utf-8")))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        return "not JSON"
