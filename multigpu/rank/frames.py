@@ -53,7 +53,7 @@ class InFlight:
     quality: Quality  # the frame's render scale and level-of-detail bound
     composed: Work | None = None  # a stereo wall's: both eyes' parts where they are composed (core/stereo.py)
     picks: list | None = None  # a stereo wall's: where each composed part comes from
-    head_at: float = 0.0  # rank 0, a tracked head: when the frame's pose arrived (perf_counter)
+    head_at: float = 0.0  # rank 0, a tracked head: when the frame's pose reached the host (time.time)
     rendered: list | None = None
     started: object = None
 

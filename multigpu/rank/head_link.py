@@ -7,14 +7,16 @@ degrees (docs/USAGE.md, "A stereo wall"). Each frame rank 0 drains the socket wi
 and keeps the newest good pose; a datagram that does not parse, or puts an eye on or behind the
 wall, is refused with one warning (the first; the rest are counted) and the last good pose stays.
 The pose travels to the other ranks in one small broadcast a frame (bounded by ``--timeout``), so
-frames in flight each use the newest pose at their submit. Rank 0 keeps when each pose arrived,
-for the motion-to-photon figure in the summary (its frame shown on rank 0's display).
+frames in flight each use the newest pose at their submit. Rank 0 keeps when each pose reached the host
+(the kernel's receive stamp), for the motion-to-photon figure in the summary: from there to its
+frame shown on rank 0's display, the wait for the next frame to start included.
 """
 
 from __future__ import annotations
 
 import json
 import socket
+import struct
 import sys
 import time
 from collections import deque
@@ -35,7 +37,7 @@ class HeadLink:
 
     def __init__(self, comm, sock: socket.socket | None, viewer, timeout: float):
         self.comm, self.sock, self.viewer, self.timeout = comm, sock, viewer, timeout
-        self.buf = np.zeros(8)  # have, x, y, z, yaw, pitch, roll, arrival (rank 0's perf_counter)
+        self.buf = np.zeros(8)  # have, x, y, z, yaw, pitch, roll, arrival (rank 0's time.time)
         self.received = self.refused = 0
         self.photon_ms: deque = deque(maxlen=PHOTON_KEPT)  # rank 0: a pose's arrival to its frame shown
 
@@ -49,6 +51,8 @@ class HeadLink:
             sock.close()
             raise
         sock.setblocking(False)
+        if hasattr(socket, "SO_TIMESTAMPNS"):  # when each datagram reached the host, from the kernel
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_TIMESTAMPNS, 1)
         print(f"multigpu: head tracker: listening for poses on udp {address}:{port}", flush=True)
         return sock
 
@@ -56,11 +60,12 @@ class HeadLink:
         """Every datagram waiting, the newest good pose kept (rank 0)."""
         while True:
             try:
-                data, sender = self.sock.recvfrom(MOST_BYTES)
+                data, ancillary, _, sender = self.sock.recvmsg(MOST_BYTES, 64)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:
                 return
+            arrived = _arrival(ancillary)
             pose = _parsed(data)
             if isinstance(pose, Pose):
                 why = head_problem(pose, self.viewer)
@@ -73,10 +78,11 @@ class HeadLink:
                           file=sys.stderr, flush=True)
                 continue
             self.received += 1
-            self.buf[:] = (1.0, *pose.position, pose.yaw, pose.pitch, pose.roll, time.perf_counter())
+            self.buf[:] = (1.0, *pose.position, pose.yaw, pose.pitch, pose.roll, arrived)
 
     def pose(self) -> tuple[Pose | None, float]:
-        """This frame's pose (None until a good one came) and, on rank 0, when it arrived."""
+        """This frame's pose (None until a good one came) and, on rank 0, when it reached the host
+        (``time.time``'s clock)."""
         if self.sock is not None:
             self._drain()
         if self.comm.Get_size() > 1:
@@ -89,7 +95,7 @@ class HeadLink:
     def shown(self, arrived: float) -> None:
         """Rank 0: a frame whose pose arrived at ``arrived`` is on its display now."""
         if self.sock is not None and arrived:
-            self.photon_ms.append((time.perf_counter() - arrived) * 1e3)
+            self.photon_ms.append((time.time() - arrived) * 1e3)
 
     def report(self) -> dict:
         """Rank 0's figures for summary.json."""
@@ -102,6 +108,15 @@ class HeadLink:
         if self.sock is not None:
             self.sock.close()
             self.sock = None
+
+
+def _arrival(ancillary) -> float:
+    """When a datagram reached the host: the kernel's stamp where it gave one, else now."""
+    for level, kind, data in ancillary:  # one entry at most
+        if level == socket.SOL_SOCKET and kind == getattr(socket, "SO_TIMESTAMPNS", -1) and len(data) >= 16:
+            sec, nsec = struct.unpack("qq", data[:16])
+            return sec + nsec * 1e-9
+    return time.time()
 
 
 def _parsed(data: bytes) -> Pose | str:
