@@ -126,13 +126,21 @@ def walk_config(a):
     for key, name in stereo_keys.items():  # the file's stereo where the flags leave it at its default
         if key in wall.stereo and given.get(name) in (None, unset[name]):
             given[name] = tuple(wall.stereo[key]) if key == "head_m" else wall.stereo[key]
+    if "tracker" in wall.stereo and given.get("head_tracker") is None:
+        from multigpu.viewing import read_tracker
+
+        try:
+            given["head_tracker"] = read_tracker(wall.stereo["tracker"])
+        except InputError as exc:
+            raise InputError(f"{wall.path}: stereo.tracker {exc}") from None
     if given.get("screen_m") is None:
         given["screen_m"] = wall.screen_m or screen_of_bezel(wall, grid, tile, mullion)
     return WalkConfig(scene=spec(a), grid=grid, tile=tile, mullion=mullion, **given,
                       displays=tuple(wall.displays.get(r) for r in ranks) if wall.displays else (),
                       positions=tuple(wall.positions.get(r) for r in ranks) if wall.positions else (),
                       fullscreen=tuple(r in wall.fullscreen for r in ranks) if wall.fullscreen else (),
-                      gpus=tuple(wall.gpus.get(r) for r in ranks) if wall.gpus else ())
+                      gpus=tuple(wall.gpus.get(r) for r in ranks) if wall.gpus else (),
+                      corners=tuple(wall.corners.get(r) for r in ranks) if wall.corners else ())
 
 
 def screen_of_bezel(wall, grid, tile, mullion) -> tuple[float, float] | None:

@@ -70,6 +70,48 @@ def most_of(cfg, balances) -> tuple[bool, int]:
     return any(k.depth for k in kinds), max(k.layers for k in kinds)
 
 
+def screen_rects(screens, canvas) -> np.ndarray:
+    """(S, 4) canvas rect of each screen: the bounding rect of its tiles."""
+    tiles = canvas.tiles()
+    return np.array([[tiles[list(sc.tiles), 0].min(), tiles[list(sc.tiles), 1].min(), tiles[list(sc.tiles), 2].max(),
+                      tiles[list(sc.tiles), 3].max()] for sc in screens], dtype=np.int64).reshape(-1, 4)
+
+
+def on_canvas(rect, size) -> np.ndarray:
+    """The clip-space map taking a screen's own NDC onto its ``rect`` of the whole canvas."""
+    from multigpu.core.camera import region_clip
+
+    return np.linalg.inv(region_clip(rect, size))
+
+
+def clipped(rects: np.ndarray, rect, size) -> np.ndarray:
+    """Normalized ``rects`` cut to the canvas ``rect`` (NaN where they miss it)."""
+    W, H = size
+    box = np.asarray(rect, dtype=np.float64) / np.array([W, H, W, H])
+    out = np.concatenate([np.maximum(rects[:, :2], box[:2]), np.minimum(rects[:, 2:], box[2:])], axis=1)
+    with np.errstate(invalid="ignore"):
+        out[~((out[:, 2] > out[:, 0]) & (out[:, 3] > out[:, 1]))] = np.nan
+    return out
+
+
+def cut_at(work: Work, screens: np.ndarray) -> Work:
+    """``work``'s pieces cut at the screens' rects, each part knowing its screen (``Work.views``),
+    a hybrid's front pieces first still."""
+    rects, masks, views, front = [], [], [], None if work.front is None else [0] * work.ranks
+    for k in range(work.ranks):  # ranks, not objects
+        R = np.asarray(work.rects[k], dtype=np.int64).reshape(-1, 4)
+        lo = np.maximum(R[:, None, :2], screens[None, :, :2])
+        hi = np.minimum(R[:, None, 2:], screens[None, :, 2:])
+        p, s = np.nonzero((hi > lo).all(axis=-1))  # (piece, screen), by piece
+        rects.append(np.concatenate([lo[p, s], hi[p, s]], axis=1))
+        masks.append(work.masks[k][p] if len(work.masks[k]) == len(R) else work.masks[k])
+        views.append(s.tolist())
+        if front is not None:
+            front[k] = int(np.count_nonzero(p < work.front[k]))
+    return work._replace(rects=tuple(rects), masks=tuple(masks), front=None if front is None else tuple(front),
+                         views=tuple(views))
+
+
 def eye_config(cfg, stereo):
     """``cfg`` as one eye's wall: its tile and bezels at the eye's pixels, mono (what the
     decompositions plan from)."""
@@ -89,7 +131,10 @@ class Planner:
         self.plan_cfg = cfg if self.stereo is None else eye_config(cfg, self.stereo)
         self.canvas = self.plan_cfg.canvas
         self.viewer = cfg.viewer  # None: the camera's own frustum
-        self.views: list = []  # the last frame's (view, proj, light) of every eye, where there is a viewer
+        self.views: list = []  # the last frame's (view, proj, light) of every eye through every screen, [eye][screen]
+        # the screens the eyes look through (a CAVE's: one per plane), each a rect of the canvas
+        self.screens = self.viewer.planes(cfg.ranks) if self.viewer is not None else ()
+        self.screen_rects = screen_rects(self.screens, self.canvas)
         self.canvas_rects = None  # the last frame's object rects on the canvas, where bezels make them differ
         self.pose = None  # a tracked head's newest pose (``rank/head_link.py``): before the pose file's
         self.bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
@@ -147,13 +192,20 @@ class Planner:
         sees in it, so one plan serves both)."""
         poses = self.cfg.poses
         pose = self.pose or (poses[min(f, len(poses) - 1)] if poses else None)
-        self.views = eye_frames(camera, self.viewer, pose, 1 if self.stereo is None else 2)
+        self.views = eye_frames(camera, self.viewer, pose, 1 if self.stereo is None else 2, self.cfg.ranks)
+        several = len(self.screens) > 1
+        if several:  # each screen's frustum onto its own rect of the canvas
+            self.views = [[(v, on_canvas(r, self.size) @ p, li) for (v, p, li), r in zip(eye, self.screen_rects)]
+                          for eye in self.views]  # eyes, screens
         rects = None
-        for view, proj, _ in self.views:  # eyes
-            r = self.project(view, proj, self.coverage if d.needs_coverage and rects is None else None)
-            rects = r if rects is None else np.concatenate([np.fmin(rects[:, :2], r[:, :2]),
-                                                            np.fmax(rects[:, 2:], r[:, 2:])], axis=1)
-        view, proj, light = self.views[0]
+        for eye in self.views:  # eyes
+            for (view, proj, _), rect in zip(eye, self.screen_rects):  # screens
+                r = self.project(view, proj, self.coverage if d.needs_coverage and rects is None else None)
+                if several:  # a screen's frustum shows only its own tiles
+                    r = clipped(r, rect, self.size)
+                rects = r if rects is None else np.concatenate([np.fmin(rects[:, :2], r[:, :2]),
+                                                                np.fmax(rects[:, 2:], r[:, 2:])], axis=1)
+        view, proj, light = self.views[0][0]
         return view, proj, light, self.visible(rects)
 
     def work(self, frame: int, rects: np.ndarray, relay: Callable | None = None,
@@ -170,6 +222,8 @@ class Planner:
             work = d.plan(frame, rects, tris, self.coverage) if d.needs_coverage else d.plan(frame, rects, tris)
         if self.bezels:
             work = self.canvas.to_canvas(work, rects, tris)
+        if len(self.screens) > 1:  # each part drawn through its screen's frustum
+            work = cut_at(work, self.screen_rects)
         planned = self._planned
         planned[frame] = (d, work)
         if len(planned) > KEEP:  # the oldest (frames are planned in order)

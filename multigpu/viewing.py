@@ -4,6 +4,8 @@ declares the flags; ``core/eyes.py`` and ``core/stereo.py`` compute with them)."
 
 from __future__ import annotations
 
+import numpy as np
+
 from multigpu.errors import InputError
 
 #: a wall's pixel pitch where neither --screen-size nor the wall file's screen_m or bezel gives its size (mm)
@@ -71,18 +73,24 @@ def check_viewer(cfg) -> None:
         object.__setattr__(cfg, "screen_m", tuple(v * DEFAULT_PITCH_MM / 1000.0 for v in cfg.canvas.size))
     if cfg.head_poses and not cfg.poses:
         object.__setattr__(cfg, "poses", read_poses(cfg.head_poses))
+    if cfg.corners and (len(cfg.corners) != cfg.ranks or any(c is None for c in cfg.corners)):
+        raise InputError.of("wall", "corners_m: every tile of the grid needs its display's corners "
+                            f"({sum(c is not None for c in cfg.corners)} of {cfg.ranks} have them)")
     viewer = cfg.viewer
     if viewer is None:
         return
-    if cfg.eye_separation >= cfg.screen_m[0]:
-        raise InputError.of("eye_separation", f"{cfg.eye_separation:g} m is as wide as the wall or wider "
-                            f"({cfg.screen_m[0]:g} m: --screen-size)")
+    if cfg.stereo != "mono":  # the narrowest screen the eyes look through
+        wide = (min(float(np.linalg.norm(np.subtract(sc.corners[1], sc.corners[0]))) for sc in viewer.screens)
+                if viewer.screens else cfg.screen_m[0])
+        if cfg.eye_separation >= wide:
+            raise InputError.of("eye_separation", f"{cfg.eye_separation:g} m is as wide as the wall or wider "
+                                f"({wide:g} m: " + ("its corners_m)" if viewer.screens else "--screen-size)"))
     if cfg.head is not None:
-        why = head_problem(Pose(cfg.head), viewer)
+        why = head_problem(Pose(cfg.head), viewer, cfg.ranks)
         if why:
             raise InputError.of("head", f"{','.join(f'{v:g}' for v in cfg.head)}: {why}")
     for i, pose in enumerate(cfg.poses):  # the file's poses, once at the door
-        why = head_problem(pose, viewer)
+        why = head_problem(pose, viewer, cfg.ranks)
         if why:
             raise InputError(f"--head-poses {cfg.head_poses}: pose {i}: {why}")
 
@@ -90,9 +98,14 @@ def check_viewer(cfg) -> None:
 def viewer_of(cfg):
     """Who looks at the wall (``core/eyes.Viewer``), where a run places one: stereo, a head or
     head poses; None: the camera's own frustum, as always."""
-    if cfg.stereo == "mono" and cfg.head is None and not cfg.poses and cfg.head_tracker is None:
+    if cfg.stereo == "mono" and cfg.head is None and not cfg.poses and cfg.head_tracker is None and not cfg.corners:
         return None
     from multigpu.core.eyes import Pose, Viewer
 
+    screens = ()
+    if cfg.corners:  # the wall file placed its displays in the room
+        from multigpu.core.eyes import screens_of
+
+        screens = screens_of(dict(enumerate(cfg.corners)), cfg.canvas.tiles())
     return Viewer(cfg.screen_m, cfg.eye_separation if cfg.stereo != "mono" else 0.0,
-                  None if cfg.head is None else Pose(cfg.head), cfg.world_per_metre, cfg.swap_eyes)
+                  None if cfg.head is None else Pose(cfg.head), cfg.world_per_metre, cfg.swap_eyes, screens)

@@ -52,6 +52,14 @@ class Wall:
     panel: str | None = None  # where the operator's page is served ([ADDRESS:]PORT, --panel), where the file says
     screen_m: tuple[float, float] | None = None  # the wall's width and height in metres (--screen-size)
     stereo: dict = field(default_factory=dict)  # the file's stereo and viewer (--stereo, --eye-separation, ...)
+    corners: dict[int, tuple] = field(default_factory=dict)  # rank -> its display's room corners (metres)
+
+
+def rectangle_problem(corners) -> str | None:
+    """Why a display's three room corners do not make one (``core.eyes``)."""
+    from multigpu.core.eyes import rectangle_problem as why
+
+    return why(corners)
 
 
 def _pair(value, what: str, zero: bool = False) -> tuple[int, int]:
@@ -128,7 +136,7 @@ def load_wall(path: str) -> Wall:
         raise InputError(f"{where}: {exc}") from None
     if "mullion" in doc and "bezel" in doc:
         raise InputError(f"{where}: give mullion (pixels) or bezel (millimetres), not both")
-    displays, positions, hosts, full, gpus = {}, {}, {}, set(), {}
+    displays, positions, hosts, full, gpus, corners = {}, {}, {}, set(), {}, {}
     for i, e in enumerate(doc.get("displays", [])):  # one entry per display, at most a few dozen
         r = e["rank"]
         if r in displays:
@@ -142,11 +150,20 @@ def load_wall(path: str) -> Wall:
             positions[r] = tuple(e["position"])
         if "gpu" in e:
             gpus[r] = e["gpu"]
+        if "corners_m" in e:
+            why = rectangle_problem(e["corners_m"])
+            if why:
+                raise InputError(f"{where}: displays[{i}]: corners_m: {why}")
+            corners[r] = tuple(tuple(float(v) for v in p) for p in e["corners_m"])
+    if corners and len(corners) != len(displays):
+        raise InputError(f"{where}: corners_m: give every display's corners or none (ranks "
+                         f"{', '.join(str(r) for r in sorted(set(displays) - set(corners)))} have none)")
     monitor = tuple(doc["monitor"]["position"]) if "monitor" in doc else None
     on = {k: v for k, v in doc.get("monitor", {}).items() if k in ("host", "display", "address")}
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
                 on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]),
-                None if "screen_m" not in doc else tuple(float(v) for v in doc["screen_m"]), doc.get("stereo", {}))
+                None if "screen_m" not in doc else tuple(float(v) for v in doc["screen_m"]), doc.get("stereo", {}),
+                corners)
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:
@@ -346,7 +363,8 @@ def check_command(path: str, grid_only: bool = False, hosts_only: bool = False,
                          eye_separation=st.get("eye_separation_m", WalkConfig.eye_separation),
                          swap_eyes=st.get("swap_eyes", False),
                          head=None if "head_m" not in st else tuple(st["head_m"]),
-                         world_per_metre=st.get("world_per_metre", 1.0))
+                         world_per_metre=st.get("world_per_metre", 1.0),
+                         corners=tuple(wall.corners.get(r) for r in range(grid[0] * grid[1])) if wall.corners else ())
     except InputError as exc:
         raise InputError(f"--wall {path}: stereo: {exc}") from None
     if grid_only:
@@ -361,8 +379,11 @@ def check_command(path: str, grid_only: bool = False, hosts_only: bool = False,
     bezel = ([f"mullion {mullion[0]}x{mullion[1]} pixels from the bezel: {json.dumps(wall.bezel)}"]
              if derived else [])
     viewer = cfg.viewer
+    size = (f"{len(viewer.screens)} screen(s) in the room (tiles "
+            f"{' | '.join(','.join(map(str, sc.tiles)) for sc in viewer.screens)})" if viewer is not None
+            and viewer.screens else f"a {cfg.screen_m[0]:g} x {cfg.screen_m[1]:g} m wall")
     seen = [] if viewer is None else [
-        f"stereo {cfg.stereo}: a {viewer.screen[0]:g} x {viewer.screen[1]:g} m wall, eyes {viewer.separation:g} m apart"
+        f"{cfg.stereo}: {size}, eyes {viewer.separation:g} m apart"
         + ("" if cfg.head is None else f", the head at {', '.join(f'{v:g}' for v in cfg.head)} m")
         + (", eyes swapped" if viewer.swap else "")]
     return "\n".join([describe(wall, grid, tile, mullion), *bezel, *seen, *picture(wall, grid)])

@@ -134,7 +134,7 @@ def test_each_eye_sees_through_the_wall_as_the_generalized_projection_says(pose,
     camera = Camera((3.0, -2.0, 1.5), (0.0, 1.0, 0.7), (0, 0, 1), 50.0, 0.05, 80.0)
     viewer = Viewer((2.0, 1.2), 0.07, None, scale)
     room, (pa, pb, pc) = _world_wall(camera, viewer)
-    frames = eye_frames(camera, viewer, pose, 2)
+    frames = [screens[0] for screens in eye_frames(camera, viewer, pose, 2)]
     eyes = viewer.eyes(camera, pose, 2)
     assert np.allclose(np.linalg.norm(eyes[1] - eyes[0]), 0.07)
     for (view, proj, _), eye in zip(frames, eyes):
@@ -154,7 +154,7 @@ def test_a_head_at_home_with_no_separation_sees_what_the_camera_sees():
     from multigpu.core.camera import frame_matrices
 
     view, proj, light = frame_matrices(camera, (1600, 900))
-    for v, p, li in eye_frames(camera, viewer, None, 2):
+    for (v, p, li), in eye_frames(camera, viewer, None, 2):
         assert np.allclose(v, view) and np.allclose(p, proj, rtol=1e-12, atol=1e-12) and np.allclose(li, light)
 
 
@@ -330,7 +330,7 @@ def test_a_moving_head_changes_the_picture_as_its_frustum_says(tmp_path):
         camera = path.camera(f)
         room, (pa, pb, pc) = _world_wall(camera, viewer)
         mvp = _kooima(pa, pb, pc, room(np.array(pose[:3])), camera.near, camera.far)
-        view, _, light = eye_frames(camera, viewer, None, 1)[0]
+        view, _, light = eye_frames(camera, viewer, None, 1)[0][0]
         rgb = renderer.render(view, mvp @ np.linalg.inv(view), light, (0, 0, 120, 96), None)
         want = rgb[::-1]
         differ = int((got[f][0] != want).any(axis=2).sum())
@@ -408,3 +408,100 @@ def test_a_tracked_head_over_udp_moves_every_rank_and_garbage_is_refused_once(tm
     s = json.loads((tmp_path / "tracked" / "summary.json").read_text())
     assert s["head_poses_received"] > 0 and s["head_poses_refused"] == 2
     assert s["head_to_photon_ms_median"] > 0
+
+
+# -- a CAVE: displays placed in the room by their corners
+
+CORNER = (((-1, -1, 1), (-1, -1, -1), (-1, 1, 1)), ((-1, -1, -1), (1, -1, -1), (-1, 1, -1)))  # left, front
+
+
+def test_tiles_in_one_plane_share_a_screen_and_a_corner_makes_two():
+    from multigpu.core.eyes import screens_of
+
+    flat = Canvas((2, 2), (100, 50), (10, 10))  # 1 cm a pixel, bezels included
+    at = lambda x, y: (x / 100 - 1.05, y / 100 - 0.55, 0.0)  # noqa: E731
+    tiles = flat.tiles()
+    corners = {k: (at(x0, y0), at(x1, y0), at(x0, y1)) for k, (x0, y0, x1, y1) in enumerate(tiles)}
+    (one,) = screens_of(corners, tiles)
+    assert sorted(one.tiles) == [0, 1, 2, 3] and np.allclose(one.corners, [at(0, 0), at(210, 0), at(0, 110)])
+    corners[3] = tuple((x, y, z + 0.01) for x, y, z in corners[3])  # a display 1 cm out of the plane
+    assert sorted(len(s.tiles) for s in screens_of(corners, tiles)) == [1, 3]
+    two = screens_of(dict(enumerate(CORNER)), Canvas((1, 2), (60, 60)).tiles())
+    assert [s.tiles for s in two] == [(0,), (1,)]
+
+
+def test_each_screen_of_a_corner_is_the_generalized_projection():
+    camera = Camera((0.0, -4.0, 1.0), (0.0, 0.0, 1.0), (0, 0, 1), 60.0, 0.05, 80.0)
+    screens = __import__("multigpu.core.eyes", fromlist=["screens_of"]).screens_of(
+        dict(enumerate(CORNER)), Canvas((1, 2), (60, 60)).tiles())
+    viewer = Viewer((1.2, 0.6), 0.06, None, 2.0, False, screens)
+    pose = Pose((0.2, 0.1, 0.3), yaw=-30)
+    frames = eye_frames(camera, viewer, pose, 2, 2)
+    c = np.asarray(camera.position, float)
+    f = np.asarray(camera.target, float) - c
+    f /= np.linalg.norm(f)
+    s = np.cross(f, camera.up)
+    s /= np.linalg.norm(s)
+    u = np.cross(s, f)
+    room = lambda p: c + 2.0 * (p[0] * s + p[1] * u - p[2] * f)  # noqa: E731  the camera stands at the origin
+    for eye, per_screen in zip(viewer.eyes(camera, pose, 2), frames):
+        for sc, (view, proj, _) in zip(screens, per_screen):
+            pa, pb, pc = (room(np.asarray(p, float)) for p in sc.corners)
+            assert np.allclose(proj @ view, _kooima(pa, pb, pc, room(eye), camera.near, camera.far), atol=1e-9)
+
+
+@pytest.mark.parametrize("mode", ["mono", "anaglyph"])
+def test_a_cave_corner_draws_each_wall_through_its_own_frustum(tmp_path, mode):
+    """Two walls at 90 degrees, a rank each: every eye's mosaic is, screen by screen, a one-rank
+    render of the canvas through that screen's frustum."""
+    from multigpu.core.eyes import eye_frames as frames_of
+    from multigpu.gpu.render import RegionRenderer, create_context
+    from multigpu.planner import on_canvas, screen_rects
+    from multigpu.rank.walkthrough import load_world
+
+    got = _walk(tmp_path / "w", (1, 2), (60, 60), corners=CORNER, stereo=mode)
+    cfg = WalkConfig(scene=SceneSpec(triangles=20_000), frames=FRAMES, grid=(1, 2), tile=(60, 60), screen_m=SCREEN,
+                     corners=CORNER, stereo=mode)
+    scene, path, _ = load_world(cfg)
+    ctx, _ = create_context()
+    renderer = RegionRenderer(ctx, scene, cfg.canvas.size, colors=cfg.colors)
+    viewer, rects = cfg.viewer, screen_rects(cfg.viewer.planes(2), cfg.canvas)
+    try:
+        for f in range(FRAMES):
+            eyes = frames_of(path.camera(f), viewer, None, 1 if mode == "mono" else 2, 2)
+            for e, per_screen in enumerate(eyes):
+                want = np.zeros((60, 120, 3), np.uint8)
+                for (view, proj, light), rect in zip(per_screen, rects):
+                    x0, y0, x1, y1 = rect
+                    want[y0:y1, x0:x1] = renderer.render(view, on_canvas(rect, cfg.canvas.size) @ proj, light,
+                                                         tuple(rect), None)
+                mosaic = got[f][0 if mode == "mono" else 1 + e]
+                assert (mosaic == want[::-1]).all(), f"frame {f} eye {e}: {(mosaic != want[::-1]).any(axis=2).sum()}"
+    finally:
+        renderer.release()
+        ctx.release()
+
+
+@pytest.mark.parametrize("change,words", [
+    (lambda d: d["displays"][0].update(corners_m=[[0, 0, 0], [1, 0, 0], [0.5, 1, 0]]),
+     "displays[0]: corners_m: its edges are not at right angles: the corners do not make a rectangle"),
+    (lambda d: d["displays"][1].pop("corners_m"), "corners_m: give every display's corners or none"),
+    (lambda d: d["displays"][0].update(corners_m=[[0, 0, 0], [0, 0, 0], [0, 1, 0]]), "two corners coincide"),
+])
+def test_a_wall_files_corners_are_checked(tmp_path, change, words):
+    from multigpu.wall import load_wall
+
+    doc = {"grid": "1x2", "tile": "60x60", "displays": [{"rank": k, "corners_m": [list(p) for p in CORNER[k]]}
+                                                        for k in range(2)]}
+    change(doc)
+    path = tmp_path / "wall.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError) as got:
+        load_wall(str(path))
+    assert words in str(got.value) and str(got.value).startswith(f"--wall {path}: "), str(got.value)
+
+
+def test_a_head_behind_a_wall_of_the_corner_is_refused():
+    with pytest.raises(InputError, match=r"--head -1.2,0,0: a viewer at \(-1.2, 0, 0\) has an eye behind the screen "
+                                         r"or inside its plane \(the screen of tiles 0\)"):
+        WalkConfig(grid=(1, 2), tile=(60, 60), corners=CORNER, head=(-1.2, 0.0, 0.0))

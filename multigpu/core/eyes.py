@@ -5,12 +5,12 @@ The room is in metres: x to the right along the wall, y up, z out of the wall to
 viewer, its origin the wall's centre. The wall (every tile and bezel) is one ``screen`` of
 ``(W, H)`` metres in the plane z = 0. The walkthrough's camera stands where the viewer's head
 stands by default: on the wall's axis at the distance where the wall spans the camera's field
-of view, so a head at home with no eye separation sees what the mono camera sees. A head moved
-by some metres moves the eye by as many metres times ``world_per_metre`` in the scene, along the
-camera's own axes; the frustum of an eye at room position ``e`` is the pyramid from ``e``
-through the wall's four corners, its view along the camera's axes (the wall's normal). Pure
-numpy, float64.
-"""
+of view, so a head at home with no eye separation sees what the mono camera sees. A wall file
+may place each display in the room by its corners instead (a CAVE's walls at any angle,
+``screens_of``); the camera then stands at the room's origin. A head moved by some metres moves
+the eye by as many metres times ``world_per_metre`` in the scene, along the camera's own axes;
+the frustum of an eye at room position ``e`` is the pyramid from ``e`` through a screen's
+corners, its view turned to the screen's normal. Pure numpy, float64."""
 
 from __future__ import annotations
 
@@ -46,19 +46,48 @@ class Pose:
 
 
 @dataclass(frozen=True)
+class Screen:
+    """Some of the wall's tiles (their labels) in one plane, and the rectangle they span in the
+    room: its lower-left, lower-right and upper-left corners (metres)."""
+
+    tiles: tuple[int, ...]
+    corners: tuple  # (pa, pb, pc), each (x, y, z)
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The screen's right, up and normal unit vectors (the normal towards the viewer)."""
+        pa, pb, pc = (np.asarray(p, dtype=np.float64) for p in self.corners)
+        vr, vu = (pb - pa) / np.linalg.norm(pb - pa), (pc - pa) / np.linalg.norm(pc - pa)
+        vn = np.cross(vr, vu)
+        return vr, vu, vn / np.linalg.norm(vn)
+
+
+@dataclass(frozen=True)
 class Viewer:
     """Who looks at a ``screen`` = (W, H) metres wall: the eye separation (metres), the head's
     pose when no per-frame pose is given (None: at home, see the module), the scene units a
-    metre of head motion moves the eye, and whether the eyes trade places."""
+    metre of head motion moves the eye, and whether the eyes trade places. ``screens``: where the
+    wall file places its displays in the room (``screens_of``); none: one flat wall of ``screen``,
+    centred on the room's origin in the plane z = 0."""
 
     screen: tuple[float, float]
     separation: float = EYE_SEPARATION
     head: Pose | None = None
     world_per_metre: float = 1.0
     swap: bool = False
+    screens: tuple[Screen, ...] = ()
+
+    def planes(self, tiles: int) -> tuple[Screen, ...]:
+        """The screens the eyes look through: the file's, or the one flat wall of all ``tiles``."""
+        if self.screens:
+            return self.screens
+        W, H = self.screen
+        return (Screen(tuple(range(tiles)), ((-W / 2, -H / 2, 0.0), (W / 2, -H / 2, 0.0), (-W / 2, H / 2, 0.0))),)
 
     def home(self, camera: Camera) -> np.ndarray:
-        """Where the camera stands in the room: on the axis, the wall spanning its vertical fov."""
+        """Where the camera stands in the room: with the displays' corners, the room's origin;
+        else on the wall's axis, where the wall spans the camera's vertical fov."""
+        if self.screens:
+            return np.zeros(3)
         return np.array([0.0, 0.0, self.screen[1] / 2.0 / math.tan(math.radians(camera.fov) / 2.0)])
 
     def eyes(self, camera: Camera, pose: Pose | None, count: int) -> np.ndarray:
@@ -72,36 +101,86 @@ class Viewer:
         return out[::-1] if self.swap else out
 
 
-def eye_frame(camera: Camera, viewer: Viewer, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(view, proj, light) of the eye at room position ``eye``: the camera's axes moved to the
-    eye, and the off-axis frustum from it through the wall's corners (the camera's near and far)."""
+def eye_frame(camera: Camera, viewer: Viewer, eye: np.ndarray, screen: Screen) -> tuple:
+    """(view, proj, light) of the eye at room position ``eye`` through ``screen``: the camera's
+    axes moved to the eye and turned to the screen's, and the off-axis frustum from the eye
+    through the screen's corners (the camera's near and far)."""
     view, _, light = frame_matrices(camera, (1, 1))
-    W, H = viewer.screen
     q = (eye - viewer.home(camera)) * viewer.world_per_metre  # the eye in the camera's view space
     move = np.eye(4)
     move[:3, 3] = -q
-    d = float(eye[2])  # the eye's distance to the wall's plane (the door keeps it > 0)
+    vr, vu, vn = screen.basis()
+    pa, pb, pc = (np.asarray(p, dtype=np.float64) for p in screen.corners)
+    va, vb, vc = pa - eye, pb - eye, pc - eye
+    d = -float(va @ vn)  # the eye's distance to the screen's plane (the door keeps it > 0)
     k = camera.near / d
-    proj = frustum((-W / 2 - eye[0]) * k, (W / 2 - eye[0]) * k, (-H / 2 - eye[1]) * k, (H / 2 - eye[1]) * k,
-                   camera.near, camera.far)
-    return move @ view, proj, light
+    proj = frustum(float(vr @ va) * k, float(vr @ vb) * k, float(vu @ va) * k, float(vu @ vc) * k, camera.near,
+                   camera.far)
+    turn = np.eye(4)
+    turn[:3, :3] = np.stack([vr, vu, vn])
+    return turn @ move @ view, proj, light
 
 
-def eye_frames(camera: Camera, viewer: Viewer, pose: Pose | None, count: int) -> list:
-    """Every eye's (view, proj, light) for a frame: ``count`` 1 (a tracked mono wall) or 2."""
-    return [eye_frame(camera, viewer, e) for e in viewer.eyes(camera, pose, count)]
+def eye_frames(camera: Camera, viewer: Viewer, pose: Pose | None, count: int, tiles: int = 1) -> list:
+    """Every eye's (view, proj, light) through every screen, ``[eye][screen]``, for a frame:
+    ``count`` 1 (a tracked mono wall) or 2; ``tiles``: the wall's (for its one flat screen)."""
+    planes = viewer.planes(tiles)
+    return [[eye_frame(camera, viewer, e, sc) for sc in planes] for e in viewer.eyes(camera, pose, count)]
 
 
-def head_problem(pose: Pose, viewer: Viewer) -> str | None:
-    """Why a head cannot look at the wall from ``pose`` (None: it can): an eye on or behind the
-    wall's plane has no frustum through it."""
-    z = float(pose.position[2])
-    lowest = z - abs(float(pose.right()[2])) * viewer.separation / 2.0
-    if not (math.isfinite(z) and all(math.isfinite(float(v)) for v in pose.position)):
+def head_problem(pose: Pose, viewer: Viewer, tiles: int = 1) -> str | None:
+    """Why a head cannot look at the wall from ``pose`` (None: it can): an eye on or behind a
+    screen's plane has no frustum through it."""
+    if not all(math.isfinite(float(v)) for v in pose.position):
         return "a head position must be finite"
-    if lowest <= 0:
-        return (f"a viewer at z = {z:g} m has an eye behind the screen or inside its plane "
-                "(z is metres out of the wall, towards the viewer)")
+    half = pose.right() * viewer.separation / 2.0
+    centre = np.asarray(pose.position, dtype=np.float64)
+    for sc in viewer.planes(tiles):  # a few screens
+        vr, vu, vn = sc.basis()
+        near = min(float((e - np.asarray(sc.corners[0])) @ vn) for e in (centre - half, centre + half))
+        if near <= 0:
+            where = "z = {:g} m".format(centre[2]) if not viewer.screens else "({})".format(
+                ", ".join(f"{v:g}" for v in centre))
+            return (f"a viewer at {where} has an eye behind the screen or inside its plane"
+                    + (" (z is metres out of the wall, towards the viewer)" if not viewer.screens else
+                       f" (the screen of tiles {', '.join(map(str, sc.tiles))})"))
+    return None
+
+
+def screens_of(corners: dict, tile_rects: np.ndarray, tolerance: float = 0.002) -> tuple[Screen, ...]:
+    """The wall's screens from each tile's room corners (``corners[k]``: lower-left, lower-right,
+    upper-left) and canvas rects: tiles in one plane that sit as the canvas places them (within
+    ``tolerance`` metres) share one screen, so one frustum per eye draws them all; any other tile
+    is a screen of its own."""
+    out, left = [], sorted(corners)
+    while left:  # tiles, a few dozen at most
+        k = left.pop(0)
+        pa, pb, pc = (np.asarray(p, dtype=np.float64) for p in corners[k])
+        x0, y0, x1, y1 = (float(v) for v in tile_rects[k])
+        ux, uy = (pb - pa) / (x1 - x0), (pc - pa) / (y1 - y0)  # metres per canvas pixel along x and y
+        at = lambda x, y: pa + (x - x0) * ux + (y - y0) * uy  # noqa: E731  canvas pixel -> room
+        group = [k]
+        for j in list(left):
+            a0, b0, a1, b1 = (float(v) for v in tile_rects[j])
+            want = (at(a0, b0), at(a1, b0), at(a0, b1))
+            if all(np.linalg.norm(np.asarray(p) - w) <= tolerance for p, w in zip(corners[j], want)):
+                group.append(j)
+                left.remove(j)
+        r = np.asarray(tile_rects)[group]
+        gx0, gy0, gx1, gy1 = r[:, 0].min(), r[:, 1].min(), r[:, 2].max(), r[:, 3].max()
+        out.append(Screen(tuple(group), tuple(tuple(float(v) for v in at(x, y))
+                                              for x, y in ((gx0, gy0), (gx1, gy0), (gx0, gy1)))))
+    return tuple(out)
+
+
+def rectangle_problem(corners) -> str | None:
+    """Why three corners (lower-left, lower-right, upper-left) do not make a display (None: they do)."""
+    pa, pb, pc = (np.asarray(p, dtype=np.float64) for p in corners)
+    w, h = np.linalg.norm(pb - pa), np.linalg.norm(pc - pa)
+    if not (w > 0 and h > 0):
+        return "two corners coincide"
+    if abs(float((pb - pa) @ (pc - pa))) > 1e-3 * w * h:
+        return "its edges are not at right angles: the corners do not make a rectangle"
     return None
 
 

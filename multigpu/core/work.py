@@ -31,6 +31,8 @@ class Work(NamedTuple):
     partition : the screen strategy's partition (for its ``observe`` and reports), if any.
     front : (K,) how many of each rank's first pieces are screen regions that win depth ties
         (a hybrid's; None: none do).
+    views : (K,) lists, each piece's screen on a wall whose displays lie in several planes (a
+        CAVE's: each screen its own frustum); None: one.
 
     Immutable, and a named tuple rather than a frozen dataclass: one is made every frame, and
     a frozen dataclass sets each field through ``object.__setattr__`` (~8 us of CPU more with
@@ -42,6 +44,7 @@ class Work(NamedTuple):
     depth: bool = False
     partition: Partition | None = None
     front: tuple | None = None
+    views: tuple | None = None  # per rank, each piece's screen (a wall of several planes; None: one)
 
     @property
     def ranks(self) -> int:

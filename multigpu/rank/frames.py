@@ -58,6 +58,20 @@ class InFlight:
     started: object = None
 
 
+class Joined:
+    """An eye's pieces drawn screen by screen (``Frames.through``), read back in piece order."""
+
+    def __init__(self, parts: list, n: int):
+        self.parts, self.n = parts, n
+
+    def read(self) -> list:
+        out = [None] * self.n
+        for idx, pending in self.parts:  # screens
+            for i, got in zip(idx, pending.read()):
+                out[i] = got
+        return out
+
+
 class Frames:
     """The frame loop in named phases: balance, render, sync, exchange, display, record. Built
     from its parts (``frame_setup.build``), it does no work until ``run``."""
@@ -105,7 +119,23 @@ class Frames:
 
     # -- phases of one frame
 
-    def render(self, t: Timer, work: Work, view, proj, light, rects, scale: float, levels, ahead: bool = True):
+    def through(self, t: Timer, work: Work, screens: list, rects, scale: float, levels):
+        """One eye's pieces drawn, each through its screen's frustum (``screens``: the eye's (view,
+        proj, light) through each; ``Work.views``: each piece's); read later, in piece order."""
+        alone = self.stereo is None and len(screens) == 1  # one pass a frame: the ring may hold it
+        if len(screens) == 1:
+            return self.render(t, work, *screens[0], rects, scale, levels, ahead=alone)
+        of, parts, drawn = work.views[self.rank], [], 0
+        for s, (view, proj, light) in enumerate(screens):  # a few screens
+            idx = [i for i, v in enumerate(of) if v == s]  # pieces, a few
+            if idx:
+                parts.append((idx, self.render(t, work, view, proj, light, rects, scale, levels, False, idx)))
+                drawn += self.drawn
+        self.drawn = drawn
+        return Joined(parts, len(of))
+
+    def render(self, t: Timer, work: Work, view, proj, light, rects, scale: float, levels, ahead: bool = True,
+               only: list | None = None):
         """Every piece this rank renders, drawn (read later: ``Pending.read``). Of a scene cut
         into parts, the parts each piece needs are found first (the ``cull`` phase); ``drawn``
         counts the triangles the pieces drew. Below ``scale`` 1 a piece draws what reaches the
@@ -122,6 +152,8 @@ class Frames:
                                            self.planner.canvas_rects),
                          *masks[front:]]
         mine = list(zip(work.rects[self.rank], masks, reach))
+        if only is not None:  # the pieces of one screen
+            mine = [mine[i] for i in only]
         if self.culler is not None:
             with t.phase("cull"):
                 self.culler.frame(view, proj, self.canvas.size)
@@ -203,15 +235,16 @@ class Frames:
                 front = work.front or (0,) * work.ranks  # a hybrid's regions stay
                 work = work._replace(rects=tuple(grown(r, self.canvas.size, quality.scale, f)
                                                  for r, f in zip(work.rects, front)))
-        if self.stereo is None:
+        if self.planner.viewer is None:
             pending = self.render(t, work, view, proj, light, rects, quality.scale, levels)
-        else:  # both eyes draw the plan, each with its own frustum (a ring of framebuffers holds one eye)
+        else:  # each eye draws the plan through its own frustums (a ring of framebuffers holds one pass)
             pending, drawn = [], 0
-            for eye_view, eye_proj, eye_light in self.planner.views:  # eyes
-                pending.append(self.render(t, work, eye_view, eye_proj, eye_light, rects, quality.scale, levels,
-                                           ahead=False))
+            for screens in self.planner.views:  # eyes
+                pending.append(self.through(t, work, screens, rects, quality.scale, levels))
                 drawn += self.drawn
             self.drawn = drawn
+            if self.stereo is None:  # a tracked mono wall: one eye
+                pending = pending[0]
         with t.phase("exchange"):
             composed, picks = (work, None) if self.stereo is None else self.stereo.compose(work)
             plan = transfers(composed, self.tiles)

@@ -37,6 +37,7 @@ class HeadLink:
 
     def __init__(self, comm, sock: socket.socket | None, viewer, timeout: float):
         self.comm, self.sock, self.viewer, self.timeout = comm, sock, viewer, timeout
+        self.tiles = comm.Get_size()
         self.buf = np.zeros(8)  # have, x, y, z, yaw, pitch, roll, arrival (rank 0's time.time)
         self.received = self.refused = 0
         self.photon_ms: deque = deque(maxlen=PHOTON_KEPT)  # rank 0: a pose's arrival to its frame shown
@@ -68,7 +69,7 @@ class HeadLink:
             arrived = _arrival(ancillary)
             pose = _parsed(data)
             if isinstance(pose, Pose):
-                why = head_problem(pose, self.viewer)
+                why = head_problem(pose, self.viewer, self.tiles)
                 pose = why if why else pose
             if isinstance(pose, str):
                 self.refused += 1
