@@ -13,11 +13,12 @@ through this one class.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
 
-from multigpu.core.eyes import eye_frames
+from multigpu.core.eyes import Pose, eye_frames, head_problem
 from multigpu.core.projectors import make_projector
 from multigpu.core.stereo import make_stereo
 from multigpu.core.work import Work
@@ -137,6 +138,7 @@ class Planner:
         self.screen_rects = screen_rects(self.screens, self.canvas)
         self.canvas_rects = None  # the last frame's object rects on the canvas, where bezels make them differ
         self.pose = None  # a tracked head's newest pose (``rank/head_link.py``): before the pose file's
+        self.head_offset = (0.0, 0.0, 0.0)  # metres the keys moved the head from its pose (an interactive run)
         self.bezels = self.canvas.cuts  # without bezels or dark tiles the visible space is the canvas: no calls
         self.balances = balances_of(cfg)
         self.using = self.balances.index(cfg.balance if cfg.decomposition == "screen" else cfg.decomposition)
@@ -192,6 +194,10 @@ class Planner:
         sees in it, so one plan serves both)."""
         poses = self.cfg.poses
         pose = self.pose or (poses[min(f, len(poses) - 1)] if poses else None)
+        if any(self.head_offset):  # the keys moved the head from where it is (at home without a pose)
+            base = pose or self.viewer.head or Pose(tuple(self.viewer.home(camera)))
+            moved = replace(base, position=tuple(float(v) for v in np.add(base.position, self.head_offset)))
+            pose = moved if head_problem(moved, self.viewer, self.cfg.ranks) is None else base  # never behind a screen
         self.views = eye_frames(camera, self.viewer, pose, 1 if self.stereo is None else 2, self.cfg.ranks)
         several = len(self.screens) > 1
         if several:  # each screen's frustum onto its own rect of the canvas

@@ -505,3 +505,51 @@ def test_a_head_behind_a_wall_of_the_corner_is_refused():
     with pytest.raises(InputError, match=r"--head -1.2,0,0: a viewer at \(-1.2, 0, 0\) has an eye behind the screen "
                                          r"or inside its plane \(the screen of tiles 0\)"):
         WalkConfig(grid=(1, 2), tile=(60, 60), corners=CORNER, head=(-1.2, 0.0, 0.0))
+
+
+# -- the head from the keyboard
+
+
+class _Glfw:
+    """What ``display.controls`` asks of glfw: key codes and flags."""
+
+    PRESS, RELEASE, MOD_SHIFT = 1, 0, 1
+
+    def __getattr__(self, name):
+        if name.startswith("KEY_"):
+            return hash(name) % 100_000
+        raise AttributeError(name)
+
+
+class _Comm:
+    def Get_rank(self):
+        return 0
+
+    def Get_size(self):
+        return 1
+
+
+def test_head_keys_move_the_viewers_head_and_k_brings_it_home():
+    from multigpu.display.controls import Controls
+    from multigpu.planner import Planner
+    from multigpu.rank.steer import Steering
+
+    g = _Glfw()
+    controls = Controls(g)
+    steering = Steering(_Comm(), 1.0, ["auto"], 0, controls=controls)
+    for key, mods in ((g.KEY_L, 0), (g.KEY_L, 0), (g.KEY_U, g.MOD_SHIFT), (g.KEY_Y, 0)):
+        controls.on_key(None, key, 0, g.PRESS, mods)
+    assert np.allclose(steering.next().head, (0.1, 0.25, -0.05))
+    assert np.allclose(steering.next().head, (0.1, 0.25, -0.05))  # it stays where the keys put it
+    cfg = WalkConfig(grid=(1, 2), tile=(60, 96), screen_m=SCREEN, stereo="anaglyph")
+    from multigpu.scene.models import load_scene
+
+    planner = Planner(cfg, load_scene(SceneSpec(triangles=2_000))[0], 0)
+    camera = Camera((0.0, -5.0, 1.0), (0.0, 0.0, 1.0), fov=50.0)
+    planner.head_offset = steering.next().head
+    planner.frame(camera)
+    home = cfg.viewer.home(camera)
+    want = eye_frames(camera, cfg.viewer, Pose(tuple(home + (0.1, 0.25, -0.05))), 2)
+    assert all(np.allclose(a[0][1], b[0][1]) for a, b in zip(planner.views, want))
+    controls.on_key(None, g.KEY_K, 0, g.PRESS, 0)
+    assert steering.next().head == (0.0, 0.0, 0.0)

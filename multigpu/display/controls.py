@@ -15,7 +15,10 @@ from multigpu.core.navigate import Input
 HELP = ("W/S or Up/Down: forward/back; A/D or Left/Right: left/right; E/Q or PageUp/PageDown: up/down; "
         "mouse drag: turn; Shift: faster; +/- or the wheel: speed; O: orbit the centre; R: back to the start; "
         "P: partition overlay; I: statistics overlay; B / Shift+B: next / previous --balance; "
-        "H: this help; Escape: quit")
+        "J/L, U/M, Y/N: the viewer's head left/right, up/down, nearer/farther (5 cm, Shift: 25 cm; a wall with a "
+        "viewer); K: the head home; H: this help; Escape: quit")
+#: metres a head key moves the viewer's head (Shift: five times as far)
+HEAD_STEP = 0.05
 
 
 def _keymap(glfw) -> tuple[dict, dict]:
@@ -24,7 +27,9 @@ def _keymap(glfw) -> tuple[dict, dict]:
              glfw.KEY_E: "up", glfw.KEY_PAGE_UP: "up", glfw.KEY_Q: "down", glfw.KEY_PAGE_DOWN: "down"}
     commands = {glfw.KEY_O: "orbit", glfw.KEY_R: "reset", glfw.KEY_HOME: "reset", glfw.KEY_P: "partition",
                 glfw.KEY_I: "stats", glfw.KEY_B: "balance", glfw.KEY_H: "help", glfw.KEY_EQUAL: "faster",
-                glfw.KEY_KP_ADD: "faster", glfw.KEY_MINUS: "slower", glfw.KEY_KP_SUBTRACT: "slower"}
+                glfw.KEY_KP_ADD: "faster", glfw.KEY_MINUS: "slower", glfw.KEY_KP_SUBTRACT: "slower",
+                glfw.KEY_J: "head-x", glfw.KEY_L: "head+x", glfw.KEY_M: "head-y", glfw.KEY_U: "head+y",
+                glfw.KEY_Y: "head-z", glfw.KEY_N: "head+z", glfw.KEY_K: "head home"}
     return moves, commands
 
 
@@ -37,6 +42,8 @@ class Taken:
     stats: int = 0
     balance: int = 0  # strategy steps: +1 next, -1 previous
     help: bool = False
+    head: tuple = (0.0, 0.0, 0.0)  # metres the viewer's head moved (room axes)
+    head_home: bool = False  # the head back home before the move
 
 
 class Controls:
@@ -54,7 +61,9 @@ class Controls:
     def _clear(self) -> None:
         self.tapped: set[str] = set()
         self.drag = [0.0, 0.0]
-        self.counts = {"orbit": 0, "reset": 0, "partition": 0, "stats": 0, "balance": 0, "help": 0, "speed": 0}
+        self.counts = {"orbit": 0, "reset": 0, "partition": 0, "stats": 0, "balance": 0, "help": 0, "speed": 0,
+                       "head home": 0}
+        self.head = [0.0, 0.0, 0.0]
         self.shift = False
 
     def attach_mouse(self, window) -> None:
@@ -89,6 +98,8 @@ class Controls:
             self.counts["speed"] -= 1
         elif what == "balance":
             self.counts["balance"] += -1 if shift else 1
+        elif what is not None and what.startswith("head") and what != "head home":
+            self.head["xyz".index(what[-1])] += (-1 if what[4] == "-" else 1) * HEAD_STEP * (5 if shift else 1)
         elif what is not None:
             self.counts[what] += 1
 
@@ -111,7 +122,7 @@ class Controls:
         fast = self.shift or self.shift_held
         nav = Input(frozenset(self.held | self.tapped), (self.drag[0], self.drag[1]), fast, c["speed"],
                     c["orbit"] % 2 == 1, c["reset"] > 0)
-        got = Taken(nav, c["partition"], c["stats"], c["balance"], c["help"] > 0)
+        got = Taken(nav, c["partition"], c["stats"], c["balance"], c["help"] > 0, tuple(self.head), c["head home"] > 0)
         self._clear()
         return got
 

@@ -204,6 +204,7 @@ class Frames:
                 self.planner.use(control.balance)
             if control.quality != self.fidelity.settings():  # the page's settings: every rank at this frame
                 self.fidelity.set(*control.quality)
+            self.planner.head_offset = control.head  # the keys' move of the viewer's head
         camera = control.camera if control is not None and control.camera is not None else self.path.camera(f)
         return camera, control
 

@@ -22,8 +22,9 @@ from multigpu.display.controls import Taken
 from multigpu.rank.exchange import wait_all
 
 #: position 3, target 3, up 3, fov, near, far, strategy index, partition, stats, orbiting, paused, frame-rate
-#: target (0: none), render scale, level-of-detail bound, the page's thumbnail wanted this frame
-SIZE = 21
+#: target (0: none), render scale, level-of-detail bound, the page's thumbnail wanted this frame, the viewer's head
+#: moved from its place by the keys (x, y, z metres)
+SIZE = 24
 #: seconds between the input phase's broadcasts while the run is paused (the page's commands read each time)
 PAUSE_TICK = 0.05
 
@@ -40,6 +41,7 @@ class Control:
     quality: tuple = (None, 1.0, 0.0)  # frame-rate target (None: none), render scale, level-of-detail bound
     paused_s: float = 0.0  # seconds the run stood paused before this frame (no frame's time counts them)
     thumb: bool = False  # the operator's page wants a thumbnail of this frame (every rank sends its tile shrunk)
+    head: tuple = (0.0, 0.0, 0.0)  # metres the keys moved the viewer's head from its place (a wall with a viewer)
 
 
 class Steering:
@@ -95,6 +97,9 @@ class Steering:
         s[12] = (int(s[12]) + taken.balance) % self.n_balance
         s[13] = (int(s[13]) + taken.partition) % 2
         s[14] = (int(s[14]) + taken.stats) % 2
+        if taken.head_home:
+            s[21:24] = 0.0
+        s[21:24] += taken.head
         if taken.help:
             from multigpu.display.controls import HELP
 
@@ -128,4 +133,5 @@ class Steering:
         if self.interactive:
             camera = Camera(tuple(s[0:3]), tuple(s[3:6]), tuple(s[6:9]), float(s[9]), float(s[10]), float(s[11]))
         quality = (float(s[17]) or None, float(s[18]), float(s[19]))
-        return Control(camera, int(s[12]), bool(s[13]), bool(s[14]), bool(s[15]), quality, paused, bool(s[20]))
+        return Control(camera, int(s[12]), bool(s[13]), bool(s[14]), bool(s[15]), quality, paused, bool(s[20]),
+                       (float(s[21]), float(s[22]), float(s[23])))
