@@ -553,3 +553,21 @@ def test_head_keys_move_the_viewers_head_and_k_brings_it_home():
     assert all(np.allclose(a[0][1], b[0][1]) for a, b in zip(planner.views, want))
     controls.on_key(None, g.KEY_K, 0, g.PRESS, 0)
     assert steering.next().head == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_wall_tests_stereo_pattern_marks_each_eye_and_shows_depth(mode):
+    from multigpu.display.pattern import DEPTH_COLOURS, stereo_tile_pattern
+
+    st = Stereo(mode, Canvas((2, 2), (240, 160), (8, 8)))
+    tile = stereo_tile_pattern(st, 3, 5, ["rank 3"])
+    assert tile.shape == (160, 240, 3)
+    composed = np.concatenate([stereo_tile_pattern(Stereo("side-by-side", st.canvas), 3, 5, ["rank 3"])], axis=1)
+    left, right = composed[:, :120], composed[:, 120:]
+    assert (left == (0, 255, 0)).all(axis=2).sum() > 50 and not (right == (0, 255, 0)).all(axis=2).any()
+    assert (right == (255, 0, 255)).all(axis=2).sum() > 50 and not (left == (255, 0, 255)).all(axis=2).any()
+    near, middle = DEPTH_COLOURS[-1], DEPTH_COLOURS[2]
+    xs = [np.flatnonzero((half == near).all(axis=2).any(axis=0)) for half in (left, right)]
+    assert xs[0].min() > xs[1].min()  # the near mark: crossed disparity, the left eye's further right
+    mid = [np.flatnonzero((half == middle).all(axis=2).any(axis=0)) for half in (left, right)]
+    assert mid[0].min() == mid[1].min()  # on the wall's plane: no disparity

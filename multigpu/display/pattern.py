@@ -46,6 +46,37 @@ def tile_pattern(canvas_size: tuple[int, int], origin: tuple[int, int], tile: tu
     return _type(img, [*label, f"frame {frame}"])
 
 
+#: the depth test's marks, from far to near: their disparities in steps (the right eye's mark sits
+#: this many steps to the left of the left eye's: crossed disparity, in front of the wall, for > 0)
+DEPTHS = (-2, -1, 0, 1, 2)
+DEPTH_COLOURS = ((60, 90, 255), (60, 200, 255), (240, 240, 240), (255, 200, 60), (255, 80, 60))
+
+
+def stereo_tile_pattern(stereo, rank: int, frame: int, label: list[str]) -> np.ndarray:
+    """What tile ``rank`` of a ``stereo`` wall (``core.stereo.Stereo``) shows, bottom row first:
+    each eye's part of the pattern on that eye's canvas, named for the eye (a different mark in
+    each: the LEFT and RIGHT squares), with a depth test across the tile's lower part (squares
+    from far behind the wall to near in front of it: each a disparity of ``DEPTHS`` steps), then
+    packed as the display shows it (side by side, top and bottom, anaglyph)."""
+    eye = stereo.eye
+    ew, eh = stereo.eye_tile
+    x0, _, _, y1 = (int(v) for v in eye.tiles()[rank])
+    step = max(2, ew // 48)
+    side = max(4, min(ew // (2 * len(DEPTHS) + 1), eh // 6))
+    halves = []
+    for e, name in enumerate(("LEFT", "RIGHT")):
+        img = tile_pattern(eye.size, (x0, eye.size[1] - y1), (ew, eh), frame, [*label, f"{name} eye"]).copy()
+        mark = (8, 8) if e == 0 else (ew - 8 - side, 8)  # each eye's own mark: a square in its own top corner
+        img[mark[1]:mark[1] + side, mark[0]:mark[0] + side] = (0, 255, 0) if e == 0 else (255, 0, 255)
+        top = eh - side - max(4, eh // 12)
+        for i, (d, colour) in enumerate(zip(DEPTHS, DEPTH_COLOURS)):  # five marks
+            cx = (2 * i + 1) * ew // (2 * len(DEPTHS)) + (d * step // 2 if e == 0 else -(d * step // 2))
+            xa = int(np.clip(cx - side // 2, 0, ew - side))
+            img[top:top + side, xa:xa + side] = colour
+        halves.append(img[::-1])  # bottom row first
+    return stereo.pack(np.concatenate(halves, axis=1))
+
+
 def _type(img: np.ndarray, lines: list[str]) -> np.ndarray:
     """``lines`` in large type centred on ``img`` (a box behind them, so they read on lines)."""
     from PIL import Image, ImageDraw, ImageFont

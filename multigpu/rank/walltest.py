@@ -4,7 +4,8 @@ launched like the walkthrough (``launch/wall-test``, or the launcher with ``-n K
 Every rank opens its window where the wall file says and shows its part of one pattern across
 the canvas (``display/pattern.py``): lines that run straight across the bezels when the mullion
 values are right, each tile's rank, host, display and size, and a moving bar and a frame counter
-that show the swap lock (at most ``PACE`` frames a second). Rank 0's window takes the arrow
+that show the swap lock (at most ``PACE`` frames a second). A stereo wall file's tiles show each
+eye its own picture, named and marked for that eye, with a depth test, packed as in a run. Rank 0's window takes the arrow
 keys: Left/Right take one pixel from or add one to the mullion between columns, Down/Up
 between rows, every rank redraws with the new value at the same frame, and rank 0 prints the
 line to put in the wall file. Escape or a closed window on any rank ends it (or
@@ -35,12 +36,14 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
     from multigpu.config import WalkConfig
     from multigpu.core.canvas import Canvas
     from multigpu.display import make_presenter
-    from multigpu.display.pattern import nudge, tile_pattern
+    from multigpu.core.stereo import Stereo
+    from multigpu.display.pattern import nudge, stereo_tile_pattern, tile_pattern
     from multigpu.wall import check_ranks, load_wall
 
     rank, k = comm.Get_rank(), comm.Get_size()
     wall = load_wall(path)
     grid, tile, mullion = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile, wall.mullion or (0, 0)
+    stereo = wall.stereo.get("mode", "mono")  # a stereo wall: each eye's mark and a depth test
     if k != grid[0] * grid[1]:
         raise InputError.of("wall", f"{path}: a {grid[0]}x{grid[1]} wall needs {grid[0] * grid[1]} ranks but the job "
                             f"has {k} (launch/wall-test {path} starts the right number)")
@@ -80,9 +83,12 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
                           flush=True)
             wait_all([comm.Ibcast(state, root=0)], timeout, "wall test")
             c = Canvas(grid, tile, (int(state[0]), int(state[1])))
-            x0, _, _, y1 = (int(v) for v in c.tiles()[rank])
-            img = tile_pattern(c.size, (x0, c.size[1] - y1), tile, f, label)
-            presenter.show(img[::-1])  # bottom row first
+            if stereo != "mono":  # each eye its own picture, packed as the display shows them
+                presenter.show(stereo_tile_pattern(Stereo(stereo, c), rank, f, label))
+            else:
+                x0, _, _, y1 = (int(v) for v in c.tiles()[rank])
+                img = tile_pattern(c.size, (x0, c.size[1] - y1), tile, f, label)
+                presenter.show(img[::-1])  # bottom row first
             barrier(comm, timeout)  # every tile drawn before any swaps: the swap lock
             presenter.swap()
             mine = np.array([1 if presenter.poll() else 0], dtype=np.int64)
