@@ -5,8 +5,8 @@ Every rank opens its window where the wall file says and shows its part of one p
 the canvas (``display/pattern.py``): lines that run straight across the bezels when the mullion
 values are right, each tile's rank, host, display and size, and a moving bar and a frame counter
 that show the swap lock (at most ``PACE`` frames a second). A stereo wall file's tiles show each
-eye its own picture, named and marked for that eye, with a depth test, packed as in a run. Rank 0's window takes the arrow
-keys: Left/Right take one pixel from or add one to the mullion between columns, Down/Up
+eye its own picture, named and marked for that eye, with a depth test, packed as in a run.
+Rank 0's window takes the arrow keys: Left/Right take one pixel from or add one to the mullion between columns, Down/Up
 between rows, every rank redraws with the new value at the same frame, and rank 0 prints the
 line to put in the wall file. Escape or a closed window on any rank ends it (or
 ``--frames N``). Every wait is bounded, as in the frame loop.
@@ -35,8 +35,8 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
 
     from multigpu.config import WalkConfig
     from multigpu.core.canvas import Canvas
-    from multigpu.display import make_presenter
     from multigpu.core.stereo import Stereo
+    from multigpu.display import make_presenter
     from multigpu.display.pattern import nudge, stereo_tile_pattern, tile_pattern
     from multigpu.wall import check_ranks, load_wall
 
