@@ -113,6 +113,42 @@ def test_each_host_shows_its_tile_of_the_mosaic(tmp_path, two_pcs, mpiexec_env):
         "Xvfb" in open(f"/proc/{p}/cmdline").read() for n in "ab" for p in hosts.processes(n))
 
 
+def test_a_stereo_wall_of_two_pcs_shows_each_its_packed_tile(tmp_path, two_pcs):
+    """Side by side on two simulated PCs: each host's screen is its packed tile of the mosaic, bit
+    for bit, and its halves are the eyes' own mosaics' parts."""
+    from multigpu.core.canvas import Canvas
+    from multigpu.core.stereo import Stereo
+
+    hosts, (xa, xb) = two_pcs
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "mullion": "8x0",
+                                "screen_m": [1.28, 0.96], "stereo": {"mode": "side-by-side"}, "displays": [
+        {"rank": 0, "host": "a", "display": xa, "position": [0, 0]},
+        {"rank": 1, "host": "b", "display": xb, "position": [20, 4]}]}))
+    out = tmp_path / "wall"
+    proc = _launch(tmp_path, hosts, {"MULTIGPU_MPIEXEC": mpi_named("mpich").path}, wall, out)
+    try:
+        shown = lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > 21
+        wait_for(lambda: shown() and windows(xa) and windows(xb), timeout=120)
+        shots = screenshot(xa), screenshot(xb)
+        wm_close(xb, windows(xb)[0])
+        _, err = end_launcher(proc)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-2000:]
+    mosaic = read_png(out / "mosaic" / "frame_00000.png")
+    assert (shots[0] == mosaic[:, :TILE[0]]).all()
+    assert (shots[1][4:4 + TILE[1], 20:20 + TILE[0]] == mosaic[:, TILE[0] + 8:]).all()
+    eye = Stereo("side-by-side", Canvas((1, 2), TILE, (8, 0))).eye
+    left, right = (read_png(out / "mosaic" / d / "frame_00000.png") for d in ("left", "right"))
+    ew = TILE[0] // 2
+    for k, x in ((0, 0), (1, TILE[0] + 8)):  # each tile: the left eye's part, then the right eye's
+        ex = int(eye.tiles()[k][0])
+        assert (mosaic[:, x:x + ew] == left[:, ex:ex + ew]).all() and (mosaic[:, x + ew:x + TILE[0]] ==
+                                                                       right[:, ex:ex + ew]).all()
+
+
 def test_a_host_without_its_x_server_is_one_line_and_exit_2(tmp_path, two_pcs, mpiexec_env):
     hosts, (xa, _) = two_pcs
     wall = tmp_path / "wall.json"

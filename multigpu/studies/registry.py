@@ -13,6 +13,7 @@ EXPERIMENTS = {
     "cost": "beyond:exp_cost", "speedup": "beyond:exp_speedup", "partition": "beyond:exp_partition",
     "compare": "compare:exp_compare", "payoff": "payoff:exp_payoff", "walls": "walls:exp_walls",
     "hybrid": "walls:exp_hybrid", "sixteen": "walls:exp_sixteen", "fidelity": "fidelity:exp_fidelity",
+    "stereo": "stereo_bench:exp_stereo",
 }
 
 #: ``multigpu bench NAME``: name -> ("module:function" taking ``quick``, or None where the

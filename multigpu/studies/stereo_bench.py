@@ -37,30 +37,56 @@ def _one(out: Path, arm: str, frames: int, scene: list[str]) -> dict:
             "bytes": s["bytes_sent_per_frame"]}
 
 
+def measure(frames: int, rounds: int, scene: list[str]) -> list[dict]:
+    """Every arm in rotating order over ``rounds``: each arm's medians and its ratio to mono."""
+    got: dict[str, list[dict]] = {a: [] for a in ARMS}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(rounds):
+            for arm in ARMS[r % len(ARMS):] + ARMS[:r % len(ARMS)]:
+                got[arm].append(_one(Path(tmp) / f"{arm}{r}", arm, frames, scene))
+    rows = []
+    for arm in ARMS:
+        row = {k: float(np.median([x[k] for x in got[arm]])) for k in got[arm][0]}
+        row["ratio"] = float(np.median([a["cpu_ms"] / m["cpu_ms"] for a, m in zip(got[arm], got["mono"])]))
+        rows.append({"arm": arm, **row})
+    return rows
+
+
 def bench_stereo(quick: bool) -> list[dict]:
     frames, rounds = (40, 1) if quick else (300, 3)
     scene = ["--triangles", "20000"] if quick else []
     print(f"bench stereo: the plant on a 2x2 wall of 256x256, {frames} frames, {rounds} alternated rounds; "
           "cpu = per-rank CPU time per frame (ms, every phase), emulated = slowest rank's phase CPU (ms), wall = "
           "wall-clock frame (ms); medians over rounds; x mono = the ratio of per-rank CPU to mono's in each round")
-    got: dict[str, list[dict]] = {a: [] for a in ARMS}
-    with tempfile.TemporaryDirectory() as tmp:
-        for r in range(rounds):
-            for arm in ARMS[r % len(ARMS):] + ARMS[:r % len(ARMS)]:
-                got[arm].append(_one(Path(tmp) / f"{arm}{r}", arm, frames, scene))
     table = Columns(("arm", "stereo", "<13"), ("cpu_ms", "cpu", "7.2f"), ("ratio", "x mono", "7.2f"),
                     ("render_cpu_ms", "render", "7.2f"), ("balance_cpu_ms", "balance", "8.2f"),
                     ("exchange_cpu_ms", "exchange", "9.2f"), ("emulated_ms", "emulated", "9.2f"),
                     ("wall_ms", "wall", "7.2f"), ("bytes", "bytes/frame", "12.0f"))
+    rows = measure(frames, rounds, scene)
     print(table.header())
-    rows = []
-    for arm in ARMS:
-        row = {k: float(np.median([x[k] for x in got[arm]])) for k in got[arm][0]}
-        row["ratio"] = float(np.median([a["cpu_ms"] / m["cpu_ms"] for a, m in zip(got[arm], got["mono"])]))
-        row["arm"] = arm
-        rows.append(row)
+    for row in rows:
         print(table.row(row))
     OUT.mkdir(parents=True, exist_ok=True)
     write_csv(OUT / "stereo.csv", [{"frames": frames, "rounds": rounds, **r} for r in rows])
     print(f"results in {OUT}/stereo.csv")
     return rows
+
+
+def exp_stereo(s, out: Path) -> str:
+    """``multigpu experiment stereo``: the stereo modes' cost beside mono (``measure``), for the
+    results page."""
+    from multigpu.studies.prose import prose
+    from multigpu.studies.tables import md_table
+
+    frames, rounds = (40, s.repeat(3)) if s.quick else (s.frames, s.repeat(3))
+    rows = measure(frames, rounds, ["--triangles", str(s.triangles)])
+    write_csv(out / "stereo.csv", [{"frames": frames, "rounds": rounds, **r} for r in rows])
+    by = {r["arm"]: r for r in rows}
+    return prose("stereo", "stereo", frames=frames, rounds=rounds, triangles=s.triangles,
+                 sbs=by["side-by-side"]["ratio"], tb=by["top-bottom"]["ratio"], ana=by["anaglyph"]["ratio"],
+                 table=md_table(rows, [("arm", "Stereo", ""), ("cpu_ms", "Per-rank CPU ms", ".2f"),
+                                       ("ratio", "x mono", ".2f"), ("render_cpu_ms", "Render ms", ".2f"),
+                                       ("balance_cpu_ms", "Balancing ms", ".2f"),
+                                       ("exchange_cpu_ms", "Exchange ms", ".2f"),
+                                       ("emulated_ms", "Frame (emulated) ms", ".2f"),
+                                       ("wall_ms", "Frame (wall) ms", ".2f")]))
