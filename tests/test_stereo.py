@@ -110,15 +110,20 @@ def _kooima(pa, pb, pc, pe, near, far):
     return P @ M @ T
 
 
-def _world_wall(camera: Camera, viewer: Viewer):
-    """The wall's corners in the world: in front of the camera, on its axes, at the distance
-    where its height spans the camera's fov (scaled by world_per_metre)."""
+def _axes(camera: Camera):
+    """The camera's position and its forward, right and up unit vectors (world)."""
     c = np.asarray(camera.position, float)
     f = np.asarray(camera.target, float) - c
     f /= np.linalg.norm(f)
     s = np.cross(f, camera.up)
     s /= np.linalg.norm(s)
-    u = np.cross(s, f)
+    return c, f, s, np.cross(s, f)
+
+
+def _world_wall(camera: Camera, viewer: Viewer):
+    """The wall's corners in the world: in front of the camera, on its axes, at the distance
+    where its height spans the camera's fov (scaled by world_per_metre)."""
+    c, f, s, u = _axes(camera)
     W, H = viewer.screen
     k = viewer.world_per_metre
     d = H / 2 / math.tan(math.radians(camera.fov) / 2)
@@ -432,17 +437,13 @@ def test_tiles_in_one_plane_share_a_screen_and_a_corner_makes_two():
 
 def test_each_screen_of_a_corner_is_the_generalized_projection():
     camera = Camera((0.0, -4.0, 1.0), (0.0, 0.0, 1.0), (0, 0, 1), 60.0, 0.05, 80.0)
-    screens = __import__("multigpu.core.eyes", fromlist=["screens_of"]).screens_of(
-        dict(enumerate(CORNER)), Canvas((1, 2), (60, 60)).tiles())
+    from multigpu.core.eyes import screens_of
+
+    screens = screens_of(dict(enumerate(CORNER)), Canvas((1, 2), (60, 60)).tiles())
     viewer = Viewer((1.2, 0.6), 0.06, None, 2.0, False, screens)
     pose = Pose((0.2, 0.1, 0.3), yaw=-30)
     frames = eye_frames(camera, viewer, pose, 2, 2)
-    c = np.asarray(camera.position, float)
-    f = np.asarray(camera.target, float) - c
-    f /= np.linalg.norm(f)
-    s = np.cross(f, camera.up)
-    s /= np.linalg.norm(s)
-    u = np.cross(s, f)
+    c, f, s, u = _axes(camera)
     room = lambda p: c + 2.0 * (p[0] * s + p[1] * u - p[2] * f)  # noqa: E731  the camera stands at the origin
     for eye, per_screen in zip(viewer.eyes(camera, pose, 2), frames):
         for sc, (view, proj, _) in zip(screens, per_screen):
