@@ -12,11 +12,8 @@ from __future__ import annotations
 import json
 import math
 import socket
-import tempfile
 import threading
 from pathlib import Path
-
-import numpy as np
 
 from multigpu.studies.tables import Columns, write_csv
 
@@ -73,17 +70,15 @@ def bench_head(quick: bool) -> list[dict]:
     print(f"bench head: the plant side by side on a 2x2 wall of 256x256, {frames} frames, {rounds} alternated "
           f"rounds, poses at {RATE:g} Hz over UDP; motion to photon = a pose reaching rank 0's host to its frame "
           "shown there (ms, median and 99th percentile), frame = wall-clock frame (ms); medians over rounds")
-    got: dict[int, list[dict]] = {n: [] for n in LATENCIES}
-    with tempfile.TemporaryDirectory() as tmp:
-        for r in range(rounds):
-            for n in LATENCIES[r % len(LATENCIES):] + LATENCIES[:r % len(LATENCIES)]:
-                got[n].append(_one(Path(tmp) / f"l{n}r{r}", n, frames, scene))
+    from multigpu.studies.runs import alternated, medians
+
+    got = alternated(LATENCIES, rounds, lambda n, folder: _one(folder, n, frames, scene))
     table = Columns(("latency", "latency", ">7"), ("photon_ms", "photon", "7.1f"), ("photon_p99_ms", "p99", "6.1f"),
                     ("frame_ms", "frame", "6.1f"), ("poses", "poses", "6.0f"))
     print(table.header())
     rows = []
     for n in LATENCIES:
-        row = {k: float(np.median([x[k] for x in got[n]])) for k in got[n][0]}
+        row = medians(got[n])
         row["latency"] = n
         rows.append(row)
         print(table.row(row))

@@ -17,12 +17,9 @@ from __future__ import annotations
 import asyncio
 import json
 import subprocess
-import tempfile
 import threading
 import time
 from pathlib import Path
-
-import numpy as np
 
 from multigpu.studies.tables import Columns
 
@@ -93,19 +90,17 @@ def bench_panel(quick: bool) -> list[dict]:
     print(f"bench panel: the plant on a 2x2 wall of 256x256, {frames} frames, {rounds} alternated rounds; "
           "rank 0 = its whole process CPU per frame (ms), emulated = slowest rank's phase CPU (ms), wall = "
           "wall-clock frame (ms); medians; share = over the run without a panel")
-    got: dict[str, list[dict]] = {a: [] for a in ARMS}
-    with tempfile.TemporaryDirectory() as tmp:
-        for r in range(rounds):
-            for arm in ARMS[r % len(ARMS):] + ARMS[:r % len(ARMS)]:
-                got[arm].append(_one(Path(tmp) / f"{arm}{r}", arm, frames, scene, 1800))
+    from multigpu.studies.runs import alternated, medians
+
+    got = alternated(ARMS, rounds, lambda arm, folder: _one(folder, arm, frames, scene, 1800))
     table = Columns(("arm", "panel", "<7"), ("server_cpu_ms", "server", "7.3f"), ("display_cpu_ms", "display", "8.3f"),
                     ("cost", "cost", ">7"), ("rank0_cpu_ms", "rank 0", "8.2f"), ("rank0_share", "share", ">7"),
                     ("emulated_ms", "emulated", "9.2f"), ("wall_ms", "wall", "7.2f"), ("thumbs", "thumbnails", "11.0f"))
     print(table.header())
     rows = []
-    base = {k: float(np.median([x[k] for x in got["off"]])) for k in got["off"][0]}
+    base = medians(got["off"])
     for arm in ARMS:
-        row = {k: float(np.median([x[k] for x in got[arm]])) for k in got[arm][0]}
+        row = medians(got[arm])
         # the page's own CPU on rank 0: its server thread, and what the loop's display phase does more
         own = row["server_cpu_ms"] + max(row["display_cpu_ms"] - base["display_cpu_ms"], 0.0)
         row.update(arm=arm, cost=f"{100 * own / base['rank0_cpu_ms']:.2f}%",

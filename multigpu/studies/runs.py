@@ -135,6 +135,26 @@ def job(ranks: int, args: list[str], timeout: float, env: dict | None = None, la
     return run_multigpu(ranks, args, timeout, env=env, launcher=launcher, merge_stderr=merge_stderr, hosts=hosts)
 
 
+def alternated(arms, rounds: int, one) -> dict:
+    """``one(arm, folder)`` for every arm in every round, the order rotating each round (a shared
+    machine's drift falls alike on every arm), each run in a folder of its own that goes
+    afterwards: each arm's results, round by round."""
+    import tempfile
+
+    got: dict = {a: [] for a in arms}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(rounds):
+            k = r % len(arms)
+            for arm in (*arms[k:], *arms[:k]):
+                got[arm].append(one(arm, Path(tmp) / f"{arm}-{r}"))
+    return got
+
+
+def medians(results: list[dict]) -> dict:
+    """Each figure's median over the rounds' results."""
+    return {k: float(np.median([x[k] for x in results])) for k in results[0]}
+
+
 def start(ranks: int, args: list[str], env: dict | None = None, as_users: bool = False,
           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) -> subprocess.Popen:
     """A multigpu job started in a session of its own, returned at once, for a study that watches

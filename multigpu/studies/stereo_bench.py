@@ -10,7 +10,6 @@ rank's phase CPU time; wall is the wall-clock frame. Each stereo row gives its r
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -39,14 +38,12 @@ def _one(out: Path, arm: str, frames: int, scene: list[str]) -> dict:
 
 def measure(frames: int, rounds: int, scene: list[str]) -> list[dict]:
     """Every arm in rotating order over ``rounds``: each arm's medians and its ratio to mono."""
-    got: dict[str, list[dict]] = {a: [] for a in ARMS}
-    with tempfile.TemporaryDirectory() as tmp:
-        for r in range(rounds):
-            for arm in ARMS[r % len(ARMS):] + ARMS[:r % len(ARMS)]:
-                got[arm].append(_one(Path(tmp) / f"{arm}{r}", arm, frames, scene))
+    from multigpu.studies.runs import alternated, medians
+
+    got = alternated(ARMS, rounds, lambda arm, folder: _one(folder, arm, frames, scene))
     rows = []
     for arm in ARMS:
-        row = {k: float(np.median([x[k] for x in got[arm]])) for k in got[arm][0]}
+        row = medians(got[arm])
         row["ratio"] = float(np.median([a["cpu_ms"] / m["cpu_ms"] for a, m in zip(got[arm], got["mono"])]))
         rows.append({"arm": arm, **row})
     return rows
