@@ -250,8 +250,8 @@ class WalkConfig:
         None, group=STEREO, metavar="[ADDRESS:]PORT", read=lambda v: read_tracker(v),
         show=lambda v: "none" if v is None else f"{v[0]}:{v[1]}", help=(
             "rank 0 takes the head's pose from UDP datagrams on this port, the newest each frame (JSON: "
-            "{\"position\": [x, y, z], \"yaw\": .., \"pitch\": .., \"roll\": ..}; every interface unless an "
-            "ADDRESS is given; docs/USAGE.md, \"A stereo wall\")"))
+            "{\"position\": [x, y, z], \"yaw\": .., \"pitch\": .., \"roll\": ..}; 127.0.0.1 unless an ADDRESS "
+            "is given (0.0.0.0: a tracker on another PC); docs/USAGE.md, \"A stereo wall\")"))
     world_per_metre: float = option(1.0, group=STEREO, metavar="U", type=float,
                                     valid=lambda v: v > 0 and _finite(v), must="must be > 0",
                                     help="scene units a metre of head motion moves the eye (default: {default})")

@@ -24,12 +24,12 @@ def read_size_m(text: str) -> tuple[float, float]:
 
 
 def read_tracker(text: str) -> tuple[str, int]:
-    """``--head-tracker [ADDRESS:]PORT``: where rank 0 listens for head poses over UDP (every
-    interface unless an address is given: the tracker is usually another PC)."""
+    """``--head-tracker [ADDRESS:]PORT``: where rank 0 listens for head poses over UDP (127.0.0.1
+    unless an address is given: a tracker on another PC needs the address to listen on, e.g. 0.0.0.0)."""
     address, _, port = str(text).rpartition(":")
     if not port.strip().isdigit() or not 0 < int(port) <= 65535:
         raise InputError(f"must look like [ADDRESS:]PORT with a port 1..65535, got '{text}'")
-    return address.strip("[]") or "0.0.0.0", int(port)
+    return address.strip("[]") or "127.0.0.1", int(port)
 
 
 def read_poses(path: str) -> tuple:

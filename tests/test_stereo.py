@@ -572,3 +572,12 @@ def test_the_wall_tests_stereo_pattern_marks_each_eye_and_shows_depth(mode):
     assert xs[0].min() > xs[1].min()  # the near mark: crossed disparity, the left eye's further right
     mid = [np.flatnonzero((half == middle).all(axis=2).any(axis=0)) for half in (left, right)]
     assert mid[0].min() == mid[1].min()  # on the wall's plane: no disparity
+
+
+def test_the_head_tracker_listens_on_127_0_0_1_unless_told():
+    from multigpu.viewing import read_tracker
+
+    assert read_tracker("7700") == ("127.0.0.1", 7700)
+    assert read_tracker("0.0.0.0:7700") == ("0.0.0.0", 7700)
+    with pytest.raises(InputError, match="a port 1..65535"):
+        read_tracker("0")
