@@ -101,11 +101,12 @@ class Viewer:
         return out[::-1] if self.swap else out
 
 
-def eye_frame(camera: Camera, viewer: Viewer, eye: np.ndarray, screen: Screen) -> tuple:
+def eye_frame(camera: Camera, viewer: Viewer, eye: np.ndarray, screen: Screen, axes=None) -> tuple:
     """(view, proj, light) of the eye at room position ``eye`` through ``screen``: the camera's
     axes moved to the eye and turned to the screen's, and the off-axis frustum from the eye
-    through the screen's corners (the camera's near and far)."""
-    view, _, light = frame_matrices(camera, (1, 1))
+    through the screen's corners (the camera's near and far). ``axes``: the camera's (view,
+    light), where the caller has them (one frame's eyes and screens share them)."""
+    view, light = axes or frame_matrices(camera, (1, 1))[::2]
     q = (eye - viewer.home(camera)) * viewer.world_per_metre  # the eye in the camera's view space
     move = np.eye(4)
     move[:3, 3] = -q
@@ -124,8 +125,8 @@ def eye_frame(camera: Camera, viewer: Viewer, eye: np.ndarray, screen: Screen) -
 def eye_frames(camera: Camera, viewer: Viewer, pose: Pose | None, count: int, tiles: int = 1) -> list:
     """Every eye's (view, proj, light) through every screen, ``[eye][screen]``, for a frame:
     ``count`` 1 (a tracked mono wall) or 2; ``tiles``: the wall's (for its one flat screen)."""
-    planes = viewer.planes(tiles)
-    return [[eye_frame(camera, viewer, e, sc) for sc in planes] for e in viewer.eyes(camera, pose, count)]
+    planes, axes = viewer.planes(tiles), frame_matrices(camera, (1, 1))[::2]
+    return [[eye_frame(camera, viewer, e, sc, axes) for sc in planes] for e in viewer.eyes(camera, pose, count)]
 
 
 def head_problem(pose: Pose, viewer: Viewer, tiles: int = 1) -> str | None:
