@@ -27,12 +27,12 @@ VALID = [{"do": "pause"}, {"do": "resume"}, {"do": "stop"}, {"do": "balance", "n
          {"do": "target_fps", "value": 30}, {"do": "target_fps", "value": None}, {"do": "render_scale", "value": 0.5},
          {"do": "lod_error", "value": 2.5}, {"do": "keys", "held": ["forward", "left"]}, {"do": "keys", "held": []},
          {"do": "drag", "dx": -12.5, "dy": 3}, {"do": "speed", "steps": -2}, {"do": "orbit"}, {"do": "reset"},
-         {"do": "record", "on": False}]
+         {"do": "record", "on": False}, {"do": "head", "dx": 0.05, "dy": 0, "dz": -0.25}, {"do": "head_home"}]
 TAMPERED = ['{"do": "exec", "cmd": "rm -rf /"}', "not json", "[1, 2]", '"pause"', '{"do": "pause", "x": 1}',
             '{"do": "balance", "name": "../etc/passwd"}', '{"do": "render_scale", "value": 1e9}',
             '{"do": "render_scale", "value": "NaN"}', '{"do": "render_scale", "value": true}',
             '{"do": "drag", "dx": Infinity, "dy": 0}', '{"do": "keys", "held": ["forward", "__class__"]}',
-            '{"do": "speed", "steps": 1.5}', '{"do": "lod_error"}', '{"do": null}', '{"do": {"do": "stop"}}',
+            '{"do": "speed", "steps": 1.5}', '{"do": "head", "dx": 2, "dy": 0, "dz": 0}', '{"do": "head", "dx": 0.1}', '{"do": "lod_error"}', '{"do": null}', '{"do": {"do": "stop"}}',
             "x" * (MOST_MESSAGE + 1)]
 
 
@@ -309,3 +309,33 @@ def test_the_page_offers_the_decompositions_the_exchange_has_room_for():
         assert most_of(cfg, balances_of(cfg)) == (own.depth, own.layers)  # no more room than it asked for
     tiny = WalkConfig(panel=panel, exchange="messages", grid=(2, 2), tile=(8, 8), bin_size=64)
     assert "bins" not in balances_of(tiny)  # fewer bins than ranks: left out
+
+
+def test_the_page_moves_the_viewers_head_and_brings_it_home():
+    """The page's head buttons reach the frame's control as the window's head keys do (a page's
+    home first, then only its own moves)."""
+    from multigpu.rank.panel_link import PanelLink
+    from multigpu.rank.steer import Steering
+
+    class _Comm:
+        def Get_rank(self):
+            return 0
+
+        def Get_size(self):
+            return 1
+
+    state = PanelState({"title": "t", "wall_pixels": [64, 32]}, BALANCES, 1)
+    link = PanelLink(state, None, "", None, False, viewer=True)
+    steering = Steering(_Comm(), 1.0, list(BALANCES), 0, panel=link)
+
+    def say(*msgs):
+        for m in msgs:
+            state.commands.put(command(json.dumps(m), BALANCES))
+        return steering.next().head
+
+    assert np.allclose(say({"do": "head", "dx": 0.05, "dy": 0.0, "dz": -0.05},
+                           {"do": "head", "dx": 0.05, "dy": 0.25, "dz": 0.0}), (0.1, 0.25, -0.05))
+    assert np.allclose(say(), (0.1, 0.25, -0.05))  # it stays where the page put it
+    assert np.allclose(say({"do": "head_home"}), (0.0, 0.0, 0.0))
+    assert np.allclose(say({"do": "head", "dx": 0.5, "dy": 0.0, "dz": 0.0}, {"do": "head_home"},
+                           {"do": "head", "dx": 0.0, "dy": 0.05, "dz": 0.0}), (0.0, 0.05, 0.0))

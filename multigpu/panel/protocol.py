@@ -26,6 +26,8 @@ MOST_DRAG = 10000.0
 #: the largest level-of-detail bound and frame-rate target the page may ask for
 MOST_LOD_PX = 1000.0
 MOST_FPS = 1000.0
+#: the most metres one message may move the viewer's head by, on each axis
+MOST_HEAD_M = 1.0
 
 
 def _number(lo: float, hi: float, none: bool = False):
@@ -56,6 +58,9 @@ ACTIONS: dict[str, dict] = {
     "orbit": {},
     "reset": {},
     "record": {"on": (_flag, "true or false")},
+    "head": {axis: (_number(-MOST_HEAD_M, MOST_HEAD_M), f"metres -{MOST_HEAD_M:g}..{MOST_HEAD_M:g}")
+             for axis in ("dx", "dy", "dz")},
+    "head_home": {},
 }
 
 

@@ -43,15 +43,18 @@ def header(cfg, title: str, balances) -> dict:
 class PanelLink:
     """The page of one run, served from rank 0 (``open`` starts it and prints its URL)."""
 
-    def __init__(self, state: PanelState, server: PanelServer, url: str, out_dir, interactive: bool):
+    def __init__(self, state: PanelState, server: PanelServer, url: str, out_dir, interactive: bool,
+                 viewer: bool = False):
         self.state, self.server, self.url = state, server, url
-        self.out_dir, self.interactive = out_dir, interactive
+        self.out_dir, self.interactive, self.viewer = out_dir, interactive, viewer
         self.last_thumb = 0.0
         self.stop = False
         self.paused = False
         self.balance: str | None = None  # a strategy the page chose, not yet applied
         self.settings: dict = {}  # settings the page changed, not yet applied
         self._fly_clear()
+        self.head = [0.0, 0.0, 0.0]  # metres the page moved the viewer's head since the last frame
+        self.head_home = False
         self.held: frozenset = frozenset()
         self.recording = None  # scene.pathfile.PathAppender while the page records
         self.recordings = 0
@@ -68,7 +71,7 @@ class PanelLink:
         print(f"multigpu: the panel: {url}", flush=True)
         from multigpu.config import INTERACTIVE
 
-        return cls(state, server, url, out_dir, cfg.path == INTERACTIVE)
+        return cls(state, server, url, out_dir, cfg.path == INTERACTIVE, cfg.viewer is not None)
 
     # -- a view of the wall (live.Live)
 
@@ -120,6 +123,11 @@ class PanelLink:
             self.reset += 1
         elif do == "record":
             self._record(args["on"])
+        elif do == "head_home":
+            self.head, self.head_home = [0.0, 0.0, 0.0], True
+        elif do == "head":
+            for i, axis in enumerate(("dx", "dy", "dz")):
+                self.head[i] += args[axis]
 
     def flight(self) -> Input:
         """The flying the page did since the last call (keys held or tapped, drags, speed, orbit,
@@ -127,6 +135,13 @@ class PanelLink:
         got = Input(frozenset(self.held | self.tapped), (self.drag[0], self.drag[1]), False, self.speed,
                     self.orbit % 2 == 1, self.reset > 0)
         self._fly_clear()
+        return got
+
+    def head_moves(self) -> tuple[tuple, bool]:
+        """The viewer's head as the page moved it since the last call: metres (room axes), and
+        whether it went home first (as the window's K)."""
+        got = (tuple(self.head), self.head_home)
+        self.head, self.head_home = [0.0, 0.0, 0.0], False
         return got
 
     # -- records (rank 0's landed rows)
@@ -146,7 +161,8 @@ class PanelLink:
         self.state.set_status(paused=bool(self.paused), recording=self.recording is not None,
                               balance=balances[control.balance] if control is not None else None,
                               target_fps=fidelity.target_fps, render_scale=fidelity.scale,
-                              lod_error=fidelity.lod_error, interactive=self.interactive)
+                              lod_error=fidelity.lod_error, interactive=self.interactive,
+                              viewer=self.viewer)
 
     def _record(self, on: bool) -> None:
         """Start (a new file in the run's outputs) or stop recording the cameras shown."""

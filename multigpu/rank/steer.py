@@ -76,6 +76,11 @@ class Steering:
         fly, a = p.flight(), taken.input
         taken.input = Input(a.moves | fly.moves, (a.drag[0] + fly.drag[0], a.drag[1] + fly.drag[1]), a.fast,
                             a.speed_steps + fly.speed_steps, a.orbit != fly.orbit, a.reset or fly.reset)
+        moved, home = p.head_moves()
+        if home:  # the page's home comes after the keys' moves: only its own move counts
+            taken.head, taken.head_home = moved, True
+        else:
+            taken.head = tuple(k + m for k, m in zip(taken.head, moved))
         s = self.state
         if p.balance is not None:
             s[12] = self.balances.index(p.balance)  # checked by the page's protocol: one of these

@@ -147,6 +147,7 @@ function showStatus(s) {
     if (document.activeElement !== $(k)) $(k).value = s[k] == null ? "" : s[k];
   }
   $("fly").hidden = !s.interactive;
+  $("head").hidden = !s.viewer;
   $("controls").hidden = !!s.view;  // a finished run (multigpu view): nothing to control
 }
 
@@ -182,6 +183,11 @@ $("lod_error").onchange = (e) => send({ do: "lod_error", value: +e.target.value 
 $("orbit").onclick = () => send({ do: "orbit" });
 $("reset").onclick = () => send({ do: "reset" });
 $("faster").onclick = () => send({ do: "speed", steps: 1 });
+$("headhome").onclick = () => send({ do: "head_home" });
+for (const b of document.querySelectorAll("#head button[data-head]")) {
+  const [dx, dy, dz] = b.dataset.head.split(",").map(Number);
+  b.onclick = () => send({ do: "head", dx, dy, dz });
+}
 $("slower").onclick = () => send({ do: "speed", steps: -1 });
 
 function hold(move, on) {
