@@ -175,6 +175,15 @@ def _walkthrough(a) -> int:
         if MPI.COMM_WORLD.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
         collective_exit(exits.BAD_INPUT)
+    from multigpu.rank import standby
+
+    go_file = standby.standing_by()
+    if go_file:  # started ahead of a restart (--standby): imports done, then idle until the launcher says go
+        standby.warm()
+        got = standby.wait_for_go(comm, go_file)
+        if got.get("quit"):
+            return 0
+        standby.go(a, got)
     job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else DEFAULT_LIVENESS)
     job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:

@@ -32,7 +32,8 @@ TAMPERED = ['{"do": "exec", "cmd": "rm -rf /"}', "not json", "[1, 2]", '"pause"'
             '{"do": "balance", "name": "../etc/passwd"}', '{"do": "render_scale", "value": 1e9}',
             '{"do": "render_scale", "value": "NaN"}', '{"do": "render_scale", "value": true}',
             '{"do": "drag", "dx": Infinity, "dy": 0}', '{"do": "keys", "held": ["forward", "__class__"]}',
-            '{"do": "speed", "steps": 1.5}', '{"do": "head", "dx": 2, "dy": 0, "dz": 0}', '{"do": "head", "dx": 0.1}', '{"do": "lod_error"}', '{"do": null}', '{"do": {"do": "stop"}}',
+            '{"do": "speed", "steps": 1.5}', '{"do": "head", "dx": 2, "dy": 0, "dz": 0}',
+            '{"do": "head", "dx": 0.1}', '{"do": "lod_error"}', '{"do": null}', '{"do": {"do": "stop"}}',
             "x" * (MOST_MESSAGE + 1)]
 
 

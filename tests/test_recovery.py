@@ -237,3 +237,35 @@ def test_a_ranks_own_child_ending_or_a_job_before_its_frames_ends_nothing(tmp_pa
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
+
+
+def test_a_standby_is_for_a_job_on_one_host_and_waits_for_its_go(tmp_path):
+    """--standby: refused with --hosts (rank 0 reads the launcher's go file); the ranks' side
+    gives a go's frame and recoveries to the restarted job, and a quit ends the standby."""
+    import argparse
+    import threading
+
+    import pytest
+
+    from multigpu.errors import InputError
+    from multigpu.launcher.mpirun import find_launcher
+    from multigpu.launcher.relaunch import _standby
+    from multigpu.rank import standby
+
+    with pytest.raises(InputError, match="--standby works for a job on one host"):
+        _standby(find_launcher(), 2, ["walkthrough", "--standby"], [("pc1", 1), ("pc2", 1)], tmp_path)
+    assert _standby(find_launcher(), 2, ["walkthrough"], None, tmp_path) is None
+
+    class _Comm:  # one rank: the broadcasts are its own
+        def Get_rank(self):
+            return 0
+
+        def Ibcast(self, buf, root=0):
+            return type("R", (), {"Wait": lambda self: None, "Test": lambda self: True})()
+
+    go = tmp_path / "go.json"
+    threading.Timer(0.2, lambda: go.write_text(json.dumps({"resume_at": 42, "history": [{"reason": "x"}]}))).start()
+    got = standby.wait_for_go(_Comm(), str(go))
+    args = argparse.Namespace(resume_at=0)
+    standby.go(args, got)
+    assert args.resume_at == 42 and json.loads(os.environ.pop(recovery.ENV)) == [{"reason": "x"}]

@@ -91,6 +91,34 @@ def test_a_killed_or_frozen_rank_and_the_wall_comes_back(tmp_path, mpiexec, how)
     assert not (segments() - before), "a failed job's shared-memory segment was left"
 
 
+def test_a_standby_takes_the_wall_over(tmp_path, mpiexec):
+    """--standby: the next job waits while the wall runs; a killed rank's restart is that job,
+    launched and imported already. The run is one run as above, and nothing is left after it."""
+    before = segments()
+    proc, out = launch(tmp_path, mpiexec, ["--standby"])
+    try:
+        wait_rows(proc, out, 2 * 60)
+        t = time.monotonic()
+        while len(ranks_of(out, standbys=True)) < 4:  # the standby's two ranks beside the job's two
+            assert proc.poll() is None and time.monotonic() - t < 60, end_launcher(proc, 5)[1][-3000:]
+            time.sleep(0.1)
+        os.kill(ranks_of(out)[-1], signal.SIGKILL)
+        _, err = end_launcher(proc, 150)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-3000:]
+    assert err.count("multigpu: recovered:") == 1 and "a standby took over" in err, err[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is True and s["frames"] == FRAMES and s["recovery_count"] == 1
+    r = s["recoveries"][0]
+    assert r["standby"] is True and r["resumed_at"] == r["last_shown"] + 1, r
+    frames = read_timings(out / "timings.csv")[:, 0].reshape(-1, 2)
+    assert (frames[:, 0] == frames[:, 1]).all() and (frames[:, 0] == range(FRAMES)).all()  # every frame, once
+    assert not ranks_of(out, standbys=True), "a rank or a standby's outlived the run"
+    assert not (segments() - before), "a shared-memory segment was left"
+
+
 def test_failures_that_repeat_are_bounded(tmp_path, mpiexec):
     proc, out = launch(tmp_path, mpiexec, env={"MULTIGPU_FAULT": "1:20"})  # every start fails at frame 20
     _, err = end_launcher(proc, 150)

@@ -42,11 +42,16 @@ def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
     restarts: collections.deque = collections.deque()
     history: list[dict] = []
     env, args, place, gone = launcher.environ(), argv, hosts, set()
+    standby = _standby(launcher, ranks, argv, hosts, out)
+    adopt = None  # a standby handed the restart
     try:
         while True:
             rejoin = threading.Event()
             watch = (lambda proc: _watch(proc, hosts, gone, rsh, rejoin)) if gone else None
-            code = supervise(launcher.command(ranks, args, hosts=place, env=env), env, out, name, watch)
+            if standby is not None:  # the next job, started once this one shows a frame, waits while it runs
+                watch = (lambda proc: standby.after(proc, out / "timings.csv", launcher.environ()))
+            code = supervise(launcher.command(ranks, args, hosts=place, env=env), env, out, name, watch, adopt)
+            adopt = None
             refused = code == 2 and bool(restarts)  # a restart refused at the door: what it needs is gone (an X server)
             if out is None or (code != 1 and not refused and not rejoin.is_set()):
                 return code
@@ -85,8 +90,27 @@ def recovering(launcher, ranks: int, argv: list[str], hosts, bound: int) -> int:
             env = launcher.environ({recovery.ENV: json.dumps(history)})
             args = [*_without(_without(argv, "--resume-at"), "--dark-tiles"), "--resume-at", str(at),
                     *(["--dark-tiles", ",".join(map(str, dark))] if dark else [])]
+            if standby is not None and not refused and history:  # its ranks are up: they go on from frame `at`
+                adopt = standby.go(at, [*history[:-1], {**history[-1], "standby": True}])
     except KeyboardInterrupt:  # Ctrl-C between two jobs: nothing is running
         return exits.INTERRUPTED
+    finally:
+        if standby is not None:
+            standby.close()
+
+
+def _standby(launcher, ranks: int, argv: list[str], hosts, out: Path | None):
+    """A ``Standby`` where the command line asks for one (``--standby``), else None. Its go file
+    is read by rank 0 on this machine: a job on one host (bad input otherwise)."""
+    from multigpu.errors import InputError
+    from multigpu.launcher.standby import Standby
+
+    if "--standby" not in argv or out is None:
+        return None
+    if hosts:
+        raise InputError.of("standby", "works for a job on one host (the waiting job's rank 0 reads the "
+                            "launcher's go file); leave it out with --hosts")
+    return Standby(launcher, ranks, _without(_without(argv, "--resume-at"), "--dark-tiles"))
 
 
 def with_flight(argv: list[str], out: Path | None) -> list[str]:

@@ -51,7 +51,30 @@ def _die_with_parent() -> None:
         pass
 
 
-def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec", started_job=None) -> int:
+def start_job(cmd: list[str], env: dict) -> subprocess.Popen:
+    """The launcher started in a session of its own, killed if this wrapper dies (Linux sends the
+    signal when the *thread* that started it ends: start it from a thread that outlives it)."""
+    return subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=_die_with_parent)
+
+
+def end_job(proc: subprocess.Popen) -> None:
+    """Kill what is left of a job ``start_job`` made and reap it: this host's ranks first (a
+    runtime may start them in sessions of their own), then the launcher's session."""
+    if proc.poll() is None:
+        for pid in _local_ranks(proc.pid):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    proc.wait()
+
+
+def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec", started_job=None,
+              proc: subprocess.Popen | None = None) -> int:
     """Run the launcher, pass it SIGINT/SIGTERM/SIGHUP exactly once each, and return the
     documented exit code whichever MPI runs the job: 0 done, 2 bad input, 128 + signal when a
     signal stopped it (Open MPI's mpiexec itself returns 1 there), 1 any failure (MPICH's
@@ -59,9 +82,11 @@ def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec"
     killed rank 0 before it closed its record (a host died), summary.json is rewritten from
     the whole frames in timings.csv and one line says so. After a failure nothing of the job is
     left: its process session is killed and its shared-memory segments swept (``segments``).
-    ``started_job``: called with the launcher's process once it runs (``relaunch``'s watch)."""
+    ``started_job``: called with the launcher's process once it runs (``relaunch``'s watch).
+    ``proc``: a job already started (a standby handed the restart), supervised from now."""
     started = time.time()
-    proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=_die_with_parent)
+    if proc is None:
+        proc = start_job(cmd, env)
     if started_job is not None:
         started_job(proc)
     got: list[int] = []

@@ -38,6 +38,8 @@ WINDOW = 600.0
 GAVE_UP = exits.GAVE_UP  # the launcher's status when it gives up
 #: the environment variable carrying the recoveries so far to a restarted job
 ENV = "MULTIGPU_RECOVERIES"
+#: a standby job's go file (launcher/standby.py writes it, rank/standby.py waits for it)
+STANDBY_ENV = "MULTIGPU_STANDBY"
 #: bytes of timings.csv's end read to find the last whole frame
 TAIL = 1 << 20
 #: when rank 0 reached each step of its setup (epoch seconds; ``mark``): a restart's breakdown
@@ -148,8 +150,9 @@ class Recovery:
                 steps[name], before = round(at[name] - before, 3), at[name]
         p["steps"] = steps
         self.done.append(p)
+        by = ", a standby took over" if p.get("standby") else ""
         print(f"multigpu: recovered: the wall is back at frame {f}, {p['seconds']:.1f} s after the last frame "
-              f"before the failure ({p['reason']}; " + ", ".join(f"{k} {v:.2f}" for k, v in steps.items()) + " s)",
+              f"before the failure{by} ({p['reason']}; " + ", ".join(f"{k} {v:.2f}" for k, v in steps.items()) + " s)",
               file=sys.stderr, flush=True)
 
     def doc(self) -> dict:

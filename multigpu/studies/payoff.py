@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from multigpu.strategies import REGISTRY
 from multigpu.studies.floor import run as floor_run
 from multigpu.studies.prose import prose
 from multigpu.studies.runs import Settings, walk
@@ -64,7 +63,7 @@ def balancing_parts(rows: list[dict], checks: list[dict]) -> list[dict]:
 def exp_payoff(s: Settings, out: Path) -> str:
     """Emulated frame of each strategy over ``none``, same scene and path, alternated rounds."""
     rounds = s.repeat(3)
-    strategies = tuple(REGISTRY)  # every registered strategy, `none` last
+    strategies = s.strategies  # every registered strategy (quick: a few), `none` last
     runs: dict = {}
     floors: dict = {}
     out.mkdir(parents=True, exist_ok=True)

@@ -27,8 +27,9 @@ from multigpu.studies.tables import Columns
 KILL_AFTER, FRAMES = 150, 400
 
 
-def rank_pids(out) -> list[int]:
-    """Pids of the rank processes (``python -m mpi4py ...``) writing the run in ``out``."""
+def rank_pids(out, standbys: bool = False) -> list[int]:
+    """Pids of the rank processes (``python -m mpi4py ...``) writing the run in ``out``; with
+    ``standbys``, those of a job started as a standby too (``--standby``)."""
     pids = []
     for d in os.listdir("/proc"):
         if d.isdigit():
@@ -36,18 +37,29 @@ def rank_pids(out) -> list[int]:
                 argv = Path(f"/proc/{d}/cmdline").read_bytes().split(b"\0")
             except OSError:
                 continue
-            if b"mpi4py" in argv and str(out).encode() in argv:
+            if b"mpi4py" in argv and str(out).encode() in argv and (standbys or not _standing_by(int(d))):
                 pids.append(int(d))
     return sorted(pids)
 
 
-def one_round(cache: str, tmp: str, k: int, kill: bool = True) -> dict:
-    """One run, killed once after ``KILL_AFTER`` frames (``kill``); its summary."""
+def _standing_by(pid: int) -> bool:
+    """Whether rank process ``pid`` was started as a standby (``--standby``): not the running job's."""
+    from multigpu.records.recovery import STANDBY_ENV
+
+    try:
+        return f"{STANDBY_ENV}=".encode() in Path(f"/proc/{pid}/environ").read_bytes()
+    except OSError:
+        return True
+
+
+def one_round(cache: str, tmp: str, k: int, kill: bool = True, standby: bool = False) -> dict:
+    """One run, killed once after ``KILL_AFTER`` frames (``kill``); its summary. ``standby``:
+    with ``--standby`` (the next job started and waiting)."""
     out = os.path.join(tmp, f"run-{k}")
     from multigpu.studies.runs import end, start
 
     args = ["walkthrough", "--frames", str(FRAMES), "--mosaic-every", "0", "--no-progress", "--out", out,
-            "--recover", "1"]
+            "--recover", "1", *(["--standby"] if standby else [])]
     proc = start(4, args, {"MULTIGPU_CACHE": cache}, as_users=True)
     try:
         csv, t = Path(out) / "timings.csv", time.monotonic()
@@ -66,7 +78,8 @@ def one_round(cache: str, tmp: str, k: int, kill: bool = True) -> dict:
 
 
 def bench_recovery(quick: bool) -> list[dict]:
-    """The dark time of a recovery and its steps, per round and their medians."""
+    """The dark time of a recovery and its steps, restarted and from a standby (``--standby``),
+    alternated round by round; per round and the medians of each."""
     rounds = 2 if quick else 5
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -74,12 +87,16 @@ def bench_recovery(quick: bool) -> list[dict]:
         one_round(cache, tmp, -1, kill=False)  # the caches warm: scene, buffers file, compiled kernels
         print(f"bench recovery: default plant, 2x2 wall of 256x256 tiles (4 ranks), a rank killed after "
               f"{KILL_AFTER} frames; wall seconds")
-        table = Columns(("round", "round", ">5"), ("seconds", "dark s", "7.2f"), *((s, s, "9.2f") for s in STEPS))
+        table = Columns(("round", "round", ">6"), ("how", "restart", ">8"), ("seconds", "dark s", "7.2f"),
+                        *((s, s, "9.2f") for s in STEPS))
         print(table.header(), flush=True)
         for k in range(rounds):
-            r = one_round(cache, tmp, k)["recoveries"][0]
-            rows.append({"round": k, "seconds": r["seconds"], **r["steps"]})
-            print(table.row({s: float("nan") for s in STEPS} | rows[-1]), flush=True)
-    med = {s: float(np.median([r.get(s, np.nan) for r in rows])) for s in ("seconds", *STEPS)}
-    print(table.row({**med, "round": "median"}), flush=True)
+            for how in (("restart", "standby") if k % 2 == 0 else ("standby", "restart")):
+                r = one_round(cache, tmp, 2 * k + (how == "standby"), standby=how == "standby")["recoveries"][0]
+                rows.append({"round": k, "how": how, "seconds": r["seconds"], **r["steps"]})
+                print(table.row({s: float("nan") for s in STEPS} | rows[-1]), flush=True)
+    for how in ("restart", "standby"):
+        mine = [r for r in rows if r["how"] == how]
+        med = {s: float(np.median([r.get(s, np.nan) for r in mine])) for s in ("seconds", *STEPS)}
+        print(table.row({**med, "round": "median", "how": how}), flush=True)
     return rows

@@ -1,0 +1,73 @@
+"""A job started ahead of need (``--standby``): its ranks are launched and import what a run
+needs, then wait, idle, until the launcher hands them a restart.
+
+A restart after a failure spends most of its dark time before the first frame: the new ranks'
+launch, MPI's start and the imports. The launcher (``launcher/standby.py``) starts the next
+job while the current one runs, with ``ENV`` naming a file that does not exist yet. Its ranks
+stop here, before they touch the output directory, a window, a port or a shared segment:
+rank 0 looks for the file every ``POLL`` seconds, the others test a non-blocking broadcast as
+often, so a job standing by costs the wall next to nothing. After a failure the launcher writes
+the file (the frame to resume at, the recoveries so far); rank 0 broadcasts it and every rank
+goes on as a restarted job would, from the frame the launcher named. A ``quit`` in the file
+ends the standby quietly (the run ended another way).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.records.recovery import STANDBY_ENV as ENV  # the go file's path, in a standby job's environment
+
+#: seconds between looks while standing by
+POLL = 0.02
+
+
+def standing_by() -> str | None:
+    """The go file this job waits for, or None (not a standby)."""
+    return os.environ.get(ENV) or None
+
+
+def warm() -> None:
+    """The imports a restarted rank would wait for, done while the wall still runs."""
+    import moderngl  # noqa: F401
+
+    import multigpu.gpu.render  # noqa: F401
+    import multigpu.rank.frames  # noqa: F401
+    import multigpu.rank.walkthrough  # noqa: F401
+
+
+def wait_for_go(comm, go_file: str) -> dict:
+    """Stand by until the launcher writes ``go_file``; its contents, the same on every rank."""
+    size = np.zeros(1, dtype=np.int64)
+    if comm.Get_rank() == 0:
+        path = Path(go_file)
+        while not path.exists():
+            time.sleep(POLL)
+        data = path.read_bytes()
+        size[0] = len(data)
+        comm.Ibcast(size, root=0).Wait()
+        buf = bytearray(data)
+    else:
+        req = comm.Ibcast(size, root=0)
+        while not req.Test():
+            time.sleep(POLL)
+        buf = bytearray(int(size[0]))
+    comm.Ibcast(buf, root=0).Wait()
+    return json.loads(bytes(buf))
+
+
+def go(args, got: dict) -> None:
+    """A restarted job's start from the launcher's go: the frame to resume at (into the parsed
+    command line ``args``), the recoveries so far, and this job's own start time."""
+    import multigpu
+    from multigpu.records import recovery
+
+    args.resume_at = int(got["resume_at"])
+    os.environ[recovery.ENV] = json.dumps(got["history"])
+    os.environ.pop(ENV, None)
+    multigpu.STARTED = time.time()  # the launch a restart measures is this one
