@@ -177,9 +177,10 @@ def _walkthrough(a) -> int:
         collective_exit(exits.BAD_INPUT)
     from multigpu.rank import standby
 
-    go_file = standby.standing_by()
-    if go_file:  # started ahead of a restart (--standby): imports done, then idle until the launcher says go
+    go_file, ready = standby.standing_by(), None
+    if go_file:  # started ahead of a restart (--standby): set up, then idle until the launcher says go
         standby.warm()
+        ready = standby.prepared(a, comm)
         got = standby.wait_for_go(comm, go_file)
         if got.get("quit"):
             return 0
@@ -191,7 +192,7 @@ def _walkthrough(a) -> int:
         from multigpu.rank.walkthrough import run
 
         with job:
-            run(cfg, comm, job)
+            run(cfg, comm, job, ready)
     except (InputError, WriteFailed) as exc:  # agreed on every rank: one line, all exit 2
         job.close()
         if comm.Get_rank() == 0:

@@ -1,5 +1,6 @@
-"""A job started ahead of need (``--standby``): its ranks are launched and import what a run
-needs, then wait, idle, until the launcher hands them a restart.
+"""A job started ahead of need (``--standby``): its ranks are launched, import what a run needs
+and (headless) map the scene and make their GL context and buffers, then wait, idle, until the
+launcher hands them a restart.
 
 A restart after a failure spends most of its dark time before the first frame: the new ranks'
 launch, MPI's start and the imports. The launcher (``launcher/standby.py``) starts the next
@@ -39,6 +40,29 @@ def warm() -> None:
     import multigpu.gpu.render  # noqa: F401
     import multigpu.rank.frames  # noqa: F401
     import multigpu.rank.walkthrough  # noqa: F401
+
+
+def prepared(args, comm):
+    """What this standby can set up before its go (``walkthrough.prepare``: the scene, the GL
+    context and buffers; headless only), or None, agreed by every rank: all have it or none."""
+    from mpi4py import MPI
+
+    from multigpu.config import setup_timeout
+    from multigpu.flags import walk_config
+    from multigpu.rank.walkthrough import prepare
+
+    ready = None
+    try:
+        cfg = walk_config(args)
+        if cfg.present == "headless" and not cfg.dark:
+            ready = prepare(cfg, comm, setup_timeout(cfg))
+    except Exception:  # noqa: BLE001 -- the restart then sets up as a fresh job does, and says what fails
+        ready = None
+    if comm.allreduce(ready is not None, op=MPI.LAND):
+        return ready
+    if ready is not None:
+        ready.renderer.release()
+    return None
 
 
 def wait_for_go(comm, go_file: str) -> dict:

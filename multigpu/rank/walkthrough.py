@@ -16,6 +16,7 @@ import json
 import os
 import socket
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -68,16 +69,63 @@ def modelled(cfg: WalkConfig, scene):
     return whole.translated(cfg.offset) if any(cfg.offset) else whole
 
 
-def load_world(cfg: WalkConfig):
+def load_world(cfg: WalkConfig, ready: "Ready | None" = None):
     """Scene, camera path and load facts, both moved by ``--offset`` (a file path too), so an
-    offset run should show the same images as one at the scene's own coordinates."""
-    scene, load_info = load_scene(cfg.scene)
-    if any(cfg.offset):
-        scene = scene.translated(cfg.offset)
+    offset run should show the same images as one at the scene's own coordinates. ``ready``: the
+    scene a standby loaded while it waited (its path is made now: a restart's frame decides it)."""
+    if ready is not None:
+        scene, load_info = ready.scene, ready.load_info
+    else:
+        scene, load_info = load_scene(cfg.scene)
+        if any(cfg.offset):
+            scene = scene.translated(cfg.offset)
     path = make_path(cfg, scene)
     if cfg.path and cfg.path != INTERACTIVE and any(cfg.offset):
         path = path.translated(cfg.offset)
     return scene, path, load_info
+
+
+@dataclass
+class Ready:
+    """What a standby job (``rank/standby.py``) set up while it waited, for a headless run: the
+    scene mapped, its buffers file, this rank's place on its host, the GL context and the
+    renderer with the scene's buffers. A restart handed to it starts with these."""
+
+    scene: object
+    load_info: dict
+    shared: object
+    local: int
+    host_ranks: int
+    ctx: object
+    device: object
+    renderer: object
+
+
+def prepare(cfg: WalkConfig, comm, wait: float) -> Ready:
+    """A standby's setup before its go, headless (a window, a port or the output directory
+    would be the running job's): every rank maps the cached scene (rank 0 makes the buffers
+    file first) and makes its GL context and renderer. Raises what a run's setup raises."""
+    from multigpu.gpu.render import RegionRenderer, create_context
+
+    scene, load_info = load_scene(cfg.scene)
+    if any(cfg.offset):
+        scene = scene.translated(cfg.offset)
+    shared = ensure_buffers(load_info.get("cache"), scene) if comm.Get_rank() == 0 else None
+    comm.Barrier()
+    if comm.Get_rank() != 0:
+        shared = ensure_buffers(load_info.get("cache"), scene)
+    local, host_ranks = node_rank(comm, wait)
+    ctx, device = create_context(_device(cfg, comm.Get_rank()), local_rank=local, host_ranks=host_ranks)
+    renderer = RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum, shared,
+                              cfg.colors)
+    return Ready(scene, load_info, shared, local, host_ranks, ctx, device, renderer)
+
+
+def _device(cfg: WalkConfig, rank: int):
+    """The EGL device this rank renders on: the wall file's ``gpu`` (a stand-in on a dark tile:
+    any), else ``--device``."""
+    own = cfg.gpus and cfg.gpus[rank] is not None and rank not in cfg.dark
+    return cfg.gpus[rank] if own else cfg.device
 
 
 def projector(cfg: WalkConfig, scene) -> BoxProjector | SphereProjector:
@@ -119,15 +167,16 @@ def _check_video() -> None:
                          f"{exc.__class__.__name__}: {exc}") from None
 
 
-def run(cfg: WalkConfig, comm, job) -> dict | None:
-    """Render the walkthrough on this rank; rank 0 returns the summary."""
+def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
+    """Render the walkthrough on this rank; rank 0 returns the summary. ``ready``: what a
+    standby set up while it waited (the same on every rank: all have it, or none)."""
     rank, K = comm.Get_rank(), comm.Get_size()
     if K != cfg.ranks:
         raise InputError.of("grid", f"{cfg.grid[0]}x{cfg.grid[1]} needs {cfg.ranks} ranks but the job has {K} "
                          f"(start it with mpiexec -n {cfg.ranks})")
     wait = setup_timeout(cfg)
     # -- setup: rank 0 takes the output directory and builds the scene cache first
-    error, out, scene, path, load_info, shared = _first(cfg) if rank == 0 else (None,) * 6
+    error, out, scene, path, load_info, shared = _first(cfg, ready) if rank == 0 else (None,) * 6
     presenter = renderer = monitor = panel = tracker = None
     try:
         fault(rank, "setup")
@@ -138,10 +187,10 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             from multigpu.gpu.render import RegionRenderer, create_context, raster_threads
 
             if rank != 0:
-                scene, path, load_info = load_world(cfg)
-                shared = ensure_buffers(load_info.get("cache"), scene)
+                scene, path, load_info = load_world(cfg, ready)
+                shared = ready.shared if ready is not None else ensure_buffers(load_info.get("cache"), scene)
 
-            local, host_ranks = node_rank(comm, wait)
+            local, host_ranks = (ready.local, ready.host_ranks) if ready is not None else node_rank(comm, wait)
             raster_threads(host_ranks)  # before any GL context, the window's included
             presenter = _presenter(cfg, rank)
             if rank == 0 and cfg.monitor is not None:
@@ -150,14 +199,15 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
                 panel = _panel(cfg, scene, out)
             if rank == 0 and cfg.head_tracker is not None:
                 tracker = _tracker(cfg)
-            if presenter.context is not None:  # render in the window's context
-                ctx, device = presenter.context, f"window on {presenter.display}"
+            if ready is not None:  # a standby's, made while it waited (headless)
+                ctx, device, renderer = ready.ctx, ready.device, ready.renderer
             else:
-                own = cfg.gpus and cfg.gpus[rank] is not None and rank not in cfg.dark  # a stand-in: any GPU
-                mine = cfg.gpus[rank] if own else cfg.device
-                ctx, device = create_context(mine, local_rank=local, host_ranks=host_ranks)
-            renderer = RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum, shared,
-                                      cfg.colors)
+                if presenter.context is not None:  # render in the window's context
+                    ctx, device = presenter.context, f"window on {presenter.display}"
+                else:
+                    ctx, device = create_context(_device(cfg, rank), local_rank=local, host_ranks=host_ranks)
+                renderer = RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum,
+                                          shared, cfg.colors)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
             if rank == 0:
                 mark("gl")
@@ -201,9 +251,10 @@ def run(cfg: WalkConfig, comm, job) -> dict | None:
             out.release()
 
 
-def _first(cfg: WalkConfig) -> tuple:
+def _first(cfg: WalkConfig, ready: Ready | None = None) -> tuple:
     """Rank 0's setup before the others': ``(error, out, scene, path, load_info, buffers file)``
-    (``error``: the bad input's line; the output directory is then released)."""
+    (``error``: the bad input's line; the output directory is then released). ``ready``: a
+    standby's scene and buffers file."""
     mark("imported")  # a restarted job's steps (records/recovery.py)
     out = scene = path = load_info = shared = None
     try:
@@ -212,11 +263,12 @@ def _first(cfg: WalkConfig) -> tuple:
             _check_video()
         if cfg.record:
             check_record(cfg.record)
-        scene, path, load_info = load_world(cfg)
+        scene, path, load_info = load_world(cfg, ready)
         mark("scene")
         warn_once(cfg, scene)
         _check_path(cfg, scene, path)
-        shared = ensure_buffers(load_info.get("cache"), scene)  # once, before the others map it
+        # once, before the others map it
+        shared = ready.shared if ready is not None else ensure_buffers(load_info.get("cache"), scene)
     except InputError as exc:
         return str(exc), out, scene, path, load_info, shared
     return None, out, scene, path, load_info, shared
