@@ -351,8 +351,9 @@ class WalkConfig:
         "restart the job after a failure (a rank or host that dies or freezes), resuming at the first frame not "
         "shown, at most N times in 10 minutes; the launcher's (default: 3 with --present window, 0 headless)"))
     standby: bool = option(False, group=CONTROL, switch=True, help=(
-        "with --recover: keep the next job started and waiting (launched, its imports done) while the wall runs, so "
-        "a restart skips that part of its dark time; the launcher's (one idle process per rank)"))
+        "with --recover: keep the next job started and waiting while the wall runs (launched, its imports done and, "
+        "headless, its scene and GL set up), so a restart skips that part of its dark time; the launcher's (one idle "
+        "process per rank)"))
     dark: tuple[int, ...] = option((), group=CONTROL, flag="--dark-tiles", metavar="K,...", read=read_labels, text="",
                                    help=(
         "tiles whose PC is gone: shown black, the rest of the wall shared among every rank (the launcher's "
