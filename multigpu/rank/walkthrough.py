@@ -72,9 +72,12 @@ def modelled(cfg: WalkConfig, scene):
 def load_world(cfg: WalkConfig, ready: "Ready | None" = None):
     """Scene, camera path and load facts, both moved by ``--offset`` (a file path too), so an
     offset run should show the same images as one at the scene's own coordinates. ``ready``: the
-    scene a standby loaded while it waited (its path is made now: a restart's frame decides it)."""
+    scene and path a standby made while it waited (a flight's start is made now: it is where the
+    restart resumes)."""
     if ready is not None:
         scene, load_info = ready.scene, ready.load_info
+        if ready.path is not None:
+            return scene, ready.path, load_info
     else:
         scene, load_info = load_scene(cfg.scene)
         if any(cfg.offset):
@@ -93,6 +96,7 @@ class Ready:
 
     scene: object
     load_info: dict
+    path: object  # the camera path (None for a flight: its start is where the restart resumes)
     shared: object
     local: int
     host_ranks: int
@@ -107,9 +111,9 @@ def prepare(cfg: WalkConfig, comm, wait: float) -> Ready:
     file first) and makes its GL context and renderer. Raises what a run's setup raises."""
     from multigpu.gpu.render import RegionRenderer, create_context
 
-    scene, load_info = load_scene(cfg.scene)
-    if any(cfg.offset):
-        scene = scene.translated(cfg.offset)
+    scene, path, load_info = load_world(cfg)
+    if cfg.path == INTERACTIVE:
+        path = None
     shared = ensure_buffers(load_info.get("cache"), scene) if comm.Get_rank() == 0 else None
     comm.Barrier()
     if comm.Get_rank() != 0:
@@ -118,7 +122,7 @@ def prepare(cfg: WalkConfig, comm, wait: float) -> Ready:
     ctx, device = create_context(_device(cfg, comm.Get_rank()), local_rank=local, host_ranks=host_ranks)
     renderer = RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum, shared,
                               cfg.colors)
-    return Ready(scene, load_info, shared, local, host_ranks, ctx, device, renderer)
+    return Ready(scene, load_info, path, shared, local, host_ranks, ctx, device, renderer)
 
 
 def _device(cfg: WalkConfig, rank: int):
