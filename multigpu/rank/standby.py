@@ -26,6 +26,8 @@ from multigpu.records.recovery import STANDBY_ENV as ENV  # the go file's path, 
 
 #: seconds between looks while standing by
 POLL = 0.02
+#: seconds the go's broadcast may take once rank 0 has read it (every rank is looking by then)
+GO_WAIT = 60.0
 
 
 def standing_by() -> str | None:
@@ -34,9 +36,8 @@ def standing_by() -> str | None:
 
 
 def warm() -> None:
-    """The imports a restarted rank would wait for, done while the wall still runs."""
-    import moderngl  # noqa: F401
-
+    """The imports a restarted rank would wait for (moderngl among them), done while the wall
+    still runs."""
     import multigpu.gpu.render  # noqa: F401
     import multigpu.rank.frames  # noqa: F401
     import multigpu.rank.walkthrough  # noqa: F401
@@ -45,20 +46,20 @@ def warm() -> None:
 def prepared(args, comm):
     """What this standby can set up before its go (``walkthrough.prepare``: the scene, the GL
     context and buffers; headless only), or None, agreed by every rank: all have it or none."""
-    from mpi4py import MPI
-
     from multigpu.config import setup_timeout
     from multigpu.flags import walk_config
+    from multigpu.rank.exchange import agree
     from multigpu.rank.walkthrough import prepare
 
-    ready = None
+    ready, wait = None, GO_WAIT
     try:
         cfg = walk_config(args)
+        wait = setup_timeout(cfg)
         if cfg.present == "headless" and not cfg.dark:
-            ready = prepare(cfg, comm, setup_timeout(cfg))
+            ready = prepare(cfg, comm, wait)
     except Exception:  # noqa: BLE001 -- the restart then sets up as a fresh job does, and says what fails
         ready = None
-    if comm.allreduce(ready is not None, op=MPI.LAND):
+    if agree(comm, None if ready is not None else "not prepared", wait, "standby") is None:
         return ready
     if ready is not None:
         ready.renderer.release()
@@ -67,6 +68,8 @@ def prepared(args, comm):
 
 def wait_for_go(comm, go_file: str) -> dict:
     """Stand by until the launcher writes ``go_file``; its contents, the same on every rank."""
+    from multigpu.rank.exchange import wait_all
+
     size = np.zeros(1, dtype=np.int64)
     if comm.Get_rank() == 0:
         path = Path(go_file)
@@ -74,14 +77,14 @@ def wait_for_go(comm, go_file: str) -> dict:
             time.sleep(POLL)
         data = path.read_bytes()
         size[0] = len(data)
-        comm.Ibcast(size, root=0).Wait()
+        wait_all([comm.Ibcast(size, root=0)], GO_WAIT, "standby's go")
         buf = bytearray(data)
     else:
         req = comm.Ibcast(size, root=0)
-        while not req.Test():
+        while not req.Test():  # as long as the wall runs: no timeout
             time.sleep(POLL)
         buf = bytearray(int(size[0]))
-    comm.Ibcast(buf, root=0).Wait()
+    wait_all([comm.Ibcast(buf, root=0)], GO_WAIT, "standby's go")
     return json.loads(bytes(buf))
 
 

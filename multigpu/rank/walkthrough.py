@@ -109,20 +109,32 @@ def prepare(cfg: WalkConfig, comm, wait: float) -> Ready:
     """A standby's setup before its go, headless (a window, a port or the output directory
     would be the running job's): every rank maps the cached scene (rank 0 makes the buffers
     file first) and makes its GL context and renderer. Raises what a run's setup raises."""
-    from multigpu.gpu.render import RegionRenderer, create_context
-
     scene, path, load_info = load_world(cfg)
     if cfg.path == INTERACTIVE:
         path = None
     shared = ensure_buffers(load_info.get("cache"), scene) if comm.Get_rank() == 0 else None
-    comm.Barrier()
+    agree(comm, None, wait, "standby")  # the buffers file is there before the others map it
     if comm.Get_rank() != 0:
         shared = ensure_buffers(load_info.get("cache"), scene)
     local, host_ranks = node_rank(comm, wait)
-    ctx, device = create_context(_device(cfg, comm.Get_rank()), local_rank=local, host_ranks=host_ranks)
-    renderer = RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum, shared,
-                              cfg.colors)
+    ctx, device, renderer = _gl(cfg, comm.Get_rank(), None, scene, shared, local, host_ranks, None)
     return Ready(scene, load_info, path, shared, local, host_ranks, ctx, device, renderer)
+
+
+def _gl(cfg: WalkConfig, rank: int, presenter, scene, shared, local: int, host_ranks: int, ready: Ready | None):
+    """``(context, device, renderer)``: a standby's, made while it waited; else the window's
+    context (``presenter``: None before there is one), or an EGL context of this rank's own, and
+    a renderer holding the scene's buffers."""
+    from multigpu.gpu.render import RegionRenderer, create_context
+
+    if ready is not None:
+        return ready.ctx, ready.device, ready.renderer
+    if presenter is not None and presenter.context is not None:  # render in the window's context
+        ctx, device = presenter.context, f"window on {presenter.display}"
+    else:
+        ctx, device = create_context(_device(cfg, rank), local_rank=local, host_ranks=host_ranks)
+    return ctx, device, RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum, shared,
+                                       cfg.colors)
 
 
 def _device(cfg: WalkConfig, rank: int):
@@ -188,7 +200,7 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
         if error:
             raise InputError(error)
         try:
-            from multigpu.gpu.render import RegionRenderer, create_context, raster_threads
+            from multigpu.gpu.render import raster_threads
 
             if rank != 0:
                 scene, path, load_info = load_world(cfg, ready)
@@ -203,15 +215,7 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
                 panel = _panel(cfg, scene, out)
             if rank == 0 and cfg.head_tracker is not None:
                 tracker = _tracker(cfg)
-            if ready is not None:  # a standby's, made while it waited (headless)
-                ctx, device, renderer = ready.ctx, ready.device, ready.renderer
-            else:
-                if presenter.context is not None:  # render in the window's context
-                    ctx, device = presenter.context, f"window on {presenter.display}"
-                else:
-                    ctx, device = create_context(_device(cfg, rank), local_rank=local, host_ranks=host_ranks)
-                renderer = RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum,
-                                          shared, cfg.colors)
+            ctx, device, renderer = _gl(cfg, rank, presenter, scene, shared, local, host_ranks, ready)
             scene = scene.without_geometry()  # the GL buffers hold it now: its mapped pages go
             if rank == 0:
                 mark("gl")
