@@ -60,16 +60,15 @@ def start_job(cmd: list[str], env: dict) -> subprocess.Popen:
 def end_job(proc: subprocess.Popen) -> None:
     """Kill what is left of a job ``start_job`` made and reap it: this host's ranks first (a
     runtime may start them in sessions of their own), then the launcher's session."""
-    if proc.poll() is None:
-        for pid in _local_ranks(proc.pid):
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+    for pid in _local_ranks(proc.pid):
         try:
-            os.killpg(proc.pid, signal.SIGKILL)
+            os.kill(pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
     proc.wait()
 
 
@@ -149,16 +148,8 @@ def _wait(proc: subprocess.Popen, out: Path | None, started: float) -> int:
             continue
         now = set(_local_ranks(proc.pid))
         if any(_gone(p) for p in seen - now) and _frames_running(out, started):
-            for pid in now:  # the ranks first: a runtime may start them in sessions of their own
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-            try:
-                os.killpg(proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            return proc.wait()
+            end_job(proc)
+            return proc.returncode
         seen |= now
 
 
