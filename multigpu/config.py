@@ -37,6 +37,12 @@ PRESENTERS = ("headless", "window")
 EXCHANGES = ("auto", "messages", "shared")
 
 
+def _eye_plans() -> tuple:
+    from multigpu.core.stereo import EYE_PLANS
+
+    return EYE_PLANS
+
+
 def _stereo_modes() -> tuple:
     from multigpu.core.stereo import MODES, UNSHOWN
 
@@ -239,6 +245,10 @@ class WalkConfig:
                                    valid=lambda v: v >= 0 and _finite(v), must="must be >= 0 metres",
                                    help="metres between the viewer's eyes (default: {default})")
     swap_eyes: bool = option(False, group=STEREO, switch=True, help="each eye's picture in the other's place")
+    eyes: str = option("joint", group=STEREO, choices=lambda: _eye_plans(), help=(
+        "how the ranks share a stereo wall's eyes: joint (every rank renders its region for both eyes) or split "
+        "(eye decomposition: half the ranks render the left eye, half the right, each over twice the pixels; "
+        "--decomposition screen, an even number of columns or rows); docs/BENCHMARKS.md measures both"))
     head: tuple[float, float, float] | None = option(None, group=STEREO, metavar="X,Y,Z", read=read_vec3, help=(
         "the viewer's head in metres from the wall's centre (x right, y up, z out of the wall): each tile shows "
         "the scene through the wall from there (default: on the wall's axis, where the wall spans the camera's "

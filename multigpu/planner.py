@@ -20,7 +20,7 @@ import numpy as np
 
 from multigpu.core.eyes import Pose, eye_frames, head_problem
 from multigpu.core.projectors import make_projector
-from multigpu.core.stereo import make_stereo
+from multigpu.core.stereo import doubled, halved, make_stereo
 from multigpu.core.work import Work
 from multigpu.decompositions import REGISTRY
 from multigpu.strategies import REGISTRY as STRATEGIES
@@ -118,8 +118,8 @@ def eye_config(cfg, stereo):
     decompositions plan from)."""
     import dataclasses
 
-    return dataclasses.replace(cfg, tile=stereo.eye.tile, mullion=stereo.eye.mullion, stereo="mono", head=None,
-                               head_poses=None, poses=())
+    return dataclasses.replace(cfg, tile=stereo.eye.tile, mullion=stereo.eye.mullion, stereo="mono", eyes="joint",
+                               head=None, head_poses=None, poses=())
 
 
 class Planner:
@@ -130,6 +130,11 @@ class Planner:
         # a stereo wall plans on one eye's canvas and both eyes render the plan (core/stereo.py)
         self.stereo = make_stereo(cfg.stereo, cfg.canvas)
         self.plan_cfg = cfg if self.stereo is None else eye_config(cfg, self.stereo)
+        # eye decomposition (``--eyes split``): half the ranks a screen plan, each eye's half drawing it (not on a
+        # wall with dark tiles, whose live tiles need not halve: both eyes then render every region)
+        self.halves = (halved(cfg.grid) if cfg.eyes == "split" and self.stereo is not None and not cfg.dark
+                       else None)
+        self._split: set[int] = set()  # the strategies (``balances`` indices) built for half the ranks
         self.canvas = self.plan_cfg.canvas
         self.viewer = cfg.viewer  # None: the camera's own frustum
         self.views: list = []  # the last frame's (view, proj, light) of every eye through every screen, [eye][screen]
@@ -159,7 +164,14 @@ class Planner:
         d = self._built.get(self.using)
         if d is None:
             name, balance = mode_of(self.cfg, self.balances[self.using])
-            d = self._built[self.using] = REGISTRY[name].from_config(self.plan_cfg, self.scene, balance, self.rank)
+            if self.halves is not None and name == "screen":  # one eye's half of the ranks (``stereo.doubled``)
+                half = self.cfg.ranks // 2
+                d = REGISTRY[name].from_config(self.plan_cfg, self.scene, balance,
+                                               None if self.rank is None else self.rank % half, grid=self.halves)
+                self._split.add(self.using)
+            else:
+                d = REGISTRY[name].from_config(self.plan_cfg, self.scene, balance, self.rank)
+            self._built[self.using] = d
         self._d = d
         return d
 
@@ -230,6 +242,8 @@ class Planner:
             work = self.canvas.to_canvas(work, rects, tris)
         if len(self.screens) > 1:  # each part drawn through its screen's frustum
             work = cut_at(work, self.screen_rects)
+        if self.using in self._split:  # each eye's half of the ranks the same pieces
+            work = doubled(work)
         planned = self._planned
         planned[frame] = (d, work)
         if len(planned) > KEEP:  # the oldest (frames are planned in order)
@@ -250,6 +264,9 @@ class Planner:
             del planned[oldest]
         if got is not None:
             d, work = got
+            if work.eyes is not None:  # split by eye: a region's time is its slower eye's
+                half = work.ranks // 2
+                times = np.maximum(times[:half], times[half:])
             d.observe(frame, work, times)
 
     def report(self) -> dict:

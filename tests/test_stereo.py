@@ -175,6 +175,11 @@ def test_a_head_at_home_with_no_separation_sees_what_the_camera_sees():
     ({"stereo": "anaglyph", "head": (0.0, 0.0, 0.0)}, "--head 0,0,0: a viewer at z = 0 m has an eye behind"),
     ({"head": (0.1, 0.2, -1.0)}, "--head 0.1,0.2,-1: a viewer at z = -1 m"),
     ({"stereo": "fourway"}, "--stereo must be one of mono, side-by-side, top-bottom, anaglyph, quad"),
+    ({"eyes": "split"}, "--eyes split needs a stereo wall (--stereo), got --stereo mono"),
+    ({"stereo": "anaglyph", "eyes": "split", "decomposition": "db"}, "--eyes split works with --decomposition screen"),
+    ({"stereo": "anaglyph", "eyes": "split", "grid": (3, 3)}, "--eyes split needs an even number of columns"),
+    ({"stereo": "anaglyph", "eyes": "split", "partition": "broadcast"}, "--eyes split plans every rank's partition"),
+    ({"stereo": "anaglyph", "eyes": "both"}, "--eyes must be one of joint, split"),
 ])
 def test_bad_stereo_input_is_one_line_naming_the_flag(fields, words):
     with pytest.raises(InputError) as got:
@@ -262,6 +267,8 @@ CASES = {
     "anaglyph screen latency 0": ("anaglyph", {"latency": 0}),
     "anaglyph db latency 2": ("anaglyph", {"decomposition": "db", "latency": 2}),
     "top-bottom bins": ("top-bottom", {"decomposition": "bins", "bin_size": 16}),
+    "anaglyph split by eye latency 2": ("anaglyph", {"eyes": "split", "latency": 2}),
+    "side-by-side split by eye cross": ("side-by-side", {"eyes": "split", "balance": "cross", "latency": 3}),
 }
 
 
@@ -282,7 +289,9 @@ def test_each_eye_composes_one_ranks_render_and_the_wall_shows_their_packing(tmp
 @pytest.mark.parametrize("mode,fields,mullion", [("top-bottom", {"balance": "strips"}, (6, 4)),
                                                  ("side-by-side", {"decomposition": "hybrid", "render_scale": 0.5},
                                                   (6, 4)),
-                                                 ("anaglyph", {"lod_error": 2.0, "balance": "cross"}, (6, 4))])
+                                                 ("anaglyph", {"lod_error": 2.0, "balance": "cross"}, (6, 4)),
+                                                 ("top-bottom", {"eyes": "split", "render_scale": 0.5,
+                                                                 "lod_error": 2.0}, (6, 4))])
 def test_bezels_render_scale_and_levels_of_detail_in_stereo(tmp_path, mode, fields, mullion):
     canvas = Canvas((2, 2), (60, 48), mullion)
     quality = {k: v for k, v in fields.items() if k in ("render_scale", "lod_error")}

@@ -30,7 +30,7 @@ def _walk(out, grid, tile, mode, extra=()):
 
 
 @pytest.mark.parametrize("mode,one,extra", [("side-by-side", (120, 96), ["--decomposition", "db"]),
-                                            ("anaglyph", (120, 96), [])])
+                                            ("anaglyph", (120, 96), ["--eyes", "split"])])
 def test_a_stereo_wall_under_mpiexec_composes_each_eye_bit_for_bit(tmp_path, mode, one, extra):
     want = _walk(tmp_path / "one", (1, 1), one, mode)
     got = _walk(tmp_path / "four", (2, 2), (60, 48), mode, extra)

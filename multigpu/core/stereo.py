@@ -12,6 +12,12 @@ Three pixel spaces (origin bottom-left, rects half-open ``[x0, y0, x1, y1)``):
 ``compose`` cuts a frame's work (planned on the eye canvas) at the eye tiles' borders and moves
 each part into the composed space once per eye, so the exchange, its backends and the merge of
 depth are those of a mono wall. Pure numpy, no MPI, no GL.
+
+How the ranks share the eyes (``--eyes``, ``EYE_PLANS``): ``joint``, every rank renders its region
+for both eyes (one plan of K regions); ``split``, eye decomposition as Equalizer's eye compounds
+do: the first half of the ranks (labels below K/2) renders the left eye, the second half the
+right, each half the same K/2 regions of one plan (``halved``, ``doubled``), so a rank draws one
+pass a frame over twice the pixels.
 """
 
 from __future__ import annotations
@@ -30,6 +36,27 @@ MODES = ("mono", "side-by-side", "top-bottom", "anaglyph")
 UNSHOWN = {"quad": "frame-sequential stereo needs a quad-buffered GL visual, which neither EGL nor this X "
                    "server offers (use side-by-side, top-bottom or anaglyph)"}
 EYES = ("left", "right")
+#: how a stereo wall's ranks share the eyes (``--eyes``; see the module)
+EYE_PLANS = ("joint", "split")
+
+
+def halved(grid: tuple[int, int]) -> tuple[int, int] | None:
+    """The GPU tree of half a wall's ranks, as the tree's own first split makes it: half the
+    columns where there are several, else half the rows (None: an odd count has no halves)."""
+    rows, cols = grid
+    if cols > 1:
+        return (rows, cols // 2) if cols % 2 == 0 else None
+    return (rows // 2, 1) if rows % 2 == 0 else None
+
+
+def doubled(work: Work) -> Work:
+    """A plan of K/2 ranks as K ranks' work for eye decomposition: ranks 0..K/2-1 the left eye,
+    K/2..K-1 the right, rank ``k + K/2`` the same pieces as rank ``k`` (``Work.eyes`` says whose
+    eye is whose; the partition stays the plan's, for its strategy to learn from)."""
+    n = work.ranks
+    twice = lambda t: None if t is None else tuple(t) + tuple(t)  # noqa: E731
+    return Work(twice(work.rects), twice(work.masks), np.concatenate([work.loads, work.loads]), work.depth,
+                work.partition, twice(work.front), twice(work.views), (0,) * n + (1,) * n)
 
 
 @dataclass(frozen=True)
@@ -81,20 +108,24 @@ class Stereo:
             cut = np.concatenate([lo[p, t], hi[p, t]], axis=1)
             inside = cut[:, :2] - R[p, :2]
             n = len(p)
-            both, eyes = np.tile(np.arange(n), 2), np.repeat([0, 1], n)
-            order = np.lexsort((both, eyes, np.tile(p, 2)))  # by piece, then eye, then cut
+            if work.eyes is None:  # every rank both eyes
+                both, eyes = np.tile(np.arange(n), 2), np.repeat([0, 1], n)
+            else:  # eye decomposition: the rank's own eye
+                both, eyes = np.arange(n), np.full(n, work.eyes[k])
+            order = np.lexsort((both, eyes, p[both]))  # by piece, then eye, then cut
             eye, src = eyes[order], both[order]
             rects.append(cut[src] + np.tile(self._shifts[eye, t[src]], 2))
             picks.append(np.column_stack([eye, p[src], inside[src]]).tolist())
             if front is not None:
                 front[k] = int(np.count_nonzero(p[src] < work.front[k]))
         return Work(tuple(rects), tuple(() for _ in rects), work.loads, work.depth, work.partition,
-                    None if front is None else tuple(front)), picks
+                    None if front is None else tuple(front), None, work.eyes), picks
 
     @staticmethod
     def parts(picks: list, rects: np.ndarray, rendered: list) -> list:
         """This rank's composed parts as ``(rgb, depth or None)`` views of its eyes' rendered pieces
-        (``rendered[eye][piece]``), in the order of its composed ``rects``."""
+        (``rendered[eye][piece]``; None for an eye it does not render), in the order of its
+        composed ``rects``."""
         out = []
         for (eye, piece, x, y), (x0, y0, x1, y1) in zip(picks, rects.tolist()):  # parts, a few per rank
             rgb, z = rendered[eye][piece]

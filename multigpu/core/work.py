@@ -33,6 +33,8 @@ class Work(NamedTuple):
         (a hybrid's; None: none do).
     views : (K,) lists, each piece's screen on a wall whose displays lie in several planes (a
         CAVE's: each screen its own frustum); None: one.
+    eyes : (K,) the eye (0 left, 1 right) each rank renders on a stereo wall split by eye
+        (``core/stereo.doubled``); None: every rank renders both.
 
     Immutable, and a named tuple rather than a frozen dataclass: one is made every frame, and
     a frozen dataclass sets each field through ``object.__setattr__`` (~8 us of CPU more with
@@ -45,6 +47,7 @@ class Work(NamedTuple):
     partition: Partition | None = None
     front: tuple | None = None
     views: tuple | None = None  # per rank, each piece's screen (a wall of several planes; None: one)
+    eyes: tuple | None = None  # per rank, the one eye it renders (stereo split by eye; None: both)
 
     @property
     def ranks(self) -> int:

@@ -22,10 +22,12 @@ class Screen:
         self.needs_coverage = strategy.needs_coverage
 
     @classmethod
-    def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Screen":
+    def from_config(cls, cfg, scene, balance: str, rank: int | None = None, grid=None) -> "Screen":
+        """``grid``: the GPU tree's shape where it is not the wall's (half the ranks, for a stereo
+        wall split by eye: ``core/stereo.halved``)."""
         from multigpu.strategies import make_strategy
 
-        return cls(make_strategy(balance, cfg.grid, cfg.size, cfg.strips))
+        return cls(make_strategy(balance, cfg.grid if grid is None else grid, cfg.size, cfg.strips))
 
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
         return from_partition(self.strategy.plan(rects, tris, coverage), tris)

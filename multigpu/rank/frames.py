@@ -122,7 +122,8 @@ class Frames:
     def through(self, t: Timer, work: Work, screens: list, rects, scale: float, levels):
         """One eye's pieces drawn, each through its screen's frustum (``screens``: the eye's (view,
         proj, light) through each; ``Work.views``: each piece's); read later, in piece order."""
-        alone = self.stereo is None and len(screens) == 1  # one pass a frame: the ring may hold it
+        # one pass a frame (mono, or one eye of a wall split by eye): the ring may hold it
+        alone = (self.stereo is None or work.eyes is not None) and len(screens) == 1
         if len(screens) == 1:
             return self.render(t, work, *screens[0], rects, scale, levels, ahead=alone)
         of, parts, drawn = work.views[self.rank], [], 0
@@ -240,7 +241,11 @@ class Frames:
             pending = self.render(t, work, view, proj, light, rects, quality.scale, levels)
         else:  # each eye draws the plan through its own frustums (a ring of framebuffers holds one pass)
             pending, drawn = [], 0
-            for screens in self.planner.views:  # eyes
+            mine = None if work.eyes is None else work.eyes[self.rank]  # split by eye: this rank's eye alone
+            for e, screens in enumerate(self.planner.views):  # eyes
+                if mine is not None and e != mine:
+                    pending.append(None)
+                    continue
                 pending.append(self.through(t, work, screens, rects, quality.scale, levels))
                 drawn += self.drawn
             self.drawn = drawn
@@ -260,7 +265,7 @@ class Frames:
         """A frame's second stage: its pixels read back (``readback``: waiting for the GL) and,
         with frames in flight, its parts on their way to their tiles' ranks."""
         with x.t.phase("readback"):
-            x.rendered = x.pending.read() if x.picks is None else [p.read() for p in x.pending]
+            x.rendered = x.pending.read() if x.picks is None else [p and p.read() for p in x.pending]
             x.pending = None
         with x.t.phase("exchange"):  # parts for peers out: into the shared segment, or as messages
             self.exchange.bits = self.cfg.compress_moving if x.quality.moving else 0  # lossy only while moving
