@@ -228,6 +228,7 @@ class WalkConfig:
                              help="how a rank renders its region (docs/ACCURACY.md)")
     displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY (wall file)
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place (wall file)
+    right_eye: tuple = ()  # per rank label: a passive tile's right-eye window position, or None (wall file)
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     gpus: tuple = ()  # per rank label: its EGL device (wall file "gpu"), or None for --device / the default
     screen_m: tuple[float, float] | None = option(
@@ -239,16 +240,17 @@ class WalkConfig:
     # -- stereo and the viewer (core/eyes.py, core/stereo.py)
     stereo: str = option("mono", group=STEREO, choices=lambda: _stereo_modes(), help=(
         "show both eyes on every display: side-by-side (each eye half the tile's width), top-bottom (the left eye "
-        "above), anaglyph (red left, cyan right); quad needs a stereo GL visual (docs/USAGE.md, \"A stereo "
-        "wall\")"))
+        "above), anaglyph (red left, cyan right), passive (two outputs a tile, an eye each at the tile's size: a "
+        "window each); quad needs a stereo GL visual (docs/USAGE.md, \"A stereo wall\")"))
     eye_separation: float = option(EYE_SEPARATION, group=STEREO, metavar="M", type=float,
                                    valid=lambda v: v >= 0 and _finite(v), must="must be >= 0 metres",
                                    help="metres between the viewer's eyes (default: {default})")
     swap_eyes: bool = option(False, group=STEREO, switch=True, help="each eye's picture in the other's place")
-    eyes: str = option("joint", group=STEREO, choices=lambda: _eye_plans(), help=(
-        "how the ranks share a stereo wall's eyes: joint (every rank renders its region for both eyes) or split "
+    eyes: str = option("auto", group=STEREO, choices=lambda: _eye_plans(), help=(
+        "how the ranks share a stereo wall's eyes: joint (every rank renders its region for both eyes), split "
         "(eye decomposition: half the ranks render the left eye, half the right, each over twice the pixels; "
-        "--decomposition screen, an even number of columns or rows); docs/BENCHMARKS.md measures both"))
+        "--decomposition screen, an even number of columns or rows), auto: split where the wall can, else joint "
+        "(docs/BENCHMARKS.md measures both)"))
     head: tuple[float, float, float] | None = option(None, group=STEREO, metavar="X,Y,Z", read=read_vec3, help=(
         "the viewer's head in metres from the wall's centre (x right, y up, z out of the wall): each tile shows "
         "the scene through the wall from there (default: on the wall's axis, where the wall spans the camera's "

@@ -65,20 +65,13 @@ def check_viewer(cfg) -> None:
     if cfg.stereo in UNSHOWN:
         raise InputError.of("stereo", f"{cfg.stereo}: {UNSHOWN[cfg.stereo]}")
     tw, th = cfg.tile
-    if cfg.eyes == "split":
-        from multigpu.core.stereo import halved
+    from multigpu.core.stereo import splits
 
-        if cfg.stereo == "mono":
-            raise InputError.of("eyes", "split needs a stereo wall (--stereo), got --stereo mono")
-        if cfg.decomposition != "screen":
-            raise InputError.of("eyes", "split works with --decomposition screen (each eye's half of the ranks "
-                                f"splits the screen), got --decomposition {cfg.decomposition}")
-        if cfg.partition == "broadcast":
-            raise InputError.of("eyes", "split plans every rank's partition itself: use --partition redundant "
-                                "(got --partition broadcast)")
-        if halved(cfg.grid) is None:
-            raise InputError.of("eyes", f"split needs an even number of columns (or, in one column, of rows) to "
-                                f"halve the ranks, got --grid {cfg.grid[0]}x{cfg.grid[1]}")
+    why = splits(cfg.stereo, cfg.grid, cfg.decomposition, cfg.partition)
+    if cfg.eyes == "split" and why:
+        raise InputError.of("eyes", why)
+    if cfg.eyes == "auto":  # split by eye where the wall can (measured the faster), else both eyes on every rank
+        object.__setattr__(cfg, "eyes", "joint" if why else "split")
     if cfg.stereo == "side-by-side" and tw % 2:
         raise InputError.of("tile", f"{tw}x{th}: side-by-side stereo needs an even tile width (each eye half)")
     if cfg.stereo == "top-bottom" and th % 2:

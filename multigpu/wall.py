@@ -53,6 +53,7 @@ class Wall:
     screen_m: tuple[float, float] | None = None  # the wall's width and height in metres (--screen-size)
     stereo: dict = field(default_factory=dict)  # the file's stereo and viewer (--stereo, --eye-separation, ...)
     corners: dict[int, tuple] = field(default_factory=dict)  # rank -> its display's room corners (metres)
+    right_eye: dict[int, tuple[int, int]] = field(default_factory=dict)  # rank -> its passive right-eye output's place
 
 
 def rectangle_problem(corners) -> str | None:
@@ -136,7 +137,7 @@ def load_wall(path: str) -> Wall:
         raise InputError(f"{where}: {exc}") from None
     if "mullion" in doc and "bezel" in doc:
         raise InputError(f"{where}: give mullion (pixels) or bezel (millimetres), not both")
-    displays, positions, hosts, full, gpus, corners = {}, {}, {}, set(), {}, {}
+    displays, positions, hosts, full, gpus, corners, right_eye = {}, {}, {}, set(), {}, {}, {}
     for i, e in enumerate(doc.get("displays", [])):  # one entry per display, at most a few dozen
         r = e["rank"]
         if r in displays:
@@ -150,6 +151,8 @@ def load_wall(path: str) -> Wall:
             positions[r] = tuple(e["position"])
         if "gpu" in e:
             gpus[r] = e["gpu"]
+        if "right_eye_position" in e:
+            right_eye[r] = tuple(e["right_eye_position"])
         if "corners_m" in e:
             why = rectangle_problem(e["corners_m"])
             if why:
@@ -163,7 +166,7 @@ def load_wall(path: str) -> Wall:
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
                 on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]),
                 None if "screen_m" not in doc else tuple(float(v) for v in doc["screen_m"]), doc.get("stereo", {}),
-                corners)
+                corners, right_eye)
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:
@@ -224,8 +227,11 @@ def tile_order(wall: Wall, ranks: int) -> list[int]:
 
 def windows(wall: Wall, grid, tile, mullion) -> list[tuple[str, str, int, int, int, int]]:
     """Every rank's window as (host, display, x, y, width, height), top-left on its display: the
-    file's position, or the tile's place on one screen holding the canvas."""
+    file's position, or the tile's place on one screen holding the canvas. A passive stereo
+    wall's right-eye windows follow, rank by rank (``right_eye_position``, else beside the wall:
+    ``core.stereo.right_eye_place``)."""
     from multigpu.core.canvas import Canvas
+    from multigpu.core.stereo import right_eye_place
 
     c = Canvas(grid, tile, mullion)
     H = c.size[1]
@@ -233,7 +239,15 @@ def windows(wall: Wall, grid, tile, mullion) -> list[tuple[str, str, int, int, i
     for k, (x0, _, _, y1) in enumerate(c.tiles()):  # K tiles
         x, y = (0, 0) if k in wall.fullscreen else wall.positions.get(k, (int(x0), int(H - y1)))
         out.append((wall.hosts.get(k, "this machine"), wall.displays.get(k) or "$DISPLAY", x, y, tile[0], tile[1]))
+    if wall.stereo.get("mode") == "passive":
+        out += [(h, d, *wall.right_eye.get(k, right_eye_place(c, (x, y))), w, ht)
+                for k, (h, d, x, y, w, ht) in enumerate(list(out))]  # K tiles
     return out
+
+
+def _whose(i: int, ranks: int) -> str:
+    """Window ``i`` of ``windows``: a rank's, or on a passive wall a rank's right eye's."""
+    return f"rank {i}" if i < ranks else f"rank {i - ranks}'s right-eye window"
 
 
 def problems(wall: Wall, grid, tile, mullion, screens=None, resolve=None) -> list[str]:
@@ -246,12 +260,14 @@ def problems(wall: Wall, grid, tile, mullion, screens=None, resolve=None) -> lis
     resolve = resolve or socket.gethostbyname
     found = []
     wins = windows(wall, grid, tile, mullion)
+    K = grid[0] * grid[1]
     for a in range(len(wins)):  # ranks, a few dozen
         ha, da, xa, ya, w, h = wins[a]
         for b in range(a + 1, len(wins)):
             hb, db, xb, yb, _, _ = wins[b]
             if (ha, da) == (hb, db) and xa < xb + w and xb < xa + w and ya < yb + h and yb < ya + h:
-                found.append(f"ranks {a} and {b}: their windows overlap on {da} of {ha} (at {xa},{ya} and {xb},{yb}, "
+                pair = (f"ranks {a} and {b}: their windows" if b < K else f"{_whose(a, K)} and {_whose(b, K)}")
+                found.append(f"{pair} overlap on {da} of {ha} (at {xa},{ya} and {xb},{yb}, "
                              f"{w}x{h} each): give each its own position or display")
     for host in sorted(set(wall.hosts.values())):
         try:
@@ -259,6 +275,12 @@ def problems(wall: Wall, grid, tile, mullion, screens=None, resolve=None) -> lis
         except OSError:
             found.append(f"host {host}: its name does not resolve (check it, or give its address)")
     for k, (host, disp, x, y, w, h) in enumerate(wins):
+        if k >= K:  # a passive tile's right-eye window: on its rank's display
+            size = screens(host, disp) if screens is not None else None
+            if size is not None and (x < 0 or y < 0 or x + w > size[0] or y + h > size[1]):
+                found.append(f"{_whose(k, K)} {w}x{h} at {x},{y} is off the {size[0]}x{size[1]} screen {disp} of "
+                             f"{host}: give its \"right_eye_position\", or a screen as wide as both eyes' walls")
+            continue
         if k in wall.hosts and disp == "$DISPLAY" and host != "this machine":
             found.append(f"rank {k} on host {host} has no display: name it (\"display\": \":0\"); a rank started on "
                          "another host gets no $DISPLAY")

@@ -25,7 +25,7 @@ from multigpu.scene.models import SceneSpec
 
 FRAMES = 3
 SCREEN = (1.2, 0.96)  # metres: a centimetre a pixel of the 120x96 canvases here
-MODES = ("side-by-side", "top-bottom", "anaglyph")
+MODES = ("side-by-side", "top-bottom", "anaglyph", "passive")
 
 
 class _Job:
@@ -78,8 +78,10 @@ def test_packing_each_mode():
         ew, eh = st.eye_tile
         left, right = rng.integers(0, 255, (eh, ew, 3), np.uint8), rng.integers(0, 255, (eh, ew, 3), np.uint8)
         got = st.pack(np.concatenate([left, right], axis=1))
-        assert got.shape == (6, 8, 3)
-        if mode == "side-by-side":
+        assert got.shape == (6, 8 * st.outputs, 3)
+        if mode == "passive":  # two outputs: the left eye's, then the right eye's, each the whole tile
+            assert st.outputs == 2 and (got[:, :8] == left).all() and (got[:, 8:] == right).all()
+        elif mode == "side-by-side":
             assert (got[:, :4] == left).all() and (got[:, 4:] == right).all()
         elif mode == "top-bottom":  # bottom row first: the left eye on top
             assert (got[3:] == left).all() and (got[:3] == right).all()
@@ -174,17 +176,26 @@ def test_a_head_at_home_with_no_separation_sees_what_the_camera_sees():
     ({"stereo": "anaglyph", "eye_separation": 2.0}, "--eye-separation 2 m is as wide as the wall or wider"),
     ({"stereo": "anaglyph", "head": (0.0, 0.0, 0.0)}, "--head 0,0,0: a viewer at z = 0 m has an eye behind"),
     ({"head": (0.1, 0.2, -1.0)}, "--head 0.1,0.2,-1: a viewer at z = -1 m"),
-    ({"stereo": "fourway"}, "--stereo must be one of mono, side-by-side, top-bottom, anaglyph, quad"),
+    ({"stereo": "fourway"}, "--stereo must be one of mono, side-by-side, top-bottom, anaglyph, passive, quad"),
     ({"eyes": "split"}, "--eyes split needs a stereo wall (--stereo), got --stereo mono"),
     ({"stereo": "anaglyph", "eyes": "split", "decomposition": "db"}, "--eyes split works with --decomposition screen"),
     ({"stereo": "anaglyph", "eyes": "split", "grid": (3, 3)}, "--eyes split needs an even number of columns"),
     ({"stereo": "anaglyph", "eyes": "split", "partition": "broadcast"}, "--eyes split plans every rank's partition"),
-    ({"stereo": "anaglyph", "eyes": "both"}, "--eyes must be one of joint, split"),
+    ({"stereo": "anaglyph", "eyes": "both"}, "--eyes must be one of auto, joint, split"),
 ])
 def test_bad_stereo_input_is_one_line_naming_the_flag(fields, words):
     with pytest.raises(InputError) as got:
         WalkConfig(**{"grid": (2, 2), "tile": (60, 48), "screen_m": SCREEN, **fields})
     assert str(got.value).startswith(words) and "\n" not in str(got.value), str(got.value)
+
+
+@pytest.mark.parametrize("fields,eyes", [({"stereo": "anaglyph"}, "split"), ({"stereo": "passive", "grid": (2, 1)}, "split"),
+                                         ({"stereo": "anaglyph", "decomposition": "db"}, "joint"),
+                                         ({"stereo": "side-by-side", "grid": (3, 3)}, "joint"),
+                                         ({"stereo": "anaglyph", "partition": "broadcast"}, "joint"), ({}, "joint")])
+def test_auto_splits_the_ranks_by_eye_where_the_wall_can(fields, eyes):
+    cfg = WalkConfig(**{"grid": (2, 2), "tile": (60, 48), "screen_m": SCREEN, **fields})
+    assert cfg.eyes == eyes
 
 
 @pytest.mark.parametrize("text,words", [
@@ -238,7 +249,10 @@ def _one_rank(base, mode, canvas: Canvas, **fields) -> list:
 
 
 def _packed(left, right, canvas: Canvas, mode):
-    """What the wall's displays show, packed here tile by tile from the eyes' mosaics (top row first)."""
+    """What the wall's displays show, packed here tile by tile from the eyes' mosaics (top row first);
+    passive: the left eyes' outputs beside the right eyes'."""
+    if mode == "passive":
+        return np.concatenate([left, right], axis=1)
     st = Stereo(mode, canvas)
     R, C = canvas.grid
     out = np.zeros((*canvas.size[::-1], 3), np.uint8)
@@ -260,12 +274,14 @@ def references(tmp_path_factory):
 
 
 CASES = {
-    "side-by-side screen": ("side-by-side", {"balance": "strips"}),
+    "side-by-side screen": ("side-by-side", {"balance": "strips", "eyes": "joint"}),
     "side-by-side cross": ("side-by-side", {"balance": "cross"}),
     "side-by-side db": ("side-by-side", {"decomposition": "db"}),
     "side-by-side hybrid latency 3": ("side-by-side", {"decomposition": "hybrid", "latency": 3}),
-    "anaglyph screen latency 0": ("anaglyph", {"latency": 0}),
+    "anaglyph screen latency 0": ("anaglyph", {"latency": 0, "eyes": "joint"}),
     "anaglyph db latency 2": ("anaglyph", {"decomposition": "db", "latency": 2}),
+    "passive screen latency 1": ("passive", {"latency": 1}),
+    "passive hybrid": ("passive", {"decomposition": "hybrid"}),
     "top-bottom bins": ("top-bottom", {"decomposition": "bins", "bin_size": 16}),
     "anaglyph split by eye latency 2": ("anaglyph", {"eyes": "split", "latency": 2}),
     "side-by-side split by eye cross": ("side-by-side", {"eyes": "split", "balance": "cross", "latency": 3}),
@@ -571,7 +587,7 @@ def test_the_wall_tests_stereo_pattern_marks_each_eye_and_shows_depth(mode):
 
     st = Stereo(mode, Canvas((2, 2), (240, 160), (8, 8)))
     tile = stereo_tile_pattern(st, 3, 5, ["rank 3"])
-    assert tile.shape == (160, 240, 3)
+    assert tile.shape == (160, 240 * st.outputs, 3)
     composed = np.concatenate([stereo_tile_pattern(Stereo("side-by-side", st.canvas), 3, 5, ["rank 3"])], axis=1)
     left, right = composed[:, :120], composed[:, 120:]
     assert (left == (0, 255, 0)).all(axis=2).sum() > 50 and not (right == (0, 255, 0)).all(axis=2).any()

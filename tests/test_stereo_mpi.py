@@ -1,7 +1,7 @@
 """Stereo under mpiexec (each job under a hard timeout, killed by process id): a 2x2 side-by-side
 and anaglyph wall headless, each eye's mosaic one rank's render of that eye and the wall its
 packing; and a stereo wall in windows on one X server (Xvfb), the screen showing the packed tiles
-bit for bit."""
+bit for bit (side by side), or each eye's window its eye's tile (passive)."""
 
 import json
 
@@ -43,15 +43,19 @@ def test_a_stereo_wall_under_mpiexec_composes_each_eye_bit_for_bit(tmp_path, mod
     assert s["config"]["stereo"] == mode and s["complete"]
 
 
-def test_a_stereo_wall_in_windows_shows_the_packed_tiles(tmp_path, still_path):  # noqa: F811
-    with Xvfb((120, 96)) as x:
+@pytest.mark.parametrize("mode", ["side-by-side", "passive"])
+def test_a_stereo_wall_in_windows_shows_the_packed_tiles(tmp_path, still_path, mode):  # noqa: F811
+    """Side by side: each tile's window its packed tile. Passive: a window per eye, the right eyes'
+    beside the left eyes' on one screen, as the mosaic shows them."""
+    outputs = 2 if mode == "passive" else 1
+    with Xvfb((120 * outputs, 96)) as x:
         out = tmp_path / "win"
         args = ["walkthrough", *SMALL, "--path", str(still_path), "--grid", "2x2", "--tile", "60x48",
                 "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out),
-                "--stereo", "side-by-side", *STEREO]
+                "--stereo", mode, *STEREO]
         proc, kill = start_mpi(4, args, env={"DISPLAY": x.name})
         try:
-            wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4)
+            wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4 * outputs)
             shot = screenshot(x.name)
             escape(x.name, windows(x.name)[0])
             _, err = finish(proc, kill)
@@ -59,8 +63,8 @@ def test_a_stereo_wall_in_windows_shows_the_packed_tiles(tmp_path, still_path): 
             kill() if proc.poll() is None else None
     assert proc.returncode == 0, err[-2000:]
     mosaic = read_png(out / "mosaic" / "frame_00000.png")
-    assert shot.shape == mosaic.shape == (96, 120, 3)
+    assert shot.shape == mosaic.shape == (96, 120 * outputs, 3)
     assert (shot == mosaic).all(), f"{(shot != mosaic).any(axis=2).sum()} screen pixels differ from the packed wall"
     left, right = (read_png(out / "mosaic" / d / "frame_00000.png") for d in ("left", "right"))
-    assert (mosaic == _packed(left, right, Canvas((2, 2), (60, 48)), "side-by-side")).all()
+    assert (mosaic == _packed(left, right, Canvas((2, 2), (60, 48)), mode)).all()
     assert np.count_nonzero((left != right).any(axis=2)) > 50

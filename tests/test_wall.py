@@ -217,3 +217,24 @@ def test_the_wall_file_chooses_compression_and_the_flag_wins(tmp_path):
     assert parse(_wall(tmp_path, {"grid": "1x2"})).compress == "auto"
     with pytest.raises(InputError, match=r"compress must be auto, none, lz4, zstd or zstd:LEVEL.*got \"gzip\""):
         load_wall(_wall(tmp_path, {"grid": "1x2", "compress": "gzip"}))
+
+
+def test_a_passive_walls_right_eye_windows_are_placed_and_checked(tmp_path):
+    """A passive tile's second window: where the file puts it, else beside the wall; an overlap
+    with a left-eye window, or a screen too narrow for it, is a problem naming that window."""
+    doc = json.loads((EXAMPLES[0].parent / "passive-projectors.json").read_text())
+    del doc["$schema"]
+    wall = load_wall(_wall(tmp_path, doc))
+    assert wall.right_eye == {0: (1920, 0), 1: (1920, 0)}
+    resolve = lambda h: "1.2.3.4"  # noqa: E731
+    assert problems(wall, (1, 2), (1920, 1080), (0, 0), lambda h, d: (3840, 1080), resolve) == []
+    assert problems(wall, (1, 2), (1920, 1080), (0, 0), lambda h, d: (1920, 1080), resolve) == [
+        f"rank {k}'s right-eye window 1920x1080 at 1920,0 is off the 1920x1080 screen :0 of pc{k + 1}: give its "
+        "\"right_eye_position\", or a screen as wide as both eyes' walls" for k in (0, 1)]
+    doc["displays"][0]["right_eye_position"] = [960, 0]
+    assert "rank 0 and rank 0's right-eye window overlap on :0 of pc1" in problems(
+        load_wall(_wall(tmp_path, doc)), (1, 2), (1920, 1080), (0, 0), None, resolve)[0]
+    one = {"grid": "1x2", "tile": "64x48", "stereo": {"mode": "passive"}, "displays": [{"rank": 0}, {"rank": 1}]}
+    from multigpu.wall import windows
+    assert [w[2:4] for w in windows(load_wall(_wall(tmp_path, one)), (1, 2), (64, 48), (0, 0))] == [
+        (0, 0), (64, 0), (128, 0), (192, 0)]  # the right eyes' wall beside the left eyes'

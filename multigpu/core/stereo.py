@@ -7,7 +7,9 @@ Three pixel spaces (origin bottom-left, rects half-open ``[x0, y0, x1, y1)``):
   the wall's bezels; every plan is made here and both eyes render the same plan;
 * the **composed** space: every tile's two eye tiles side by side (left eye first), one rect per
   rank, so each rank composes exactly its own tile of both eyes in one exchange;
-* the **display**: what a monitor shows, a tile packed from its composed tile (``pack``).
+* the **display**: what a monitor shows, a tile packed from its composed tile (``pack``); a
+  passive wall's tile has two outputs (two projectors, polarized or spectrally filtered), each
+  showing one eye's whole tile: the composed tile itself, the left eye's output then the right's.
 
 ``compose`` cuts a frame's work (planned on the eye canvas) at the eye tiles' borders and moves
 each part into the composed space once per eye, so the exchange, its backends and the merge of
@@ -17,7 +19,8 @@ How the ranks share the eyes (``--eyes``, ``EYE_PLANS``): ``joint``, every rank 
 for both eyes (one plan of K regions); ``split``, eye decomposition as Equalizer's eye compounds
 do: the first half of the ranks (labels below K/2) renders the left eye, the second half the
 right, each half the same K/2 regions of one plan (``halved``, ``doubled``), so a rank draws one
-pass a frame over twice the pixels.
+pass a frame over twice the pixels. ``auto`` (the default) splits where a wall can
+(``splits``): measured faster in per-rank CPU time (docs/BENCHMARKS.md, "bench stereo").
 """
 
 from __future__ import annotations
@@ -30,14 +33,15 @@ import numpy as np
 from multigpu.core.canvas import Canvas
 from multigpu.core.work import Work
 
-#: the stereo modes a wall shows, packed per display (``--stereo``); ``mono`` is one eye
-MODES = ("mono", "side-by-side", "top-bottom", "anaglyph")
+#: the stereo modes a wall shows, packed per display (``--stereo``); ``mono`` is one eye; ``passive``:
+#: two outputs a tile, one an eye
+MODES = ("mono", "side-by-side", "top-bottom", "anaglyph", "passive")
 #: modes that need what no presenter here has (a GL stereo visual), refused with this reason
 UNSHOWN = {"quad": "frame-sequential stereo needs a quad-buffered GL visual, which neither EGL nor this X "
                    "server offers (use side-by-side, top-bottom or anaglyph)"}
 EYES = ("left", "right")
 #: how a stereo wall's ranks share the eyes (``--eyes``; see the module)
-EYE_PLANS = ("joint", "split")
+EYE_PLANS = ("auto", "joint", "split")
 
 
 def halved(grid: tuple[int, int]) -> tuple[int, int] | None:
@@ -47,6 +51,22 @@ def halved(grid: tuple[int, int]) -> tuple[int, int] | None:
     if cols > 1:
         return (rows, cols // 2) if cols % 2 == 0 else None
     return (rows // 2, 1) if rows % 2 == 0 else None
+
+
+def splits(stereo: str, grid: tuple[int, int], decomposition: str, partition: str) -> str | None:
+    """Why a wall cannot split its ranks by eye (None: it can): it needs stereo, the screen
+    decomposition (each eye's half of the ranks splits the screen), an even count of columns (or,
+    in one column, of rows), and a partition every rank plans itself."""
+    if stereo == "mono":
+        return "split needs a stereo wall (--stereo), got --stereo mono"
+    if decomposition != "screen":
+        return f"split works with --decomposition screen, got --decomposition {decomposition}"
+    if partition == "broadcast":
+        return "split plans every rank's partition itself: use --partition redundant (got --partition broadcast)"
+    if halved(grid) is None:
+        return (f"split needs an even number of columns (or, in one column, of rows) to halve the ranks, got "
+                f"--grid {grid[0]}x{grid[1]}")
+    return None
 
 
 def doubled(work: Work) -> Work:
@@ -68,11 +88,16 @@ class Stereo:
 
     @cached_property
     def eye_tile(self) -> tuple[int, int]:
-        """(w, h) of one eye's picture of a tile."""
+        """(w, h) of one eye's picture of a tile (anaglyph and passive: the whole tile)."""
         tw, th = self.canvas.tile
         if self.mode == "side-by-side":
             return tw // 2, th
         return (tw, th // 2) if self.mode == "top-bottom" else (tw, th)
+
+    @property
+    def outputs(self) -> int:
+        """Outputs a tile's display has: two on a passive wall (an eye each), else one."""
+        return 2 if self.mode == "passive" else 1
 
     @cached_property
     def eye(self) -> Canvas:
@@ -140,15 +165,24 @@ class Stereo:
 
     def pack(self, tile: np.ndarray) -> np.ndarray:
         """What the display shows of a composed tile: side by side as it is, the left eye above
-        the right, or red from the left eye with green and blue from the right."""
+        the right, or red from the left eye with green and blue from the right; passive: the
+        left eye's output beside the right's, as it is (``outputs``)."""
         left, right = self.eyes(tile)
-        if self.mode == "side-by-side":
+        if self.mode in ("side-by-side", "passive"):
             return tile
         if self.mode == "top-bottom":  # bottom row first: the right eye's rows, then the left's
             return np.concatenate([right, left], axis=0)
         out = right.copy()
         out[..., 0] = left[..., 0]
         return out
+
+
+def right_eye_place(canvas: Canvas, place: tuple[int, int]) -> tuple[int, int]:
+    """Where a passive tile's right-eye output sits by default, from its left one's ``place``
+    (top-left, on a screen holding the canvas): as far right as the wall is wide, so the right
+    eyes' outputs form a second wall beside the first (the wall file may place it:
+    ``right_eye_position``)."""
+    return place[0] + canvas.size[0], place[1]
 
 
 def make_stereo(mode: str, canvas: Canvas) -> Stereo | None:

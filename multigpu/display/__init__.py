@@ -54,15 +54,28 @@ class Headless:
 
 
 def make_presenter(mode: str, rank: int, tile_size: tuple[int, int], position: tuple[int, int],
-                   display: str | None, where: str, fullscreen: bool = False) -> Presenter:
+                   display: str | None, where: str, fullscreen: bool = False,
+                   right: tuple[int, int] | None = None) -> Presenter:
     """The presenter of ``mode`` for rank label ``rank``; ``where`` names the wall-file entry
     or flag behind ``display`` for error messages; ``fullscreen``: the window covers its
-    screen from the top-left corner, above the other windows (the tile is the screen's size)."""
+    screen from the top-left corner, above the other windows (the tile is the screen's size).
+    ``right``: a passive stereo tile's right-eye output's place (``display/passive.py``): two
+    windows of ``tile_size``, the left eye's at ``position``."""
     if mode == "headless":
         return Headless()
     from multigpu.display.window import Window
 
-    return Window(rank, tile_size, position, display, where, fullscreen=fullscreen)
+    if right is None:
+        return Window(rank, tile_size, position, display, where, fullscreen=fullscreen)
+    from multigpu.display.passive import Passive
+
+    left = Window(rank, tile_size, position, display, where, title=f"multigpu tile {rank} left eye")
+    try:
+        other = Window(rank, tile_size, right, display, where, title=f"multigpu tile {rank} right eye")
+    except BaseException:
+        left.close()
+        raise
+    return Passive(left, other)
 
 
 class Monitor:

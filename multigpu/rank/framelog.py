@@ -142,8 +142,10 @@ class FrameLog:
         ew = st.eye_tile[0]
         eyes = [stitch(self.gathered[:, :, e * ew:(e + 1) * ew], st.eye.tiles(), st.eye.size, self.canvas.dark)
                 for e in range(2)]  # eyes
-        self.write(self.record.image, f, stitch(shown, self.tiles, self.canvas.size, self.canvas.dark), work.rects,
-                   mosaic_due, eyes)
+        # a passive wall's outputs: the left eyes' beside the right eyes', as one X screen spanning both shows them
+        wall = (np.concatenate(eyes, axis=1) if st.outputs == 2 else
+                stitch(shown, self.tiles, self.canvas.size, self.canvas.dark))
+        self.write(self.record.image, f, wall, work.rects, mosaic_due, eyes)
 
     def _gather(self, f: int, back: np.ndarray) -> None:
         """Every rank's composed tile into rank 0's ``gathered``: one message each, compressed from

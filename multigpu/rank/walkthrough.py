@@ -303,7 +303,14 @@ def _presenter(cfg: WalkConfig, rank: int):
     display = screen_of(cfg.displays[rank] if cfg.displays else None, cfg.gpus[rank] if cfg.gpus else None)
     where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"
     full = bool(cfg.fullscreen and cfg.fullscreen[rank])
-    return make_presenter("headless" if rank in cfg.dark else cfg.present, rank, cfg.tile, pos, display, where, full)
+    right = None
+    if cfg.stereo == "passive":  # a window per eye: the right eye's where the wall file says, else beside the wall
+        from multigpu.core.stereo import right_eye_place
+
+        right = cfg.right_eye[rank] if cfg.right_eye and cfg.right_eye[rank] is not None else right_eye_place(
+            cfg.canvas, place if pos is None else pos)
+    return make_presenter("headless" if rank in cfg.dark else cfg.present, rank, cfg.tile, pos, display, where, full,
+                          right)
 
 
 def screen_of(display: str | None, gpu: int | None) -> str | None:

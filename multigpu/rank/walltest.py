@@ -54,8 +54,13 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
         x0, _, _, y1 = (int(v) for v in Canvas(grid, tile, mullion).tiles()[rank])
         place = wall.positions.get(rank, (x0, Canvas(grid, tile, mullion).size[1] - y1))
         where = f"wall file {path}, rank {rank} on host {host}"
+        right = None
+        if stereo == "passive":  # a window per eye (display/passive.py)
+            from multigpu.core.stereo import right_eye_place
+
+            right = wall.right_eye.get(rank, right_eye_place(Canvas(grid, tile, mullion), place))
         presenter = make_presenter("window", rank, tile, place, wall.displays.get(rank), where,
-                                   rank in wall.fullscreen)
+                                   rank in wall.fullscreen, right)
     except InputError as exc:
         error = str(exc)
     error = agree(comm, error, timeout, "setup")
