@@ -189,7 +189,8 @@ def test_bad_stereo_input_is_one_line_naming_the_flag(fields, words):
     assert str(got.value).startswith(words) and "\n" not in str(got.value), str(got.value)
 
 
-@pytest.mark.parametrize("fields,eyes", [({"stereo": "anaglyph"}, "split"), ({"stereo": "passive", "grid": (2, 1)}, "split"),
+@pytest.mark.parametrize("fields,eyes", [({"stereo": "anaglyph"}, "split"),
+                                         ({"stereo": "passive", "grid": (2, 1)}, "split"),
                                          ({"stereo": "anaglyph", "decomposition": "db"}, "joint"),
                                          ({"stereo": "side-by-side", "grid": (3, 3)}, "joint"),
                                          ({"stereo": "anaglyph", "partition": "broadcast"}, "joint"), ({}, "joint")])
