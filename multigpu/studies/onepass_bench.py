@@ -103,8 +103,6 @@ class OnePass:
     """Both eyes of a region in one draw, into two stacked eye canvases (see the module)."""
 
     def __init__(self, renderer, geometry: bool):
-        import moderngl
-
         ctx, r = renderer.ctx, renderer
         self.r, self.ctx, self.geometry = r, ctx, geometry
         W, H = self.size = r.size
@@ -115,7 +113,7 @@ class OnePass:
         self.fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer((W, 2 * H), 4)],
                                    depth_attachment=ctx.depth_renderbuffer((W, 2 * H)))
         self.viewports, self.scissors = _gl_arrays()
-        self.depth_test = moderngl.DEPTH_TEST
+        self.depth_test = ctx.DEPTH_TEST
 
     def render(self, eyes, region, mask) -> list[np.ndarray]:
         """Each eye's ``(view, proj, light)`` of ``region``'s ``mask`` objects, as two images."""
