@@ -412,6 +412,14 @@ class WalkConfig:
         check_viewer(self)
 
     @property
+    def eyes_split(self) -> bool:
+        """Whether the ranks split by eye (``--eyes``: split, or auto where the wall can;
+        ``core/stereo.splits``)."""
+        from multigpu.core.stereo import splits
+
+        return self.eyes != "joint" and splits(self.stereo, self.grid, self.decomposition, self.partition) is None
+
+    @property
     def viewer(self):
         """Who looks at the wall (``core/eyes.Viewer``), where a run places one: stereo, a head or
         head poses; None: the camera's own frustum, as always."""

@@ -67,11 +67,10 @@ def check_viewer(cfg) -> None:
     tw, th = cfg.tile
     from multigpu.core.stereo import splits
 
-    why = splits(cfg.stereo, cfg.grid, cfg.decomposition, cfg.partition)
-    if cfg.eyes == "split" and why:
-        raise InputError.of("eyes", why)
-    if cfg.eyes == "auto":  # split by eye where the wall can (measured the faster), else both eyes on every rank
-        object.__setattr__(cfg, "eyes", "joint" if why else "split")
+    if cfg.eyes == "split":
+        why = splits(cfg.stereo, cfg.grid, cfg.decomposition, cfg.partition)
+        if why:
+            raise InputError.of("eyes", why)
     if cfg.stereo == "side-by-side" and tw % 2:
         raise InputError.of("tile", f"{tw}x{th}: side-by-side stereo needs an even tile width (each eye half)")
     if cfg.stereo == "top-bottom" and th % 2:

@@ -37,7 +37,7 @@ def test_every_declared_field_has_its_one_flag(cls):
         a = actions[f.name]
         assert a.option_strings == [flag_of(f.name, opt)] and a.help
     undeclared = {f.name for f in dataclasses.fields(cls)} - {f.name for f, _ in declared(cls)}
-    assert undeclared == ({"scene", "displays", "positions", "fullscreen", "gpus", "poses", "corners"}
+    assert undeclared == ({"scene", "displays", "positions", "fullscreen", "gpus", "poses", "corners", "right_eye"}
                           if cls is WalkConfig
                           else {"ranks", "lods"})
 
@@ -53,7 +53,8 @@ def test_every_choice_and_switch_reaches_its_field():
                     with pytest.raises(InputError, match=f"--stereo {value}: "):
                         _walk(flag_of(f.name, opt), value)
                     continue
-                assert getattr(_walk(flag_of(f.name, opt), value), f.name) == value
+                with_stereo = ["--stereo", "anaglyph"] if f.name == "eyes" else []  # how stereo eyes are shared
+                assert getattr(_walk(flag_of(f.name, opt), value, *with_stereo), f.name) == value
         elif opt.switch or opt.negate:
             cfg = _walk(flag_of(f.name, opt))
             assert getattr(cfg, f.name) is (not getattr(base, f.name))

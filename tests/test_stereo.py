@@ -5,6 +5,7 @@ each eye's mosaic is one rank's render of that eye bit for bit, and the packed m
 packing of those, for every decomposition, with bezels, frames in flight, render scale and
 levels of detail."""
 
+import dataclasses
 import json
 import math
 
@@ -196,7 +197,8 @@ def test_bad_stereo_input_is_one_line_naming_the_flag(fields, words):
                                          ({"stereo": "anaglyph", "partition": "broadcast"}, "joint"), ({}, "joint")])
 def test_auto_splits_the_ranks_by_eye_where_the_wall_can(fields, eyes):
     cfg = WalkConfig(**{"grid": (2, 2), "tile": (60, 48), "screen_m": SCREEN, **fields})
-    assert cfg.eyes == eyes
+    assert cfg.eyes == "auto" and cfg.eyes_split is (eyes == "split")
+    assert not dataclasses.replace(cfg, eyes="joint").eyes_split
 
 
 @pytest.mark.parametrize("text,words", [
@@ -301,6 +303,8 @@ def test_each_eye_composes_one_ranks_render_and_the_wall_shows_their_packing(tmp
         assert (shown == want).all(), f"frame {f}: {(shown != want).any(axis=2).sum()} packed px differ"
     s = json.loads((tmp_path / "w" / "summary.json").read_text())
     assert s["config"]["stereo"] == mode and s["config"]["viewer"]["eye_separation_m"] == 0.064
+    assert s["config"]["eyes"] == fields.get("eyes", "split" if fields.get("decomposition", "screen") == "screen"
+                                             else "joint")
 
 
 @pytest.mark.parametrize("mode,fields,mullion", [("top-bottom", {"balance": "strips"}, (6, 4)),

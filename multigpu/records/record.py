@@ -273,6 +273,7 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
             "dark": list(cfg.dark),
             "monitor": cfg.monitor is not None,
             "stereo": cfg.stereo, "viewer": _viewer_doc(cfg),
+            "eyes": None if cfg.stereo == "mono" else "split" if cfg.eyes_split else "joint",  # who draws which eye
             "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
             "kernel": {"compiled": jit.available(),
                        "warm_seconds": round(load_info.get("kernel_seconds", 0.0), 3)}}
