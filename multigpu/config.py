@@ -414,10 +414,12 @@ class WalkConfig:
     @property
     def eyes_split(self) -> bool:
         """Whether the ranks split by eye (``--eyes``: split, or auto where the wall can;
-        ``core/stereo.splits``)."""
+        ``core/stereo.splits``). Not with dark tiles (a restart without a PC that is gone): the
+        live tiles need not halve, so every rank then draws both eyes of its region."""
         from multigpu.core.stereo import splits
 
-        return self.eyes != "joint" and splits(self.stereo, self.grid, self.decomposition, self.partition) is None
+        return (self.eyes != "joint" and not self.dark
+                and splits(self.stereo, self.grid, self.decomposition, self.partition) is None)
 
     @property
     def viewer(self):

@@ -130,9 +130,9 @@ class Planner:
         # a stereo wall plans on one eye's canvas and both eyes render the plan (core/stereo.py)
         self.stereo = make_stereo(cfg.stereo, cfg.canvas)
         self.plan_cfg = cfg if self.stereo is None else eye_config(cfg, self.stereo)
-        # eye decomposition (``--eyes split``): half the ranks a screen plan, each eye's half drawing it (not on a
-        # wall with dark tiles, whose live tiles need not halve: both eyes then render every region)
-        self.halves = halved(cfg.grid) if cfg.eyes_split and not cfg.dark else None
+        # eye decomposition (``--eyes``, ``WalkConfig.eyes_split``): half the ranks a screen plan, each eye's half
+        # drawing it
+        self.halves = halved(cfg.grid) if cfg.eyes_split else None
         self._split: set[int] = set()  # the strategies (``balances`` indices) built for half the ranks
         self.canvas = self.plan_cfg.canvas
         self.viewer = cfg.viewer  # None: the camera's own frustum

@@ -199,6 +199,7 @@ def test_auto_splits_the_ranks_by_eye_where_the_wall_can(fields, eyes):
     cfg = WalkConfig(**{"grid": (2, 2), "tile": (60, 48), "screen_m": SCREEN, **fields})
     assert cfg.eyes == "auto" and cfg.eyes_split is (eyes == "split")
     assert not dataclasses.replace(cfg, eyes="joint").eyes_split
+    assert not dataclasses.replace(cfg, eyes="split" if eyes == "split" else "auto", dark=(1,)).eyes_split  # a restart
 
 
 @pytest.mark.parametrize("text,words", [
