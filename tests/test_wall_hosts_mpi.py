@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mpirun import ROOT, SMALL, end_launcher, mpi_named, read_png, start_launcher
 from simhosts import SimHosts
@@ -147,6 +148,36 @@ def test_a_stereo_wall_of_two_pcs_shows_each_its_packed_tile(tmp_path, two_pcs):
         ex = int(eye.tiles()[k][0])
         assert (mosaic[:, x:x + ew] == left[:, ex:ex + ew]).all() and (mosaic[:, x + ew:x + TILE[0]] ==
                                                                        right[:, ex:ex + ew]).all()
+
+
+def test_a_passive_wall_of_two_pcs_shows_each_eye_on_its_own_output(tmp_path, two_pcs_rows):
+    """Passive stereo on two simulated PCs, each with two outputs side by side on its X screen: the
+    left-eye window shows the tile of the left eye's mosaic, the right-eye window the right's, bit
+    for bit."""
+    hosts, (xa, xb) = two_pcs_rows
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": f"{TILE[0]}x{TILE[1]}", "mullion": "8x0",
+                                "screen_m": [1.28, 0.96], "stereo": {"mode": "passive"}, "displays": [
+        {"rank": k, "host": h, "display": x, "position": [0, 0], "right_eye_position": [TILE[0], 0]}
+        for k, (h, x) in enumerate((("a", xa), ("b", xb)))]}))
+    out = tmp_path / "wall"
+    proc = _launch(tmp_path, hosts, {"MULTIGPU_MPIEXEC": mpi_named("mpich").path}, wall, out)
+    try:
+        shown = lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > 21
+        wait_for(lambda: shown() and len(windows(xa)) == 2 and len(windows(xb)) == 2, timeout=120)
+        shots = screenshot(xa), screenshot(xb)
+        wm_close(xb, windows(xb)[0])
+        _, err = end_launcher(proc)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-2000:]
+    left, right = (read_png(out / "mosaic" / d / "frame_00000.png") for d in ("left", "right"))
+    assert (read_png(out / "mosaic" / "frame_00000.png") == np.concatenate([left, right], axis=1)).all()
+    for shot, x in zip(shots, (0, TILE[0] + 8)):  # each PC: its tile of the left eye, then of the right eye
+        assert (shot[:, :TILE[0]] == left[:, x:x + TILE[0]]).all()
+        assert (shot[:, TILE[0]:] == right[:, x:x + TILE[0]]).all()
+    assert (left != right).any()
 
 
 def test_a_host_without_its_x_server_is_one_line_and_exit_2(tmp_path, two_pcs, mpiexec_env):
