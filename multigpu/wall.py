@@ -355,8 +355,14 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         disp = wall.displays.get(k) or "$DISPLAY"
         host = wall.hosts.get(k, "-")
         gpu = wall.gpus.get(k, "-")
+        right = ""
+        if wall.stereo.get("mode") == "passive":  # its second output's window (``windows``)
+            from multigpu.core.stereo import right_eye_place
+
+            rx, ry = wall.right_eye.get(k, right_eye_place(c, pos))
+            right = f", right eye's window at {rx},{ry}"
         lines.append(f"{k:>4} {row:>3} {col:>3}  {host:<12} {disp:<10} {gpu:>3}  {f'{pos[0]},{pos[1]}':<12} "
-                     f"[{x0}, {top})")
+                     f"[{x0}, {top}){right}")
     if wall.monitor is not None:
         on = wall.monitor_on
         where = (f"on host {on['host']}, display {on.get('display', '$DISPLAY')} (reached at "

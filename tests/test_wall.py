@@ -226,6 +226,8 @@ def test_a_passive_walls_right_eye_windows_are_placed_and_checked(tmp_path):
     del doc["$schema"]
     wall = load_wall(_wall(tmp_path, doc))
     assert wall.right_eye == {0: (1920, 0), 1: (1920, 0)}
+    from multigpu.wall import describe
+    assert describe(wall, (1, 2), (1920, 1080), (0, 0)).count("right eye's window at 1920,0") == 2
     resolve = lambda h: "1.2.3.4"  # noqa: E731
     assert problems(wall, (1, 2), (1920, 1080), (0, 0), lambda h, d: (3840, 1080), resolve) == []
     assert problems(wall, (1, 2), (1920, 1080), (0, 0), lambda h, d: (1920, 1080), resolve) == [

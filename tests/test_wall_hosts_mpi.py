@@ -84,6 +84,22 @@ def _launch(tmp_path, hosts, env, wall, out):
                           {**hosts.env, **env})
 
 
+def _shown_and_closed(proc, out, rows: int, displays, per_display: int, close, timeout: float = 120):
+    """Once ``rows`` timing rows are written and each of ``displays`` holds ``per_display``
+    windows: a screenshot of each, then ``close``'s first window closed as a window manager does
+    and the launcher ended (killed by its group if still there). Returns the shots and stderr."""
+    try:
+        shown = lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > rows
+        wait_for(lambda: shown() and all(len(windows(x)) == per_display for x in displays), timeout=timeout)
+        shots = tuple(screenshot(x) for x in displays)
+        wm_close(close, windows(close)[0])
+        _, err = end_launcher(proc)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    return shots, err
+
+
 def test_each_host_shows_its_tile_of_the_mosaic(tmp_path, two_pcs, mpiexec_env):
     hosts, (xa, xb) = two_pcs
     wall = tmp_path / "wall.json"
@@ -128,15 +144,7 @@ def test_a_stereo_wall_of_two_pcs_shows_each_its_packed_tile(tmp_path, two_pcs):
         {"rank": 1, "host": "b", "display": xb, "position": [20, 4]}]}))
     out = tmp_path / "wall"
     proc = _launch(tmp_path, hosts, {"MULTIGPU_MPIEXEC": mpi_named("mpich").path}, wall, out)
-    try:
-        shown = lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > 21
-        wait_for(lambda: shown() and windows(xa) and windows(xb), timeout=120)
-        shots = screenshot(xa), screenshot(xb)
-        wm_close(xb, windows(xb)[0])
-        _, err = end_launcher(proc)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+    shots, err = _shown_and_closed(proc, out, 21, (xa, xb), 1, xb)
     assert proc.returncode == 0, err[-2000:]
     mosaic = read_png(out / "mosaic" / "frame_00000.png")
     assert (shots[0] == mosaic[:, :TILE[0]]).all()
@@ -162,15 +170,7 @@ def test_a_passive_wall_of_two_pcs_shows_each_eye_on_its_own_output(tmp_path, tw
         for k, (h, x) in enumerate((("a", xa), ("b", xb)))]}))
     out = tmp_path / "wall"
     proc = _launch(tmp_path, hosts, {"MULTIGPU_MPIEXEC": mpi_named("mpich").path}, wall, out)
-    try:
-        shown = lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > 21
-        wait_for(lambda: shown() and len(windows(xa)) == 2 and len(windows(xb)) == 2, timeout=120)
-        shots = screenshot(xa), screenshot(xb)
-        wm_close(xb, windows(xb)[0])
-        _, err = end_launcher(proc)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+    shots, err = _shown_and_closed(proc, out, 21, (xa, xb), 2, xb)
     assert proc.returncode == 0, err[-2000:]
     left, right = (read_png(out / "mosaic" / d / "frame_00000.png") for d in ("left", "right"))
     assert (read_png(out / "mosaic" / "frame_00000.png") == np.concatenate([left, right], axis=1)).all()
@@ -211,15 +211,7 @@ def test_a_pc_per_row_shows_its_row_of_the_mosaic(tmp_path, two_pcs_rows, mpiexe
     proc = start_launcher(["-n", "4", "walkthrough", *SMALL, "--path", str(_still(tmp_path)), "--wall", str(wall),
                            "--present", "window", "--mosaic-every", "100", "--no-overlay", "--out", str(out)],
                           {**hosts.env, **mpiexec_env})
-    try:
-        shown = lambda: (out / "timings.csv").exists() and len((out / "timings.csv").read_text().splitlines()) > 41
-        wait_for(lambda: shown() and len(windows(xa)) == 2 and len(windows(xb)) == 2, timeout=180)
-        shots = screenshot(xa), screenshot(xb)
-        wm_close(xa, windows(xa)[0])
-        _, err = end_launcher(proc)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+    shots, err = _shown_and_closed(proc, out, 41, (xa, xb), 2, xa, timeout=180)
     assert proc.returncode == 0, err[-2000:]
     s = json.loads((out / "summary.json").read_text())
     assert [r["host"] for r in s["config"]["ranks"]] == ["a", "b", "a", "b"]  # by tile: rows on their hosts
