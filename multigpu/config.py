@@ -15,7 +15,7 @@ from multigpu.options import check, option, register
 from multigpu.scene.models import SceneSpec
 from multigpu.scene.paths import DEFAULT_FRAMES
 from multigpu.strategies import REGISTRY
-from multigpu.viewing import DEFAULT_PITCH_MM, check_viewer, read_size_m, read_tracker, viewer_of
+from multigpu.viewing import DEFAULT_PITCH_MM, check_viewer, read_size_m, read_tracker, splits_by_eye, viewer_of
 
 #: rank 0 rewrites summary.json every this many frames (and whenever the run ends)
 SUMMARY_EVERY = 50
@@ -413,13 +413,8 @@ class WalkConfig:
 
     @property
     def eyes_split(self) -> bool:
-        """Whether the ranks split by eye (``--eyes``: split, or auto where the wall can;
-        ``core/stereo.splits``). Not with dark tiles (a restart without a PC that is gone): the
-        live tiles need not halve, so every rank then draws both eyes of its region."""
-        from multigpu.core.stereo import splits
-
-        return (self.eyes != "joint" and not self.dark
-                and splits(self.stereo, self.grid, self.decomposition, self.partition) is None)
+        """Whether the ranks split by eye (``viewing.splits_by_eye``)."""
+        return splits_by_eye(self)
 
     @property
     def viewer(self):

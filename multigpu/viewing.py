@@ -101,6 +101,16 @@ def check_viewer(cfg) -> None:
             raise InputError(f"--head-poses {cfg.head_poses}: pose {i}: {why}")
 
 
+def splits_by_eye(cfg) -> bool:
+    """Whether a wall's ranks split by eye (``--eyes``: split, or auto where the wall can;
+    ``core/stereo.splits``). Not with dark tiles (a restart without a PC that is gone): the live
+    tiles need not halve, so every rank then draws both eyes of its region."""
+    from multigpu.core.stereo import splits
+
+    return (cfg.eyes != "joint" and not cfg.dark
+            and splits(cfg.stereo, cfg.grid, cfg.decomposition, cfg.partition) is None)
+
+
 def viewer_of(cfg):
     """Who looks at the wall (``core/eyes.Viewer``), where a run places one: stereo, a head or
     head poses; None: the camera's own frustum, as always."""
