@@ -14,6 +14,7 @@ corners, its view turned to the screen's normal. Pure numpy, float64."""
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -55,10 +56,24 @@ class Screen:
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The screen's right, up and normal unit vectors (the normal towards the viewer)."""
-        pa, pb, pc = (np.asarray(p, dtype=np.float64) for p in self.corners)
-        vr, vu = (pb - pa) / np.linalg.norm(pb - pa), (pc - pa) / np.linalg.norm(pc - pa)
-        vn = np.cross(vr, vu)
-        return vr, vu, vn / np.linalg.norm(vn)
+        return _frame_of(self.corners)[:3]
+
+    def points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The corners (lower-left, lower-right, upper-left) as float64 arrays."""
+        return _frame_of(self.corners)[3:]
+
+
+@functools.lru_cache(maxsize=256)
+def _frame_of(corners: tuple) -> tuple[np.ndarray, ...]:
+    """A screen's basis and corner arrays, made once per screen (every frame's eyes look through
+    the same few screens): read-only."""
+    pa, pb, pc = (np.asarray(p, dtype=np.float64) for p in corners)
+    vr, vu = (pb - pa) / np.linalg.norm(pb - pa), (pc - pa) / np.linalg.norm(pc - pa)
+    vn = np.cross(vr, vu)
+    out = (vr, vu, vn / np.linalg.norm(vn), pa, pb, pc)
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 @dataclass(frozen=True)
@@ -111,7 +126,7 @@ def eye_frame(camera: Camera, viewer: Viewer, eye: np.ndarray, screen: Screen, a
     move = np.eye(4)
     move[:3, 3] = -q
     vr, vu, vn = screen.basis()
-    pa, pb, pc = (np.asarray(p, dtype=np.float64) for p in screen.corners)
+    pa, pb, pc = screen.points()
     va, vb, vc = pa - eye, pb - eye, pc - eye
     d = -float(va @ vn)  # the eye's distance to the screen's plane (the door keeps it > 0)
     k = camera.near / d

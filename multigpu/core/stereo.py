@@ -123,28 +123,35 @@ class Stereo:
         pieces stay first), and each rank's ``picks``: for every composed rect, (eye, piece,
         x, y) of its lower-left pixel inside the eye piece it is cut from. Only the rects and the
         front of the composed work are used (the exchange's)."""
-        tiles = self.eye.tiles()
-        rects, picks, front = [], [], None if work.front is None else [0] * work.ranks
-        for k in range(work.ranks):  # ranks, not objects
-            R = np.asarray(work.rects[k], dtype=np.int64).reshape(-1, 4)
-            lo = np.maximum(R[:, None, :2], tiles[None, :, :2])
-            hi = np.minimum(R[:, None, 2:], tiles[None, :, 2:])
-            p, t = np.nonzero((hi > lo).all(axis=-1))  # (piece, tile) pairs, by piece
-            cut = np.concatenate([lo[p, t], hi[p, t]], axis=1)
-            inside = cut[:, :2] - R[p, :2]
-            n = len(p)
-            if work.eyes is None:  # every rank both eyes
-                both, eyes = np.tile(np.arange(n), 2), np.repeat([0, 1], n)
-            else:  # eye decomposition: the rank's own eye
-                both, eyes = np.arange(n), np.full(n, work.eyes[k])
-            order = np.lexsort((both, eyes, p[both]))  # by piece, then eye, then cut
-            eye, src = eyes[order], both[order]
-            rects.append(cut[src] + np.tile(self._shifts[eye, t[src]], 2))
-            picks.append(np.column_stack([eye, p[src], inside[src]]).tolist())
-            if front is not None:
-                front[k] = int(np.count_nonzero(p[src] < work.front[k]))
-        return Work(tuple(rects), tuple(() for _ in rects), work.loads, work.depth, work.partition,
-                    None if front is None else tuple(front), None, work.eyes), picks
+        tiles, K = self.eye.tiles(), work.ranks
+        pieces = [np.asarray(r, dtype=np.int64).reshape(-1, 4) for r in work.rects]
+        counts = np.array([len(r) for r in pieces], dtype=np.int64)
+        R = np.concatenate(pieces) if pieces else np.zeros((0, 4), dtype=np.int64)  # every rank's, rank by rank
+        owner = np.repeat(np.arange(K), counts)
+        local = np.arange(len(R)) - np.repeat(np.cumsum(counts) - counts, counts)  # a piece's index in its rank
+        lo = np.maximum(R[:, None, :2], tiles[None, :, :2])
+        hi = np.minimum(R[:, None, 2:], tiles[None, :, 2:])
+        p, t = np.nonzero((hi > lo).all(axis=-1))  # (piece, tile) pairs, by piece (so by rank)
+        cut = np.concatenate([lo[p, t], hi[p, t]], axis=1)
+        inside = cut[:, :2] - R[p, :2]
+        n = len(p)
+        if work.eyes is None:  # every rank both eyes
+            both, eyes = np.tile(np.arange(n), 2), np.repeat([0, 1], n)
+        else:  # eye decomposition: each rank's own eye
+            both = np.arange(n)
+            eyes = np.asarray(work.eyes, dtype=np.int64)[owner[p]]
+        order = np.lexsort((both, eyes, p[both]))  # by rank and piece, then eye, then cut
+        eye, src = eyes[order], both[order]
+        rank, piece = owner[p[src]], local[p[src]]
+        cuts = np.cumsum(np.bincount(rank, minlength=K))[:-1]
+        rects = tuple(np.split(cut[src] + np.tile(self._shifts[eye, t[src]], 2), cuts))
+        picks = [part.tolist() for part in np.split(np.column_stack([eye, piece, inside[src]]), cuts)]
+        front = None
+        if work.front is not None:  # a hybrid's front pieces stay first
+            ahead = piece < np.asarray(work.front, dtype=np.int64)[rank]
+            front = tuple(int(c) for c in np.bincount(rank[ahead], minlength=K))
+        return Work(rects, tuple(() for _ in rects), work.loads, work.depth, work.partition, front, None,
+                    work.eyes), picks
 
     @staticmethod
     def parts(picks: list, rects: np.ndarray, rendered: list) -> list:
