@@ -52,7 +52,7 @@ class Screen:
     room: its lower-left, lower-right and upper-left corners (metres)."""
 
     tiles: tuple[int, ...]
-    corners: tuple  # (pa, pb, pc), each (x, y, z)
+    corners: tuple  # (pa, pb, pc), each an (x, y, z) tuple of floats (hashable: ``_frame_of`` keys on it)
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The screen's right, up and normal unit vectors (the normal towards the viewer)."""
