@@ -58,10 +58,6 @@ class Screen:
         """The screen's right, up and normal unit vectors (the normal towards the viewer)."""
         return _frame_of(self.corners)[:3]
 
-    def points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The corners (lower-left, lower-right, upper-left) as float64 arrays."""
-        return _frame_of(self.corners)[3:]
-
 
 @functools.lru_cache(maxsize=256)
 def _frame_of(corners: tuple) -> tuple[np.ndarray, ...]:
@@ -125,8 +121,7 @@ def eye_frame(camera: Camera, viewer: Viewer, eye: np.ndarray, screen: Screen, a
     q = (eye - viewer.home(camera)) * viewer.world_per_metre  # the eye in the camera's view space
     move = np.eye(4)
     move[:3, 3] = -q
-    vr, vu, vn = screen.basis()
-    pa, pb, pc = screen.points()
+    vr, vu, vn, pa, pb, pc = _frame_of(screen.corners)
     va, vb, vc = pa - eye, pb - eye, pc - eye
     d = -float(va @ vn)  # the eye's distance to the screen's plane (the door keeps it > 0)
     k = camera.near / d

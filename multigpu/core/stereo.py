@@ -126,7 +126,7 @@ class Stereo:
         tiles, K = self.eye.tiles(), work.ranks
         pieces = [np.asarray(r, dtype=np.int64).reshape(-1, 4) for r in work.rects]
         counts = np.array([len(r) for r in pieces], dtype=np.int64)
-        R = np.concatenate(pieces) if pieces else np.zeros((0, 4), dtype=np.int64)  # every rank's, rank by rank
+        R = np.concatenate(pieces)  # every rank's, rank by rank
         owner = np.repeat(np.arange(K), counts)
         local = np.arange(len(R)) - np.repeat(np.cumsum(counts) - counts, counts)  # a piece's index in its rank
         lo = np.maximum(R[:, None, :2], tiles[None, :, :2])
