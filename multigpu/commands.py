@@ -85,8 +85,9 @@ COMMANDS: tuple[Command, ...] = (
             (arg("--display", help="X display (default $DISPLAY)"),
              arg("--position", default="0x0", help="window position XxY on that display (default 0x0)"),
              arg("--port", type=int, default=0, help="TCP port to listen on (default: any, printed)"),
-             arg("--listen", default="", help="address to listen on (default: every interface; a connection must "
-                                              "bring the token the launcher writes on standard input)"))),
+             arg("--listen", default="127.0.0.1", help="address to listen on (default 127.0.0.1; the launcher gives "
+                                                       "the wall file's monitor address or host; a connection must "
+                                                       "bring the token the launcher writes on standard input)"))),
     Command(("view",), "serve the operator's page over a finished run's outputs: its plots, summary and mosaics",
             "multigpu.tools:view",
             (arg("out", help="the run's output directory (summary.json, timings.csv, mosaic/)"),

@@ -16,7 +16,7 @@ def wall_test(a) -> int:
 def monitor_view(a) -> int:
     import sys
 
-    from multigpu.config import parse_pair
+    from multigpu.config import parse_place
     from multigpu.display.remote import serve
 
     token = sys.stdin.readline().strip()  # the launcher's, on standard input (not on a command line)
@@ -24,7 +24,7 @@ def monitor_view(a) -> int:
         print("multigpu monitor-view: error: no token on standard input (the launcher writes one)",
               file=sys.stderr)
         return 2
-    serve(a.display, parse_pair(a.position, "--position"), token, a.port, a.listen)
+    serve(a.display, parse_place(a.position, "--position"), token, a.port, a.listen)
     return 0
 
 

@@ -32,18 +32,25 @@ def read_tracker(text: str) -> tuple[str, int]:
     return address.strip("[]") or "127.0.0.1", int(port)
 
 
+#: the largest head pose file read (bytes): a pose a frame for days of frames
+MOST_POSE_FILE = 1 << 28
+
+
 def read_poses(path: str) -> tuple:
     """A head pose file (docs/USAGE.md, "A stereo wall"): JSON, a list (or ``{"poses": [...]}``)
     with a pose per frame, each [x, y, z] or [x, y, z, yaw, pitch, roll] (metres, degrees)."""
     import json
 
+    from multigpu.core.doors import Refusal, parse_json
     from multigpu.core.eyes import pose_of
 
     try:
-        with open(path, encoding="utf-8") as fh:
-            doc = json.load(fh)
-    except (OSError, ValueError) as exc:
+        with open(path, "rb") as fh:
+            doc = parse_json(fh.read(MOST_POSE_FILE + 1), MOST_POSE_FILE)
+    except OSError as exc:
         raise InputError(f"--head-poses {path}: {exc.__class__.__name__}: {exc}") from None
+    if isinstance(doc, Refusal):
+        raise InputError(f"--head-poses {path}: {doc}")
     rows = doc.get("poses") if isinstance(doc, dict) else doc  # an object may carry a "comment" too
     if not isinstance(rows, list) or not rows:
         raise InputError(f"--head-poses {path}: must be a non-empty list of poses (or {{\"poses\": [...]}})")

@@ -203,7 +203,10 @@ def test_auto_splits_the_ranks_by_eye_where_the_wall_can(fields, eyes):
 
 
 @pytest.mark.parametrize("text,words", [
-    ("not json", "JSONDecodeError"), ("[]", "must be a non-empty list of poses"),
+    ("not json", "not JSON"), ("[]", "must be a non-empty list of poses"),
+    ("[[0, 0, 1" + "0" * 400 + "]]", "an integer of 401 digits"),  # once OverflowError at the start
+    ("[[0, 0, 1, 0, 0, 1e999]]", "out of range"), ("[[0, 0, NaN]]", "NaN is not a number"),
+    ("[" * 5000 + "]" * 5000, "nested deeper"), ("[[0, 0, 1e300]]", "pose 0 must be"),
     ("[[0, 0, 1], [0, 1]]", "pose 1 must be [x, y, z] or [x, y, z, yaw, pitch, roll]"),
     ('{"poses": [[0, 0, 1, 0, 0, "x"]]}', "pose 0 must be"),
     ("[[0, 0, 1], [0, 0, -0.5]]", "pose 1: a viewer at z = -0.5 m has an eye behind the screen"),

@@ -24,6 +24,7 @@ class Request:
 
     def __init__(self, test):
         self._test, self.done = test, False
+        self.count = 0  # bytes a receive got
 
     def Test(self) -> bool:  # noqa: N802
         if not self.done:
@@ -31,8 +32,21 @@ class Request:
         return self.done
 
     @classmethod
-    def Testall(cls, requests) -> bool:  # noqa: N802
-        return all([r.Test() for r in requests])  # every one tested, as MPI's does
+    def Testall(cls, requests, statuses=None) -> bool:  # noqa: N802
+        done = all([r.Test() for r in requests])  # every one tested, as MPI's does
+        if done and statuses is not None:
+            statuses[:] = [Status(r.count) for r in requests]
+        return done
+
+
+class Status:
+    """What a completed request got: a receive's byte count (``Get_count``, as MPI's)."""
+
+    def __init__(self, count: int):
+        self.count = count
+
+    def Get_count(self, datatype=None) -> int:  # noqa: N802
+        return self.count
 
 
 class World:
@@ -97,9 +111,11 @@ class ThreadComm:
             # as MPI: a message may be shorter than its receive (a compressed one), never longer
             assert data.size <= out.size, f"message of {data.size} bytes truncated by a {out.size}-byte receive"
             out[:data.size] = data
+            request.count = data.size
             return True
 
-        return Request(test)
+        request = Request(test)
+        return request
 
     def _collective(self, part, finish, needs=None) -> Request:
         """This rank's ``part`` of the next collective; ``finish(parts)`` once the parts of the

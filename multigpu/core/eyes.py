@@ -21,9 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from multigpu.core.camera import Camera, frame_matrices, frustum
+from multigpu.core.doors import is_number
 
 #: the eye separation a stereo wall takes unless told (metres: an adult's interpupillary distance)
 EYE_SEPARATION = 0.064
+#: the largest coordinate (metres) or angle (degrees) a pose may give: a room, not an orbit
+MOST_POSE = 1e6
 
 
 @dataclass(frozen=True)
@@ -215,7 +218,7 @@ def pose_of(row) -> Pose | str:
         if len(row) != 6:
             return "position must be [x, y, z]"
     ok = (isinstance(row, list) and len(row) in (3, 6)
-          and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in row))
+          and all(is_number(v, -MOST_POSE, MOST_POSE) for v in row))
     if not ok:
-        return "must be [x, y, z] or [x, y, z, yaw, pitch, roll] (finite numbers)"
+        return f"must be [x, y, z] or [x, y, z, yaw, pitch, roll] (numbers within +-{MOST_POSE:g})"
     return Pose(tuple(float(v) for v in row[:3]), *(float(v) for v in row[3:]))

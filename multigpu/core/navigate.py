@@ -24,6 +24,8 @@ WALK = 0.15
 FAST = 4.0
 #: one speed step (scroll wheel, + / -) multiplies the speed by this
 STEP = 1.25
+#: the most speed steps one frame applies (from the slowest speed to the fastest takes 73)
+MOST_STEPS = 100
 #: mouse turning, degrees per pixel dragged; keys turning in orbit mode, degrees per second
 TURN = 0.25
 ORBIT = 60.0
@@ -113,8 +115,9 @@ class Navigator:
     def step(self, inp: Input, dt: float) -> Camera:
         """Apply one frame's input over ``dt`` seconds; the camera to render."""
         dt = min(max(float(dt), 0.0), MAX_DT)
-        if inp.speed_steps:
-            self.speed = min(max(self.speed * STEP ** inp.speed_steps, 1e-6 * self.diag), 10.0 * self.diag)
+        if inp.speed_steps:  # a flood of steps is as good as MOST_STEPS: the speed is bounded either way
+            steps = max(-MOST_STEPS, min(MOST_STEPS, int(inp.speed_steps)))
+            self.speed = min(max(self.speed * STEP ** steps, 1e-6 * self.diag), 10.0 * self.diag)
         if inp.reset:
             self.reset()
         if inp.orbit:

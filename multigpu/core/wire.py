@@ -5,9 +5,10 @@ A message is a 24-byte header and a payload. The header says the codec, the low 
 frame dropped, and the raw and payload lengths; the payload is the packed bytes as that codec
 leaves them. A payload no smaller than the raw bytes, or raw bytes below the codec's
 ``least`` bytes, go raw (codec ``none``): compressing them saves nothing. Both codecs
-carry a checksum of the content (zstd's and LZ4 frame's), so a corrupt or short message is
-found, named and never composed. The receiver posts ``bound(raw)`` bytes, the largest message
-for ``raw`` packed bytes.
+carry a checksum of the content (zstd's and LZ4 frame's) and a raw payload carries its CRC-32
+in the header, so a corrupt or short message is found, named and never composed. The receiver
+posts ``bound(raw)`` bytes, the largest message for ``raw`` packed bytes, and checks that the
+bytes that arrived are what the header says.
 
 The packed bytes are laid out for the codec by ``rank/composite.py`` on a compressed link: every
 part's colour first, then the depth of every part as four byte planes (lowest bytes of every
@@ -25,16 +26,18 @@ from __future__ import annotations
 
 import struct
 import threading
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
 #: codec names on the command line and in the wall file, by header id
 CODECS = ("none", "lz4", "zstd")
-#: magic, codec id, dropped colour bits, two spare bytes, raw length, payload length
-HEADER = struct.Struct("<4sBBxxQQ")
-MAGIC = b"MGW1"
-HEADER_BYTES = HEADER.size  # 24
+#: magic, codec id, dropped colour bits, two spare bytes, a raw payload's CRC-32 (0 for a compressed
+#: one: its codec checks its own), four spare bytes, raw length, payload length
+HEADER = struct.Struct("<4sBBxxIxxxxQQ")
+MAGIC = b"MGW2"
+HEADER_BYTES = HEADER.size  # 32: the payload stays 8-byte aligned
 #: raw bytes below which a message goes raw: one page. Not measured: such a piece takes gigabit
 #: about 35 us, the order of two codec calls' fixed cost, so compressing it saves next to nothing
 #: (Equalizer found small tiles not worth compressing)
@@ -120,6 +123,16 @@ def _decompress(codec_id: int, payload: memoryview, raw: int) -> bytes:
         raise WireError(f"{name} payload does not decode ({exc})") from None
 
 
+def _lz4_size(payload: np.ndarray) -> int | None:
+    """The content size an LZ4 frame declares (None where it declares none or is no frame)."""
+    import lz4.frame
+
+    try:
+        return lz4.frame.get_frame_info(memoryview(payload)).get("content_size") or None
+    except Exception:  # noqa: BLE001 - the library's own error for a header that is no frame
+        return None
+
+
 def bound(raw: int) -> int:
     """The most bytes a message of ``raw`` packed bytes takes (a compressed payload never larger
     than the raw one is sent: the receiver's buffer)."""
@@ -138,43 +151,61 @@ def encode(packed: np.ndarray, codec: Codec, colour: int = 0, bits: int = 0) -> 
         payload = _compress(codec, memoryview(packed))
         if len(payload) >= raw:
             payload = None
+    crc = 0
     if payload is None:
         out = np.empty(HEADER_BYTES + raw, dtype=np.uint8)
         out[HEADER_BYTES:] = packed
-        cid = 0
+        cid, crc = 0, zlib.crc32(packed)
     else:
         out = np.empty(HEADER_BYTES + len(payload), dtype=np.uint8)
         out[HEADER_BYTES:] = np.frombuffer(payload, dtype=np.uint8)
         cid = CODECS.index(codec.name)
-    out[:HEADER_BYTES] = np.frombuffer(HEADER.pack(MAGIC, cid, bits, raw, out.nbytes - HEADER_BYTES), np.uint8)
+    out[:HEADER_BYTES] = np.frombuffer(HEADER.pack(MAGIC, cid, bits, crc, raw, out.nbytes - HEADER_BYTES), np.uint8)
     return out
 
 
 def header(message: np.ndarray) -> tuple[int, int, int, int]:
     """(codec id, dropped bits, raw bytes, payload bytes) of a message; WireError where the
     header is not one."""
-    if message.nbytes < HEADER_BYTES:
-        raise WireError(f"a message of {message.nbytes} bytes is shorter than its header")
-    magic, cid, bits, raw, size = HEADER.unpack(message[:HEADER_BYTES].tobytes())
-    if magic != MAGIC or cid >= len(CODECS) or bits > 7:
-        raise WireError("the message's header is not multigpu's (corrupt)")
+    cid, bits, _, raw, size = _head(message)
     return cid, bits, raw, size
 
 
-def decode(message: np.ndarray, raw: int) -> tuple[np.ndarray, int]:
+def _head(message: np.ndarray) -> tuple[int, int, int, int, int]:
+    if message.nbytes < HEADER_BYTES:
+        raise WireError(f"a message of {message.nbytes} bytes is shorter than its header")
+    magic, cid, bits, crc, raw, size = HEADER.unpack(message[:HEADER_BYTES].tobytes())
+    if magic != MAGIC or cid >= len(CODECS) or bits > 7:
+        raise WireError("the message's header is not multigpu's (corrupt)")
+    return cid, bits, crc, raw, size
+
+
+def decode(message: np.ndarray, raw: int, received: int | None = None) -> tuple[np.ndarray, int]:
     """The packed bytes of a message expected to hold ``raw`` of them, and the colour bits the
     sender dropped; WireError naming what is wrong where the message is corrupt or short.
-    ``message`` may be longer than the message (a receive buffer of ``bound(raw)`` bytes)."""
-    cid, bits, got, size = header(message)
+    ``message`` may be a receive buffer longer than the message (``bound(raw)`` bytes): then
+    ``received`` is how many bytes arrived (MPI's ``Get_count``), which must be what the header
+    says, so that no byte of the buffer that nothing wrote is ever read."""
+    if received is not None:
+        message = message[:received]
+    cid, bits, crc, got, size = _head(message)
     if got != raw:
         raise WireError(f"the message holds {got} bytes where {raw} were expected")
     if HEADER_BYTES + size > message.nbytes:
         raise WireError(f"the message is short: {message.nbytes - HEADER_BYTES} of {size} payload bytes")
+    if received is not None and HEADER_BYTES + size != received:
+        raise WireError(f"{received} bytes arrived where the header says {HEADER_BYTES + size}")
     payload = message[HEADER_BYTES:HEADER_BYTES + size]
     if cid == 0:
         if size != raw:
             raise WireError(f"a raw payload of {size} bytes where {raw} were expected")
+        if zlib.crc32(payload) != crc:
+            raise WireError("a raw payload whose checksum does not match (corrupt)")
         return payload, bits
+    if CODECS[cid] == "lz4":  # a frame that claims another size is refused before it is decoded
+        claimed = _lz4_size(payload)
+        if claimed != raw:
+            raise WireError(f"an lz4 frame that says {claimed} bytes where {raw} were expected")
     data = _decompress(cid, memoryview(payload), raw)
     if len(data) != raw:
         raise WireError(f"the payload decodes to {len(data)} bytes where {raw} were expected")

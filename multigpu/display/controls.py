@@ -8,6 +8,7 @@ steps, and the commands (orbit, reset, overlays, next strategy). The keys, as th
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from multigpu.core.navigate import Input
@@ -19,6 +20,8 @@ HELP = ("W/S or Up/Down: forward/back; A/D or Left/Right: left/right; E/Q or Pag
         "viewer); K: the head home; H: this help; Escape: quit")
 #: metres a head key moves the viewer's head (Shift: five times as far)
 HEAD_STEP = 0.05
+#: the most speed steps one wheel event takes
+MOST_WHEEL = 10
 
 
 def _keymap(glfw) -> tuple[dict, dict]:
@@ -75,7 +78,7 @@ class Controls:
 
     def on_key(self, window, key, scancode, action, mods) -> None:
         g = self.glfw
-        shift = bool(mods & g.MOD_SHIFT)
+        shift = bool(int(mods) & g.MOD_SHIFT)
         self.shift = self.shift or shift
         if key in (g.KEY_LEFT_SHIFT, g.KEY_RIGHT_SHIFT):
             self.shift_held = action != g.RELEASE
@@ -104,6 +107,8 @@ class Controls:
             self.counts[what] += 1
 
     def _on_button(self, window, button, action, mods) -> None:
+        if not 0 <= button < 32:  # glfw's are 0..7
+            return
         bit = 1 << button  # the cursor's place comes from the motion events (queued in order with this one)
         self.buttons = self.buttons | bit if action == self.glfw.PRESS else self.buttons & ~bit
 
@@ -114,7 +119,8 @@ class Controls:
         self.cursor = (x, y)
 
     def _on_scroll(self, window, dx: float, dy: float) -> None:
-        self.counts["speed"] += int(round(dy))
+        if math.isfinite(dy):
+            self.counts["speed"] += int(round(max(-MOST_WHEEL, min(MOST_WHEEL, dy))))
 
     def take(self) -> Taken:
         """Everything since the last call; shift counts when held now or at any moment meanwhile."""

@@ -52,7 +52,7 @@ def start_view(on: dict) -> subprocess.Popen:
     x, y = on["position"]
     cmd = [sys.executable, "-m", "multigpu", "monitor-view", "--position", f"{x}x{y}",
            *(["--display", on["display"]] if on.get("display") else []),
-           *(["--listen", on["address"]] if on.get("address") else [])]
+           "--listen", on.get("address") or on["host"]]  # where rank 0 reaches it (never every interface)
     host = on["host"]
     if not is_this_machine(host):
         cmd = [*shell_command(remote_shell()), host, shlex.join(cmd)]

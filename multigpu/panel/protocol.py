@@ -11,11 +11,11 @@ the wall with the operator's cookie).
 from __future__ import annotations
 
 import hmac
-import json
-import math
+import ipaddress
 from typing import NamedTuple
 from urllib.parse import urlsplit
 
+from multigpu.core.doors import Refusal, is_number, is_whole, parse_json
 from multigpu.core.navigate import MOVES
 from multigpu.core.resample import MIN_SCALE
 
@@ -32,9 +32,7 @@ MOST_HEAD_M = 1.0
 
 def _number(lo: float, hi: float, none: bool = False):
     def check(v) -> bool:
-        if v is None:
-            return none
-        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
+        return none if v is None else is_number(v, lo, hi)
     return check
 
 
@@ -53,8 +51,7 @@ ACTIONS: dict[str, dict] = {
     "keys": {"held": (_moves, f"a list of moves from {', '.join(MOVES)}")},
     "drag": {"dx": (_number(-MOST_DRAG, MOST_DRAG), "a number of pixels"),
              "dy": (_number(-MOST_DRAG, MOST_DRAG), "a number of pixels")},
-    "speed": {"steps": (lambda v: isinstance(v, int) and not isinstance(v, bool) and -10 <= v <= 10,
-                        "a whole number -10..10")},
+    "speed": {"steps": (lambda v: is_whole(v, -10, 10), "a whole number -10..10")},
     "orbit": {},
     "reset": {},
     "record": {"on": (_flag, "true or false")},
@@ -84,10 +81,9 @@ def command(text: str | bytes, balances: tuple[str, ...] = ()) -> Command | Refu
         return Refused(f"a message of {len(text)} bytes (at most {MOST_MESSAGE})")
     if isinstance(text, bytes):
         return Refused("a binary message (the page sends JSON text)")
-    try:
-        msg = json.loads(text)
-    except ValueError:
-        return Refused("not JSON")
+    msg = parse_json(text, MOST_MESSAGE)
+    if isinstance(msg, Refusal):
+        return Refused(msg)
     if not isinstance(msg, dict):
         return Refused("not a JSON object")
     do = msg.get("do")
@@ -109,6 +105,24 @@ def command(text: str | bytes, balances: tuple[str, ...] = ()) -> Command | Refu
 def admitted(given: str | None, token: str) -> bool:
     """Whether a request brought the run's token (compared in constant time)."""
     return given is not None and hmac.compare_digest(given.encode(), token.encode())
+
+
+def known_host(host: str | None, names: frozenset) -> bool:
+    """Whether a request's ``Host`` names this server: an IP address, or one of ``names`` (its
+    listening address, ``localhost``, the machine's names). A browser fooled by DNS rebinding
+    sends the attacker's name here, so it is refused even with the token in hand."""
+    if not host or len(host) > 300:
+        return False
+    name = host.lower()
+    if name.startswith("["):  # [IPv6]:port
+        name = name[1:name.find("]")] if "]" in name else ""
+    else:
+        name = name.rpartition(":")[0] if ":" in name else name
+    try:
+        ipaddress.ip_address(name)
+        return True
+    except ValueError:
+        return name.rstrip(".") in names
 
 
 def same_origin(origin: str | None, host: str | None) -> bool:

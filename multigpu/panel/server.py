@@ -28,13 +28,15 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from multigpu.panel.protocol import Command, Refused, admitted, command, same_origin
+from multigpu.panel.protocol import Command, Refused, admitted, command, known_host, same_origin
 from multigpu.panel.state import PanelState, names
 
 PAGE = Path(__file__).parent / "page"
 #: the files the page may fetch, by name, with their types (nothing else is ever read)
 FILES = {"panel.js": "text/javascript", "panel.css": "text/css", "uPlot.iife.min.js": "text/javascript",
          "uPlot.min.css": "text/css"}
+#: the cookie's name, with the server's port after it: cookies are per host, not per port, so two
+#: panels on one machine would otherwise overwrite each other's token
 COOKIE = "multigpu-panel"
 #: seconds between updates to a page (the thumbnail and plots refresh at this rate at most)
 PERIOD = 0.2
@@ -108,6 +110,8 @@ class PanelServer:
             self.ready.set()
             return
         self.port = server.sockets[0].getsockname()[1]
+        self.cookie = f"{COOKIE}-{self.port}"
+        self.names = _names(self.address)
         self.ready.set()
         async with server:
             await self.stopping.wait()
@@ -142,7 +146,7 @@ class PanelServer:
             return query["token"][0]
         for part in request.headers.get("Cookie", "").split(";"):
             name, _, value = part.strip().partition("=")
-            if name == COOKIE:
+            if name == self.cookie:
                 return value
         return None
 
@@ -153,6 +157,9 @@ class PanelServer:
         path = urlsplit(request.path).path
         plain = lambda status, text: Response(status.value, status.phrase, Headers(  # noqa: E731
             [("Content-Type", "text/plain; charset=utf-8"), ("Cache-Control", "no-store")]), text.encode())
+        if not known_host(request.headers.get("Host"), self.names):
+            self._refused(f"a request for host {request.headers.get('Host', '')[:80]!r}")
+            return plain(HTTPStatus.MISDIRECTED_REQUEST, "multigpu panel: not this server's name\n")
         if not admitted(self._token(request), self.token):
             return plain(HTTPStatus.FORBIDDEN, "multigpu panel: this page needs the run's token: open the URL "
                                                "the console printed\n")
@@ -172,7 +179,7 @@ class PanelServer:
                    ("Content-Security-Policy", "default-src 'self'; img-src 'self' blob:; connect-src 'self'; "
                                                "style-src 'self'; frame-ancestors 'none'")]
         if path == "/":
-            headers.append(("Set-Cookie", f"{COOKIE}={self.token}; HttpOnly; SameSite=Strict; Path=/"))
+            headers.append(("Set-Cookie", f"{self.cookie}={self.token}; HttpOnly; SameSite=Strict; Path=/"))
         return Response(200, "OK", Headers(headers), (PAGE / name).read_bytes())
 
     # -- the page's WebSocket
@@ -183,6 +190,7 @@ class PanelServer:
         self.delivered.clear()
         pusher = asyncio.create_task(self._push(ws))
         allowance, last = 2 * MOST_RATE, time.monotonic()  # a token bucket per page
+        holding = False  # the page's last keys message held some down
         try:
             async for message in ws:
                 now = time.monotonic()
@@ -192,11 +200,15 @@ class PanelServer:
                     got = Refused(f"more than {MOST_RATE:g} messages a second")
                 else:
                     allowance -= 1.0
-                    got = command(message, state.balances)
+                    try:
+                        got = command(message, state.balances)
+                    except Exception as exc:  # noqa: BLE001 - a bug in a check: said, the page stays
+                        got = Refused(f"a message the checks could not read ({exc.__class__.__name__})")
                 if isinstance(got, Command) and self.readonly:
                     await ws.send(json.dumps({"error": f"{got.do}: a finished run, nothing to control"}))
                 elif isinstance(got, Command):
                     state.commands.put(got)
+                    holding = bool(got.args["held"]) if got.do == "keys" else holding
                     await ws.send(json.dumps({"ok": got.do}))
                 else:
                     self._refused(f"a message from {_peer(ws)} ({got.why})")
@@ -206,6 +218,8 @@ class PanelServer:
         finally:
             pusher.cancel()
             state.clients -= 1
+            if holding:  # a page gone (a laptop closed) holds no keys down
+                state.commands.put(Command("keys", {"held": []}))
 
     async def _push(self, ws) -> None:
         state = self.state
@@ -220,8 +234,7 @@ class PanelServer:
                     await ws.send(json.dumps({"rows": np.where(np.isnan(rows), None, rows).tolist()}))
                 with state.lock:
                     now_status, got = dict(state.status), state.thumb
-                    new_events = state.events[events:]
-                    events = len(state.events)
+                events, new_events = state.events_since(events)
                 if now_status != status:
                     status = now_status
                     await ws.send(json.dumps({"status": status}))
@@ -271,6 +284,19 @@ def _peer(ws) -> str:
         return str(ws.remote_address[0])
     except (AttributeError, IndexError, TypeError):
         return "a page"
+
+
+def _names(address: str) -> frozenset:
+    """The names a request's ``Host`` may give for this server: ``localhost``, the machine's
+    names and the address it listens on."""
+    import socket
+
+    names = {"localhost", socket.gethostname(), address}
+    try:
+        names.add(socket.getfqdn())
+    except OSError:
+        pass
+    return frozenset(n.lower().rstrip(".") for n in names if n)
 
 
 def _hostname() -> str:

@@ -17,6 +17,8 @@ import numpy as np
 
 #: frames of plot history the page gets when it connects (the plots scroll over the newest)
 HISTORY = 600
+#: the newest events kept for a page that connects
+MOST_EVENTS = 200
 #: the plotted series before the per-rank ones: frame, fps, balance id, swap skew, imbalance; then each
 #: rank's frame time (ms), then each rank's render CPU time (ms: how evenly the work was balanced)
 SERIES = ("frame", "fps", "balance", "swap_skew_ms", "imbalance")
@@ -63,7 +65,8 @@ class PanelState:
         self.thumb: tuple[int, np.ndarray, object, int] | None = None  # (seq, image top row first, rects, shrink)
         self.thumb_seq = 0
         self.status: dict = {}
-        self.events: list[tuple[float, str]] = [(time.time(), e) for e in (events or [])]
+        self.events: list[tuple[float, str]] = [(time.time(), e) for e in (events or [])][-MOST_EVENTS:]
+        self.events_total = len(events or [])  # events ever, the trimmed ones included
         self.summary: dict | None = None
         self.commands: queue.SimpleQueue = queue.SimpleQueue()
         self.clients = 0  # pages connected now (the server's count)
@@ -93,7 +96,15 @@ class PanelState:
         """Something the operator should see as it happens (a recovery, a dark tile, a refusal)."""
         with self.lock:
             self.events.append((time.time(), text))
-            del self.events[:-200]
+            self.events_total += 1
+            del self.events[:-MOST_EVENTS]
+
+    def events_since(self, seen: int) -> tuple[int, list]:
+        """The events after the first ``seen`` ever (those still kept), and how many there were
+        ever: a page counts events, not places in the trimmed list."""
+        with self.lock:
+            new = min(self.events_total - seen, len(self.events))
+            return self.events_total, self.events[len(self.events) - new:] if new > 0 else []
 
     def finish(self, summary: dict) -> None:
         """The run's end: its summary, for the page to show."""

@@ -62,11 +62,14 @@ class Posted:
     waits for them and composes the tile."""
 
     def __init__(self, me, rects, rendered, incoming, requests, keep, inbox, sent: Sent, with_depth, near,
-                 frame: int = 0, links: dict | None = None):
+                 frame: int = 0, links: dict | None = None, recv_order: tuple = ()):
         self.me, self.rects, self.rendered, self.incoming = me, rects, rendered, incoming
         self.requests, self.keep, self.inbox = requests, keep, inbox
         self.sent, self.with_depth, self.near = sent, with_depth, near
         self.frame, self.links = frame, links or {}
+        # where each framed message's receive sits in ``requests`` (its byte count is checked)
+        self.recv_at = {s: i for i, s in enumerate(recv_order, len(requests) - len(recv_order)) if s in self.links}
+        self.received: dict[int, int] = {}
 
     def complete(self, tile, timeout: float, color: np.ndarray, depth: np.ndarray | None = None,
                  read=None) -> Sent:
@@ -80,7 +83,10 @@ class Posted:
         early = me in incoming and not self.with_depth
         if early:
             _merge(color, depth, tile, [(p, *_local(p, rects[me], rendered)) for p in incoming[me]])
-        wait_all(self.requests, timeout, "frame exchange")
+        statuses = [] if self.recv_at else None  # what each framed message's receive got
+        wait_all(self.requests, timeout, "frame exchange", statuses=statuses)
+        if statuses:
+            self.received = {s: statuses[i].Get_count() for s, i in self.recv_at.items()}
         self.keep = None
         spent = 0.0
         for s in sorted(incoming):  # ascending sender: the depth tie rule
@@ -104,16 +110,17 @@ class Posted:
         took; CorruptPiece where it does not decode."""
         raw = sum(p.pixels for p in parts) * (7 if self.with_depth else 3)
         what = f"rank {self.me}: frame {self.frame}: the pieces from rank {s}"
-        packed, bits, took = decoded(self.inbox[s], raw, what)
+        packed, bits, took = decoded(self.inbox[s], raw, what, self.received.get(s))
         return _unpack_planar(packed, parts, self.with_depth, bits), took
 
 
-def decoded(message: np.ndarray, raw: int, what: str) -> tuple[np.ndarray, int, float]:
-    """``wire.decode`` of a message that must hold ``raw`` bytes, with the CPU seconds it took;
-    CorruptPiece beginning with ``what`` (the rank, the frame, the sender) where it does not decode."""
+def decoded(message: np.ndarray, raw: int, what: str, received: int | None = None) -> tuple[np.ndarray, int, float]:
+    """``wire.decode`` of a message that must hold ``raw`` bytes (``received`` of them arrived),
+    with the CPU seconds it took; CorruptPiece beginning with ``what`` (the rank, the frame, the
+    sender) where it does not decode."""
     t0 = time.thread_time()
     try:
-        packed, bits = wire.decode(message, raw)
+        packed, bits = wire.decode(message, raw, received)
     except wire.WireError as exc:
         raise CorruptPiece(f"{what}: {exc}") from None
     return packed, bits, time.thread_time() - t0
@@ -167,7 +174,8 @@ def post(comm, me: int, rects, rendered: list, plan: list[Piece], with_depth: bo
         inbox[s] = buf
         requests.append(comm.Irecv(buf, source=s, tag=TAG))
     cost = Sent(sent, zbytes, onwire, spent * 1e3, 0.0, bits if any(r in links for r in sends) else 0)
-    return Posted(me, rects, rendered, incoming, requests, keep, inbox, cost, with_depth, near, frame, links)
+    return Posted(me, rects, rendered, incoming, requests, keep, inbox, cost, with_depth, near, frame, links,
+                  tuple(inbox))  # the receives come last in ``requests``, in the inbox's order
 
 
 def _merge(color, depth, tile, views) -> None:

@@ -48,17 +48,20 @@ class PeerTimeout(RuntimeError):
     """A wait on other ranks exceeded its bound."""
 
 
-def wait_all(requests, timeout: float, what: str, most: float | None = None) -> None:
+def wait_all(requests, timeout: float, what: str, most: float | None = None, statuses: list | None = None) -> None:
     """Complete MPI requests, sleeping between tests (growing to ``most`` s); raise PeerTimeout
     after ``timeout`` s. The requests' own class tests them (``MPI.Request.Testall``, or a
     stand-in communicator's), so waiting imports no MPI: a process that never sent stays
-    MPI-free."""
+    MPI-free. ``statuses``: a list that gets each request's status (what a receive got)."""
     if not requests:
         return
     start = time.monotonic()
     deadline, checks = start + timeout, start + CHECK_AFTER
     sleep, most = 1e-5, POLL if most is None else most
     testall = type(requests[0]).Testall
+    if statuses is not None:
+        test = testall
+        testall = lambda r: test(r, statuses)  # noqa: E731
     while not testall(requests):
         now = time.monotonic()
         if now > deadline:

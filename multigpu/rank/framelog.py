@@ -158,10 +158,12 @@ class FrameLog:
         self.gathered[0] = back
         boxes = {k: np.empty(wire.bound(back.nbytes), np.uint8) if k in self.links else self.gathered[k]
                  for k in range(1, self.K)}
+        statuses: list = []
         wait_all([self.comm.Irecv(b, source=k, tag=MOSAIC_TAG) for k, b in boxes.items()], self.cfg.timeout,
-                 "mosaic gather")
-        for k in self.links:
-            packed, _, _ = decoded(boxes[k], back.nbytes, f"rank 0: frame {f}: the tile of rank {k}")
+                 "mosaic gather", statuses=statuses)
+        for k in self.links:  # boxes hold ranks 1.. in order: rank k's status is statuses[k - 1]
+            packed, _, _ = decoded(boxes[k], back.nbytes, f"rank 0: frame {f}: the tile of rank {k}",
+                                   statuses[k - 1].Get_count())
             self.gathered[k].reshape(-1)[:] = packed
 
     def write(self, write, *args) -> None:

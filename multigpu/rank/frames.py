@@ -87,6 +87,8 @@ class Frames:
         self.tiles = composed.tiles()
         tw, th = composed.tile
         self.live, self.record, self.background = setup.live, setup.record, setup.background
+        if self.live is not None:  # a paused run still hears Ctrl-C and SIGTERM
+            self.live.steering.stopping = lambda: job is not None and job.signum is not None
         self.head = setup.head  # the tracked head (--head-tracker), or None
         self.culler = PartCuller(scene) if renderer.draws.parts else None  # objects cut into parts
         # speed for accuracy: each frame's render scale and levels of detail (core/quality.py)

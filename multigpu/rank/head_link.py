@@ -3,9 +3,10 @@ and every rank uses it from the same frame.
 
 The protocol is one JSON object (or list) per UDP datagram, a pose as ``core.eyes.pose_of`` reads
 it: ``{"position": [x, y, z], "yaw": .., "pitch": .., "roll": ..}`` in the room's metres and
-degrees (docs/USAGE.md, "A stereo wall"). Each frame rank 0 drains the socket without waiting
-and keeps the newest good pose; a datagram that does not parse, or puts an eye on or behind the
-wall, is refused with one warning (the first; the rest are counted) and the last good pose stays.
+degrees (docs/USAGE.md, "A stereo wall"). Each frame rank 0 reads at most ``MOST_PER_FRAME``
+datagrams without waiting (``core.doors`` checks each) and keeps the newest good pose; a datagram
+that does not parse, or puts an eye on or behind the wall, is refused in a rate-limited line (all
+are counted) and the last good pose stays.
 The pose travels to the other ranks in one small broadcast a frame (bounded by ``--timeout``), so
 frames in flight each use the newest pose at their submit. Rank 0 keeps when each pose reached the host
 (the kernel's receive stamp), for the motion-to-photon figure in the summary: from there to its
@@ -14,15 +15,14 @@ frame shown on rank 0's display, the wait for the next frame to start included.
 
 from __future__ import annotations
 
-import json
 import socket
 import struct
-import sys
 import time
 from collections import deque
 
 import numpy as np
 
+from multigpu.core.doors import Refusal, Refusals, parse_json
 from multigpu.core.eyes import Pose, head_problem, pose_of
 from multigpu.rank.exchange import wait_all
 
@@ -30,6 +30,9 @@ from multigpu.rank.exchange import wait_all
 PHOTON_KEPT = 10_000
 #: the longest datagram read (a pose is well under 200 bytes)
 MOST_BYTES = 2048
+#: the most datagrams read a frame: a flood costs the frame loop this many reads, the rest wait
+#: in the kernel's buffer (and, once it is full, are dropped there)
+MOST_PER_FRAME = 64
 
 
 class HeadLink:
@@ -40,6 +43,7 @@ class HeadLink:
         self.tiles = comm.Get_size()
         self.buf = np.zeros(8)  # have, x, y, z, yaw, pitch, roll, arrival (rank 0's time.time)
         self.received = self.refused = 0
+        self.refusals = Refusals("multigpu: warning: head tracker: refused ", per_minute=1)
         self.photon_ms: deque = deque(maxlen=PHOTON_KEPT)  # rank 0: a pose's arrival to its frame shown
 
     @staticmethod
@@ -58,8 +62,8 @@ class HeadLink:
         return sock
 
     def _drain(self) -> None:
-        """Every datagram waiting, the newest good pose kept (rank 0)."""
-        while True:
+        """The datagrams waiting (``MOST_PER_FRAME`` at most), the newest good pose kept (rank 0)."""
+        for _ in range(MOST_PER_FRAME):
             try:
                 data, ancillary, _, sender = self.sock.recvmsg(MOST_BYTES, 64)
             except (BlockingIOError, InterruptedError):
@@ -73,10 +77,8 @@ class HeadLink:
                 pose = why if why else pose
             if isinstance(pose, str):
                 self.refused += 1
-                if self.refused == 1:
-                    print(f"multigpu: warning: head tracker: refused a pose from {sender[0]}:{sender[1]} ({pose}); "
-                          "the last good pose stays (further refusals are counted in summary.json)",
-                          file=sys.stderr, flush=True)
+                self.refusals.refuse(f"a pose from {sender[0]}:{sender[1]} ({pose}); the last good pose stays "
+                                     "(every refusal is counted in summary.json)")
                 continue
             self.received += 1
             self.buf[:] = (1.0, *pose.position, pose.yaw, pose.pitch, pose.roll, arrived)
@@ -121,7 +123,6 @@ def _arrival(ancillary) -> float:
 
 
 def _parsed(data: bytes) -> Pose | str:
-    try:
-        return pose_of(json.loads(data.decode("utf-8")))
-    except (UnicodeDecodeError, ValueError, RecursionError):
-        return "not JSON"
+    """A datagram's pose, or why it was refused (never raises: ``core.doors``)."""
+    got = parse_json(data, MOST_BYTES)
+    return got if isinstance(got, Refusal) else pose_of(got)

@@ -171,6 +171,9 @@ class PanelLink:
         if on and self.recording is None:
             self.recordings += 1
             path = self.out_dir / f"recorded-{self.recordings:02d}.json"
+            while path.exists():  # a restarted run (--recover) keeps the recordings made before it
+                self.recordings += 1
+                path = self.out_dir / f"recorded-{self.recordings:02d}.json"
             self.recording = PathAppender(path)
             self.state.event(f"recording the camera to {path} (replay: --path {path})")
         elif not on and self.recording is not None:

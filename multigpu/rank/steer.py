@@ -65,6 +65,7 @@ class Steering:
         self.last = time.perf_counter()
         self.recorded: Camera | None = None  # rank 0: this frame's camera in path-file coordinates
         self.last_control: Control | None = None  # the newest agreed control (what the page shows)
+        self.stopping = lambda: False  # whether this rank was told to stop (``job.Job.interrupted``)
 
     def _taken(self) -> Taken:
         """Rank 0: the windows' input and the page's, as one."""
@@ -120,11 +121,13 @@ class Steering:
     def next(self) -> Control:
         """This frame's control, agreed by every rank (one broadcast from rank 0). While the page
         has the run paused, every rank waits here, a broadcast each ``PAUSE_TICK``, until it
-        resumes or stops it (the frames in flight wait with it)."""
+        resumes or stops it, or a signal reaches rank 0 (the frames in flight wait with it)."""
         began = None
         while True:
             if self.comm.Get_rank() == 0:
                 self._read()
+                if self.state[16] and self.stopping():  # Ctrl-C or SIGTERM ends a pause: the frame
+                    self.state[16] = 0.0  # loop then stops after this frame, as it does unpaused
             if self.comm.Get_size() > 1:
                 wait_all([self.comm.Ibcast(self.state, root=0)], self.timeout, "input broadcast")
             if not self.state[16]:
