@@ -177,14 +177,20 @@ def _walkthrough(a) -> int:
         collective_exit(exits.BAD_INPUT)
     from multigpu.rank import standby
 
-    go_file, ready = standby.standing_by(), None
-    if go_file:  # started ahead of a restart (--standby): set up, then idle until the launcher says go
-        standby.warm()
-        ready = standby.prepared(a, comm)
-        got = standby.wait_for_go(comm, go_file)
-        if got.get("quit"):
-            return 0
-        standby.go(a, got)
+    ready = None
+    try:
+        go_file = standby.standing_by()
+        if go_file:  # started ahead of a restart (--standby): set up, then idle until the launcher says go
+            standby.warm()
+            ready = standby.prepared(a, comm)
+            got = standby.wait_for_go(comm, go_file)
+            if got.get("quit"):
+                return 0
+            standby.go(a, got)
+    except InputError as exc:  # the same on every rank (the same setting, the same bytes): one line, all exit 2
+        if comm.Get_rank() == 0:
+            print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
+        collective_exit(exits.BAD_INPUT)
     job = Job(comm, liveness=a.liveness if a.liveness is not None and a.liveness >= 0 else DEFAULT_LIVENESS)
     job.catch_signals()  # SIGINT/SIGTERM: raise during setup, stop after the frame during frames
     try:

@@ -119,7 +119,7 @@ def walk_config(a):
         try:
             given["panel"] = read_panel(wall.panel)
         except InputError as exc:
-            raise InputError(f"{wall.path}: panel {exc}") from None
+            raise InputError(f"{wall.file}: panel {exc}") from None
     stereo_keys = {"mode": "stereo", "eye_separation_m": "eye_separation", "swap_eyes": "swap_eyes",
                    "head_m": "head", "world_per_metre": "world_per_metre"}
     unset = defaults(WalkConfig)
@@ -132,7 +132,7 @@ def walk_config(a):
         try:
             given["head_tracker"] = read_tracker(wall.stereo["tracker"])
         except InputError as exc:
-            raise InputError(f"{wall.path}: stereo.tracker {exc}") from None
+            raise InputError(f"{wall.file}: stereo.tracker {exc}") from None
     if given.get("screen_m") is None:
         given["screen_m"] = wall.screen_m or screen_of_bezel(wall, grid, tile, mullion)
     return WalkConfig(scene=spec(a), grid=grid, tile=tile, mullion=mullion, **given,

@@ -102,6 +102,12 @@ def check_viewer(cfg) -> None:
         why = head_problem(Pose(cfg.head), viewer, cfg.ranks)
         if why:
             raise InputError.of("head", f"{','.join(f'{v:g}' for v in cfg.head)}: {why}")
+    elif viewer.screens and not cfg.poses:  # the viewer stands at the room's origin (Viewer.home)
+        why = head_problem(Pose((0.0, 0.0, 0.0)), viewer, cfg.ranks)
+        if why:
+            raise InputError.of("wall", f"corners_m: the viewer stands at the room's origin unless a head is given, "
+                                f"and there {why.removeprefix('a viewer at (0, 0, 0) has ')} (give --head X,Y,Z "
+                                "or the wall file's stereo.head_m)")
     for i, pose in enumerate(cfg.poses):  # the file's poses, once at the door
         why = head_problem(pose, viewer, cfg.ranks)
         if why:

@@ -23,6 +23,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from multigpu.core.doors import Unfit, loads
 from multigpu.errors import InputError
 
 #: the wall file's JSON Schema (shipped beside the example walls: examples/walls/), which
@@ -117,7 +118,11 @@ def load_wall(path: str) -> Wall:
     one line naming the file, the entry and the key."""
     where = f"--wall {path}"
     try:
-        doc = json.loads(Path(path).read_text())
+        doc = loads(Path(path).read_text())  # NaN, Infinity and numbers out of range refused here
+    except Unfit as exc:
+        raise InputError(f"{where}: {exc} (every number must be finite)") from None
+    except RecursionError:
+        raise InputError(f"{where}: nested too deeply") from None
     except FileNotFoundError:
         raise InputError(f"{where}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:

@@ -27,25 +27,25 @@ class Refusal(str):
     """Why a door's input was refused (a string: it is said as it is)."""
 
 
-class _Bad(ValueError):
-    pass
+class Unfit(ValueError):
+    """A JSON document with a number it may not hold (NaN, Infinity, out of range, too many digits)."""
 
 
 def _int(text: str) -> int:
     if len(text.lstrip("-")) > MOST_DIGITS:
-        raise _Bad(f"an integer of {len(text.lstrip('-'))} digits (at most {MOST_DIGITS})")
+        raise Unfit(f"an integer of {len(text.lstrip('-'))} digits (at most {MOST_DIGITS})")
     return int(text)
 
 
 def _float(text: str) -> float:
     v = float(text)
     if not math.isfinite(v):  # 1e999 reads as inf
-        raise _Bad("a number out of range")
+        raise Unfit("a number out of range")
     return v
 
 
 def _constant(name: str):
-    raise _Bad(f"{name} is not a number JSON allows")
+    raise Unfit(f"{name} is not a number JSON allows")
 
 
 def _depth(value, most: int) -> bool:
@@ -60,6 +60,12 @@ def _depth(value, most: int) -> bool:
     return True
 
 
+def loads(text: str) -> object:
+    """``json.loads`` with numbers bounded: ``Unfit`` for NaN, Infinity, a float out of range or
+    an integer of more than ``MOST_DIGITS`` digits (JSONDecodeError as ``json``'s)."""
+    return json.loads(text, parse_int=_int, parse_float=_float, parse_constant=_constant)
+
+
 def parse_json(data: str | bytes, most_bytes: int, most_depth: int = MOST_DEPTH) -> object:
     """``data`` read as JSON, or a ``Refusal`` saying why not: longer than ``most_bytes``, not
     UTF-8, not JSON, nested deeper than ``most_depth``, an integer of more than ``MOST_DIGITS``
@@ -70,8 +76,8 @@ def parse_json(data: str | bytes, most_bytes: int, most_depth: int = MOST_DEPTH)
         text = data.decode("utf-8") if isinstance(data, (bytes, bytearray, memoryview)) else data
         if text.count("[") + text.count("{") > 4 * most_depth and not _shallow(text, most_depth):
             return Refusal(f"nested deeper than {most_depth}")
-        value = json.loads(text, parse_int=_int, parse_float=_float, parse_constant=_constant)
-    except _Bad as exc:
+        value = loads(text)
+    except Unfit as exc:
         return Refusal(str(exc))
     except UnicodeDecodeError:
         return Refusal("not UTF-8")

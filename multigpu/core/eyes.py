@@ -190,6 +190,8 @@ def screens_of(corners: dict, tile_rects: np.ndarray, tolerance: float = 0.002) 
 def rectangle_problem(corners) -> str | None:
     """Why three corners (lower-left, lower-right, upper-left) do not make a display (None: they do)."""
     pa, pb, pc = (np.asarray(p, dtype=np.float64) for p in corners)
+    if not all(is_number(float(v), -MOST_POSE, MOST_POSE) for p in (pa, pb, pc) for v in p):
+        return f"every coordinate must be a finite number of metres within +-{MOST_POSE:g}"
     w, h = np.linalg.norm(pb - pa), np.linalg.norm(pc - pa)
     if not (w > 0 and h > 0):
         return "two corners coincide"
@@ -210,7 +212,7 @@ def pose_of(row) -> Pose | str:
     if isinstance(row, dict):
         extra = set(row) - {"position", "yaw", "pitch", "roll", "t"}
         if extra:
-            return f"unknown key '{sorted(extra)[0]}' (known: position, yaw, pitch, roll, t)"
+            return f"unknown key {sorted(extra)[0][:20]!r} (known: position, yaw, pitch, roll, t)"
         at = row.get("position")
         if not isinstance(at, list):
             return "position must be [x, y, z]"

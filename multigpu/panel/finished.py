@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import json
 import secrets
+import sys
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
+from multigpu.core.doors import is_whole
 from multigpu.errors import InputError
 from multigpu.panel.server import PanelServer
 from multigpu.panel.state import PanelState, width
@@ -23,6 +25,9 @@ from multigpu.panel.state import plot_rows as plot_rows_of
 SLIDE = 1.0
 #: the largest thumbnail side (pixels) a mosaic is shrunk to
 THUMB = 640
+#: the most ranks a run may say it had, and the most frames plotted (a longer run: every k-th frame)
+MOST_RANKS = 4096
+MOST_PLOTTED = 20_000
 
 
 def plot_rows(timings: np.ndarray, ranks: int) -> np.ndarray:
@@ -47,20 +52,26 @@ def load(out: Path) -> tuple[PanelState, list[Path]]:
     if not summary_file.is_file() or not timings_file.is_file():
         raise InputError(f"{out}: not a run's outputs (needs summary.json and timings.csv)")
     try:
-        summary = json.loads(summary_file.read_text())
+        summary = json.loads(summary_file.read_text())  # our own writer's (NaN where a figure has none)
         timings = read_timings(timings_file)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{out}: cannot read the run's outputs ({exc})") from None
-    config = summary.get("config", {})
-    ranks = int(summary.get("ranks") or config.get("ranks") or 1)
+    except (OSError, ValueError, RecursionError) as exc:
+        raise InputError(f"{out}: cannot read the run's outputs ({exc.__class__.__name__}: {str(exc)[:120]})") from None
+    if not isinstance(summary, dict):
+        raise InputError(f"{summary_file}: not a run's summary (not a JSON object)")
+    config = summary.get("config") if isinstance(summary.get("config"), dict) else {}
+    ranks = summary.get("ranks") or config.get("ranks") or 1
+    if not is_whole(ranks, 1, MOST_RANKS):
+        raise InputError(f"{summary_file}: ranks must be a whole number 1..{MOST_RANKS}, got {str(ranks)[:40]!r}")
     header = {"title": f"multigpu view: {out}", "run": str(out), **{k: v for k, v in config.items()
                                                                     if not isinstance(v, (dict, list))}}
     events = [f"{'complete' if summary.get('complete') else 'not complete'}: {summary.get('frames_written', 0)} "
               "frames written"]
     if summary.get("stopped_by"):
         events.append(f"stopped by {summary['stopped_by']}")
-    state = PanelState(header, (), ranks, events, history=max(len(timings) // max(ranks, 1), 1))
     rows = plot_rows(timings, ranks)
+    if len(rows) > MOST_PLOTTED:  # a run of days: every k-th frame, the last one kept
+        rows = rows[np.unique(np.r_[np.arange(0, len(rows), -(-len(rows) // MOST_PLOTTED)), len(rows) - 1])]
+    state = PanelState(header, (), ranks, events, history=max(len(rows), 1))
     for row in rows:  # once, at the start
         state.add_row(row)
     state.set_status(state="finished run", view=True)
@@ -73,7 +84,7 @@ def _slides(state: PanelState, mosaics: list[Path], stop: threading.Event) -> No
     """Show the mosaics in turn as the thumbnail, over and over, while a page is connected."""
     from PIL import Image
 
-    i = 0
+    i, skipped = 0, set()
     while mosaics and not stop.is_set():
         if (state.clients and len(mosaics) > 1) or state.thumb is None:
             path = mosaics[i % len(mosaics)]
@@ -81,8 +92,11 @@ def _slides(state: PanelState, mosaics: list[Path], stop: threading.Event) -> No
                 with Image.open(path) as im:
                     im.thumbnail((THUMB, THUMB))
                     state.set_thumb(np.asarray(im.convert("RGB")), None, 1)
-            except OSError:
-                pass
+            except (OSError, ValueError, Image.DecompressionBombError) as exc:  # one bad mosaic: the next
+                if path not in skipped:
+                    skipped.add(path)
+                    print(f"multigpu view: {path}: not shown ({exc.__class__.__name__}: {str(exc)[:120]})",
+                          file=sys.stderr, flush=True)
             i += 1
         stop.wait(SLIDE)
 

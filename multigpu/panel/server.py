@@ -45,6 +45,8 @@ MOST_LOG = 20
 #: messages a page may send a second (a burst of twice as many): beyond, refused, so that a page
 #: that floods cannot fill the queue the frame loop drains
 MOST_RATE = 60.0
+#: plot rows in one message to a page at most (a long history goes in several, one a period)
+MOST_ROWS = 2000
 
 
 def _log(text: str) -> None:
@@ -229,7 +231,7 @@ class PanelServer:
         seq, thumb, status, events, summary = 0, 0, None, 0, False
         try:
             while True:
-                seq, rows = state.rows_since(seq)
+                seq, rows = state.rows_since(seq, MOST_ROWS)
                 if len(rows):
                     await ws.send(json.dumps({"rows": np.where(np.isnan(rows), None, rows).tolist()}))
                 with state.lock:

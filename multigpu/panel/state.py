@@ -123,10 +123,12 @@ class PanelState:
 
     # -- the server's side
 
-    def rows_since(self, seq: int) -> tuple[int, np.ndarray]:
-        """The plot rows added after row ``seq`` (at most ``history``), and the newest count."""
+    def rows_since(self, seq: int, most: int | None = None) -> tuple[int, np.ndarray]:
+        """The plot rows added after row ``seq`` (at most ``history``, and at most ``most`` of the
+        oldest of them: the rest come on the next call), and the count up to the last returned."""
         with self.lock:
             n = self.seq
             first = max(seq, n - self.history)
-            idx = np.arange(first, n) % self.history
-            return n, self.plot[idx].copy()
+            last = n if most is None else min(n, first + most)
+            idx = np.arange(first, last) % self.history
+            return last, self.plot[idx].copy()

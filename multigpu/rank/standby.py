@@ -28,11 +28,20 @@ from multigpu.records.recovery import STANDBY_ENV as ENV  # the go file's path, 
 POLL = 0.02
 #: seconds the go's broadcast may take once rank 0 has read it (every rank is looking by then)
 GO_WAIT = 60.0
+#: the largest go file read (bytes): a frame and a few recoveries' history
+MOST_GO = 1 << 20
 
 
 def standing_by() -> str | None:
-    """The go file this job waits for, or None (not a standby)."""
-    return os.environ.get(ENV) or None
+    """The go file this job waits for, or None (not a standby). InputError where ``ENV`` names
+    a file in a folder that does not exist: a stray setting (the launcher makes the folder
+    first), which would otherwise keep a walk waiting without a word."""
+    from multigpu.errors import InputError
+
+    go_file = os.environ.get(ENV) or None
+    if go_file and not Path(go_file).parent.is_dir():
+        raise InputError(f"{ENV}={go_file}: no such folder: only the launcher's --standby sets it (unset it)")
+    return go_file
 
 
 def warm() -> None:
@@ -72,10 +81,17 @@ def wait_for_go(comm, go_file: str) -> dict:
 
     size = np.zeros(1, dtype=np.int64)
     if comm.Get_rank() == 0:
+        print(f"multigpu: standing by for a restart ({ENV}): waiting for the launcher's go", flush=True)
         path = Path(go_file)
         while not path.exists():
+            if not path.parent.is_dir():  # the launcher is gone and took its folder: nothing will come
+                break
             time.sleep(POLL)
-        data = path.read_bytes()
+        try:
+            data = path.read_bytes()[:MOST_GO]
+        except OSError:
+            data = b'{"quit": true}'
+
         size[0] = len(data)
         wait_all([comm.Ibcast(size, root=0)], GO_WAIT, "standby's go")
         buf = bytearray(data)
@@ -85,7 +101,25 @@ def wait_for_go(comm, go_file: str) -> dict:
             time.sleep(POLL)
         buf = bytearray(int(size[0]))
     wait_all([comm.Ibcast(buf, root=0)], GO_WAIT, "standby's go")
-    return json.loads(bytes(buf))
+    return go_of(bytes(buf), go_file)
+
+
+def go_of(data: bytes, go_file: str) -> dict:
+    """The launcher's go, checked (the same bytes give the same answer on every rank):
+    ``{"quit": true}`` or ``{"resume_at": F, "history": [...]}``; InputError naming the file
+    and what is wrong."""
+    from multigpu.core.doors import Refusal, is_whole, parse_json
+    from multigpu.errors import InputError
+
+    got = parse_json(data, MOST_GO)
+    if isinstance(got, Refusal):
+        raise InputError(f"{ENV} {go_file}: {got}")
+    if got == {"quit": True}:
+        return got
+    if (not isinstance(got, dict) or set(got) != {"resume_at", "history"} or not is_whole(got["resume_at"], 0, 1 << 62)
+            or not isinstance(got["history"], list)):
+        raise InputError(f"{ENV} {go_file}: must be {{\"quit\": true}} or {{\"resume_at\": FRAME, \"history\": [...]}}")
+    return got
 
 
 def go(args, got: dict) -> None:
