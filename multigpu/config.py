@@ -281,6 +281,7 @@ class WalkConfig:
                                     valid=lambda v: v > 0 and _finite(v), must="must be > 0",
                                     help="scene units a metre of head motion moves the eye (default: {default})")
     poses: tuple = ()  # the head pose file's poses, read at the door
+    focus: bool = False  # no wall size, head or scale given: zero parallax at the scene (core/eyes.focused)
     corners: tuple = ()  # per rank label: its display's room corners (wall file "corners_m"), where the file gives them
     # -- balancing
     balance: str = option("auto", group=BALANCING, choices=lambda: REGISTRY, help=_strategies)

@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from multigpu.core.eyes import Pose, eye_frames, head_problem
+from multigpu.core.eyes import FOCUS_SAMPLES, Pose, eye_frames, focused, head_problem
 from multigpu.core.projectors import make_projector
 from multigpu.core.stereo import doubled, halved, make_stereo
 from multigpu.core.work import Work
@@ -122,6 +122,15 @@ def eye_config(cfg, stereo):
                                head=None, head_poses=None, poses=())
 
 
+def focus_of(scene) -> tuple[np.ndarray, np.ndarray]:
+    """What ``core.eyes.focused`` needs of a scene: its centre, and (M, 4) homogeneous world
+    positions of every k-th vertex (``FOCUS_SAMPLES`` at most)."""
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.bounds)
+    step = max(1, -(-len(scene.vertices) // FOCUS_SAMPLES))
+    pts = scene.vertices[::step, :3].astype(np.float64) + np.asarray(scene.origin, dtype=np.float64)
+    return (lo + hi) / 2, np.c_[pts, np.ones(len(pts))]
+
+
 class Planner:
     """Plans frames for one rank of a ``WalkConfig`` wall (``rank`` None: every rank's masks)."""
 
@@ -140,6 +149,8 @@ class Planner:
         # the screens the eyes look through (a CAVE's: one per plane), each a rect of the canvas
         self.screens = self.viewer.planes(cfg.ranks) if self.viewer is not None else ()
         self.screen_rects = screen_rects(self.screens, self.canvas)
+        # a wall of no given size: the zero-parallax plane at the scene's centre (``core.eyes.focused``)
+        self.focus = focus_of(scene) if cfg.focus else None
         self.canvas_rects = None  # the last frame's object rects on the canvas, where bezels make them differ
         self.pose = None  # a tracked head's newest pose (``rank/head_link.py``): before the pose file's
         self.head_offset = (0.0, 0.0, 0.0)  # metres the keys moved the head from its pose (an interactive run)
@@ -209,7 +220,8 @@ class Planner:
             base = pose or self.viewer.head or Pose(tuple(self.viewer.home(camera)))
             moved = replace(base, position=tuple(float(v) for v in np.add(base.position, self.head_offset)))
             pose = moved if head_problem(moved, self.viewer, self.cfg.ranks) is None else base  # never behind a screen
-        self.views = eye_frames(camera, self.viewer, pose, 1 if self.stereo is None else 2, self.cfg.ranks)
+        viewer = self.viewer if self.focus is None else focused(self.viewer, camera, *self.focus, self.size)
+        self.views = eye_frames(camera, viewer, pose, 1 if self.stereo is None else 2, self.cfg.ranks)
         several = len(self.screens) > 1
         if several:  # each screen's frustum onto its own rect of the canvas
             self.views = [[(v, on_canvas(r, self.size) @ p, li) for (v, p, li), r in zip(eye, self.screen_rects)]

@@ -84,6 +84,11 @@ def check_viewer(cfg) -> None:
         raise InputError.of("tile", f"{tw}x{th}: top-bottom stereo needs an even tile height (each eye half)")
     if cfg.screen_m is None:
         object.__setattr__(cfg, "screen_m", tuple(v * DEFAULT_PITCH_MM / 1000.0 for v in cfg.canvas.size))
+        # nothing physical given: the wall's size is a guess, so the eyes converge on the scene instead
+        # (a copy of the config keeps it: its screen_m is set by then)
+        unscaled = (cfg.head is None and not cfg.head_poses and cfg.head_tracker is None and not cfg.corners
+                    and cfg.world_per_metre == 1.0)
+        object.__setattr__(cfg, "focus", cfg.focus or (unscaled and cfg.stereo != "mono"))
     if cfg.head_poses and not cfg.poses:
         object.__setattr__(cfg, "poses", read_poses(cfg.head_poses))
     if cfg.corners and (len(cfg.corners) != cfg.ranks or any(c is None for c in cfg.corners)):

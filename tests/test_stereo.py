@@ -8,6 +8,7 @@ levels of detail."""
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -615,3 +616,78 @@ def test_the_head_tracker_listens_on_127_0_0_1_unless_told():
     assert read_tracker("0.0.0.0:7700") == ("0.0.0.0", 7700)
     with pytest.raises(InputError, match="a port 1..65535"):
         read_tracker("0")
+
+
+def test_a_passive_tiles_windows_keep_fullscreen_and_swap_in_one_refresh(monkeypatch):
+    """Defect 20: passive stereo dropped the wall file's fullscreen and swapped both eyes' windows
+    with vsync one after the other (two refreshes a frame)."""
+    import multigpu.display.window as window_module
+    from multigpu.display import make_presenter
+
+    calls, made = [], []
+
+    class _Window:
+        def __init__(self, rank, size, position, display, where, title=None, vsync=True, fullscreen=False,
+                     origin=(0, 0)):
+            self.name = "left" if "left" in title else "right"
+            self.context, self.display = None, display
+            made.append((self.name, vsync, fullscreen, origin))
+
+        def current(self):
+            calls.append(("current", self.name))
+
+        def swap(self):
+            calls.append(("swap", self.name))
+            return 1.0
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(window_module, "Window", _Window)
+    p = make_presenter("window", 0, (64, 48), (0, 0), ":0", "test", fullscreen=True, right=(1920, 0))
+    assert made == [("left", True, True, (0, 0)), ("right", False, True, (1920, 0))]
+    calls.clear()
+    p.swap()
+    swaps = [c for c in calls if c[0] == "swap"]
+    assert swaps == [("swap", "left"), ("swap", "right")] and calls[-1] == ("current", "left")
+
+
+def _parallax(cfg, spec, frames: int = 40) -> float:
+    """The largest parallax of the default walk, as a share of the wall's width: every vertex both
+    eyes see, projected through each eye's off-axis frustum, every few frames of the walk."""
+    from multigpu.planner import Planner
+    from multigpu.scene.models import load_scene
+    from multigpu.scene.paths import generate
+
+    scene = load_scene(spec)[0]
+    path = generate(cfg.path_kind, scene)
+    planner = Planner(cfg, scene, rank=0)
+    pts = np.c_[scene.vertices[::7, :3].astype(np.float64) + scene.origin, np.ones(len(scene.vertices[::7]))]
+    most = 0.0
+    for f in np.linspace(0, len(path) - 1, frames).astype(int):
+        planner.frame(path.camera(int(f)), int(f))
+        (left,), (right,) = planner.views  # one screen
+        ndc = []
+        for view, proj, _ in (left, right):
+            clip = pts @ (proj @ view).T
+            ndc.append((clip[:, :3] / clip[:, 3:], clip[:, 3] > 0))
+        (a, in_a), (b, in_b) = ndc
+        seen = in_a & in_b & (np.abs(a[:, :3]) <= 1).all(axis=1) & (np.abs(b[:, :3]) <= 1).all(axis=1)
+        if seen.any():
+            most = max(most, float(np.abs(a[seen, 0] - b[seen, 0]).max()) / 2)  # NDC spans 2 a wall's width
+    return most
+
+
+def test_the_default_anaglyph_can_be_fused_and_a_physical_wall_keeps_its_scale():
+    """The default anaglyph of the pump on a 2x2 wall of 320x240 tiles once showed the eyes ~110 px
+    apart on a 640 px wall (17 %): with no size, head or scale given, the zero-parallax plane is at
+    the scene and the largest parallax of the default walk at most 3 % of the wall's width."""
+    from multigpu.scene.models import SceneSpec
+
+    spec = SceneSpec(model=str(Path(__file__).parent.parent / "models" / "pump.glb"))
+    cfg = WalkConfig(scene=spec, grid=(2, 2), tile=(320, 240), stereo="anaglyph")
+    assert cfg.focus
+    got = _parallax(cfg, spec)
+    assert 0.005 < got <= 0.03, got  # fusable, and still stereo
+    physical = WalkConfig(scene=spec, grid=(2, 2), tile=(320, 240), stereo="anaglyph", screen_m=(0.32, 0.24))
+    assert not physical.focus and _parallax(physical, spec) > 0.1  # the room's scale, as given

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -27,6 +27,13 @@ from multigpu.core.doors import is_number
 EYE_SEPARATION = 0.064
 #: the largest coordinate (metres) or angle (degrees) a pose may give: a room, not an orbit
 MOST_POSE = 1e6
+#: the largest parallax a wall of no given size shows, as a share of its width (``focused``): beyond
+#: about 3 % a viewer cannot fuse the eyes' pictures
+PARALLAX = 0.03
+#: the nearest sampled point taken a little nearer still: a vertex between the samples may be
+NEAR_MARGIN = 0.9
+#: the scene's vertices ``focused`` samples at most (a stereo frame's one matrix product)
+FOCUS_SAMPLES = 20_000
 
 
 @dataclass(frozen=True)
@@ -113,6 +120,30 @@ class Viewer:
         half = (pose.right() if pose is not None else np.array([1.0, 0.0, 0.0])) * (self.separation / 2.0)
         out = np.stack([centre - half, centre + half])
         return out[::-1] if self.swap else out
+
+
+def focused(viewer: Viewer, camera: Camera, centre, points: np.ndarray, size: tuple[int, int]) -> Viewer:
+    """``viewer`` for a wall whose size in the room nobody gave (the default pixel pitch, no head,
+    no tracker): the zero-parallax plane at the scene's focus, as ParaView puts it at its focal
+    point, and the eyes as far apart as keeps every visible point's parallax within ``PARALLAX``
+    of the wall's width (never farther apart than ``viewer``'s). ``points``: (M, 4) homogeneous
+    samples of the scene's vertices, whose nearest one in the camera's frustum (``size``: the
+    canvas) bounds the depth. The screen stands at the scene centre's depth, or at twice the
+    nearest point's where that is nearer: a point at depth z is s (1 - focus / z) metres apart on
+    the screen, so from half the focus to infinity within s."""
+    pos = np.asarray(camera.position, dtype=np.float64)
+    ahead = np.asarray(camera.target, dtype=np.float64) - pos
+    ahead /= max(float(np.linalg.norm(ahead)), 1e-300)
+    view, proj, _ = frame_matrices(camera, size)
+    clip = points @ (proj @ view).T  # a few thousand points: one matrix product
+    w = clip[:, 3]
+    seen = (w > 0) & (np.abs(clip[:, :3]) <= w[:, None]).all(axis=1)
+    nearest = NEAR_MARGIN * float(w[seen].min()) if seen.any() else np.inf
+    focus = max(float((np.asarray(centre, dtype=np.float64) - pos) @ ahead), 2.0 * camera.near)
+    focus = min(focus, 2.0 * nearest) if np.isfinite(nearest) else focus
+    separation = PARALLAX * viewer.screen[0] / max(1.0, focus / max(nearest, 1e-300) - 1.0)
+    return replace(viewer, separation=min(viewer.separation, separation),
+                   world_per_metre=focus / float(viewer.home(camera)[2]))
 
 
 def eye_frame(camera: Camera, viewer: Viewer, eye: np.ndarray, screen: Screen, axes=None) -> tuple:

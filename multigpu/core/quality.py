@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -124,11 +124,12 @@ class Fidelity:
         """Frame ``f``'s quality, each object's level (None: all as modelled) and triangles
         (``rects``: the frame's object rects, NaN where unseen: only seen objects are chosen for)."""
         still = camera == self.last_camera
+        moved = self.last_camera is not None and not still  # a run's first frame has not moved
         self.last_camera = camera
         if self.controller is None or still:
-            q = Quality(self.scale, self.lod_error, True, not still)
+            q = Quality(self.scale, self.lod_error, True, moved)
         else:
-            q = self.controller.quality(self.scale, self.lod_error)
+            q = replace(self.controller.quality(self.scale, self.lod_error), moving=moved)
         if not still and self.controller is not None and f >= WARMUP:
             self.chosen[f] = q
             while len(self.chosen) > 16:  # frames whose times never came (a stopped run)

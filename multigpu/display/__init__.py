@@ -69,9 +69,13 @@ def make_presenter(mode: str, rank: int, tile_size: tuple[int, int], position: t
         return Window(rank, tile_size, position, display, where, fullscreen=fullscreen)
     from multigpu.display.passive import Passive
 
-    left = Window(rank, tile_size, position, display, where, title=f"multigpu tile {rank} left eye")
+    # each eye's output full screen at its own place (two outputs of one X screen); the right eye's
+    # window swaps without waiting, just after the left eye's vsync swap (``Passive.swap``)
+    left = Window(rank, tile_size, position, display, where, title=f"multigpu tile {rank} left eye",
+                  fullscreen=fullscreen, origin=position)
     try:
-        other = Window(rank, tile_size, right, display, where, title=f"multigpu tile {rank} right eye")
+        other = Window(rank, tile_size, right, display, where, title=f"multigpu tile {rank} right eye", vsync=False,
+                       fullscreen=fullscreen, origin=right)
     except BaseException:
         left.close()
         raise

@@ -3,7 +3,9 @@
 A passive wall gives each tile two projectors (or monitors behind polarizing filters), one per
 eye; one GPU drives both, as two outputs of one X screen. The rank shows its composed tile (the
 left eye's picture beside the right eye's, ``core/stereo.py``) as two borderless windows, one at
-each output's place, and swaps them together after the swap barrier. The left eye's window
+each output's place (full screen there where the wall file says ``fullscreen``), and swaps
+them in one refresh after the swap barrier: the left eye's with vsync, the right eye's just after
+it without a second wait. The left eye's window
 holds the GL context the rank renders in; the right eye's has its own, made current only to
 show and swap (as the operator's monitor does).
 """
@@ -36,12 +38,15 @@ class Passive:
             self.left.current()
 
     def swap(self) -> float:
+        """Both eyes in one refresh: the left eye's window waits for the vertical blank, the
+        right eye's (no vsync) swaps right after it, never a second wait."""
+        took = self.left.swap()
         self.right.current()
         try:
             self.right.swap()
         finally:
             self.left.current()
-        return self.left.swap()
+        return took
 
     def poll(self) -> str | None:
         return self.left.poll() or self.right.poll()

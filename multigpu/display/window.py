@@ -35,7 +35,8 @@ class Window:
     mode = "window"
 
     def __init__(self, rank: int, tile_size: tuple[int, int], position: tuple[int, int], display: str | None,
-                 where: str, title: str | None = None, vsync: bool = True, fullscreen: bool = False):
+                 where: str, title: str | None = None, vsync: bool = True, fullscreen: bool = False,
+                 origin: tuple[int, int] = (0, 0)):
         try:
             import glfw
         except Exception as exc:  # the wheel bundles libglfw; a source install may lack it
@@ -77,7 +78,7 @@ class Window:
                 why = errors[-1] if errors else "no window"
                 raise InputError.of("present", f"window: rank {rank} cannot open a {tw}x{th} GL 4.3 window on "
                                  f"'{name}' ({where}): {why}; {X_HELP}")
-            at = (0, 0) if fullscreen else position
+            at = origin if fullscreen else position  # ``origin``: where a full-screen output starts
             glfw.set_window_pos(self.window, int(at[0]), int(at[1]))
             glfw.show_window(self.window)
             glfw.make_context_current(self.window)

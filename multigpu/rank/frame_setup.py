@@ -106,8 +106,10 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
         doc = setup.doc = config_doc(cfg, scene, load_info, n_frames, placement, renderer.method)
         doc["exchange"] = exchange.name
         doc["compress"] = wire.describe(cfg.compress, hosts)
-        if cfg.compress_moving:
+        if cfg.compress_moving and not doc["compress"].startswith("none"):  # bits drop on compressed links only
             doc["compress"] += f", {cfg.compress_moving} colour bits dropped while moving"
+        elif cfg.compress_moving:
+            doc["compress"] += " (--compress-moving has no compressed link to drop bits on: every frame exact)"
         if why:
             doc["exchange_why"] = f"messages: no shared segment ({why})"
         doc["projection"] = setup.projection.name

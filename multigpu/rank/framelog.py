@@ -88,7 +88,7 @@ class FrameLog:
                 "input_ms": t.ms("input"), "heartbeat_cpu_ms": self._heartbeat_cpu(),
                 "render_scale": x.quality.scale, "lod_error_px": x.quality.lod_px,
                 "choosing_cpu_ms": t.cpu_ms("choose"), "balance": x.balance,
-                "load_balancing_waited_ms": t.waited_ms(*BALANCE_PHASES, "input"),
+                "load_balancing_waited_ms": t.waited_ms(*BALANCE_PHASES),  # the span of load_balancing_ms
                 "rendering_waited_ms": t.waited_ms(*RENDER_PHASES), "synchronization_waited_ms": t.waited_ms("sync"),
                 "frame_exchange_waited_ms": t.waited_ms("exchange"),
                 "display_waited_ms": t.waited_ms("display", "swap_wait"), "restarts": restarts(),
