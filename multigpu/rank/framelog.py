@@ -64,7 +64,7 @@ class FrameLog:
             self.shown_at += seconds
 
     def row(self, x, sent, swapped: float) -> dict:
-        """This rank's row of frame ``x`` (``frames.InFlight``) by column name."""
+        """This rank's row of frame ``x`` (``flight.InFlight``) by column name."""
         t, work = x.t, x.work
         box = work.bounds(self.rank)
         now = t.end
@@ -165,6 +165,20 @@ class FrameLog:
             packed, _, _ = decoded(boxes[k], back.nbytes, f"rank 0: frame {f}: the tile of rank {k}",
                                    statuses[k - 1].Get_count())
             self.gathered[k].reshape(-1)[:] = packed
+
+    def close(self, complete: bool, stopped_by: str | None, loop: tuple[float, int], head, panel,
+              served: float) -> dict:
+        """Rank 0: the run's record closed, its summary (``records.record.RunRecord.close``) with
+        rank 0's costs per frame of the loop (``loop``: its CPU seconds, all threads, and frames):
+        the whole process, the tracked ``head``'s poses and their motion to photon, the ``panel``'s
+        server thread on its own clock (``served``: its CPU seconds before the loop)."""
+        frames = max(loop[1], 1)
+        self.record.extra["rank0_process_cpu_ms"] = loop[0] * 1e3 / frames
+        if head is not None:
+            self.record.extra.update(head.report())
+        if panel is not None:
+            self.record.extra["panel_server_cpu_ms"] = (panel.server.cpu_s() - served) * 1e3 / frames
+        return self.record.close(complete, stopped_by)
 
     def write(self, write, *args) -> None:
         """Rank 0's outputs: the first write that fails is kept (``record.failed``) and stops every

@@ -8,68 +8,29 @@ Built by ``walkthrough.run`` once setup has been agreed on every rank; every wai
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
 from time import process_time
 
 import numpy as np
 
 from multigpu.config import INTERACTIVE, WalkConfig
 from multigpu.core.camera import unshifted
-from multigpu.core.culling import PartCuller
 from multigpu.core.inflight import read_lag, step
-from multigpu.core.quality import Fidelity, Quality
-from multigpu.core.resample import Widen, covered, grown, scaled_size
-from multigpu.core.work import Work, transfers
+from multigpu.core.quality import Fidelity
+from multigpu.core.resample import grown
+from multigpu.core.work import transfers
 from multigpu.errors import WriteFailed
-from multigpu.rank.exchange import agree, barrier, broadcast_partition
+from multigpu.rank.drawing import Drawing
+from multigpu.rank.exchange import agree, broadcast_partition
 from multigpu.rank.fault import FAULT_SPEC, fault
+from multigpu.rank.flight import InFlight
 from multigpu.rank.frame_setup import FrameSetup, planned_frames
 from multigpu.rank.framelog import FrameLog
 from multigpu.rank.rows import Rows
+from multigpu.rank.showing import Showing
 from multigpu.rank.timer import Timer
 from multigpu.records.record import run_title
 from multigpu.records.report import BALANCE_NAMES
-from multigpu.records.stops import STOP_FLAG, stopped_by_flags
-
-#: the longest sleep between tests of the swap barrier (s): every rank swaps within about as much of the last
-#: one's arrival (the default 2 ms let the swap skew grow with frames in flight)
-SWAP_POLL = 1e-4
-
-
-@dataclass(slots=True)
-class InFlight:
-    """A frame between its stages (``core/inflight.py``): what each later stage needs of it."""
-
-    f: int
-    t: Timer
-    control: object
-    work: Work
-    plan: list
-    pending: object  # gpu.render.Pending: the pixels, once read
-    drawn: int  # triangles this rank drew
-    objects: int  # distinct objects it drew
-    balance: int  # the CSV's balance column
-    recorded: object  # rank 0 with --record: the camera, in path-file coordinates
-    quality: Quality  # the frame's render scale and level-of-detail bound
-    composed: Work | None = None  # a stereo wall's: both eyes' parts where they are composed (core/stereo.py)
-    picks: list | None = None  # a stereo wall's: where each composed part comes from
-    head_at: float = 0.0  # rank 0, a tracked head: when the frame's pose reached the host (time.time)
-    rendered: list | None = None
-    started: object = None
-
-
-class Joined:
-    """An eye's pieces drawn screen by screen (``Frames.through``), read back in piece order."""
-
-    def __init__(self, parts: list, n: int):
-        self.parts, self.n = parts, n
-
-    def read(self) -> list:
-        out = [None] * self.n
-        for idx, pending in self.parts:  # screens
-            for i, got in zip(idx, pending.read()):
-                out[i] = got
-        return out
+from multigpu.records.stops import stopped_by_flags
 
 
 class Frames:
@@ -90,17 +51,15 @@ class Frames:
         if self.live is not None:  # a paused run still hears Ctrl-C and SIGTERM
             self.live.steering.stopping = lambda: job is not None and job.signum is not None
         self.head = setup.head  # the tracked head (--head-tracker), or None
-        self.culler = PartCuller(scene) if renderer.draws.parts else None  # objects cut into parts
         # speed for accuracy: each frame's render scale and levels of detail (core/quality.py)
         self.fidelity = Fidelity(scene, self.canvas.size[1], cfg.target_fps, cfg.render_scale, cfg.lod_error,
                                  lag=cfg.latency + 1)  # a frame's time is learnt about latency + 1 frames later
-        self.widen = Widen(self.canvas)
-        self.drawn = 0  # triangles this rank drew in the last frame
         self.balance_ids = [BALANCE_NAMES.index(b) for b in self.planner.balances]  # the CSV's balance column
         self.relay = self._relay if cfg.partition == "broadcast" and self.K > 1 else None  # screen only (door)
         self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
         self.zback = np.ones((th, tw), dtype=np.float32) if self.planner.depth else None
-        self.latency, self.ahead = cfg.latency, read_lag(cfg.latency) > 0
+        self.latency, ahead = cfg.latency, read_lag(cfg.latency) > 0
+        self.draw = Drawing(scene, renderer, self.planner, self.canvas, self.stereo, self.rank, ahead)
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col
@@ -110,6 +69,7 @@ class Frames:
         self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
         self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
         self.window = presenter.mode == "window"
+        self.showing = Showing(comm, presenter, self.stereo, self.live, self.window, cfg.timeout)
         self.flight: dict[int, InFlight] = {}  # the frames between their stages (``loop``)
         self.log = FrameLog(cfg, comm, job, self.record, self.col, self.n_frames, self.window,
                             self.exchange.links)
@@ -121,103 +81,15 @@ class Frames:
 
     # -- phases of one frame
 
-    def through(self, t: Timer, work: Work, screens: list, rects, scale: float, levels):
-        """One eye's pieces drawn, each through its screen's frustum (``screens``: the eye's (view,
-        proj, light) through each; ``Work.views``: each piece's); read later, in piece order."""
-        # one pass a frame (mono, or one eye of a wall split by eye): the ring may hold it
-        alone = (self.stereo is None or work.eyes is not None) and len(screens) == 1
-        if len(screens) == 1:
-            return self.render(t, work, *screens[0], rects, scale, levels, ahead=alone)
-        of, parts, drawn = work.views[self.rank], [], 0
-        for s, (view, proj, light) in enumerate(screens):  # a few screens
-            idx = [i for i, v in enumerate(of) if v == s]  # pieces, a few
-            if idx:
-                parts.append((idx, self.render(t, work, view, proj, light, rects, scale, levels, False, idx)))
-                drawn += self.drawn
-        self.drawn = drawn
-        return Joined(parts, len(of))
-
-    def render(self, t: Timer, work: Work, view, proj, light, rects, scale: float, levels, ahead: bool = True,
-               only: list | None = None):
-        """Every piece this rank renders, drawn (read later: ``Pending.read``). Of a scene cut
-        into parts, the parts each piece needs are found first (the ``cull`` phase); ``drawn``
-        counts the triangles the pieces drew. Below ``scale`` 1 a piece draws what reaches the
-        canvas its scaled pixels cover (``core/resample.py``; ``rects``: the objects' visible rects);
-        ``levels``: each object's level of detail (None: as modelled)."""
-        masks, reach = work.masks[self.rank], work.rects[self.rank]
-        if scale != 1.0:
-            size = self.canvas.size
-            small = scaled_size(size, scale)
-            reach = [covered(r, size, small) for r in reach]  # pieces, not objects
-            front = len(masks) if not work.depth else work.front[self.rank] if work.front else 0
-            if front:  # screen regions widened; sort-last masks are the rank's objects wherever they fall
-                masks = [*self.widen.masks(work.rects[self.rank][:front], masks[:front], rects, scale,
-                                           self.planner.canvas_rects),
-                         *masks[front:]]
-        mine = list(zip(work.rects[self.rank], masks, reach))
-        if only is not None:  # the pieces of one screen
-            mine = [mine[i] for i in only]
-        if self.culler is not None:
-            with t.phase("cull"):
-                self.culler.frame(view, proj, self.canvas.size)
-                # ``seen`` rewrites one array: a copy each where there are several pieces
-                pieces = [(rect, mask, self.culler.seen(at) if len(mine) == 1 else self.culler.seen(at).copy())
-                          for rect, mask, at in mine]  # pieces, not objects
-        else:
-            pieces = [(rect, mask, None) for rect, mask, _ in mine]
-        with t.phase("render"):
-            pending = self.renderer.submit(view, proj, light, pieces, work.depth, self.ahead and ahead, scale, levels)
-        self.drawn = self.renderer.last_triangles
-        return pending
-
-    def present(self, t: Timer, work: Work, control, rows) -> tuple[float, int]:
-        """Display: the composed tile (and the overlays that are on) into the back buffer, the
-        swap barrier (every tile composed before any swaps), the swap; then window events and
-        the operator's monitor. Returns when the swap returned and the stop flag of a window
-        event (0: none)."""
-        with t.phase("display"):
-            tile = self.back if self.stereo is None else self.stereo.pack(self.back)  # what the display shows
-            shown = tile if self.live is None else self.live.tile(tile, work, control, rows)
-            self.presenter.show(shown)
-        if self.window:
-            with t.phase("swap_wait"):
-                barrier(self.comm, self.cfg.timeout, SWAP_POLL)
-        with t.phase("display"):
-            swapped = self.presenter.swap()
-            why = self.presenter.poll()
-            if self.live is not None:
-                seen = self.live.show_monitor(tile, work, control, rows)
-                if seen and not why:
-                    return swapped, STOP_FLAG.get(seen, STOP_FLAG["window closed (the monitor)"])
-        return swapped, STOP_FLAG.get(why, 0)
-
-    def _camera(self, f: int, t: Timer):
-        """The input phase of a window run (every rank the same camera and settings), then
-        this frame's camera: the hand-flown one, or the path's."""
-        control = None
-        if self.live is not None:
-            with t.phase("input"):
-                control = self.live.control()
-            if control.paused_s:  # the page paused the run: no frame's time holds the pause
-                t.paused(control.paused_s, "input")
-                for x in self.flight.values():
-                    x.t.paused(control.paused_s)
-                self.log.paused(control.paused_s)
-            if control.balance != self.planner.using:  # every rank switches at this frame
-                self.planner.use(control.balance)
-            if control.quality != self.fidelity.settings():  # the page's settings: every rank at this frame
-                self.fidelity.set(*control.quality)
-            self.planner.head_offset = control.head  # the keys' move of the viewer's head
-        camera = control.camera if control is not None and control.camera is not None else self.path.camera(f)
-        return camera, control
-
     def submit(self, f: int) -> "InFlight":
         """A frame's first stage: input, balancing in three named phases (``BALANCE_PHASES``:
         learning from the landed rows' times, projecting the bounds, planning the partition) and
         the draw calls (``core/inflight.py``)."""
         t = Timer()
         self.rows.push()
-        camera, control = self._camera(f, t)
+        control = None if self.live is None else self.live.steer(  # a window run's input phase
+            t, self.flight.values(), self.log, self.planner, self.fidelity)
+        camera = control.camera if control is not None and control.camera is not None else self.path.camera(f)
         with t.phase("learn"):
             if FAULT_SPEC:
                 fault(self.rank, f)
@@ -239,20 +111,8 @@ class Frames:
                 front = work.front or (0,) * work.ranks  # a hybrid's regions stay
                 work = work._replace(rects=tuple(grown(r, self.canvas.size, quality.scale, f)
                                                  for r, f in zip(work.rects, front)))
-        if self.planner.viewer is None:
-            pending = self.render(t, work, view, proj, light, rects, quality.scale, levels)
-        else:  # each eye draws the plan through its own frustums (a ring of framebuffers holds one pass)
-            pending, drawn = [], 0
-            mine = None if work.eyes is None else work.eyes[self.rank]  # split by eye: this rank's eye alone
-            for e, screens in enumerate(self.planner.views):  # eyes
-                if mine is not None and e != mine:
-                    pending.append(None)
-                    continue
-                pending.append(self.through(t, work, screens, rects, quality.scale, levels))
-                drawn += self.drawn
-            self.drawn = drawn
-            if self.stereo is None:  # a tracked mono wall: one eye
-                pending = pending[0]
+        eyes = None if self.planner.viewer is None else self.planner.views
+        pending = self.draw.frame(t, work, eyes, (view, proj, light), rects, quality.scale, levels)
         with t.phase("exchange"):
             composed, picks = (work, None) if self.stereo is None else self.stereo.compose(work)
             plan = transfers(composed, self.tiles)
@@ -260,7 +120,7 @@ class Frames:
         if (self.cfg.record or self.cfg.panel) and self.rank == 0:  # the frame's camera, in path-file coordinates
             live = self.live.recorded() if self.live is not None and self.interactive else None
             recorded = live if live is not None else unshifted(camera, self.cfg.offset)
-        return InFlight(f, t, control, work, plan, pending, self.drawn, work.objects(self.rank),
+        return InFlight(f, t, control, work, plan, pending, self.draw.drawn, work.objects(self.rank),
                         self.balance_ids[self.planner.using], recorded, quality, composed, picks, head_at)
 
     def send(self, x: "InFlight") -> None:
@@ -292,7 +152,7 @@ class Frames:
                 self.zback[:] = 1.0
             sent = self.exchange.finish(x.started, self.tiles[self.rank], self.back, self.zback if depth else None)
         x.rendered = x.started = None
-        swapped, stop = self.present(t, work, x.control, self.rows.allrows)
+        swapped, stop = self.showing.present(t, self.back, work, x.control, self.rows.allrows)
         if self.head is not None:
             self.head.shown(x.head_at)
         # a signal, a window event or a failed write seen here stops every rank after the same frame
@@ -364,14 +224,8 @@ class Frames:
             raise
         finally:
             if self.rank == 0:
-                # rank 0's whole process (every thread: heartbeat, the panel's server) per frame of the loop
-                frames = max(self.done - shown, 1)
-                self.record.extra["rank0_process_cpu_ms"] = (process_time() - began) * 1e3 / frames
-                if self.head is not None:  # the tracked head's poses and their motion to photon
-                    self.record.extra.update(self.head.report())
-                if panel is not None:  # the page's server thread, on its own clock
-                    self.record.extra["panel_server_cpu_ms"] = (panel.server.cpu_s() - served) * 1e3 / frames
-                summary = self.record.close(complete, stopped_by)
+                summary = self.log.close(complete, stopped_by, (process_time() - began, self.done - shown),
+                                         self.head, panel, served)
         # every rank learns whether rank 0's outputs were all written (a bounded agreement)
         failed = agree(self.comm, str(self.record.failed) if self.rank == 0 and self.record.failed else None,
                        self.cfg.timeout, "the end of the run")

@@ -84,6 +84,25 @@ class Live:
         control = self.steering.last_control = self.steering.next()
         return control
 
+    def steer(self, t, in_flight, log, planner, fidelity) -> Control:
+        """The input phase of a frame (every rank the same camera and settings from here on): a
+        pause left out of every time (this frame's ``t``, the frames ``in_flight``, the ``log``'s
+        period), and the page's or the keys' strategy, quality and head applied to the
+        ``planner`` and ``fidelity`` at this frame on every rank."""
+        with t.phase("input"):
+            control = self.control()
+        if control.paused_s:  # the page paused the run: no frame's time holds the pause
+            t.paused(control.paused_s, "input")
+            for x in in_flight:
+                x.t.paused(control.paused_s)
+            log.paused(control.paused_s)
+        if control.balance != planner.using:
+            planner.use(control.balance)
+        if control.quality != fidelity.settings():
+            fidelity.set(*control.quality)
+        planner.head_offset = control.head  # the keys' move of the viewer's head
+        return control
+
     def recorded(self):
         """Rank 0: the hand-flown camera of this frame in path-file coordinates (or None)."""
         return self.steering.recorded

@@ -286,7 +286,8 @@ def _viewer_doc(cfg) -> dict | None:
         return None
     return {"screen_m": list(v.screen), "eye_separation_m": v.separation, "swap_eyes": v.swap,
             "head_m": None if cfg.head is None else list(cfg.head), "head_poses": cfg.head_poses,
-            "world_per_metre": v.world_per_metre}
+            "world_per_metre": v.world_per_metre,
+            "focus": cfg.focus}  # no size given: zero parallax at the scene, parallax within 3 % (core/eyes.focused)
 
 
 def run_title(cfg, scene) -> str:
