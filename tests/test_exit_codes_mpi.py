@@ -20,7 +20,7 @@ from multigpu.launcher.mpirun import find_launcher, launcher_for, openmpi_on_pat
 
 pytestmark = pytest.mark.mpi
 ENTRIES = ["script", "module", "raw"]
-EVENTS = {"bad flag": 2, "failing rank": 1, "corrupt piece": 2, "SIGINT": 130, "SIGTERM": 143}
+EVENTS = {"bad flag": 2, "failing rank": 1, "corrupt piece": 2, "corrupt raw piece": 2, "SIGINT": 130, "SIGTERM": 143}
 
 
 @pytest.fixture(params=["default", "openmpi"], scope="module")
@@ -57,8 +57,11 @@ def test_exit_code(tmp_path, launcher, entry, event):
     args = [*SMALL, "--grid", "1x2", "--tile", "64x48", "--mosaic-every", "0", "--out", str(out)]
     args += {"bad flag": ["--balance", "nope", "--frames", "5"], "failing rank": ["--frames", "100000"],
              "corrupt piece": ["--frames", "100000", "--decomposition", "db", "--exchange", "messages",
-                               "--compress", "zstd"]}.get(event, ["--frames", "100000"])
-    fault = {"failing rank": "1:8", "corrupt piece": "1:8:corrupt"}
+                               "--compress", "zstd"],
+             # 16x16 tiles: pieces under 4 kB travel raw on a compressed link, and the fault cuts them short
+             "corrupt raw piece": ["--frames", "100000", "--decomposition", "db", "--exchange", "messages",
+                                   "--compress", "zstd", "--tile", "16x16"]}.get(event, ["--frames", "100000"])
+    fault = {"failing rank": "1:8", "corrupt piece": "1:8:corrupt", "corrupt raw piece": "1:8:corrupt"}
     env = launcher.environ({"LP_NUM_THREADS": "1", "MULTIGPU_MPIEXEC": launcher.path,
                             **({"MULTIGPU_FAULT": fault[event]} if event in fault else {})})
     proc = subprocess.Popen(command(entry, launcher, args), cwd=ROOT, env=env, stdout=subprocess.PIPE,
@@ -85,7 +88,7 @@ def test_exit_code(tmp_path, launcher, entry, event):
         shown = 8 - WalkConfig().latency
         assert s["frames"] == shown and "injected fault at frame 8" in s["stopped_by"], s["stopped_by"]
         assert err.count("injected fault at frame 8") == 1, err[-2000:]
-    elif event == "corrupt piece":  # rank 0 finds frame 8's pieces from rank 1 spoilt: one line, the frames before kept
+    elif event.startswith("corrupt"):  # rank 0 finds frame 8's pieces from rank 1 spoilt: one line, frames before kept
         lines = [ln for ln in err.splitlines() if "frame 8: the pieces from rank 1" in ln]
         assert len(lines) == 1 and lines[0].startswith("multigpu: error: rank 0: frame 8: the pieces from rank 1: "), \
             err[-2000:]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
-import threading
+import socket
 import time
 import urllib.error
 import urllib.request
@@ -55,16 +55,26 @@ def test_a_binary_message_is_refused():
     assert isinstance(command(b'{"do": "stop"}', BALANCES), Refused)
 
 
-_json = st.recursive(st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True) | st.text(max_size=20),
+_numbers = (st.integers() | st.integers(min_value=10 ** 300, max_value=10 ** 1000) | st.floats(allow_nan=True)
+            | st.sampled_from([1e308, -1e308, 11, -11, 0.5]))
+_json = st.recursive(st.none() | st.booleans() | _numbers | st.text(max_size=20),
                      lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=10), inner,
-                                                                                  max_size=4), max_leaves=12)
+                                                                                  max_size=4), max_leaves=40)
 
 
-@settings(max_examples=400, deadline=None)
-@given(st.one_of(_json.map(json.dumps), st.text(max_size=300),
+def _dumps(value) -> str:
+    try:
+        return json.dumps(value)
+    except ValueError:  # an integer past Python's own limit for printing it
+        return '{"do": "speed", "steps": ' + "9" * 5000 + "}"
+
+
+@settings(max_examples=2000, deadline=None)
+@given(st.one_of(_json.map(_dumps), st.text(max_size=300),
+                 st.integers(1, 3000).map(lambda d: '{"do": "drag", "dx": ' + "[" * d + "]" * d + ', "dy": 0}'),
                  st.fixed_dictionaries({"do": st.sampled_from(sorted(ACTIONS))}, optional={
                      "name": _json, "value": _json, "held": _json, "dx": _json, "dy": _json, "steps": _json,
-                     "on": _json, "do2": _json}).map(json.dumps)))
+                     "on": _json, "do2": _json}).map(_dumps)))
 def test_no_message_raises_and_every_command_is_in_range(text):
     got = command(text, BALANCES)
     assert isinstance(got, (Command, Refused))
@@ -103,12 +113,13 @@ def test_the_flag_and_the_wall_file(tmp_path):
     assert cfg.panel == ("127.0.0.1", 8765)
     cfg = walk_config(build_parser().parse_args(["walkthrough", "--wall", str(wall), "--panel", "9000"]))
     assert cfg.panel == ("127.0.0.1", 9000)  # the flag wins
-    wall.write_text(json.dumps({"grid": "1x2", "panel": "nope"}))
-    with pytest.raises(InputError, match="panel"):
+    wall.write_text(json.dumps({"grid": "1x2", "panel": "99999"}))  # past the schema, refused by read_panel
+    with pytest.raises(InputError) as got:  # once AttributeError (wall.path) on every rank
         walk_config(build_parser().parse_args(["walkthrough", "--wall", str(wall)]))
+    assert str(got.value).startswith(f"{wall}: panel must look like [ADDRESS:]PORT"), str(got.value)
     with pytest.raises(InputError, match="--path"):
         WalkConfig(path="interactive")  # no window and no page to fly from
-    assert WalkConfig(path="interactive", panel=("127.0.0.1", 0)).panel is not None
+    assert WalkConfig(path="interactive", panel=("127.0.0.1", 0)).panel == ("127.0.0.1", 0)
 
 
 @pytest.fixture
@@ -138,6 +149,10 @@ def test_the_server_wants_the_token_for_everything(served):
     assert _get(base + "static/panel.js")[0] == 403
     code, body, headers = _get(url)
     assert code == 200 and b"panel.js" in body and "HttpOnly" in headers["Set-Cookie"]
+    port = url.split(":")[2].split("/")[0]
+    assert headers["Set-Cookie"].startswith(f"multigpu-panel-{port}=")  # one cookie per panel, not per host
+    assert _get(url, {"Host": f"evil.example:{port}"})[0] == 421  # DNS rebinding: another name, token or not
+    assert _get(url, {"Host": f"localhost:{port}"})[0] == 200
     cookie = {"Cookie": headers["Set-Cookie"].split(";")[0]}
     assert _get(base + "static/panel.js", cookie)[0] == 200  # the page's own files, with its cookie
     assert _get(base + "static/uPlot.iife.min.js", cookie)[0] == 200
@@ -199,34 +214,69 @@ def test_a_page_of_another_origin_is_refused(served):
     assert exc.value.response.status_code == 403
 
 
-def test_a_page_that_stops_reading_costs_the_loop_nothing(served):
+def _stalled_page(url: str) -> socket.socket:
+    """A page that opens its WebSocket and then never reads a byte (a raw socket with a small
+    receive buffer: a client library would keep reading into its own)."""
+    import base64
+    import os
+
+    port = int(url.split(":")[2].split("/")[0])
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET /ws?{url.split('?')[1]} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                  f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
+    assert sock.recv(12) == b"HTTP/1.1 101"
+    return sock
+
+
+def test_a_page_that_stops_reading_costs_the_loop_and_the_other_pages_nothing(served):
     """A page connects and never reads while the loop hands over thousands of rows and large
-    thumbnails: every hand-over returns (the server only fills that page's buffer)."""
+    thumbnails: every hand-over returns, and another page still gets the run (the stalled one
+    only fills its own connection's buffer)."""
     state, server, url = served
-    done = threading.Event()
+    stalled = _stalled_page(url)
+    img = np.random.default_rng(0).integers(0, 255, (480, 640, 3), dtype=np.uint8)
+    for i in range(3000):
+        state.add_row(np.full(width(2), float(i)))
+        if i % 10 == 0:
+            state.set_thumb(img.copy(), None, 1)
+    assert state.seq == 3000 and state.clients == 1
 
-    def loop():
-        img = np.random.default_rng(0).integers(0, 255, (480, 640, 3), dtype=np.uint8)
-        for i in range(3000):
-            state.add_row(np.full(width(2), float(i)))
-            if i % 10 == 0:
-                state.set_thumb(img.copy(), None, 1)
-        done.set()
-
-    async def stall():
+    async def another():
         async with _ws(url) as ws:
-            ws.transport.pause_reading() if hasattr(ws, "transport") else None
-            t = threading.Thread(target=loop)
-            t.start()
-            await asyncio.get_running_loop().run_in_executor(None, done.wait, 60)
-            assert state.clients == 1
-            t.join(10)
+            rows = 0
+            while rows < 1:
+                m = await asyncio.wait_for(ws.recv(), 10)
+                if isinstance(m, str) and "rows" in json.loads(m):
+                    rows = len(json.loads(m)["rows"])
+            return rows
 
-    asyncio.run(stall())
-    assert done.is_set() and state.seq == 3000
+    assert asyncio.run(another()) >= 1 and state.clients >= 1
+    stalled.close()
 
 
-def test_a_finished_run_is_served_read_only(tmp_path):
+def test_a_page_that_goes_away_lets_go_of_its_keys(served):
+    """Defect 16: keys held on a page stayed held when it disconnected (a closed laptop flew on)."""
+    state, server, url = served
+
+    async def hold_and_go():
+        async with _ws(url) as ws:
+            await ws.send(json.dumps({"do": "keys", "held": ["forward"]}))
+            while "ok" not in json.loads(await asyncio.wait_for(ws.recv(), 10)):
+                pass
+
+    asyncio.run(hold_and_go())
+    for _ in range(100):
+        cmds = state.take_commands()
+        if cmds and cmds[-1] == Command("keys", {"held": []}):
+            break
+        time.sleep(0.05)
+    assert cmds[-1] == Command("keys", {"held": []})
+
+
+def test_a_finished_run_is_served_read_only(tmp_path, monkeypatch):
     from PIL import Image
 
     from multigpu.panel.finished import load, plot_rows
@@ -257,6 +307,38 @@ def test_a_finished_run_is_served_read_only(tmp_path):
     assert plot_rows(np.zeros((0, len(COLUMNS))), 2).shape == (0, width(2))
     with pytest.raises(InputError, match="not a run"):
         load(tmp_path / "nothing")
+    _view_refuses_and_bounds(out, monkeypatch)
+
+
+def _view_refuses_and_bounds(out, monkeypatch):
+    """Defect 13: a summary that is a list, or says a non-numeric or huge ``ranks``, gave a traceback;
+    a mosaic past Pillow's bomb limit killed the thumbnail thread; a long run went as one message."""
+    import threading
+
+    from PIL import Image
+
+    import multigpu.panel.finished as finished
+
+    good = (out / "summary.json").read_text()
+    for bad, words in (("[]", "not a JSON object"), ('{"ranks": "x"}', "ranks must be"),
+                       ('{"ranks": 1' + "0" * 30 + "}", "ranks must be"), ('{"ranks": 0}', "ranks must be")):
+        (out / "summary.json").write_text(bad)
+        with pytest.raises(InputError, match=words):
+            finished.load(out)
+    (out / "summary.json").write_text(good)
+    monkeypatch.setattr(finished, "MOST_PLOTTED", 2)
+    state, mosaics = finished.load(out)
+    assert state.rows_since(0)[1][:, 0].tolist() == [0, 2]  # every k-th frame, the last one kept
+    assert state.rows_since(0, 1)[0] == 1  # a page gets a long history in pieces
+    Image.new("RGB", (64, 32), (9, 9, 9)).save(out / "mosaic" / "frame_00001.png")
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 10)  # every mosaic is a "bomb" now
+    stop = threading.Event()
+    slides = threading.Thread(target=finished._slides, args=(state, sorted(mosaics), stop), daemon=True)
+    slides.start()
+    slides.join(0.5)
+    assert slides.is_alive()  # skipped with one line, still showing the others
+    stop.set()
+    slides.join(5)
 
 
 def test_a_page_that_floods_is_refused_beyond_its_rate(served):
@@ -340,3 +422,48 @@ def test_the_page_moves_the_viewers_head_and_brings_it_home():
     assert np.allclose(say({"do": "head_home"}), (0.0, 0.0, 0.0))
     assert np.allclose(say({"do": "head", "dx": 0.5, "dy": 0.0, "dz": 0.0}, {"do": "head_home"},
                            {"do": "head", "dx": 0.0, "dy": 0.05, "dz": 0.0}), (0.0, 0.05, 0.0))
+
+
+def _link(tmp_path):
+    """Rank 0's side of a page, without a server."""
+    from multigpu.rank.panel_link import PanelLink
+
+    return PanelLink(PanelState({}, BALANCES, 1), None, "", tmp_path, interactive=False)
+
+
+def test_a_paused_run_still_hears_a_signal():
+    """Defect 14: a run paused from the page ignored Ctrl-C and SIGTERM (the pause loop never looked)."""
+    import threading
+
+    from multigpu.rank.steer import Steering
+
+    class _One:
+        def Get_rank(self):  # noqa: N802
+            return 0
+
+        def Get_size(self):  # noqa: N802
+            return 1
+
+    link = _link(None)
+    link._apply(Command("pause", {}))
+    steering = Steering(_One(), 1.0, list(BALANCES), 0, panel=link)
+    signalled = threading.Event()
+    steering.stopping = signalled.is_set
+    got = []
+    t = threading.Thread(target=lambda: got.append(steering.next()), daemon=True)
+    t.start()
+    t.join(0.5)
+    assert t.is_alive()  # paused: it waits
+    signalled.set()  # SIGTERM reaches rank 0
+    t.join(5)
+    assert not t.is_alive() and got[0].paused_s > 0
+
+
+def test_a_recording_after_a_restart_keeps_the_ones_before(tmp_path):
+    """Defect 17: after a recovery the first recording from the page overwrote recorded-01.json."""
+    (tmp_path / "recorded-01.json").write_text("kept")
+    link = _link(tmp_path)
+    link._apply(Command("record", {"on": True}))
+    assert link.recording.path == tmp_path / "recorded-02.json"
+    link._apply(Command("record", {"on": False}))
+    assert (tmp_path / "recorded-01.json").read_text() == "kept"

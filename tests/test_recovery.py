@@ -268,9 +268,40 @@ def test_a_standby_is_for_a_job_on_one_host_and_waits_for_its_go(tmp_path):
         def Ibcast(self, buf, root=0):
             return _Done()
 
+    def say(go, what: str) -> None:  # as the launcher writes it: whole, by a rename
+        tmp = go.with_suffix(".tmp")
+        tmp.write_text(what)
+        os.replace(tmp, go)
+
     go = tmp_path / "go.json"
-    threading.Timer(0.2, lambda: go.write_text(json.dumps({"resume_at": 42, "history": [{"reason": "x"}]}))).start()
+    threading.Timer(0.2, say, (go, json.dumps({"resume_at": 42, "history": [{"reason": "x"}]}))).start()
     got = standby.wait_for_go(_Comm(), str(go))
     args = argparse.Namespace(resume_at=0)
     standby.go(args, got)
     assert args.resume_at == 42 and json.loads(os.environ.pop(recovery.ENV)) == [{"reason": "x"}]
+    go = tmp_path / "quit.json"  # the run ended another way: the standby ends quietly
+    threading.Timer(0.2, say, (go, json.dumps({"quit": True}))).start()
+    assert standby.wait_for_go(_Comm(), str(go)) == {"quit": True}
+    gone = tmp_path / "gone"  # the launcher went and took its folder: nothing will come, the standby ends
+    gone.mkdir()
+    threading.Timer(0.2, gone.rmdir).start()
+    assert standby.wait_for_go(_Comm(), str(gone / "go.json")) == {"quit": True}
+    for bad in ("[]", '{"resume_at": "x", "history": []}', "{", '{"resume_at": 1' + "0" * 400 + ', "history": []}'):
+        go = tmp_path / "bad.json"  # defect 12: once parsed outside the error path (a traceback)
+        say(go, bad)
+        with pytest.raises(InputError, match=f"MULTIGPU_STANDBY {go}: "):
+            standby.wait_for_go(_Comm(), str(go))
+
+
+def test_a_stray_standby_setting_is_refused_not_waited_on(monkeypatch):
+    """Defect 12: a MULTIGPU_STANDBY left in the environment made any walk wait forever, without a word."""
+    import pytest
+
+    from multigpu.errors import InputError
+    from multigpu.rank import standby
+
+    monkeypatch.setenv(standby.ENV, "/nonexistent-folder/go.json")
+    with pytest.raises(InputError, match="only the launcher's --standby sets it"):
+        standby.standing_by()
+    monkeypatch.delenv(standby.ENV)
+    assert standby.standing_by() is None

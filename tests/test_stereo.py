@@ -596,16 +596,26 @@ def test_the_wall_tests_stereo_pattern_marks_each_eye_and_shows_depth(mode):
     from multigpu.display.pattern import DEPTH_COLOURS, stereo_tile_pattern
 
     st = Stereo(mode, Canvas((2, 2), (240, 160), (8, 8)))
-    tile = stereo_tile_pattern(st, 3, 5, ["rank 3"])
+    tile = stereo_tile_pattern(st, 3, 5, ["rank 3"])  # what this mode's display shows, bottom row first
     assert tile.shape == (160, 240 * st.outputs, 3)
-    composed = np.concatenate([stereo_tile_pattern(Stereo("side-by-side", st.canvas), 3, 5, ["rank 3"])], axis=1)
-    left, right = composed[:, :120], composed[:, 120:]
+    w, h = tile.shape[1], tile.shape[0]
+    if mode == "anaglyph":  # red from the left eye's picture, green and blue from the right's (full-size eyes)
+        full = stereo_tile_pattern(Stereo("passive", st.canvas), 3, 5, ["rank 3"])
+        eye_l, eye_r = full[:, :240], full[:, 240:]
+        assert (tile[..., 0] == eye_l[..., 0]).all() and (tile[..., 1:] == eye_r[..., 1:]).all()
+        assert not (eye_l == eye_r).all()  # the eyes differ: the channels say which is which
+        left, right = eye_l, eye_r
+    elif mode == "top-bottom":  # the left eye above: its rows last, bottom row first
+        left, right = tile[h // 2:], tile[:h // 2]
+    else:  # side by side in one output, or two outputs (passive)
+        left, right = tile[:, :w // 2], tile[:, w // 2:]
     assert (left == (0, 255, 0)).all(axis=2).sum() > 50 and not (right == (0, 255, 0)).all(axis=2).any()
     assert (right == (255, 0, 255)).all(axis=2).sum() > 50 and not (left == (255, 0, 255)).all(axis=2).any()
     near, middle = DEPTH_COLOURS[-1], DEPTH_COLOURS[2]
-    xs = [np.flatnonzero((half == near).all(axis=2).any(axis=0)) for half in (left, right)]
+    band = [half[:half.shape[0] // 3] for half in (left, right)]  # the depth marks' rows (bottom row first)
+    xs = [np.flatnonzero((half == near).all(axis=2).any(axis=0)) for half in band]
     assert xs[0].min() > xs[1].min()  # the near mark: crossed disparity, the left eye's further right
-    mid = [np.flatnonzero((half == middle).all(axis=2).any(axis=0)) for half in (left, right)]
+    mid = [np.flatnonzero((half == middle).all(axis=2).any(axis=0)) for half in band]
     assert mid[0].min() == mid[1].min()  # on the wall's plane: no disparity
 
 

@@ -59,7 +59,8 @@ def load(out: Path) -> tuple[PanelState, list[Path]]:
     if not isinstance(summary, dict):
         raise InputError(f"{summary_file}: not a run's summary (not a JSON object)")
     config = summary.get("config") if isinstance(summary.get("config"), dict) else {}
-    ranks = summary.get("ranks") or config.get("ranks") or 1
+    placed = config.get("ranks", 1)  # the config's: every rank's placement
+    ranks = summary["ranks"] if "ranks" in summary else len(placed) if isinstance(placed, list) else placed
     if not is_whole(ranks, 1, MOST_RANKS):
         raise InputError(f"{summary_file}: ranks must be a whole number 1..{MOST_RANKS}, got {str(ranks)[:40]!r}")
     header = {"title": f"multigpu view: {out}", "run": str(out), **{k: v for k, v in config.items()

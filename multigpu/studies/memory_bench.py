@@ -194,6 +194,10 @@ def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
     return steps
 
 
+#: what a run says where its GL cannot share the buffers file (the test skips only then)
+NO_PIN = "this GL cannot draw from host memory"
+
+
 def _steps(triangles: int, copies: int, shared: bool = False) -> None:
     """The measured process of ``bench_memory_steps`` (a fresh one per setting): the GL
     buffers uploaded, or (``shared``) drawn from the host's buffers file as the walkthrough's are."""
@@ -201,7 +205,7 @@ def _steps(triangles: int, copies: int, shared: bool = False) -> None:
 
     from multigpu import kernels
     from multigpu.core.camera import frame_matrices
-    from multigpu.gpu.buffers import ensure_buffers
+    from multigpu.gpu.buffers import can_pin, ensure_buffers
     from multigpu.gpu.render import RegionRenderer, create_context
     from multigpu.scene.models import SceneSpec, load_scene
     from multigpu.scene.paths import generate
@@ -213,7 +217,9 @@ def _steps(triangles: int, copies: int, shared: bool = False) -> None:
     r = RegionRenderer(ctx, scene, (512, 512), "auto", path)
     scene = scene.without_geometry()  # as the walkthrough does
     if shared and not r.storage.startswith("shared"):
-        raise RuntimeError(f"the GL buffers were not shared: {r.storage}")
+        why = can_pin(ctx)  # a GL that cannot draw from host memory (NVIDIA's) shares nothing, by design
+        raise RuntimeError(f"the GL buffers were not shared: {r.storage}"
+                           + (f" ({NO_PIN}: {why})" if why else " (this GL can draw from host memory: a failure)"))
     print(f"{'GL buffers drawn from the shared file' if shared else 'GL upload'} {_anonymous_mib():.1f}")
     kernels.warm()
     print(f"compiled kernel loaded {_anonymous_mib():.1f}")
