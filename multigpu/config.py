@@ -109,11 +109,6 @@ def parse_pair(text: str, flag: str, sep: str = "x") -> tuple[int, int]:
     return _named(read_pair, flag, text, sep)
 
 
-def parse_place(text: str, flag: str) -> tuple[int, int]:
-    """'XxY' as a window's place (pixels >= 0), or a clear error naming ``flag``."""
-    return _named(read_place, flag, text)
-
-
 def _named(read, flag: str, *args):
     try:
         return read(*args)
@@ -126,14 +121,6 @@ def read_mullion(text: str) -> tuple[int, int]:
     m = re.fullmatch(r"\s*(\d+)\s*x\s*(\d+)\s*", str(text))
     if not m:
         raise InputError(f"must look like MXxMY with pixels >= 0 (e.g. 40x40), got '{text}'")
-    return int(m.group(1)), int(m.group(2))
-
-
-def read_place(text: str) -> tuple[int, int]:
-    """'XxY': a window's place on its display, pixels >= 0 from the top-left corner."""
-    m = re.fullmatch(r"\s*(\d{1,6})\s*x\s*(\d{1,6})\s*", str(text))
-    if not m:
-        raise InputError(f"must look like XxY with pixels >= 0 (e.g. 0x0), got '{text}'")
     return int(m.group(1)), int(m.group(2))
 
 

@@ -14,9 +14,9 @@ def wall_test(a) -> int:
 
 
 def monitor_view(a) -> int:
+    import re
     import sys
 
-    from multigpu.config import parse_place
     from multigpu.display.remote import serve
 
     token = sys.stdin.readline().strip()  # the launcher's, on standard input (not on a command line)
@@ -24,7 +24,10 @@ def monitor_view(a) -> int:
         print("multigpu monitor-view: error: no token on standard input (the launcher writes one)",
               file=sys.stderr)
         return 2
-    serve(a.display, parse_place(a.position, "--position"), token, a.port, a.listen)
+    m = re.fullmatch(r"\s*(\d{1,6})\s*x\s*(\d{1,6})\s*", str(a.position))  # a window's place: pixels >= 0
+    if not m:
+        raise InputError(f"--position must look like XxY with pixels >= 0 (e.g. 0x0), got '{a.position}'")
+    serve(a.display, (int(m.group(1)), int(m.group(2))), token, a.port, a.listen)
     return 0
 
 

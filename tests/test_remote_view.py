@@ -3,6 +3,7 @@ connection that brings the run's token is shown, and every line the view sends i
 before anything is called; a malformed or hostile one is refused with one line and the wall
 goes on."""
 
+import io
 import json
 import socket
 import threading
@@ -119,13 +120,18 @@ def test_the_view_admits_only_the_runs_token():
     b.close()
 
 
-def test_the_view_starts_with_its_own_defaults_and_listens_on_loopback():
+def test_the_view_starts_with_its_own_defaults_and_listens_on_loopback(monkeypatch):
     """Defect 4: ``--position`` defaulted to 0x0, which its check refused; it listened on every interface."""
+    import multigpu.display.remote as remote
     from multigpu.cli import build_parser
-    from multigpu.config import parse_place
+    from multigpu.tools import monitor_view
 
     a = build_parser().parse_args(["monitor-view"])
-    assert parse_place(a.position, "--position") == (0, 0) and a.listen == "127.0.0.1"
+    assert a.position == "0x0" and a.listen == "127.0.0.1"
+    got = {}
+    monkeypatch.setattr(remote, "serve", lambda *args: got.setdefault("args", args))
+    monkeypatch.setattr("sys.stdin", io.StringIO("secret\n"))
+    assert monitor_view(a) == 0 and got["args"] == (None, (0, 0), "secret", 0, "127.0.0.1")
 
 
 def test_a_peer_that_trickles_its_token_is_dropped_at_its_own_deadline():
