@@ -271,3 +271,7 @@ def test_the_panel_switches_decomposition_mid_run_exactly(tmp_path, reference, s
     assert (balance == balance[:, :1]).all()  # every rank the same at every frame
     names = [BALANCE_NAMES[int(b)] for b in balance[:, 0]]
     assert names == ["strips"] * 2 + ["db"] * 2 + ["hybrid"] * 2 + ["bins"] * 2 + ["cross"] * 2
+    from multigpu.records.report import COMPONENTS, WAITED
+
+    for c in COMPONENTS:  # defect 18: the input phase's wait (and a pause's) once counted in load balancing's
+        assert (rows[:, COLUMNS.index(WAITED[c])] <= rows[:, COLUMNS.index(c)] + 1e-6).all(), c
