@@ -275,3 +275,14 @@ def test_generated_paths_are_valid_for_every_model_that_loads(tmp_path, name):
             for f in range(len(path)):  # frames, not objects
                 view, proj, light = frame_matrices(path.camera(f), (64, 64))
                 assert np.isfinite(view).all() and np.isfinite(proj).all(), (kind, frames, f)
+
+
+def test_a_still_path_holds_the_camera_where_the_walkthrough_starts():
+    """``--path-kind still``: a scene's own motion watched from one place."""
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.paths import generate
+
+    scene = load_scene(SceneSpec(triangles=2_000))[0]
+    walk, held = generate("walkthrough", scene), generate("still", scene, 7)
+    assert len(held) == 7 and all(held.camera(f) == walk.camera(0) for f in range(7))
+    assert len(generate("still", scene)) == 300

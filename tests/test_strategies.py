@@ -144,10 +144,35 @@ def test_time_feedback_converges_and_tiles():
 
 
 def test_registry_and_unknown_name():
-    assert set(REGISTRY) == {"strips", "cost", "time", "adaptive", "cross", "shares", "auto", "none"}
+    assert set(REGISTRY) == {"strips", "cost", "time", "adaptive", "cross", "shares", "auto", "none", "static"}
     assert all(name in describe() for name in REGISTRY)
     with pytest.raises(ValueError, match="unknown balancing strategy"):
         make_strategy("magic", (2, 2), (64, 64), 16)
+
+
+def test_static_holds_the_first_frames_split_while_the_load_moves():
+    """``--balance static``: frame 0 is the paper's split; later frames keep its regions (only the
+    objects each needs change), so a load that moves leaves it unbalanced where strips follows."""
+    from multigpu.strategies.static import Static
+
+    size = (256, 256)
+    rects, tris = workload(600, seed=7)
+    for compiled in (False, True):
+        static = Static((2, 2), size, 256, compiled=compiled)
+        first = static.plan(rects, tris)
+        want = partition(rects, tris, (2, 2), size, 256, compiled=compiled)
+        assert (first.regions == want.regions).all() and (first.visible == want.visible).all()
+        moved = rects.copy()
+        moved[:, [0, 2]] = moved[:, [0, 2]] * 0.4  # the load gathers at the left
+        held = static.plan(moved, tris)
+        follows = partition(moved, tris, (2, 2), size, 256, compiled=compiled)
+        assert (held.regions == first.regions).all() and not (follows.regions == first.regions).all()
+        spans, onscreen = pixel_spans(moved, size)  # which objects each held region needs now
+        for k, (x0, y0, x1, y1) in enumerate(held.regions):
+            need = onscreen & (spans[:, 0] < x1) & (spans[:, 2] >= x0) & (spans[:, 1] < y1) & (spans[:, 3] >= y0)
+            assert (held.visible[k] == need).all() and held.loads[k] == tris[need].sum()
+        assert held.loads.max() / held.loads.mean() > follows.loads.max() / follows.loads.mean()
+        assert static.report()["held_split_pixels"] == first.split_pixels.tolist()
 
 
 def test_adaptive_learns_a_per_object_cost_the_model_cannot_see():

@@ -414,8 +414,15 @@ def orbit(scene, frames: int = 300, fov: float = 60.0, elevation_deg: float = 30
 
 
 #: the generated paths, and their frame counts when none is asked for
-GENERATORS = {"walkthrough": walkthrough, "orbit": orbit}
-DEFAULT_FRAMES = {"walkthrough": 1200, "orbit": 300}
+def still(scene, frames: int = 300, fov: float = 60.0) -> CameraPath:
+    """The camera held where the walkthrough starts: a scene's own motion watched and measured alone."""
+    first = walkthrough(scene, fov=fov)  # its default length: the same first camera as the walkthrough
+    return CameraPath(*(np.repeat(a[:1], frames, axis=0) for a in (first.position, first.target, first.up,
+                                                                   first.fov, first.near, first.far)))
+
+
+GENERATORS = {"walkthrough": walkthrough, "orbit": orbit, "still": still}
+DEFAULT_FRAMES = {"walkthrough": 1200, "orbit": 300, "still": 300}
 
 
 def generate(kind: str, scene, frames: int | None = None, fov: float = 60.0) -> CameraPath:

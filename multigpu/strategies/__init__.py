@@ -13,11 +13,12 @@ from multigpu.strategies.cost import CostModel
 from multigpu.strategies.cross import CrossSegment
 from multigpu.strategies.none import NoBalance
 from multigpu.strategies.shares import Shares
+from multigpu.strategies.static import Static
 from multigpu.strategies.strips import Strips
 from multigpu.strategies.time import TimeFeedback
 
 REGISTRY: dict[str, type] = {cls.name: cls for cls in (Strips, CostModel, TimeFeedback, Adaptive, CrossSegment,
-                                                      Shares, Auto, NoBalance)}
+                                                      Shares, Auto, NoBalance, Static)}
 
 
 def describe() -> str:
@@ -32,4 +33,5 @@ def make_strategy(name: str, grid, size, strips: int) -> Strategy:
 
 
 __all__ = ["REGISTRY", "Strategy", "Configured", "make_strategy", "describe", "rank_pixels",
-           "Strips", "CostModel", "TimeFeedback", "Adaptive", "CrossSegment", "Shares", "Auto", "NoBalance"]
+           "Strips", "CostModel", "TimeFeedback", "Adaptive", "CrossSegment", "Shares", "Auto", "NoBalance",
+           "Static"]
