@@ -38,7 +38,7 @@ def quick(help: str) -> Arg:
     return arg("--quick", action="store_true", help=help)
 
 
-def path_kind(help: str = "generated path: walkthrough | orbit") -> Arg:
+def path_kind(help: str = "generated path: walkthrough | orbit | still") -> Arg:
     """``--path-kind``: the generated camera path (the walkthrough's choices)."""
     return arg("--path-kind", default="walkthrough", choices=tuple(GENERATORS), help=help)
 

@@ -108,4 +108,4 @@ def test_the_entry_point_declares_flags_as_data():
     outs = [a for c in COMMANDS for a in c.args if a.names == ("--out",)]
     assert outs and all(("default" in a.kw) != a.kw.get("required", False) for a in outs)
     kinds = [a for c in COMMANDS for a in c.args if a.names == ("--path-kind",)]
-    assert kinds and all(a.kw["choices"] == ("walkthrough", "orbit") for a in kinds)
+    assert kinds and all(a.kw["choices"] == ("walkthrough", "orbit", "still") for a in kinds)

@@ -305,3 +305,25 @@ def test_a_stray_standby_setting_is_refused_not_waited_on(monkeypatch):
         standby.standing_by()
     monkeypatch.delenv(standby.ENV)
     assert standby.standing_by() is None
+
+
+def test_a_job_that_missed_the_signal_is_ended_by_the_launcher(monkeypatch, capsys):
+    """A rank still starting when Ctrl-C came (a restart's, before its handler) ignores it: the
+    launcher ends the job once it has not stopped within its grace, never a wall left running."""
+    import signal
+    import sys
+
+    from multigpu.launcher import supervise
+
+    monkeypatch.setattr(supervise, "STOP_GRACE", 0.5)
+    proc = supervise.start_job([sys.executable, "-c", "import signal, time; signal.signal(signal.SIGINT, "
+                                "signal.SIG_IGN); print('up', flush=True); time.sleep(60)"], dict(os.environ))
+    try:
+        time.sleep(0.5)
+        os.killpg(proc.pid, signal.SIGINT)  # ignored, as a rank without its handler yet
+        supervise._end_unless_stopped(proc, signal.SIGINT)
+        assert proc.poll() is not None and "did not stop within 0.5 s of SIGINT" in capsys.readouterr().err
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()

@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -72,6 +73,23 @@ def end_job(proc: subprocess.Popen) -> None:
     proc.wait()
 
 
+#: seconds a job has to stop after the launcher passed it a signal (its ranks stop after the frame they
+#: are in, their waits within ``rank.job.INTERRUPT_GRACE``) before the launcher ends it
+STOP_GRACE = 10.0
+
+
+def _end_unless_stopped(proc: subprocess.Popen, signum: int) -> None:
+    """End the job if it has not stopped ``STOP_GRACE`` seconds after ``signum`` was passed to it:
+    a rank that was still starting (a restart's) when the signal came ignores it, and would keep
+    the wall running."""
+    try:
+        proc.wait(STOP_GRACE)
+    except subprocess.TimeoutExpired:
+        print(f"multigpu: the job did not stop within {STOP_GRACE:g} s of {signal.Signals(signum).name}: "
+              "ending it", file=sys.stderr, flush=True)
+        end_job(proc)
+
+
 def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec", started_job=None,
               proc: subprocess.Popen | None = None) -> int:
     """Run the launcher, pass it SIGINT/SIGTERM/SIGHUP exactly once each, and return the
@@ -96,6 +114,8 @@ def supervise(cmd: list[str], env: dict, out: Path | None, name: str = "mpiexec"
             os.killpg(proc.pid, signum)  # the launcher and every local rank, as a terminal's Ctrl-C
         except ProcessLookupError:
             pass
+        if len(got) == 1:  # a rank that missed it (sent before its handler, as a restart starts) ends anyway
+            threading.Thread(target=_end_unless_stopped, args=(proc, signum), daemon=True).start()
 
     old = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     try:
