@@ -123,12 +123,13 @@ def eye_config(cfg, stereo):
 
 
 def focus_of(scene) -> tuple[np.ndarray, np.ndarray]:
-    """What ``core.eyes.focused`` needs of a scene: its centre, and (M, 4) homogeneous world
-    positions of every k-th vertex (``FOCUS_SAMPLES`` at most)."""
+    """What ``core.eyes.focused`` needs of a scene: its centre, and (M, 4) float32 homogeneous
+    positions about it of every k-th vertex (``FOCUS_SAMPLES`` at most)."""
     lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.bounds)
+    centre = (lo + hi) / 2
     step = max(1, -(-len(scene.vertices) // FOCUS_SAMPLES))
-    pts = scene.vertices[::step, :3].astype(np.float64) + np.asarray(scene.origin, dtype=np.float64)
-    return (lo + hi) / 2, np.c_[pts, np.ones(len(pts))]
+    pts = scene.vertices[::step, :3].astype(np.float64) + (np.asarray(scene.origin, dtype=np.float64) - centre)
+    return centre, np.c_[pts, np.ones(len(pts))].astype(np.float32)
 
 
 class Planner:

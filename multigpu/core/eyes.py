@@ -33,7 +33,7 @@ PARALLAX = 0.03
 #: the nearest sampled point taken a little nearer still: a vertex between the samples may be
 NEAR_MARGIN = 0.9
 #: the scene's vertices ``focused`` samples at most (a stereo frame's one matrix product)
-FOCUS_SAMPLES = 20_000
+FOCUS_SAMPLES = 8192
 
 
 @dataclass(frozen=True)
@@ -126,18 +126,20 @@ def focused(viewer: Viewer, camera: Camera, centre, points: np.ndarray, size: tu
     """``viewer`` for a wall whose size in the room nobody gave (the default pixel pitch, no head,
     no tracker): the zero-parallax plane at the scene's focus, as ParaView puts it at its focal
     point, and the eyes as far apart as keeps every visible point's parallax within ``PARALLAX``
-    of the wall's width (never farther apart than ``viewer``'s). ``points``: (M, 4) homogeneous
-    samples of the scene's vertices, whose nearest one in the camera's frustum (``size``: the
-    canvas) bounds the depth. The screen stands at the scene centre's depth, or at twice the
-    nearest point's where that is nearer: a point at depth z is s (1 - focus / z) metres apart on
-    the screen, so from half the focus to infinity within s."""
+    of the wall's width (never farther apart than ``viewer``'s). ``points``: (M, 4) float32
+    homogeneous samples of the scene's vertices about ``centre``, whose nearest one in the
+    camera's frustum (``size``: the canvas) bounds the depth. The screen stands at the scene
+    centre's depth, or at twice the nearest point's where that is nearer: a point at depth z is
+    s (1 - focus / z) metres apart on the screen, so from half the focus to infinity within s."""
     pos = np.asarray(camera.position, dtype=np.float64)
     ahead = np.asarray(camera.target, dtype=np.float64) - pos
     ahead /= max(float(np.linalg.norm(ahead)), 1e-300)
     view, proj, _ = frame_matrices(camera, size)
-    clip = points @ (proj @ view).T  # a few thousand points: one matrix product
+    move = np.eye(4)
+    move[:3, 3] = centre  # ``points`` are about the centre, in float32: the product in float32 too
+    clip = points @ (proj @ view @ move).astype(np.float32).T  # a few thousand points: one matrix product
     w = clip[:, 3]
-    seen = (w > 0) & (np.abs(clip[:, :3]) <= w[:, None]).all(axis=1)
+    seen = (w > 0) & (np.abs(clip[:, 0]) <= w) & (np.abs(clip[:, 1]) <= w) & (np.abs(clip[:, 2]) <= w)
     nearest = NEAR_MARGIN * float(w[seen].min()) if seen.any() else np.inf
     focus = max(float((np.asarray(centre, dtype=np.float64) - pos) @ ahead), 2.0 * camera.near)
     focus = min(focus, 2.0 * nearest) if np.isfinite(nearest) else focus
