@@ -199,10 +199,8 @@ class RemoteMonitor:
             if self.sock is not None:
                 self.sock.settimeout(TIMEOUT)
         *lines, rest = self.buf.split(b"\n", MOST_LINES)
-        self.buf = rest
-        if len(lines) == MOST_LINES or b"\n" in rest:
-            pass  # more lines than a frame takes: the rest waits for the next frame
-        elif len(rest) > MOST_LINE:  # a line with no end: dropped, not kept growing
+        self.buf = rest  # beyond MOST_LINES lines, the rest waits for the next frame
+        if b"\n" not in rest and len(rest) > MOST_LINE:  # a line with no end: dropped, not kept growing
             lines.append(rest[:MOST_LINE] + b"...")
             self.buf = b""
         for line in lines:  # events since the last frame, a handful
