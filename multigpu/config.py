@@ -6,7 +6,7 @@ import math
 import re
 from dataclasses import dataclass, field, replace
 
-from multigpu.core.canvas import Canvas
+from multigpu.core.canvas import MOST_TILES, Canvas
 from multigpu.core.eyes import EYE_SEPARATION
 from multigpu.core.inflight import MOST
 from multigpu.core.resample import MIN_SCALE
@@ -204,6 +204,7 @@ class WalkConfig:
         help="move scene and path by these world units (e.g. 1e8,0,0: far from the origin)")
     # -- wall and display
     grid: tuple[int, int] = option((2, 2), group=WALL, metavar="ROWSxCOLS", read=read_pair, show=_pair,
+                                   valid=lambda v: v[0] * v[1] <= MOST_TILES, must=f"must be <= {MOST_TILES} tiles",
                                    help="display wall; ranks = rows*cols (default: {default})")
     tile: tuple[int, int] = option((256, 256), group=WALL, metavar="WxH", read=read_pair, show=_pair,
                                    valid=lambda v: max(v) <= 16384, must="must be at most 16384 pixels per side",

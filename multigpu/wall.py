@@ -23,6 +23,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from multigpu.core.canvas import MOST_TILES
 from multigpu.core.doors import Unfit, loads
 from multigpu.errors import InputError
 
@@ -103,7 +104,7 @@ def _schema_error(doc, where: str) -> str | None:
     if e.validator == "additionalProperties":
         known = sorted(k for k in node.get("properties", {}) if k not in ("$schema", "comment"))
         extra = sorted(set(e.instance) - set(node.get("properties", {})))
-        return f"{prefix}unknown key '{extra[0]}' (known: {', '.join(known)})"
+        return f"{prefix}unknown key {extra[0][:40]!r} (known: {', '.join(known)})"
     if e.validator == "required":
         missing = next(k for k in e.validator_value if k not in e.instance)
         text = node.get("properties", {}).get(missing, {}).get("description", f"needs \"{missing}\"")
@@ -191,8 +192,11 @@ def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:
 
 
 def check_ranks(wall: Wall, ranks: int) -> None:
-    """Every display entry names a rank of a ``ranks``-rank wall, and once ``displays`` is given
-    every rank has one (a missing rank would silently take ``$DISPLAY``)."""
+    """A wall of at most ``MOST_TILES`` tiles; every display entry names a rank of a
+    ``ranks``-rank wall, and once ``displays`` is given every rank has one (a missing rank would
+    silently take ``$DISPLAY``)."""
+    if ranks > MOST_TILES:
+        raise InputError.of("wall", f"{wall.file}: a grid of {ranks} tiles (at most {MOST_TILES})")
     for r in sorted(wall.displays):
         if r >= ranks:
             raise InputError.of("wall", f"{wall.file}: displays entry for rank {r}, but the wall has ranks "

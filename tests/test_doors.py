@@ -286,6 +286,7 @@ def test_a_wall_file_runs_or_is_refused_in_one_line(tmp_path_factory, doc):
     ("panel", "99999", "panel must look like"),  # once AttributeError: wall.path
     ("stereo", {"mode": "anaglyph", "tracker": "0"}, "stereo.tracker"),
     ("screen_m", [float("inf"), 1.0], "Infinity"),
+    ("grid", "99999x99999", "tiles (at most 4096)"),  # once 23 GB of memory before any word
 ])
 def test_a_wall_files_bad_field_names_the_file(tmp_path, field, value, words):
     """Defects 9 and 11."""

@@ -31,6 +31,9 @@ import numpy as np
 from multigpu.core.regions import overlaps, pixel_spans, tile_regions
 from multigpu.core.work import Work
 
+#: the most tiles a wall may have (a rank each; its arrays are made per tile): more than any wall here
+MOST_TILES = 4096
+
 #: widening of mapped rects (normalized units) that absorbs the rounding of the
 #: canvas -> visible -> pixel round trip; it can only add a pixel, never drop one
 PAD = 1e-9
