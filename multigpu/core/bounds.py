@@ -116,6 +116,19 @@ class BoxProjector:
     def __len__(self) -> int:
         return self.center.shape[1]
 
+    def place(self, center: np.ndarray, half: np.ndarray) -> None:
+        """Moved boxes: (3, N) float64 centres and half extents (``core.motion.Posed``'s arrays,
+        held, not copied: call again once they change). From then on the boxes are projected in
+        their own order, the spatial groups having been made for the boxes at rest."""
+        if center.shape != self.center.shape or half.shape != self.center.shape:
+            raise ValueError(f"moved boxes must be {self.center.shape}, got {center.shape} and {half.shape}")
+        self.center, self.half64 = center, half
+        np.copyto(self.half, half, casting="unsafe")
+        self.plain_boxes = (center, half)
+        self.plain = 1
+        if self.compiled:
+            self._boxes = (*self._boxes[:6], center, half)
+
     def __call__(self, view, proj, coverage: np.ndarray | None = None) -> np.ndarray:
         """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen.
 

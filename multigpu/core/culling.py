@@ -33,6 +33,10 @@ class PartCuller:
         self.rects = np.zeros((0, 4))
         self.size = (1, 1)
 
+    def place(self, center: np.ndarray, half: np.ndarray) -> None:
+        """Every part's moved box: (3, P) centres and half extents (``core.motion.Posed``)."""
+        self.project.place(center[:, self.cut], half[:, self.cut])
+
     def frame(self, view: np.ndarray, proj: np.ndarray, size: tuple[int, int]) -> None:
         """Project the cut objects' parts for this frame's camera on a ``size`` canvas."""
         self.rects, self.size = self.project(view, proj), (int(size[0]), int(size[1]))

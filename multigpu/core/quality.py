@@ -120,10 +120,12 @@ class Fidelity:
         """Whether any frame may differ from an every-pixel, as-modelled one."""
         return self.controller is not None or self.scale != 1.0 or self.lod_error > 0
 
-    def frame(self, f: int, camera, rects: np.ndarray | None = None) -> tuple[Quality, np.ndarray | None, np.ndarray]:
+    def frame(self, f: int, camera, rects: np.ndarray | None = None, moves: bool = False
+              ) -> tuple[Quality, np.ndarray | None, np.ndarray]:
         """Frame ``f``'s quality, each object's level (None: all as modelled) and triangles
-        (``rects``: the frame's object rects, NaN where unseen: only seen objects are chosen for)."""
-        still = camera == self.last_camera
+        (``rects``: the frame's object rects, NaN where unseen: only seen objects are chosen for;
+        ``moves``: the scene moves, so no frame is still)."""
+        still = camera == self.last_camera and not moves
         moved = self.last_camera is not None and not still  # a run's first frame has not moved
         self.last_camera = camera
         if self.controller is None or still:

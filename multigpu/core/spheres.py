@@ -29,6 +29,10 @@ class SphereProjector:
     def __len__(self) -> int:
         return self.radii.shape[0]
 
+    def place(self, center: np.ndarray, radii: np.ndarray) -> None:
+        """Moved spheres: (3, N) centres and (N,) radii (``core.motion.Posed``'s, held)."""
+        self.center, self.radii = center, radii
+
     def __call__(self, view, proj, coverage: np.ndarray | None = None) -> np.ndarray:
         """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen.
         ``coverage`` receives pi/4 per sphere (a disc in its square; the ellipse of an

@@ -136,7 +136,7 @@ class RegionRenderer:
     """
 
     def __init__(self, ctx, scene, size: tuple[int, int], method: str = "auto", shared: Path | None = None,
-                 colors: str = "model"):
+                 colors: str = "model", moving: bool = False):
         import moderngl
 
         from multigpu.scene.looks import COLOR_VIEWS, palette
@@ -151,7 +151,7 @@ class RegionRenderer:
         per_vertex = colors == "model" and scene.vertex_colors is not None
         textured = colors == "model" and scene.texcoords is not None and scene.texels is not None
         self.texture_path = texturing.texture_path() if textured else None
-        self.prog = ctx.program(vertex_shader=vertex_shader(per_vertex, textured),
+        self.prog = ctx.program(vertex_shader=vertex_shader(per_vertex, textured, moving),
                                 fragment_shader=fragment_shader(textured, self.texture_path))
         self.draws = DrawList(scene)
         bufs = self._buffers(scene, shared, per_vertex, textured, self.texture_path == "pool")
@@ -162,12 +162,14 @@ class RegionRenderer:
         object_colors = scene.colors if colors == "model" else palette(scene.n_objects)
         self.cbo = ctx.buffer(np.ascontiguousarray(object_colors, dtype=np.float32).ravel())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 1u", "in_pos", "in_nrm"),
-                                                (self.rgba, "1u", "in_rgba") if per_vertex else
-                                                (self.obo, "1u", "in_obj"),
+                                                *([(self.rgba, "1u", "in_rgba")] if per_vertex else []),
+                                                *([(self.obo, "1u", "in_obj")] if moving or not per_vertex else []),
                                                 *([(self.uvl, "3f", "in_uvl")] if textured else [])],
                                     index_buffer=self.ibo, index_element_size=4)
         self.texture, self.samplers, self.layers = (texturing.make(ctx, self.prog, scene, self.texture_path)
                                                     if textured else (None, [], None))
+        # each object's map where the scene moves (``pose``), at rest till then
+        self.mbo = ctx.buffer(np.tile(np.eye(3, 4, dtype=np.float32).ravel(), scene.n_objects)) if moving else None
         self.indirect = ctx.buffer(reserve=20 * 1024)  # grows when a frame needs more commands
         self.last_commands = 0  # draw commands of the last frame (runs of visible objects)
         self.fbo = None
@@ -277,6 +279,8 @@ class RegionRenderer:
         self.indirect.write(cmds)
         self.prog["light"].value = tuple(float(v) for v in light)
         self.cbo.bind_to_storage_buffer(0)
+        if self.mbo is not None:
+            self.mbo.bind_to_storage_buffer(4)
         if self.texture is not None:
             self.layers.bind_to_storage_buffer(1)
             if self.texels is not None:  # the pool: its level table and texels (a pinned buffer's
@@ -388,6 +392,12 @@ class RegionRenderer:
         self.last_triangles = total
         return Pending(None, self.fbo, drawn, depth)
 
+    def pose(self, rows: np.ndarray) -> None:
+        """Every object's (N, 12) float32 map (``core.motion``) from now on; frames still being drawn
+        keep theirs (the buffer is orphaned first)."""
+        self.mbo.orphan()
+        self.mbo.write(rows)
+
     @property
     def framebuffer_bytes(self) -> int:
         """Colour + depth bytes of the framebuffer this renderer holds now."""
@@ -399,8 +409,8 @@ class RegionRenderer:
                 for att in (*fbo.color_attachments, fbo.depth_attachment):
                     att.release()
                 fbo.release()
-        for obj in (self.vao, self.indirect, self.cbo, self.ibo, self.obo, self.rgba, self.uvl, self.texels, self.vbo,
-                    *self.samplers, self.texture, self.layers, self.prog):
+        for obj in (self.vao, self.indirect, self.mbo, self.cbo, self.ibo, self.obo, self.rgba, self.uvl, self.texels,
+                    self.vbo, *self.samplers, self.texture, self.layers, self.prog):
             if obj is not None:
                 obj.release()
         self._maps = None  # the file's maps outlive the GL buffers drawing from them

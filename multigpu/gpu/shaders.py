@@ -1,4 +1,5 @@
-"""The renderer's GLSL: a vertex shader that decodes the packed normal and takes each vertex's
+"""The renderer's GLSL: a vertex shader that decodes the packed normal, moves the vertex by its
+object's map where the scene moves (``MOVING``, ``core/motion.py``), and takes each vertex's
 colour (its object's, from a storage buffer indexed by the vertex's object id, or the model's
 own per-vertex RGBA8 where ``VERTEX_COLORS`` is defined), and a headlight-lit fragment shader.
 
@@ -23,8 +24,12 @@ in vec3 in_pos;
 in uint in_nrm;  // octahedral, 16 + 16 bits (pack_normals)
 #ifdef VERTEX_COLORS
 in uint in_rgba;  // the model's colour at this vertex, RGBA8
-#else
+#endif
+#if !defined(VERTEX_COLORS) || defined(MOVING)
 in uint in_obj;
+#endif
+#ifdef MOVING
+layout(std430, binding = 4) readonly buffer Motions { vec4 motions[]; };  // 3 rows of [A | b] per object
 #endif
 #ifdef TEXTURED
 in vec3 in_uvl;  // UV and texture layer (-1: none)
@@ -34,11 +39,19 @@ flat out int v_layer;
 out vec3 v_nrm;
 out vec3 v_col;
 void main() {
-    gl_Position = mvp * vec4(in_pos, 1.0);
     vec2 f = vec2(float(in_nrm & 0xFFFFu), float(in_nrm >> 16)) / 65535.0 * 2.0 - 1.0;
     vec3 n = vec3(f, 1.0 - abs(f.x) - abs(f.y));
     float t = max(-n.z, 0.0);
     n.xy += vec2(n.x >= 0.0 ? -t : t, n.y >= 0.0 ? -t : t);
+#ifdef MOVING
+    vec4 r0 = motions[3u * in_obj], r1 = motions[3u * in_obj + 1u], r2 = motions[3u * in_obj + 2u];
+    vec4 p = vec4(in_pos, 1.0);
+    gl_Position = mvp * vec4(dot(r0, p), dot(r1, p), dot(r2, p), 1.0);
+    vec3 a0 = vec3(r0.x, r1.x, r2.x), a1 = vec3(r0.y, r1.y, r2.y), a2 = vec3(r0.z, r1.z, r2.z);
+    n = mat3(cross(a1, a2), cross(a2, a0), cross(a0, a1)) * n;  // the cofactor: normals stay normal
+#else
+    gl_Position = mvp * vec4(in_pos, 1.0);
+#endif
     v_nrm = n;
 #ifdef VERTEX_COLORS
     v_col = unpackUnorm4x8(in_rgba).rgb;
@@ -143,10 +156,11 @@ def _defined(source: str, names: list[str]) -> str:
 TEXTURE_PATHS = ("pool", "array")
 
 
-def vertex_shader(per_vertex_colors: bool, textured: bool = False) -> str:
+def vertex_shader(per_vertex_colors: bool, textured: bool = False, moving: bool = False) -> str:
     """The vertex shader, reading the model's per-vertex colours or its objects' colours, and
-    its texture coordinates where it is ``textured``."""
-    return _defined(VERTEX, ["VERTEX_COLORS"] * per_vertex_colors + ["TEXTURED"] * textured)
+    its texture coordinates where it is ``textured``; ``moving``: each vertex moved by its
+    object's map (``core/motion.py``) before the camera's."""
+    return _defined(VERTEX, ["VERTEX_COLORS"] * per_vertex_colors + ["TEXTURED"] * textured + ["MOVING"] * moving)
 
 
 def fragment_shader(textured: bool = False, path: str = "pool") -> str:

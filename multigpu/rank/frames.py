@@ -25,12 +25,14 @@ from multigpu.rank.fault import FAULT_SPEC, fault
 from multigpu.rank.flight import InFlight
 from multigpu.rank.frame_setup import FrameSetup, planned_frames
 from multigpu.rank.framelog import FrameLog
+from multigpu.rank.moving import Moving
 from multigpu.rank.rows import Rows
 from multigpu.rank.showing import Showing
 from multigpu.rank.timer import Timer
 from multigpu.records.record import run_title
 from multigpu.records.report import BALANCE_NAMES
 from multigpu.records.stops import stopped_by_flags
+from multigpu.scene.moves import motion_of
 
 
 class Frames:
@@ -60,6 +62,10 @@ class Frames:
         self.zback = np.ones((th, tw), dtype=np.float32) if self.planner.depth else None
         self.latency, ahead = cfg.latency, read_lag(cfg.latency) > 0
         self.draw = Drawing(scene, renderer, self.planner, self.canvas, self.stereo, self.rank, ahead)
+        motion = motion_of(scene, cfg.scene)  # a scene that moves: posed every frame (``rank/moving.py``)
+        self.moving = None if motion is None else Moving(scene, motion, cfg.scene.anim_speed, self.planner,
+                                                         self.projection, self.draw.culler, self.fidelity.chooser,
+                                                         renderer)
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col
@@ -100,9 +106,11 @@ class Frames:
         if self.head is not None:  # the newest pose, every rank the same from this frame
             with t.phase("input"):
                 self.planner.pose, head_at = self.head.pose()
+        if self.moving is not None:  # the bodies where they are at the frame's scene time
+            self.moving.pose(t, self.moving.time_of(f))
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
-            quality, levels, tris = self.fidelity.frame(f, camera, rects)
+            quality, levels, tris = self.fidelity.frame(f, camera, rects, self.moving is not None)
         with t.phase("plan"):
             work = self.planner.work(f, rects, self.relay, None if levels is None else tris.copy())
             # the planner's arrays may be its own again by the time the frame is shown (frames in flight)

@@ -37,6 +37,7 @@ from multigpu.rank.frames import Frames
 from multigpu.records.outdir import OutputDir
 from multigpu.records.recovery import mark, restarts
 from multigpu.scene.models import load_scene
+from multigpu.scene.moves import moves
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
 
@@ -134,7 +135,7 @@ def _gl(cfg: WalkConfig, rank: int, presenter, scene, shared, local: int, host_r
     else:
         ctx, device = create_context(_device(cfg, rank), local_rank=local, host_ranks=host_ranks)
     return ctx, device, RegionRenderer(ctx, scene, eye_canvas(cfg.stereo, cfg.canvas).size, cfg.subfrustum, shared,
-                                       cfg.colors)
+                                       cfg.colors, moves(scene, cfg.scene))
 
 
 def _device(cfg: WalkConfig, rank: int):

@@ -15,9 +15,11 @@ Figures and what they are:
 * ``input_ms``: the frame's input phase (rank 0 reads keys and mouse, the camera and commands
   reach every rank in one broadcast; 0 when headless); ``balance``: the strategy (screen) or
   decomposition that planned the frame, by name (it may change at a key press);
-* ``learning_cpu_ms``, ``projection_cpu_ms``, ``choosing_cpu_ms``, ``planning_cpu_ms``: the load
-  balancing CPU time in its four phases (they add up to ``load_balancing_cpu_ms``): the strategy
-  learning from the last frame's measured times, projecting the object bounds (``--projection
+* ``learning_cpu_ms``, ``posing_cpu_ms``, ``projection_cpu_ms``, ``choosing_cpu_ms``,
+  ``planning_cpu_ms``: the load balancing CPU time in its five phases (they add up to
+  ``load_balancing_cpu_ms``): the strategy learning from the last frame's measured times, posing
+  a moving scene's objects at the frame's scene time (their bounds, and their maps sent to the
+  GL; 0 where nothing moves), projecting the object bounds (``--projection
   shared``: this rank's slice), choosing the frame's quality (render scale, levels of detail),
   planning the partition (``--partition broadcast``: with its broadcast);
 * ``render_scale``, ``lod_error_px``: the frame's quality (``--target-fps``, ``--render-scale``,
@@ -55,9 +57,9 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms",
            "latency_ms", "load_balancing_waited_ms", "rendering_waited_ms", "synchronization_waited_ms",
            "frame_exchange_waited_ms", "display_waited_ms", "render_scale", "lod_error_px", "choosing_cpu_ms",
-           "wire_bytes", "compress_cpu_ms", "decompress_cpu_ms", "lossy_bits", "balance", "restarts"]
-#: the load balancing CPU time's four phases (learn, project, choose, plan), adding up to it
-BALANCE_CPU = ("learning_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
+           "wire_bytes", "compress_cpu_ms", "decompress_cpu_ms", "lossy_bits", "balance", "restarts", "posing_cpu_ms"]
+#: the load balancing CPU time's phases (learn, pose, project, choose, plan), adding up to it
+BALANCE_CPU = ("learning_cpu_ms", "posing_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
 #: the part of each component's wall time the rank's thread did not run (waited), by component
 WAITED = {c: c.replace("_ms", "_waited_ms") for c in COMPONENTS}
@@ -191,7 +193,9 @@ def _parts(cpu: dict) -> str:
     """The load balancing CPU time's phases, where the summary has them."""
     if not all(c in cpu for c in BALANCE_CPU):
         return ""
-    return " (learn {:.2f}, project {:.2f}, choose {:.2f}, plan {:.2f})".format(*(cpu[c] for c in BALANCE_CPU))
+    learn, pose, project, choose, plan = (cpu[c] for c in BALANCE_CPU)
+    posing = f", pose {pose:.2f}" if pose else ""  # a moving scene's
+    return f" (learn {learn:.2f}{posing}, project {project:.2f}, choose {choose:.2f}, plan {plan:.2f})"
 
 
 def _cull(cpu: dict) -> str:

@@ -84,6 +84,14 @@ class SceneSpec:
                             must="must be one of x, y, z, -x, -y, -z",
                             help="up axis of the model (default: the format's convention, see scene info)")
     lods: bool = True  # build (and cache, and hold) levels of detail: only where the run can draw them
+    # -- what moves (``scene/moves.py``): no part of the cached scene, only of its motion
+    moving: float = option(0.0, group="scene", metavar="FRACTION", type=float,
+                           valid=lambda v: 0.0 <= v <= 1.0, must="must be in 0..1", help=(
+        "this share of the scene's objects move as machinery does: turning, sliding or orbiting"))
+    anim_speed: float = option(1.0, group="scene", metavar="S", type=float, valid=lambda v: abs(v) <= 1000.0,
+                               must="must be a number in -1000..1000", help=(
+        "scene time runs at S seconds a second of the path (frames at 30 a second; 0 holds it, below 0 plays "
+        "it backwards)"))
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
@@ -176,13 +184,20 @@ def _fill(spec: SceneSpec) -> Scene:
     return generate_fill(spec.triangles, panels=24 * spec.copies, seed=spec.seed)
 
 
+def _swarm(spec: SceneSpec) -> Scene:
+    from multigpu.scene.swarm import generate_swarm
+
+    return generate_swarm(spec.triangles, spec.seed)
+
+
 def _city(spec: SceneSpec) -> Scene:
     from multigpu.scene.city import generate_city
 
     return generate_city(spec.triangles, spec.seed)
 
 
-# built-in scenes: the plant (triangle-bound, the paper's kind), a fill-bound contrast, and a
-# city of many small objects on big ground pieces (per-frame overhead); for ``fill``,
-# ``--copies`` multiplies the 24 panels (depth complexity)
-BUILTIN = {"plant": _plant, "fill": _fill, "city": _city}
+# built-in scenes: the plant (triangle-bound, the paper's kind), a fill-bound contrast, a
+# city of many small objects on big ground pieces (per-frame overhead) and a swarm whose load
+# moves across the wall (``scene/swarm.py``); for ``fill``, ``--copies`` multiplies the 24
+# panels (depth complexity)
+BUILTIN = {"plant": _plant, "fill": _fill, "city": _city, "swarm": _swarm}

@@ -14,6 +14,7 @@ from pathlib import Path
 
 #: phase -> (component, colour)
 COMPONENT = {"input": ("load balancing", "#4c72b0"), "learn": ("load balancing", "#4c72b0"),
+             "pose": ("load balancing", "#4c72b0"),
              "project": ("load balancing", "#4c72b0"), "choose": ("load balancing", "#4c72b0"),
              "plan": ("load balancing", "#4c72b0"),
              "cull": ("rendering", "#dd8452"), "render": ("rendering", "#dd8452"),

@@ -1,0 +1,172 @@
+"""Objects that move: one rigid (affine) transform per body a frame, and what it does to bounds.
+
+A moving scene keeps its vertices as modelled (one copy per host, never rewritten); each frame a
+``Motion`` gives every *body* (a modelled object: the clusters and parts cut from it move with
+it) an affine map ``x -> A x + b`` of the scene's local coordinates (vertex coordinates, relative
+to ``Scene.origin``). ``Posed`` turns those into everything downstream needs, vectorized over
+all objects: the moved objects' boxes (a box's image under ``A`` is contained in the box of half
+extents ``|A| h`` about ``A c + b``: Arvo's rule, exact for a box's own corners), their spheres
+(radius times a bound of ``A``'s largest stretch), the parts' boxes, and the (N, 12) float32 rows
+the vertex shader applies (``gpu/shaders.py``). Every rank computes the same float64 numbers from
+the same time, so every rank draws the same float32 vertices: composites stay bit-identical to
+one rank's render. Pure numpy: no MPI, no GL.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from multigpu.core import jit
+from multigpu.core import motion_kernel as kernel
+
+#: a frame is this many seconds of scene time at ``--anim-speed 1`` (a path's frames, played at 30 Hz)
+FRAME_SECONDS = 1.0 / 30.0
+
+
+def scene_time(frame: int, speed: float = 1.0) -> float:
+    """The scene's time (seconds) at frame ``frame`` of the path: the same on every rank, in a
+    replay and after a recovery (it is the frame's, not the clock's)."""
+    return float(frame) * FRAME_SECONDS * float(speed)
+
+
+class Motion(Protocol):
+    """Where a scene's bodies are at time ``t``: ``at(t)`` gives ``(A (B, 3, 3), b (B, 3))`` float64
+    in the scene's local coordinates; ``bodies`` (N,) is each object's body."""
+
+    bodies: np.ndarray
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def bodies_of(scene) -> np.ndarray:
+    """(N,) each object's body: objects sharing a base vertex were cut from one modelled object
+    (``scene/cluster.py`` keeps its base vertex), so they move as one."""
+    _, body = np.unique(np.asarray(scene.base_vertex), return_inverse=True)
+    return body.astype(np.int64)
+
+
+def rotations(axis: np.ndarray, angle: np.ndarray, compiled: bool | None = None) -> np.ndarray:
+    """(n, 3, 3) rotations by ``angle`` (n,) radians about unit ``axis`` (n, 3) (Rodrigues)."""
+    axis = np.ascontiguousarray(axis, dtype=np.float64)
+    angle = np.ascontiguousarray(np.broadcast_to(angle, axis.shape[:1]), dtype=np.float64)
+    out = np.empty((axis.shape[0], 3, 3))
+    if jit.use(compiled):
+        kernel._rotations(axis, angle, out)
+        return out
+    c, s = np.cos(angle), np.sin(angle)
+    x, y, z = axis[:, 0], axis[:, 1], axis[:, 2]
+    C = 1.0 - c
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = c + x * x * C, x * y * C - z * s, x * z * C + y * s
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = y * x * C + z * s, c + y * y * C, y * z * C - x * s
+    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = z * x * C - y * s, z * y * C + x * s, c + z * z * C
+    return out
+
+
+def apply(A: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(n, 3) ``A @ v`` per row, summed left to right (as the kernel sums)."""
+    return A[:, :, 0] * v[:, 0, None] + A[:, :, 1] * v[:, 1, None] + A[:, :, 2] * v[:, 2, None]
+
+
+def stretch(A: np.ndarray) -> np.ndarray:
+    """(n,) an upper bound of each map's largest stretch (spectral norm): exact where its columns
+    are orthogonal (a rotation times a scale: the longest column), else the Frobenius norm."""
+    col = [A[:, 0, j] * A[:, 0, j] + A[:, 1, j] * A[:, 1, j] + A[:, 2, j] * A[:, 2, j] for j in range(3)]
+    dot = lambda i, j: np.abs(A[:, 0, i] * A[:, 0, j] + A[:, 1, i] * A[:, 1, j] + A[:, 2, i] * A[:, 2, j])  # noqa: E731
+    off = np.maximum(np.maximum(dot(0, 1), dot(0, 2)), dot(1, 2))
+    top = np.maximum(np.maximum(col[0], col[1]), col[2])
+    return np.sqrt(np.where(off <= ORTHOGONAL * top, top, col[0] + col[1] + col[2]))
+
+
+#: columns whose dot products stay under this share of their squared lengths count as orthogonal
+ORTHOGONAL = 1e-12
+
+
+def moved_boxes(center: np.ndarray, half: np.ndarray, A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes (n, 3) ``center`` +- ``half`` moved by ``x -> A x + b``: the boxes that hold them."""
+    return apply(A, center) + b, apply(np.abs(A), half)
+
+
+def shader_rows(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n, 12) float32: each map's three rows ``[A_i0, A_i1, A_i2, b_i]`` (the vertex shader's)."""
+    return np.concatenate([A, b[:, :, None]], axis=2).reshape(len(A), 12).astype(np.float32)
+
+
+class Posed:
+    """A scene's bounds at each time of its ``motion``, made from its bounds at rest.
+
+    ``at(t)`` fills, for every object: ``center``/``half`` (3, N) float64 world boxes, coordinate-
+    major as ``core.bounds.BoxProjector`` holds them; ``centers`` (N, 3) and ``radii`` (N,) its
+    spheres; ``rows`` (N, 12) float32 its map for the GPU; and for a scene cut into parts each
+    part's ``part_center``/``part_half`` (3, P). Only bodies that move (``Motion.moving``, all
+    where it says nothing) are computed; the others keep their rest values."""
+
+    def __init__(self, scene, motion: Motion, compiled: bool | None = None):
+        self.motion = motion
+        self.compiled = jit.use(compiled)
+        self.origin = np.asarray(scene.origin, dtype=np.float64)
+        body = np.asarray(motion.bodies, dtype=np.int64)
+        if body.shape != (scene.n_objects,):
+            raise ValueError(f"a motion for {body.shape[0]} objects cannot move a scene of {scene.n_objects}")
+        bmin, bmax = np.asarray(scene.bmin, dtype=np.float64), np.asarray(scene.bmax, dtype=np.float64)
+        moving = getattr(motion, "moving", None)
+        self.objects = (np.arange(scene.n_objects) if moving is None
+                        else np.flatnonzero(np.asarray(moving, dtype=bool)[body]))  # the objects that move
+        self.body = body[self.objects]
+        # rest boxes and spheres of the moving objects, local
+        self.c0 = np.ascontiguousarray((bmin + bmax)[self.objects] * 0.5 - self.origin)
+        self.h0 = np.ascontiguousarray((bmax - bmin)[self.objects] * 0.5)
+        self.s0 = np.asarray(scene.centers, dtype=np.float64)[self.objects] - self.origin
+        self.r0 = np.asarray(scene.radii, dtype=np.float64)[self.objects]
+        self.center = np.ascontiguousarray(((bmin + bmax) * 0.5).T)
+        self.half = np.ascontiguousarray(((bmax - bmin) * 0.5).T)
+        self.centers = np.array(scene.centers, dtype=np.float64)
+        self.radii = np.array(scene.radii, dtype=np.float64)
+        self.rows = np.tile(np.array([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0], dtype=np.float32), (scene.n_objects, 1))
+        self.parts = None
+        start = scene.part_start
+        if start is not None and int(start[-1]) > scene.n_objects:
+            pmin, pmax = np.asarray(scene.part_bmin, dtype=np.float64), np.asarray(scene.part_bmax, dtype=np.float64)
+            part_obj = np.repeat(np.arange(scene.n_objects), np.diff(start))
+            rows = np.flatnonzero(np.isin(part_obj, self.objects))
+            self.parts = (rows, body[part_obj[rows]], np.ascontiguousarray((pmin + pmax)[rows] * 0.5 - self.origin),
+                          np.ascontiguousarray((pmax - pmin)[rows] * 0.5))
+            self.part_center = np.ascontiguousarray(((pmin + pmax) * 0.5).T)
+            self.part_half = np.ascontiguousarray(((pmax - pmin) * 0.5).T)
+        self.t = None
+
+    @property
+    def n_moving(self) -> int:
+        return int(self.objects.size)
+
+    def at(self, t: float) -> "Posed":
+        """Every array above at time ``t`` (rewritten in place; this object, for chaining)."""
+        A, b = self.motion.at(float(t))
+        if self.compiled:  # one pass (``motion_kernel.py``), the same numbers
+            A, b = np.ascontiguousarray(A, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)
+            kernel._pose(A, b, self.body, self.objects, self.c0, self.h0, self.s0, self.r0, self.origin, ORTHOGONAL,
+                         self.center, self.half, self.centers, self.radii, self.rows)
+            if self.parts is not None:
+                kernel._boxes(A, b, *self.parts, self.origin, self.part_center, self.part_half)
+            self.t = float(t)
+            return self
+        Ao, bo = A[self.body], b[self.body]
+        idx = self.objects
+        c, h = moved_boxes(self.c0, self.h0, Ao, bo)
+        self.center[:, idx] = (c + self.origin).T
+        self.half[:, idx] = h.T
+        self.centers[idx] = apply(Ao, self.s0) + bo + self.origin
+        self.radii[idx] = self.r0 * stretch(Ao)
+        self.rows[idx] = shader_rows(Ao, bo)
+        if self.parts is not None:
+            rows, pbody, pc, ph = self.parts
+            c, h = moved_boxes(pc, ph, A[pbody], b[pbody])
+            self.part_center[:, rows] = (c + self.origin).T
+            self.part_half[:, rows] = h.T
+        self.t = float(t)
+        return self
+
+    def bmin_bmax(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) the moved boxes' corners (tests, tools)."""
+        return (self.center - self.half).T, (self.center + self.half).T

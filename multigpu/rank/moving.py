@@ -1,0 +1,53 @@
+"""A moving scene in the frame loop: its bodies posed at each frame's scene time, and every
+part of the loop that reads object bounds pointed at the posed ones.
+
+The scene's time is the frame's (``core.motion.scene_time``, at ``--anim-speed``), or the
+operator's where a run steers it (``Live``): every rank poses the same frame at the same time,
+so a replay, a restart after a failure and a one-rank render all see what the wall saw. The
+planner's projector (or this rank's slice of a shared projection), the part culler and the
+level-of-detail chooser read the posed arrays; the renderer gets the maps the vertex shader
+applies. A part of the frame loop (``frames.Frames``) with one job.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multigpu.core.bounds import BoxProjector
+from multigpu.core.motion import Posed, scene_time
+from multigpu.rank.timer import Timer
+
+
+class Moving:
+    """Poses ``scene`` by ``motion`` for the frame loop's parts (any of them None where absent)."""
+
+    def __init__(self, scene, motion, speed: float, planner, projection, culler, chooser, renderer):
+        self.posed = Posed(scene, motion)
+        self.speed = float(speed)
+        self.planner, self.culler, self.renderer = planner, culler, renderer
+        self.sub = getattr(projection, "sub", None)  # a shared projection's slice of the boxes
+        self.span = (projection.lo, projection.hi) if self.sub is not None else None
+        if chooser is not None:  # reads the posed spheres from now on
+            chooser.centers, chooser.radii = self.posed.centers, self.posed.radii
+        self.time = 0.0  # the scene time of the last frame posed
+
+    def time_of(self, f: int) -> float:
+        """Frame ``f``'s scene time as the path plays it."""
+        return scene_time(f, self.speed)
+
+    def pose(self, t: Timer, when: float) -> None:
+        """Every body where it is at scene time ``when``, for the frame planned next."""
+        with t.phase("pose"):
+            p = self.posed.at(when)
+            project = self.planner.project
+            if isinstance(project, BoxProjector):
+                project.place(p.center, p.half)
+            else:
+                project.place(np.ascontiguousarray(p.centers.T), p.radii)
+            if self.sub is not None:
+                lo, hi = self.span
+                self.sub.place(np.ascontiguousarray(p.center[:, lo:hi]), np.ascontiguousarray(p.half[:, lo:hi]))
+            if self.culler is not None and p.parts is not None:
+                self.culler.place(p.part_center, p.part_half)
+            self.renderer.pose(p.rows)
+        self.time = when
