@@ -39,7 +39,7 @@ class Machinery:
         heading = rng.uniform(0, 2 * np.pi, n)
         ground = rotations(self.up, heading) @ side  # (n, 3) a direction along the ground each
         self.kind = rng.integers(0, len(KINDS), n)
-        turns, slides, orbits = (self.kind == k for k in range(3))
+        turns, slides, orbits = ((self.kind == k) & self.moving for k in range(3))  # the others stay
         self.rate = np.where(turns | orbits, rng.uniform(0.3, 1.2, n) * rng.choice([-1, 1], n), 0.0)  # rad/s
         self.pivot = centre + np.where(orbits, 1.5 * reach, 0.0)[:, None] * ground
         self.slide = np.where(slides, np.minimum(0.5 * reach, 3.0), 0.0)[:, None] * ground  # amplitude

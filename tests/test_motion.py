@@ -1,0 +1,192 @@
+"""Scenes that move, in one process: the maps, the posed bounds (against the moved vertices), the
+compiled kernel against its numpy reference, the swarm's flight and the machinery."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from multigpu.core import jit
+from multigpu.core.bounds import BoxProjector
+from multigpu.core.camera import look_at, perspective
+from multigpu.core.motion import FRAME_SECONDS, Posed, moved_boxes, rotations, scene_time, shader_rows, stretch
+from multigpu.core.triangles import triangle_objects
+from multigpu.errors import InputError
+from multigpu.scene.models import SceneSpec
+from multigpu.scene.moves import Machinery, motion_of, moves
+from multigpu.scene.parts import with_parts
+from multigpu.scene.plant import generate_plant
+from multigpu.scene.swarm import GATHER_S, SIDE, Swarm, generate_swarm
+
+needs_numba = pytest.mark.skipif(not jit.available(), reason="numba is not installed")
+
+
+@pytest.fixture(scope="module")
+def swarm():
+    return generate_swarm(20_000, seed=3)
+
+
+@pytest.fixture(scope="module")
+def plant():
+    return with_parts(generate_plant(20_000, seed=1), 32)  # big objects cut into parts
+
+
+def moved_vertices(scene, A, b, body):
+    """(T, 3, 3) every triangle's corners moved by its object's body's map (float64, world), and
+    (T,) each triangle's object."""
+    tri, obj = triangle_objects(scene)
+    local = scene.vertices[:, :3].astype(np.float64)[tri]  # (T, 3, 3)
+    Ao, bo = A[body[obj]], b[body[obj]]
+    return np.einsum("tij,tvj->tvi", Ao, local) + bo[:, None, :] + scene.origin, obj
+
+
+def test_rotations_are_rotations_and_the_kernel_makes_the_same_numbers():
+    rng = np.random.default_rng(0)
+    axis = rng.normal(size=(500, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    angle = rng.uniform(-50, 50, 500)
+    R = rotations(axis, angle, compiled=False)
+    assert np.allclose(np.einsum("nki,nkj->nij", R, R), np.eye(3), atol=1e-12)
+    assert np.allclose(np.linalg.det(R), 1.0)
+    assert np.allclose(np.einsum("nij,nj->ni", R, axis), axis)  # the axis stays
+    if jit.available():
+        assert np.array_equal(rotations(axis, angle, compiled=True), R)
+
+
+def test_stretch_bounds_the_largest_singular_value():
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(300, 3, 3))
+    R = rotations(np.tile([0.0, 0.0, 1.0], (300, 1)), rng.uniform(0, 6, 300))
+    scaled = R * rng.uniform(0.1, 5, (300, 1, 3))  # a rotation times a scale: columns orthogonal
+    for M in (A, scaled):
+        top = np.linalg.svd(M, compute_uv=False)[:, 0]
+        assert (stretch(M) >= top * (1 - 1e-12)).all()
+    assert np.allclose(stretch(scaled), np.linalg.svd(scaled, compute_uv=False)[:, 0])  # exact there
+
+
+def test_moved_boxes_hold_their_moved_corners():
+    rng = np.random.default_rng(2)
+    c, h = rng.normal(size=(200, 3)), rng.uniform(0, 2, (200, 3))
+    A, b = rng.normal(size=(200, 3, 3)), rng.normal(size=(200, 3))
+    mc, mh = moved_boxes(c, h, A, b)
+    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, 8).T
+    corners = c[:, None, :] + signs[None] * h[:, None, :]
+    moved = np.einsum("nij,nvj->nvi", A, corners) + b[:, None, :]
+    assert (np.abs(moved - mc[:, None, :]) <= mh[:, None, :] * (1 + 1e-12) + 1e-12).all()
+    # the box is the tightest: each face is reached by a corner
+    assert np.allclose(np.abs(moved - mc[:, None, :]).max(axis=1), mh)
+
+
+def test_shader_rows_are_the_maps():
+    A, b = np.arange(18.0).reshape(2, 3, 3), np.array([[10.0, 11, 12], [13, 14, 15]])
+    rows = shader_rows(A, b).reshape(2, 3, 4)
+    assert rows.dtype == np.float32 and np.array_equal(rows[:, :, :3], A) and np.array_equal(rows[:, :, 3], b)
+
+
+@pytest.mark.parametrize("which", ["swarm", "plant"])
+@pytest.mark.parametrize("t", [0.0, 1.3, 4.0, 9.7])
+def test_posed_bounds_hold_every_moved_vertex(swarm, plant, which, t):
+    """The boxes, spheres and parts the balancer, the levels and the culler read contain every
+    vertex where the GPU puts it."""
+    scene = swarm if which == "swarm" else plant
+    motion = Swarm(scene) if which == "swarm" else Machinery(scene, 0.5, seed=4)
+    posed = Posed(scene, motion, compiled=False).at(t)
+    A, b = motion.at(t)
+    world, obj = moved_vertices(scene, A, b, motion.bodies)
+    lo, hi = posed.bmin_bmax()
+    tol = 8 * np.finfo(np.float32).eps * np.abs(scene.vertices[:, :3]).max()  # float32 vertices, float64 bounds
+    assert (world >= lo[obj][:, None, :] - tol).all() and (world <= hi[obj][:, None, :] + tol).all()
+    d = np.linalg.norm(world - posed.centers[obj][:, None, :], axis=2)
+    assert (d <= posed.radii[obj][:, None] * (1 + 1e-9) + tol).all()
+    if which == "plant":  # every part's box holds its triangles
+        start = scene.part_start
+        assert posed.parts is not None and int(start[-1]) > scene.n_objects
+        part_of = np.empty(len(obj), dtype=np.int64)  # triangles follow their object's parts in index order
+        order = np.argsort(scene.first_index, kind="stable")
+        at = 0
+        for o in order:  # objects (a test)
+            for p in range(start[o], start[o + 1]):
+                n = int(scene.part_count[p]) // 3
+                part_of[at:at + n] = p
+                at += n
+        pc, ph = posed.part_center.T, posed.part_half.T
+        assert (world >= (pc - ph)[part_of][:, None, :] - tol).all()
+        assert (world <= (pc + ph)[part_of][:, None, :] + tol).all()
+
+
+@needs_numba
+@pytest.mark.parametrize("which", ["swarm", "plant"])
+def test_the_compiled_pose_makes_the_references_numbers(swarm, plant, which):
+    scene = swarm if which == "swarm" else plant
+    motion = Swarm(scene) if which == "swarm" else Machinery(scene, 0.3, seed=2)
+    a, b = Posed(scene, motion, compiled=True), Posed(scene, motion, compiled=False)
+    for t in (0.0, 0.7, 5.5, -2.0):
+        a.at(t), b.at(t)
+        for name in ("center", "half", "centers", "radii", "rows", *(("part_center", "part_half") if b.parts else ())):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+
+def test_a_projector_of_moved_boxes_gives_the_rects_of_the_moved_boxes(swarm):
+    posed = Posed(swarm, Swarm(swarm)).at(3.0)
+    view, proj = look_at([0, -160, 40], [0, 0, 0], [0, 0, 1]), perspective(50, 1.3, 0.5, 500)
+    lo, hi = posed.bmin_bmax()
+    for compiled in ([False, True] if jit.available() else [False]):
+        moved = BoxProjector(swarm.bmin, swarm.bmax, compiled=compiled)
+        moved.place(posed.center, posed.half)
+        fresh = BoxProjector(lo, hi, compiled=compiled, plain=1)
+        assert np.array_equal(moved(view, proj), fresh(view, proj), equal_nan=True)
+
+
+def test_the_swarm_rests_at_time_0_gathers_and_stays_in_its_cube(swarm):
+    motion = Swarm(swarm)
+    A, b = motion.at(0.0)
+    assert np.array_equal(A, np.broadcast_to(np.eye(3), A.shape)) and not b.any()
+    home = motion.home + swarm.origin
+    spread = lambda p: np.linalg.norm(p - p.mean(axis=0), axis=1).mean()  # noqa: E731
+    posed = Posed(swarm, motion)
+    gathered = posed.at(GATHER_S / 2 + 0.6).centers
+    assert spread(gathered) < 0.5 * spread(home)  # the load crowds into a small part of the screen
+    for t in np.linspace(0, 3 * GATHER_S, 25):
+        lo, hi = posed.at(t).bmin_bmax()
+        assert lo.min() >= -SIDE / 2 + swarm.origin.min() - 1e-9 and hi.max() <= SIDE / 2 + swarm.origin.max() + 1e-9
+    assert swarm.n_objects == 1000 and swarm.n_triangles == 20_000
+
+
+def test_machinery_moves_its_share_of_bodies_each_with_one_map(plant):
+    from multigpu.scene.cluster import split_objects
+
+    cut = split_objects(plant, 40)  # clusters of one modelled object: one body
+    motion = Machinery(cut, 0.2, seed=5)
+    assert motion.bodies.max() + 1 == plant.n_objects < cut.n_objects
+    assert motion.moving.sum() == round(0.2 * plant.n_objects)
+    A, b = motion.at(0.0)
+    assert np.allclose(A, np.eye(3)) and np.allclose(b, 0)
+    A, b = motion.at(2.5)
+    still = ~motion.moving
+    assert np.allclose(A[still], np.eye(3)) and np.allclose(b[still], 0)
+    assert (np.abs(A[motion.moving] - np.eye(3)).max(axis=(1, 2)) + np.abs(b[motion.moving]).max(axis=1) > 0).all()
+    posed = Posed(cut, motion).at(2.5)
+    rest = Posed(cut, motion).at(0.0)
+    fixed = still[motion.bodies]
+    assert np.array_equal(posed.center[:, fixed], rest.center[:, fixed])  # the others keep their rest boxes
+    assert posed.n_moving == int((~fixed).sum())
+    again = Machinery(cut, 0.2, seed=5)  # every rank picks the same bodies and the same motions
+    assert np.array_equal(again.moving, motion.moving) and np.array_equal(again.at(2.5)[1], b)
+
+
+def test_scene_time_is_the_frames_and_what_moves_is_known_from_the_spec(swarm, plant):
+    assert scene_time(30) == pytest.approx(1.0) and scene_time(45, 2.0) == pytest.approx(90 * FRAME_SECONDS)
+    assert scene_time(12, -1.0) == -scene_time(12)
+    spec = SceneSpec()
+    assert moves(swarm, spec) and isinstance(motion_of(swarm, spec), Swarm)
+    assert not moves(plant, spec) and motion_of(plant, spec) is None
+    spec = dataclasses.replace(spec, moving=0.2)
+    assert moves(plant, spec) and isinstance(motion_of(plant, spec), Machinery)
+
+
+@pytest.mark.parametrize("field,value,words", [("moving", 1.5, "must be in 0..1"), ("moving", float("nan"), "0..1"),
+                                               ("anim_speed", float("inf"), "-1000..1000"),
+                                               ("anim_speed", float("nan"), "-1000..1000")])
+def test_motion_flags_are_checked_at_the_door(field, value, words):
+    with pytest.raises(InputError, match=words):
+        SceneSpec(**{field: value})

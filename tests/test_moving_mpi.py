@@ -1,0 +1,113 @@
+"""Scenes that move, under mpiexec (2-4 ranks, each job under a hard timeout): a moving scene's
+wall equals one rank's render of the same frame bit for bit, for every decomposition, frames in
+flight, machinery cut into clusters and parts, Open MPI, a replay and a recovery; its mosaics
+change with the camera held still."""
+
+import json
+import os
+import signal
+
+import numpy as np
+import pytest
+from mpirun import end_launcher, mpi_named, read_png, run_mpi, start_launcher
+
+from multigpu.studies.recovery_bench import rank_pids
+
+pytestmark = pytest.mark.mpi
+FRAMES = 5
+SWARM = ["--scene", "swarm", "--triangles", "20000", "--path-kind", "still", "--no-progress"]
+# the plant's machinery, its objects cut into clusters (one body each) and parts
+PLANT = ["--triangles", "20000", "--moving", "0.3", "--cluster", "64", "--path-kind", "orbit", "--no-progress"]
+
+
+def walk(out, grid, tile, extra=(), scene=SWARM, frames=FRAMES, launcher=None):
+    args = ["walkthrough", *scene, "--frames", str(frames), "--grid", f"{grid[0]}x{grid[1]}",
+            "--tile", f"{tile[0]}x{tile[1]}", "--mosaic-every", "1", "--no-overlay", "--out", str(out), *extra]
+    res = run_mpi(grid[0] * grid[1], args, launcher=launcher)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return out
+
+
+def frames_of(out, n=FRAMES):
+    return [read_png(out / "mosaic" / f"frame_{f:05d}.png") for f in range(n)]
+
+
+def same(got, want):
+    for f, (g, w) in enumerate(zip(got, want)):
+        assert g.shape == w.shape and (g == w).all(), f"frame {f}: {(g != w).any(axis=2).sum()} pixels differ"
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    base = tmp_path_factory.mktemp("moving")
+    return {"swarm": frames_of(walk(base / "swarm", (1, 1), (120, 96))),
+            "plant": frames_of(walk(base / "plant", (1, 1), (120, 96), scene=PLANT))}
+
+
+def test_the_swarm_moves_with_the_camera_held_still(reference):
+    shots = reference["swarm"]
+    changed = [int((shots[f] != shots[f - 1]).any(axis=2).sum()) for f in range(1, FRAMES)]
+    assert min(changed) > 100, changed  # every frame differs from the last: the objects flew
+
+
+@pytest.mark.parametrize("extra", [[], ["--decomposition", "db"], ["--decomposition", "hybrid"],
+                                   ["--latency", "2"], ["--balance", "static"], ["--balance", "time"],
+                                   ["--projection", "shared"], ["--decomposition", "db", "--latency", "3"]],
+                         ids=["screen", "db", "hybrid", "latency2", "static", "time", "shared-projection",
+                              "db-latency3"])
+def test_a_moving_swarm_equals_one_rank_render(reference, tmp_path, extra):
+    out = walk(tmp_path / "wall", (2, 2), (60, 48), extra)
+    same(frames_of(out), reference["swarm"])
+    s = json.loads((out / "summary.json").read_text())
+    assert s["cpu"]["posing_cpu_ms"] > 0  # the objects were posed every frame
+
+
+@pytest.mark.parametrize("grid,tile,extra", [((2, 2), (60, 48), []), ((1, 3), (40, 96), ["--decomposition", "hybrid"]),
+                                             ((1, 2), (60, 96), ["--latency", "0"])], ids=["2x2", "1x3-hybrid", "1x2"])
+def test_moving_machinery_equals_one_rank_render(reference, tmp_path, grid, tile, extra):
+    """A plant whose machinery turns, slides and orbits, its objects cut into clusters and parts:
+    each cluster and part moves with its object."""
+    same(frames_of(walk(tmp_path / "wall", grid, tile, extra, scene=PLANT)), reference["plant"])
+
+
+def test_under_open_mpi_too(reference, tmp_path):
+    same(frames_of(walk(tmp_path / "wall", (2, 2), (60, 48), launcher=mpi_named("openmpi"))), reference["swarm"])
+
+
+def test_a_replay_of_a_recording_shows_the_same_moving_frames(reference, tmp_path):
+    rec = tmp_path / "rec.json"
+    walk(tmp_path / "first", (1, 2), (60, 96), ["--record", str(rec)])
+    replay = walk(tmp_path / "replay", (2, 2), (60, 48), ["--path", str(rec)], scene=[
+        a for a in SWARM if a not in ("--path-kind", "still")])
+    same(frames_of(replay), reference["swarm"])
+
+
+def test_a_recovered_wall_resumes_at_the_same_scene_time(tmp_path):
+    """A rank killed mid-run: the restarted job poses the frames it shows where the first would
+    have, so every mosaic equals the one-rank render of its frame."""
+    frames = 160
+    ref = frames_of(walk(tmp_path / "one", (1, 1), (96, 48), frames=frames), frames)
+    out = tmp_path / "o"
+    args = ["-n", "2", "walkthrough", *SWARM, "--grid", "1x2", "--tile", "48x48", "--frames", str(frames),
+            "--mosaic-every", "1", "--no-overlay", "--out", str(out), "--recover", "1", "--liveness", "3"]
+    proc = start_launcher(args, {"LP_NUM_THREADS": "1"})
+    try:
+        import time
+
+        t = time.monotonic()
+        while not (out / "timings.csv").exists() or (out / "timings.csv").read_text().count("\n") < 2 * 40:
+            assert proc.poll() is None and time.monotonic() - t < 90, end_launcher(proc, 5)[1][-3000:]
+            time.sleep(0.1)
+        os.kill(rank_pids(out)[-1], signal.SIGKILL)
+        _, err = end_launcher(proc, 150)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is True and s["recovery_count"] == 1
+    resumed = s["recoveries"][0]["resumed_at"]
+    assert 40 <= resumed < frames
+    got = frames_of(out, frames)
+    same(got, ref)
+    assert not np.array_equal(got[resumed], got[resumed - 1])
