@@ -88,7 +88,8 @@ def test_reads_wait_a_step_from_two_frames_in_flight():
 def test_pieces_drawn_ahead_read_as_render_gives_them(ctx):
     """Two frames in flight on the scissor method: frame f+1 drawn into the other framebuffer
     before frame f is read; the pixels equal ``render``'s, with depth and several pieces."""
-    from multigpu.gpu.render import RegionRenderer, _disjoint
+    from multigpu.gpu.pending import _disjoint
+    from multigpu.gpu.render import RegionRenderer
 
     scene, cams = ctx
     r = RegionRenderer(scene["ctx"], scene["scene"], (96, 64), "scissor")

@@ -33,7 +33,8 @@ def scene_time(frame: int, speed: float = 1.0) -> float:
 
 class Motion(Protocol):
     """Where a scene's bodies are at time ``t``: ``at(t)`` gives ``(A (B, 3, 3), b (B, 3))`` float64
-    in the scene's local coordinates; ``bodies`` (N,) is each object's body."""
+    in the scene's local coordinates (arrays it may reuse: valid until its next call); ``bodies``
+    (N,) is each object's body; ``moving`` (B,) bool the bodies that ever move (None: all)."""
 
     bodies: np.ndarray
 

@@ -1,8 +1,9 @@
 """Headless GL rendering of one rank's screen region (moderngl on EGL; textures: ``texturing.py``).
 
 One context per rank, the whole scene uploaded once. A frame is ONE ``render_indirect`` call
-over the draw commands of the objects in the rank's T' mask (one command per run of visible
-objects in the spatially ordered index buffer, built with numpy: see ``drawlist.py``), into a
+(two where some of a moving scene's objects stand still: ``pose``) over the draw commands of
+the objects in the rank's T' mask (one command per run of visible objects in the spatially
+ordered index buffer, built with numpy: see ``drawlist.py``), into a
 full-display-sized framebuffer with the full-display viewport and projection, scissored to the
 rank's region (``scissor``, the default where the display fits one framebuffer): viewport and
 projection are those of a one-rank full render, so the pixels a rank produces are bit-identical
@@ -25,6 +26,7 @@ from multigpu.core.drawlist import DrawList
 from multigpu.errors import InputError
 from multigpu.gpu import texturing
 from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
+from multigpu.gpu.pending import Pending, _disjoint
 from multigpu.gpu.shaders import fragment_shader, vertex_shader
 
 EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL drivers "
@@ -151,8 +153,9 @@ class RegionRenderer:
         per_vertex = colors == "model" and scene.vertex_colors is not None
         textured = colors == "model" and scene.texcoords is not None and scene.texels is not None
         self.texture_path = texturing.texture_path() if textured else None
-        self.prog = ctx.program(vertex_shader=vertex_shader(per_vertex, textured, moving),
-                                fragment_shader=fragment_shader(textured, self.texture_path))
+        program = lambda m: ctx.program(vertex_shader=vertex_shader(per_vertex, textured, m),  # noqa: E731
+                                        fragment_shader=fragment_shader(textured, self.texture_path))
+        self.prog = program(moving)
         self.draws = DrawList(scene)
         bufs = self._buffers(scene, shared, per_vertex, textured, self.texture_path == "pool")
         self.vbo, self.ibo, self.obo = bufs["vertices"], bufs["indices"], bufs["objects"]
@@ -161,11 +164,18 @@ class RegionRenderer:
         self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
         object_colors = scene.colors if colors == "model" else palette(scene.n_objects)
         self.cbo = ctx.buffer(np.ascontiguousarray(object_colors, dtype=np.float32).ravel())
-        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 1u", "in_pos", "in_nrm"),
-                                                *([(self.rgba, "1u", "in_rgba")] if per_vertex else []),
-                                                *([(self.obo, "1u", "in_obj")] if moving or not per_vertex else []),
-                                                *([(self.uvl, "3f", "in_uvl")] if textured else [])],
-                                    index_buffer=self.ibo, index_element_size=4)
+        vao = lambda prog, m: ctx.vertex_array(prog, [  # noqa: E731
+            (self.vbo, "3f 1u", "in_pos", "in_nrm"), *([(self.rgba, "1u", "in_rgba")] if per_vertex else []),
+            *([(self.obo, "1u", "in_obj")] if m or not per_vertex else []),
+            *([(self.uvl, "3f", "in_uvl")] if textured else [])], index_buffer=self.ibo, index_element_size=4)
+        self.vao = vao(self.prog, moving)
+        # the programs a frame is drawn with, in order, and their commands' counts (``_commands``): where
+        # the scene moves, the objects at rest (``pose``'s) are drawn first without the maps (their reads
+        # cost llvmpipe a quarter of a frame), then the moving ones
+        self.passes, self._runs, self.movers = [(self.prog, self.vao)], (0,), None
+        if moving and not textured:
+            still = program(False)
+            self.passes.insert(0, (still, vao(still, False)))
         self.texture, self.samplers, self.layers = (texturing.make(ctx, self.prog, scene, self.texture_path)
                                                     if textured else (None, [], None))
         # each object's map where the scene moves (``pose``), at rest till then
@@ -253,8 +263,16 @@ class RegionRenderer:
 
     def _commands(self, mask, seen, levels) -> np.ndarray:
         """The draw commands of the objects in ``mask`` (of their ``seen`` parts) at their ``levels``
-        of detail (None: as modelled); ``_tris``: their triangles."""
-        cmds = self.draws.leveled(mask, levels, seen)
+        of detail (None: as modelled), each pass's in turn (``_runs``); ``_tris``: their triangles."""
+        if self.movers is None:  # every object through the last pass (all move, or none does)
+            cmds = self.draws.leveled(mask, levels, seen)
+            self._runs = (0,) * (len(self.passes) - 1) + (len(cmds),)
+        else:
+            mask = self._every if mask is None else mask
+            runs = [self.draws.leveled(mask & ~self.movers, levels, seen),
+                    self.draws.leveled(mask & self.movers, levels, seen)]
+            cmds = np.concatenate(runs)
+            self._runs = (len(runs[0]), len(runs[1]))
         self.last_commands = len(cmds)
         self._tris = int(cmds[:, 0].sum()) // 3
         return cmds
@@ -269,15 +287,24 @@ class RegionRenderer:
         self.fbo.clear(*BACKGROUND, 1.0, depth=1.0)
         if len(cmds):
             self._upload(cmds, light)
-            self.prog["mvp"].write(np.ascontiguousarray(mvp.T, dtype=np.float32))
-            self.vao.render_indirect(self.indirect, count=len(cmds))
+            self._issue(mvp)
+
+    def _issue(self, mvp) -> None:
+        """The uploaded commands drawn, each pass's with its program (``_runs``)."""
+        first, m = 0, np.ascontiguousarray(mvp.T, dtype=np.float32)
+        for (prog, vao), n in zip(self.passes, self._runs):  # one or two passes
+            if n:
+                prog["mvp"].write(m)
+                vao.render_indirect(self.indirect, count=n, first=first)
+            first += n
 
     def _upload(self, cmds: np.ndarray, light) -> None:
         """A frame's draw commands into the indirect buffer, the light and the colours bound."""
         if cmds.nbytes > self.indirect.size:
             self.indirect.orphan(cmds.nbytes)
         self.indirect.write(cmds)
-        self.prog["light"].value = tuple(float(v) for v in light)
+        for prog, _ in self.passes:  # one or two
+            prog["light"].value = tuple(float(v) for v in light)
         self.cbo.bind_to_storage_buffer(0)
         if self.mbo is not None:
             self.mbo.bind_to_storage_buffer(4)
@@ -344,8 +371,7 @@ class RegionRenderer:
             ctx.enable(self.depth_test)
             self.fbo.clear(*BACKGROUND, 1.0, depth=1.0)
             if len(cmds):
-                self.prog["mvp"].write(np.ascontiguousarray(m.T, dtype=np.float32))
-                self.vao.render_indirect(self.indirect, count=len(cmds))
+                self._issue(m)
             if (cw, ch) == (w, h):  # one chunk (the usual): read straight into the result, no copy
                 self.fbo.read_into(out, viewport=(fx, fy, cw, ch), components=3, alignment=1)
                 if depth:
@@ -392,11 +418,16 @@ class RegionRenderer:
         self.last_triangles = total
         return Pending(None, self.fbo, drawn, depth)
 
-    def pose(self, rows: np.ndarray) -> None:
+    def pose(self, rows: np.ndarray, movers: np.ndarray | None = None) -> None:
         """Every object's (N, 12) float32 map (``core.motion``) from now on; frames still being drawn
-        keep theirs (the buffer is orphaned first)."""
+        keep theirs (the buffer is orphaned first). ``movers``: (N,) bool, the objects that may
+        move (the others are drawn without their maps); None keeps the last."""
         self.mbo.orphan()
         self.mbo.write(rows)
+        if movers is not None and len(self.passes) > 1:
+            movers = np.asarray(movers, dtype=bool)
+            self.movers = None if movers.all() else movers
+            self._every = np.ones(len(movers), dtype=bool)
 
     @property
     def framebuffer_bytes(self) -> int:
@@ -409,42 +440,10 @@ class RegionRenderer:
                 for att in (*fbo.color_attachments, fbo.depth_attachment):
                     att.release()
                 fbo.release()
-        for obj in (self.vao, self.indirect, self.mbo, self.cbo, self.ibo, self.obo, self.rgba, self.uvl, self.texels,
-                    self.vbo, *self.samplers, self.texture, self.layers, self.prog):
+        for obj in (*(v for _, v in self.passes), self.indirect, self.mbo, self.cbo, self.ibo, self.obo, self.rgba,
+                    self.uvl, self.texels, self.vbo, *self.samplers, self.texture, self.layers,
+                    *(p for p, _ in self.passes)):
             if obj is not None:
                 obj.release()
         self._maps = None  # the file's maps outlive the GL buffers drawing from them
 
-
-class Pending:
-    """A submitted frame's pieces: already read (``done``), or drawn into ``fbo`` at ``drawn``
-    (x, y, w, h) and read on ``read`` (waiting for the GL to finish drawing them)."""
-
-    def __init__(self, done: list | None, fbo=None, drawn: list | None = None, depth: bool = False):
-        self.done, self.fbo, self.drawn, self.depth = done, fbo, drawn, depth
-
-    def read(self) -> list:
-        """Every piece as ``(rgb, depth or None)``, row 0 at the bottom (as ``render``)."""
-        if self.done is None:
-            out = []
-            for x, y, w, h in self.drawn:  # pieces, not objects
-                rgb = np.empty((h, w, 3), dtype=np.uint8)
-                self.fbo.read_into(rgb, viewport=(x, y, w, h), components=3, alignment=1)
-                z = None
-                if self.depth:
-                    z = np.empty((h, w), dtype=np.float32)
-                    self.fbo.read_into(z, viewport=(x, y, w, h), components=1, attachment=-1, dtype="f4", alignment=1)
-                out.append((rgb, z))
-            self.done, self.fbo = out, None
-        return self.done
-
-
-def _disjoint(rects: list) -> bool:
-    """Whether no two of the ``[x0, y0, x1, y1)`` rects overlap (pieces, a handful a rank)."""
-    r = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
-    if len(r) < 2:
-        return True
-    apart = ((r[:, None, 2] <= r[None, :, 0]) | (r[None, :, 2] <= r[:, None, 0]) |
-             (r[:, None, 3] <= r[None, :, 1]) | (r[None, :, 3] <= r[:, None, 1]))
-    np.fill_diagonal(apart, True)
-    return bool(apart.all())

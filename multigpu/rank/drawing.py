@@ -1,7 +1,7 @@
 """One rank's draw calls for a frame: the pieces of its ``Work``, each through its screen's
 frustum, with the parts a piece needs culled first (``core/culling.py``) and the regions
 widened below render scale 1 (``core/resample.py``); the pixels are read later
-(``gpu.render.Pending``). A part of the frame loop (``frames.Frames``) with one job.
+(``gpu.pending.Pending``). A part of the frame loop (``frames.Frames``) with one job.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ class InFlight:
     control: object
     work: Work
     plan: list
-    pending: object  # gpu.render.Pending: the pixels, once read
+    pending: object  # gpu.pending.Pending: the pixels, once read
     drawn: int  # triangles this rank drew
     objects: int  # distinct objects it drew
     balance: int  # the CSV's balance column

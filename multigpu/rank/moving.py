@@ -30,6 +30,8 @@ class Moving:
         if chooser is not None:  # reads the posed spheres from now on
             chooser.centers, chooser.radii = self.posed.centers, self.posed.radii
         self.time = 0.0  # the scene time of the last frame posed
+        self.movers = np.zeros(scene.n_objects, dtype=bool)  # told the renderer once, with the first maps
+        self.movers[self.posed.objects] = True
 
     def time_of(self, f: int) -> float:
         """Frame ``f``'s scene time as the path plays it."""
@@ -49,5 +51,6 @@ class Moving:
                 self.sub.place(np.ascontiguousarray(p.center[:, lo:hi]), np.ascontiguousarray(p.half[:, lo:hi]))
             if self.culler is not None and p.parts is not None:
                 self.culler.place(p.part_center, p.part_half)
-            self.renderer.pose(p.rows)
+            self.renderer.pose(p.rows, self.movers)
+            self.movers = None
         self.time = when

@@ -90,8 +90,8 @@ class SceneSpec:
         "this share of the scene's objects move as machinery does: turning, sliding or orbiting"))
     anim_speed: float = option(1.0, group="scene", metavar="S", type=float, valid=lambda v: abs(v) <= 1000.0,
                                must="must be a number in -1000..1000", help=(
-        "scene time runs at S seconds a second of the path (frames at 30 a second; 0 holds it, below 0 plays "
-        "it backwards)"))
+        "scene time runs at S seconds a second of the path (frames at 30 a second; 0 holds the scene at rest, "
+        "below 0 plays it backwards)"))
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:

@@ -35,6 +35,7 @@ BENCHES = {
     "onepass": ("onepass_bench:bench_onepass", "both eyes in one pass (instanced, geometry shader) against two"),
     "head": ("head_bench:bench_head", "a tracked head over UDP: motion to photon at latency 0, 1, 2"),
     "memory": ("memory_bench:bench_memory", "memory per rank and per host"),
+    "moving": ("moving_bench:bench_moving", "moving scenes: per-frame balancing against static and none, their cost"),
     "memory-steps": ("memory_bench:bench_memory_steps", "memory step by step through setup"),
     "model-load": ("memory_bench:bench_model_load", "loading a model file: time and peak memory"),
     "textures": ("texture_bench:bench_textures", "a textured model against the same untextured: time, memory"),
