@@ -94,7 +94,7 @@ def warm() -> float:
             np.empty(1, dtype=np.int64))
     one, idx = np.zeros((1, 3)), np.zeros(1, dtype=np.int64)
     _rotations(one, np.zeros(1), np.empty((1, 3, 3)))
-    _pose(np.zeros((1, 3, 3)), one, idx, idx, one, one, one, np.ones(1), np.zeros(3), 1e-12, np.empty((3, 1)),
+    _pose(np.zeros((1, 3, 3)), one, idx, idx, one, one, one, np.ones(1), np.zeros(3), 1e-12, True, np.empty((3, 1)),
           np.empty((3, 1)), np.empty((1, 3)), np.empty(1), np.empty((1, 12), dtype=np.float32))
     return time.perf_counter() - t0
 

@@ -16,7 +16,7 @@ from multigpu.scene.models import SceneSpec
 from multigpu.scene.moves import Machinery, motion_of, moves
 from multigpu.scene.parts import with_parts
 from multigpu.scene.plant import generate_plant
-from multigpu.scene.swarm import GATHER_S, SIDE, Swarm, generate_swarm
+from multigpu.scene.swarm import CYCLE_S, GATHER_S, LEG_S, SIDE, Swarm, generate_swarm
 
 needs_numba = pytest.mark.skipif(not jit.available(), reason="numba is not installed")
 
@@ -144,9 +144,13 @@ def test_the_swarm_rests_at_time_0_gathers_and_stays_in_its_cube(swarm):
     home = motion.home + swarm.origin
     spread = lambda p: np.linalg.norm(p - p.mean(axis=0), axis=1).mean()  # noqa: E731
     posed = Posed(swarm, motion)
-    gathered = posed.at(GATHER_S / 2 + 0.6).centers
-    assert spread(gathered) < 0.5 * spread(home)  # the load crowds into a small part of the screen
-    for t in np.linspace(0, 3 * GATHER_S, 25):
+    gathered = posed.at(GATHER_S + 0.6).centers
+    assert spread(gathered) < 0.3 * spread(home)  # the load crowds into a small part of the screen
+    # and the flock moves across the cube: its centre at the tour's corners, a leg apart
+    corners = [posed.at(t).centers.mean(axis=0) for t in (LEG_S * 1.1, LEG_S * 2.1, LEG_S * 3.1)]
+    assert min(np.linalg.norm(a - b) for a, b in zip(corners, corners[1:])) > 0.4 * SIDE
+    assert spread(posed.at(CYCLE_S - 0.2).centers) == pytest.approx(spread(home), rel=0.05)  # home again
+    for t in np.linspace(0, 2 * CYCLE_S, 41):
         lo, hi = posed.at(t).bmin_bmax()
         assert lo.min() >= -SIDE / 2 + swarm.origin.min() - 1e-9 and hi.max() <= SIDE / 2 + swarm.origin.max() + 1e-9
     assert swarm.n_objects == 1000 and swarm.n_triangles == 20_000

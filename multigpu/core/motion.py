@@ -103,9 +103,10 @@ class Posed:
     part's ``part_center``/``part_half`` (3, P). Only bodies that move (``Motion.moving``, all
     where it says nothing) are computed; the others keep their rest values."""
 
-    def __init__(self, scene, motion: Motion, compiled: bool | None = None):
+    def __init__(self, scene, motion: Motion, compiled: bool | None = None, spheres: bool = True):
         self.motion = motion
         self.compiled = jit.use(compiled)
+        self.spheres = bool(spheres)  # the spheres posed too (levels of detail, sphere bounds read them)
         self.origin = np.asarray(scene.origin, dtype=np.float64)
         body = np.asarray(motion.bodies, dtype=np.int64)
         if body.shape != (scene.n_objects,):
@@ -143,29 +144,33 @@ class Posed:
 
     def at(self, t: float) -> "Posed":
         """Every array above at time ``t`` (rewritten in place; this object, for chaining)."""
-        A, b = self.motion.at(float(t))
+        return self.place(*self.motion.at(float(t)), t)
+
+    def place(self, A: np.ndarray, b: np.ndarray, t: float | None = None) -> "Posed":
+        """Every array above for the bodies' maps ``A``, ``b`` (``Motion.at``'s, at time ``t``)."""
         if self.compiled:  # one pass (``motion_kernel.py``), the same numbers
             A, b = np.ascontiguousarray(A, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)
             kernel._pose(A, b, self.body, self.objects, self.c0, self.h0, self.s0, self.r0, self.origin, ORTHOGONAL,
-                         self.center, self.half, self.centers, self.radii, self.rows)
+                         self.spheres, self.center, self.half, self.centers, self.radii, self.rows)
             if self.parts is not None:
                 kernel._boxes(A, b, *self.parts, self.origin, self.part_center, self.part_half)
-            self.t = float(t)
+            self.t = t
             return self
         Ao, bo = A[self.body], b[self.body]
         idx = self.objects
         c, h = moved_boxes(self.c0, self.h0, Ao, bo)
         self.center[:, idx] = (c + self.origin).T
         self.half[:, idx] = h.T
-        self.centers[idx] = apply(Ao, self.s0) + bo + self.origin
-        self.radii[idx] = self.r0 * stretch(Ao)
+        if self.spheres:
+            self.centers[idx] = apply(Ao, self.s0) + bo + self.origin
+            self.radii[idx] = self.r0 * stretch(Ao)
         self.rows[idx] = shader_rows(Ao, bo)
         if self.parts is not None:
             rows, pbody, pc, ph = self.parts
             c, h = moved_boxes(pc, ph, A[pbody], b[pbody])
             self.part_center[:, rows] = (c + self.origin).T
             self.part_half[:, rows] = h.T
-        self.t = float(t)
+        self.t = t
         return self
 
     def bmin_bmax(self) -> tuple[np.ndarray, np.ndarray]:

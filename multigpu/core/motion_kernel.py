@@ -44,18 +44,21 @@ def _boxes(A, b, rows, body, c0, h0, origin, center, half):
             half[i, o] = abs(A[k, i, 0]) * h0[j, 0] + abs(A[k, i, 1]) * h0[j, 1] + abs(A[k, i, 2]) * h0[j, 2]
 
 
-def _pose(A, b, body, objects, c0, h0, s0, r0, origin, orthogonal, center, half, centers, radii, rows):
-    """The moving objects' boxes, spheres and shader rows (``motion.Posed.at``)."""
+def _pose(A, b, body, objects, c0, h0, s0, r0, origin, orthogonal, spheres, center, half, centers, radii, rows):
+    """The moving objects' boxes, spheres (``spheres``) and shader rows (``motion.Posed.place``)."""
     _boxes(A, b, objects, body, c0, h0, origin, center, half)
     for j in range(objects.shape[0]):
         k, o = body[j], objects[j]
         for i in range(3):
-            centers[o, i] = A[k, i, 0] * s0[j, 0] + A[k, i, 1] * s0[j, 1] + A[k, i, 2] * s0[j, 2] + b[k, i] + origin[i]
+            if spheres:
+                centers[o, i] = (A[k, i, 0] * s0[j, 0] + A[k, i, 1] * s0[j, 1] + A[k, i, 2] * s0[j, 2] + b[k, i]
+                                 + origin[i])
             rows[o, 4 * i] = A[k, i, 0]
             rows[o, 4 * i + 1] = A[k, i, 1]
             rows[o, 4 * i + 2] = A[k, i, 2]
             rows[o, 4 * i + 3] = b[k, i]
-        radii[o] = r0[j] * _stretch(A, k, orthogonal)
+        if spheres:
+            radii[o] = r0[j] * _stretch(A, k, orthogonal)
 
 
 compile_all(globals(), ("_rotations", "_stretch", "_boxes", "_pose"))

@@ -32,7 +32,7 @@ from multigpu.records.stops import STOP_FLAG, STOPS
 #: choosing the frame's quality (render scale, levels of detail), planning the partition
 BALANCE_PHASES = ("learn", "pose", "project", "choose", "plan")
 #: the phases of the Rendering column: the parts culled, the draw calls, the pixels read back
-RENDER_PHASES = ("cull", "render", "readback")
+RENDER_PHASES = ("animate", "cull", "render", "readback")
 #: the mosaic gather's messages (the frame exchange's are ``composite.TAG``)
 MOSAIC_TAG = 10
 #: the frames ``--timeline`` keeps: the run's last ones
@@ -80,7 +80,7 @@ class FrameLog:
                 "load_balancing_cpu_ms": t.cpu_ms(*BALANCE_PHASES), "rendering_cpu_ms": t.cpu_ms(*RENDER_PHASES),
                 "culling_cpu_ms": t.cpu_ms("cull"),
                 "learning_cpu_ms": t.cpu_ms("learn"), "projection_cpu_ms": t.cpu_ms("project"),
-                "posing_cpu_ms": t.cpu_ms("pose"),
+                "posing_cpu_ms": t.cpu_ms("pose"), "animating_cpu_ms": t.cpu_ms("animate"),
                 "planning_cpu_ms": t.cpu_ms("plan"),
                 "frame_exchange_cpu_ms": t.cpu_ms("exchange"), "display_cpu_ms": t.cpu_ms("display"),
                 "bytes_sent": sent.bytes, "objects": x.objects, "pieces": len(work.rects[self.rank]),

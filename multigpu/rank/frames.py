@@ -65,7 +65,7 @@ class Frames:
         motion = motion_of(scene, cfg.scene)  # a scene that moves: posed every frame (``rank/moving.py``)
         self.moving = None if motion is None else Moving(scene, motion, cfg.scene.anim_speed, self.planner,
                                                          self.projection, self.draw.culler, self.fidelity.chooser,
-                                                         renderer)
+                                                         renderer, spheres=self.fidelity.chooser.levels > 1)
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col

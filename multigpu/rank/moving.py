@@ -21,8 +21,9 @@ from multigpu.rank.timer import Timer
 class Moving:
     """Poses ``scene`` by ``motion`` for the frame loop's parts (any of them None where absent)."""
 
-    def __init__(self, scene, motion, speed: float, planner, projection, culler, chooser, renderer):
-        self.posed = Posed(scene, motion)
+    def __init__(self, scene, motion, speed: float, planner, projection, culler, chooser, renderer,
+                 spheres: bool = True):
+        self.posed = Posed(scene, motion, spheres=spheres or not isinstance(planner.project, BoxProjector))
         self.speed = float(speed)
         self.planner, self.culler, self.renderer = planner, culler, renderer
         self.sub = getattr(projection, "sub", None)  # a shared projection's slice of the boxes
@@ -38,9 +39,13 @@ class Moving:
         return scene_time(f, self.speed)
 
     def pose(self, t: Timer, when: float) -> None:
-        """Every body where it is at scene time ``when``, for the frame planned next."""
+        """Every body where it is at scene time ``when``, for the frame planned next: where the
+        motion puts them and their maps to the GL (the ``animate`` phase: the scene's own work, a
+        part of rendering), their bounds moved (``pose``: a part of balancing)."""
+        with t.phase("animate"):
+            A, b = self.posed.motion.at(when)
         with t.phase("pose"):
-            p = self.posed.at(when)
+            p = self.posed.place(A, b, when)
             project = self.planner.project
             if isinstance(project, BoxProjector):
                 project.place(p.center, p.half)
@@ -51,6 +56,7 @@ class Moving:
                 self.sub.place(np.ascontiguousarray(p.center[:, lo:hi]), np.ascontiguousarray(p.half[:, lo:hi]))
             if self.culler is not None and p.parts is not None:
                 self.culler.place(p.part_center, p.part_half)
+        with t.phase("animate"):
             self.renderer.pose(p.rows, self.movers)
             self.movers = None
         self.time = when

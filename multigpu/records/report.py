@@ -18,10 +18,12 @@ Figures and what they are:
 * ``learning_cpu_ms``, ``posing_cpu_ms``, ``projection_cpu_ms``, ``choosing_cpu_ms``,
   ``planning_cpu_ms``: the load balancing CPU time in its five phases (they add up to
   ``load_balancing_cpu_ms``): the strategy learning from the last frame's measured times, posing
-  a moving scene's objects at the frame's scene time (their bounds, and their maps sent to the
-  GL; 0 where nothing moves), projecting the object bounds (``--projection
+  a moving scene's objects' bounds at the frame's scene time (where its motion put them; 0 where
+  nothing moves), projecting the object bounds (``--projection
   shared``: this rank's slice), choosing the frame's quality (render scale, levels of detail),
   planning the partition (``--partition broadcast``: with its broadcast);
+* ``animating_cpu_ms``: a moving scene's own work, a part of ``rendering_cpu_ms``: where its
+  motion puts every object at the frame's scene time, and their maps sent to the GL;
 * ``render_scale``, ``lod_error_px``: the frame's quality (``--target-fps``, ``--render-scale``,
   ``--lod-error``; 1 and 0: every pixel, every object as modelled);
 * ``triangles``: the triangles a rank drew (of a scene cut into parts, only the parts its
@@ -57,7 +59,8 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "learning_cpu_ms", "projection_cpu_ms", "planning_cpu_ms", "planned_triangles", "culling_cpu_ms",
            "latency_ms", "load_balancing_waited_ms", "rendering_waited_ms", "synchronization_waited_ms",
            "frame_exchange_waited_ms", "display_waited_ms", "render_scale", "lod_error_px", "choosing_cpu_ms",
-           "wire_bytes", "compress_cpu_ms", "decompress_cpu_ms", "lossy_bits", "balance", "restarts", "posing_cpu_ms"]
+           "wire_bytes", "compress_cpu_ms", "decompress_cpu_ms", "lossy_bits", "balance", "restarts", "posing_cpu_ms",
+           "animating_cpu_ms"]
 #: the load balancing CPU time's phases (learn, pose, project, choose, plan), adding up to it
 BALANCE_CPU = ("learning_cpu_ms", "posing_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]
@@ -199,8 +202,10 @@ def _parts(cpu: dict) -> str:
 
 
 def _cull(cpu: dict) -> str:
-    """The culling of parts inside the rendering CPU time, where a run culled any."""
-    return f"; culling {cpu['culling_cpu_ms']:.2f}" if cpu.get("culling_cpu_ms") else ""
+    """The culling of parts and a moving scene's animation inside the rendering CPU time, where a
+    run had any."""
+    return (f"; culling {cpu['culling_cpu_ms']:.2f}" if cpu.get("culling_cpu_ms") else "") + (
+        f"; animating {cpu['animating_cpu_ms']:.2f}" if cpu.get("animating_cpu_ms") else "")
 
 
 def _fmt(v) -> str:

@@ -33,7 +33,7 @@ BATCH = 4096
 _C = {c: i for i, c in enumerate(COLUMNS)}
 _CPU = [_C[c] for c in ("load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms")]
 _CPU_SHOWN = ("load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms",
-              "heartbeat_cpu_ms", "culling_cpu_ms", *BALANCE_CPU)
+              "heartbeat_cpu_ms", "culling_cpu_ms", "animating_cpu_ms", *BALANCE_CPU)
 
 
 class Quantiles:

@@ -2,12 +2,14 @@
 
 ``generate_swarm`` places one icosahedron per 20 triangles (1k to 100k objects and more, with
 ``--triangles``) at rest through a cube of side ``SIDE``. ``Swarm`` (its ``core.motion.Motion``)
-flies them: each object heads, with a lag of its own, for its place in a tight flock about a
-gathering point that travels round the cube, and back home again (``GATHER_S`` seconds a
-cycle), spinning all the while. Scattered, the load lies evenly over the screen; gathered, most
-of it lies in one small, moving part of it: a split made once is soon badly wrong. At rest
-(time 0) every object is home, where the scene's bounds were measured; every place it visits
-lies inside the cube. Pure numpy.
+flies them, spinning all the while: each object heads, with a lag of its own, for its place in
+a tight flock (``GATHER_S`` seconds), and the flock tours four far corners of the cube (the
+vertices of a tetrahedron: from any side they lie apart on the screen), a leg every ``LEG_S``
+seconds, until it scatters home again (at ``SCATTER_S``, a cycle every ``CYCLE_S``).
+Scattered, the load lies evenly over the screen; gathered, most of it lies in one small part of
+it that moves from one side of the wall to another: a split made once is soon badly wrong. At
+rest (time 0) every object is home, where the scene's bounds were measured; every place it
+visits lies inside the cube. Pure numpy.
 """
 
 from __future__ import annotations
@@ -19,10 +21,18 @@ from multigpu.scene.layout import Scene, assemble
 
 #: the cube the swarm lives in (world units)
 SIDE = 100.0
-#: seconds of one gather-and-scatter cycle, and of the gathering point's round
-GATHER_S, ROUND_S = 8.0, 12.0
+#: seconds to gather, a leg of the tour, when the flock scatters, and a whole cycle
+GATHER_S, LEG_S, SCATTER_S, CYCLE_S = 2.0, 2.0, 12.0, 16.0
 #: the flock's radius, as a fraction of the side
 FLOCK = 0.12
+#: the corners the flock tours (a tetrahedron's vertices), as fractions of the side
+TOUR = 0.3 * np.array([[1.0, 1.0, 1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0], [1.0, -1.0, -1.0]])
+
+
+def smooth(x):
+    """Smoothstep of ``x`` clipped to [0, 1]: 0 to 1 with no jolt at either end."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
 
 
 def icosahedron():
@@ -65,27 +75,33 @@ class Swarm:
         n = int(self.bodies.max()) + 1 if self.bodies.size else 0
         rest = np.zeros((n, 3))
         rest[self.bodies] = (np.asarray(scene.bmin) + np.asarray(scene.bmax)) / 2 - np.asarray(scene.origin)
-        self.home = rest  # each body's centre at rest, local
-        self.middle = np.asarray(scene.origin, dtype=np.float64) * 0  # the cube's centre, local (the origin)
+        self.home = rest  # each body's centre at rest, local (the cube's centre is the origin)
         rng = np.random.default_rng(int(scene.meta.get("seed", 0)) + 1)
         place = rng.normal(size=(n, 3))
         self.place = place / np.linalg.norm(place, axis=1, keepdims=True) * (
             FLOCK * SIDE * rng.uniform(0, 1, (n, 1)) ** (1 / 3))  # each one's place in the flock
-        self.lag = rng.uniform(0.0, 0.15, n)  # of a cycle
+        self.lag = rng.uniform(0.0, 0.5, n)  # seconds
         axis = rng.normal(size=(n, 3))
         self.axis = axis / np.linalg.norm(axis, axis=1, keepdims=True)
         self.spin = rng.uniform(-2.0, 2.0, n)  # radians a second
         self.moving = None  # every body moves
 
-    def gather_point(self, t: float) -> np.ndarray:
-        """(3,) where the flock gathers at time ``t``: round the cube, inside it."""
-        a = 2 * np.pi * t / ROUND_S
-        r = (0.5 - FLOCK) * SIDE * 0.85
-        return self.middle + np.array([r * np.cos(a), r * np.sin(a), 0.35 * r * np.sin(2 * a)])
+    @staticmethod
+    def gather_point(t: float) -> np.ndarray:
+        """(3,) where the flock is at time ``t``: at a corner of its tour for the first third of
+        a leg, then on its way to the next."""
+        k = int(np.floor(t / LEG_S))
+        a, b = TOUR[k % len(TOUR)], TOUR[(k + 1) % len(TOUR)]
+        return SIDE * (a + (b - a) * smooth((t / LEG_S - k - 1 / 3) * 1.5))
+
+    def gathered(self, t: float) -> np.ndarray:
+        """(n,) how far each object is from home towards its place in the flock: 0 home, 1 there."""
+        u = t - self.lag
+        cycle = np.mod(u, CYCLE_S)
+        return np.where(u > 0, smooth(cycle / GATHER_S) * (1 - smooth((cycle - SCATTER_S) / GATHER_S)), 0.0)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        phase = 2 * np.pi * (t / GATHER_S - self.lag)
-        s = np.where(t / GATHER_S > self.lag, 0.5 - 0.5 * np.cos(phase), 0.0)[:, None]  # 0 home, 1 gathered
+        s = self.gathered(t)[:, None]
         where = self.home + s * (self.gather_point(t) + self.place - self.home)
         A = rotations(self.axis, self.spin * t)
         return A, where - apply(A, self.home)
