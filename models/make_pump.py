@@ -1,5 +1,6 @@
 """Write models/pump.glb: a small pump assembly (glTF 2.0, +Y up, metres), made of trimesh
-primitives, one node per part. Deterministic; run ``python models/make_pump.py`` to remake it.
+primitives, one node per part; and models/pump-running.glb, the same pump with two animations
+(``animate``: pygltflib). Deterministic; run ``python models/make_pump.py`` to remake them.
 
 It is the kind of model users bring (a CAD assembly exported to glTF): compact, a few big
 parts (base, casing, motor) among many small ones (bolts, flanges, pipe segments), each part but
@@ -106,6 +107,77 @@ def main() -> Path:
     return out
 
 
+#: the running pump's moving groups: a pivot node (its place) over these parts
+GROUPS = {"rotor": ([-0.45, 0.3, 0.0], [f"fin_{k}" for k in range(12)]),
+          "gauge_pivot": ([0.28, 0.86, 0.09], ["gauge"]),
+          "bolt_ring": ([0.28, 0.97, 0.0], [f"flange_1_bolt_{k}" for k in range(8)]),
+          "pipe_run": ([0.0, 0.0, 0.0], [*(f"pipe_{k}" for k in range(6))])}
+
+
+def _quat(axis, degrees) -> list[list[float]]:
+    """xyzw quaternions turning ``degrees`` (each) about unit ``axis``."""
+    h = np.radians(np.asarray(degrees, dtype=np.float64)) / 2
+    return [[*(np.sin(a) * np.asarray(axis, dtype=np.float64)), np.cos(a)] for a in h]
+
+
+def animate(src: Path, out: Path) -> Path:
+    """``src`` with each of ``GROUPS`` hung from a pivot node and two animations: "run" (the cooling
+    fins' cage turning about its axis, LINEAR rotations by slerp; the gauge pulsing, CUBICSPLINE
+    scale; the top flange's bolt ring stepping round, STEP rotation) and "lift" (the pipe run
+    rising and settling, LINEAR translation), 2 s each, looped."""
+    import pygltflib as g
+
+    doc = g.GLTF2().load(str(src))
+    blob = bytearray(doc.binary_blob())
+    by_name = {n.name: i for i, n in enumerate(doc.nodes)}
+    roots = doc.scenes[doc.scene or 0].nodes
+
+    def data(values, kind: str) -> int:
+        arr = np.asarray(values, dtype=np.float32)
+        while len(blob) % 4:
+            blob.append(0)
+        doc.bufferViews.append(g.BufferView(buffer=0, byteOffset=len(blob), byteLength=arr.nbytes))
+        blob.extend(arr.tobytes())
+        flat = arr.reshape(len(arr), -1)
+        doc.accessors.append(g.Accessor(bufferView=len(doc.bufferViews) - 1, componentType=g.FLOAT, count=len(arr),
+                                        type=kind, min=flat.min(axis=0).tolist() if kind == "SCALAR" else None,
+                                        max=flat.max(axis=0).tolist() if kind == "SCALAR" else None))
+        return len(doc.accessors) - 1
+
+    pivot = {}
+    for name, (at, members) in GROUPS.items():  # a pivot at ``at``, its parts moved back under it
+        kids = [by_name[m] for m in members]
+        for k in kids:
+            doc.nodes[k].translation = [-v for v in at]
+            roots.remove(k)
+        doc.nodes.append(g.Node(name=name, translation=list(at), children=kids))
+        pivot[name] = len(doc.nodes) - 1
+        roots.append(pivot[name])
+
+    def channel(anim, node: int, path: str, times, values, kind: str, mode: str) -> None:
+        anim.samplers.append(g.AnimationSampler(input=data(times, "SCALAR"), output=data(values, kind),
+                                                interpolation=mode))
+        anim.channels.append(g.AnimationChannel(sampler=len(anim.samplers) - 1,
+                                                target=g.AnimationChannelTarget(node=node, path=path)))
+
+    run, lift = g.Animation(name="run"), g.Animation(name="lift")
+    turns = np.arange(9) * 90.0  # two turns, a key each quarter: slerp the shorter way between them
+    channel(run, pivot["rotor"], "rotation", turns / 360.0, _quat([1, 0, 0], turns), "VEC4", "LINEAR")
+    pulse = [[0, 0, 0], [1, 1, 1], [0, 0, 0], [0, 0, 0], [1.4, 1.4, 1.4], [0, 0, 0], [0, 0, 0], [1, 1, 1], [0, 0, 0]]
+    channel(run, pivot["gauge_pivot"], "scale", [0.0, 1.0, 2.0], pulse, "VEC3", "CUBICSPLINE")  # in, value, out
+    channel(run, pivot["bolt_ring"], "rotation", [0.0, 0.5, 1.0, 1.5], _quat([0, 1, 0], [0, 45, 90, 135]), "VEC4",
+            "STEP")
+    channel(lift, pivot["pipe_run"], "translation", [0.0, 1.0, 2.0], [[0, 0, 0], [0, 0.12, 0], [0, 0, 0]], "VEC3",
+            "LINEAR")
+    doc.animations = [run, lift]
+    doc.buffers[0].byteLength = len(blob)
+    doc.set_binary_blob(bytes(blob))
+    doc.save_binary(str(out))
+    return out
+
+
 if __name__ == "__main__":
     path = main()
     print(f"wrote {path} ({path.stat().st_size} bytes)")
+    moving = animate(path, HERE / "pump-running.glb")
+    print(f"wrote {moving} ({moving.stat().st_size} bytes)")

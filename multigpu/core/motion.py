@@ -42,9 +42,11 @@ class Motion(Protocol):
 
 
 def bodies_of(scene) -> np.ndarray:
-    """(N,) each object's body: objects sharing a base vertex were cut from one modelled object
-    (``scene/cluster.py`` keeps its base vertex), so they move as one."""
-    _, body = np.unique(np.asarray(scene.base_vertex), return_inverse=True)
+    """(N,) each object's body, numbered from 0: the clusters cut from one modelled object
+    (``Scene.body``) move as one."""
+    if scene.body is None:
+        return np.arange(scene.n_objects, dtype=np.int64)
+    _, body = np.unique(np.asarray(scene.body), return_inverse=True)
     return body.astype(np.int64)
 
 

@@ -37,7 +37,7 @@ from multigpu.rank.frames import Frames
 from multigpu.records.outdir import OutputDir
 from multigpu.records.recovery import mark, restarts
 from multigpu.scene.models import load_scene
-from multigpu.scene.moves import moves
+from multigpu.scene.moves import motion_of, moves
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
 
@@ -274,6 +274,7 @@ def _first(cfg: WalkConfig, ready: Ready | None = None) -> tuple:
             check_record(cfg.record)
         scene, path, load_info = load_world(cfg, ready)
         mark("scene")
+        motion_of(scene, cfg.scene)  # a model's animations checked here: bad input ends the job now, in one line
         warn_once(cfg, scene)
         _check_path(cfg, scene, path)
         # once, before the others map it

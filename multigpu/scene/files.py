@@ -19,6 +19,8 @@ import numpy as np
 from multigpu.errors import InputError
 from multigpu.scene import looks, textures
 from multigpu.scene.blocks import blocks, per_object
+from multigpu.scene.gltf_motion import check as check_animations
+from multigpu.scene.gltf_motion import nodes_of
 from multigpu.scene.labels import face_labels
 from multigpu.scene.layout import Scene
 
@@ -51,6 +53,8 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     kind = path.suffix.lstrip(".").upper()
     declared = declared_counts(path)
     _check_size(path, declared)
+    if path.suffix.lower() in (".gltf", ".glb"):
+        check_animations(path)
     try:
         with np.errstate(all="ignore"):
             loaded = trimesh.load(str(path), process=False)
@@ -61,14 +65,16 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
         what = f"{exc.__class__.__name__}: {why}"
         raise InputError.of("model", f"{path}: cannot read as {kind} ({what}){promise}") from None
     warnings: list[str] = []
+    nodes = None  # an animated glTF's node of each mesh
     if isinstance(loaded, trimesh.Scene):
         meshes = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh)]
         meshes = [m for m in meshes if len(m.faces)]
         if not meshes:
             raise InputError.of("model", f"{path}: the file holds no triangles (empty, or not a {kind} file)")
+        nodes = nodes_of(path, loaded, meshes) if path.suffix.lower() in (".gltf", ".glb") else None
         if len(meshes) > 1:
             del loaded  # the meshes (transforms applied) are copies: _from_meshes lets them go
-            return _from_meshes(meshes, path, warnings, split, merge_below)
+            return animated(_from_meshes(meshes, path, warnings, split, merge_below, nodes), path, nodes, split)
         mesh = meshes.pop()  # the list lets it go with the rest
     elif isinstance(loaded, trimesh.Trimesh):
         mesh = loaded
@@ -90,8 +96,29 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     split = "components" if split == "auto" else split
     look = Look(rgba, normals, None, {"colors": colors_from, "materials": int(colors_from == "material")},
                 texcoords, layers.pack(warnings))
-    return _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings, {"split": split},
-                        look)
+    scene = _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings,
+                         {"split": split}, look)
+    return animated(scene, path, None if nodes is None else nodes * scene.n_objects, "auto")
+
+
+def animated(scene: Scene, path: Path, nodes: list[int] | None, split: str) -> Scene:
+    """The scene with the glTF node each object hangs from (``meta['gltf']``, read by
+    ``gltf_motion.GltfMotion``), where the file has animations; an explicit ``--split`` cuts
+    across nodes, so the model then stands still (its meta says why)."""
+    if nodes is None and "gltf_nodes" not in scene.meta:
+        return scene
+    from multigpu.scene.gltf_motion import load, not_played
+
+    doc = load(path)
+    names = [a.name or f"animation {i}" for i, a in enumerate(doc.animations)]
+    scene.meta["warnings"].extend(not_played(doc))
+    per = scene.meta.pop("gltf_nodes", nodes)
+    if split != "auto" or per is None or len(per) != scene.n_objects:
+        scene.meta["warnings"].append(f"animations ({', '.join(names)}) not played: --split {split} cuts objects "
+                                      "across the model's nodes (use --split auto)")
+        return scene
+    scene.meta["gltf"] = {"file": str(Path(path).resolve()), "nodes": [int(n) for n in per], "animations": names}
+    return scene
 
 
 def _narrow(faces: np.ndarray, n_verts: int) -> np.ndarray:
@@ -323,9 +350,11 @@ def guess_up(suffix: str, bmin, bmax) -> dict:
     return {"up": axis_vector(conv), "up_source": f"{suffix[1:].upper()} convention ({conv[1:].upper()} up)"}
 
 
-def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int = 64) -> Scene:
+def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int = 64,
+                 nodes: list[int] | None = None) -> Scene:
     """One object per scene-graph node instance (transforms already applied by trimesh), or
-    the whole graph's triangles cut by an explicit ``--split components|grid:N``."""
+    the whole graph's triangles cut by an explicit ``--split components|grid:N``; ``nodes``: the
+    glTF node of each mesh (an animated file's), kept per object in ``meta['gltf_nodes']``."""
     sizes = np.array([len(m.vertices) for m in meshes])
     n_faces = np.array([len(m.faces) for m in meshes])
     n_meshes = len(meshes)
@@ -397,5 +426,6 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
     if split != "auto":
         objects = face_labels(verts, faces, split, merge_below)
         return _from_labels(verts, faces, objects, path, warnings, {"split": split}, look)
-    labels = np.unique(labels, return_inverse=True)[1].ravel()
-    return _from_labels(verts, faces, labels, path, warnings, {"split": "nodes"}, look)
+    kept, labels = np.unique(labels, return_inverse=True)
+    meta = {"split": "nodes", **({} if nodes is None else {"gltf_nodes": [nodes[k] for k in kept.tolist()]})}
+    return _from_labels(verts, faces, labels.ravel(), path, warnings, meta, look)

@@ -19,9 +19,10 @@ import numpy as np
 
 from multigpu.errors import InputError
 
+#: 9: each object's body (the modelled object it was cut from: they move as one)
 #: 7: the model's own colours and normals (vertex colours, materials, crease-angle normals); 6: levels of
 #: detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
-FORMAT_VERSION = 8
+FORMAT_VERSION = 9
 
 
 @dataclass
@@ -54,6 +55,8 @@ class Scene:
         scene's own indices, relative to its base vertex as those)
     lod_error : (N, L) float64  each level's geometric error (world units), non-decreasing
     (None: no levels; ``scene/lod.py`` makes them)
+    body : (N,) int64  the modelled object each object was cut from (``scene/cluster.py``): a
+        moving scene moves them as one (None: every object a body of its own)
     """
 
     vertices: np.ndarray
@@ -81,6 +84,7 @@ class Scene:
     texels: np.ndarray | None = None
     texture_levels: np.ndarray | None = None
     texture_modes: np.ndarray | None = None
+    body: np.ndarray | None = None
 
     @property
     def n_objects(self) -> int:
@@ -106,7 +110,7 @@ class Scene:
         return sum(a.nbytes for a in self._arrays().values())
 
     #: the arrays with one row per object (``objects`` picks rows of these)
-    PER_OBJECT = ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors")
+    PER_OBJECT = ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors", "body")
 
     #: a model's look beyond its objects' colours (None where it has none)
     PER_VERTEX = ("vertex_colors", "texcoords", "texels", "texture_levels", "texture_modes")

@@ -88,6 +88,8 @@ class SceneSpec:
     moving: float = option(0.0, group="scene", metavar="FRACTION", type=float,
                            valid=lambda v: 0.0 <= v <= 1.0, must="must be in 0..1", help=(
         "this share of the scene's objects move as machinery does: turning, sliding or orbiting"))
+    animation: str = option("all", group="scene", metavar="NAME|all|none", help=(
+        "a glTF model's animations played, looped over the path: all, none, or the one of this name"))
     anim_speed: float = option(1.0, group="scene", metavar="S", type=float, valid=lambda v: abs(v) <= 1000.0,
                                must="must be a number in -1000..1000", help=(
         "scene time runs at S seconds a second of the path (frames at 30 a second; 0 holds the scene at rest, "

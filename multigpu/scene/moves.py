@@ -1,4 +1,5 @@
-"""What makes a scene move: its own flight (the swarm), moving machinery (``--moving``), or none.
+"""What makes a scene move: a model's glTF animations (``--animation``), the swarm's flight,
+moving machinery (``--moving``), or nothing.
 
 ``Machinery`` moves a share of any scene's bodies (modelled objects: ``core.motion.bodies_of``),
 the small ones first (halls and floors stay put) and neighbours together (``chosen``), as a
@@ -85,15 +86,20 @@ def chosen(scene, bodies: np.ndarray, reach: np.ndarray, k: int, rng) -> np.ndar
 
 
 def moves(scene, spec) -> bool:
-    """Whether ``scene`` moves under ``spec`` (``motion_of`` is not None): known from its meta alone.
-    ``--anim-speed 0`` holds every scene at rest, posing nothing (a moving scene's still twin)."""
-    return spec.anim_speed != 0 and (scene.meta.get("motion") == "swarm" or spec.moving > 0)
+    """Whether ``scene`` moves under ``spec``: known from its meta alone. ``--anim-speed 0`` holds
+    every scene at rest, posing nothing (a moving scene's still twin)."""
+    played = "gltf" in scene.meta and spec.animation != "none"
+    return spec.anim_speed != 0 and (scene.meta.get("motion") == "swarm" or spec.moving > 0 or played)
 
 
 def motion_of(scene, spec):
     """The scene's motion for ``spec`` (a ``models.SceneSpec``), or None where it stands still."""
     if not moves(scene, spec):
         return None
+    if "gltf" in scene.meta and spec.animation != "none":  # a model's own animations (``gltf_motion.py``)
+        from multigpu.scene.gltf_motion import GltfMotion
+
+        return GltfMotion(scene, spec.animation)
     if scene.meta.get("motion") == "swarm":
         from multigpu.scene.swarm import Swarm
 
