@@ -111,3 +111,30 @@ def test_a_recovered_wall_resumes_at_the_same_scene_time(tmp_path):
     got = frames_of(out, frames)
     same(got, ref)
     assert not np.array_equal(got[resumed], got[resumed - 1])
+
+
+PUMP = ["--model", "models/pump-running.glb", "--path-kind", "still", "--cluster", "64", "--no-progress"]  # one scene
+
+
+def test_an_animated_gltf_plays_on_a_2x2_wall_like_one_rank(tmp_path):
+    ref = frames_of(walk(tmp_path / "one", (1, 1), (128, 96), scene=PUMP, frames=8), 8)
+    assert all((ref[f] != ref[f - 1]).any() for f in range(1, 8))  # the camera still, the pump running
+    for extra in ([], ["--decomposition", "hybrid", "--latency", "2"]):
+        same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=PUMP, frames=8), 8), ref)
+
+
+def test_a_bad_animation_ends_the_job_in_one_line_with_exit_2(tmp_path):
+    import pygltflib
+
+    doc = pygltflib.GLTF2().load("models/pump-running.glb")
+    doc.animations[0].channels[0].target.node = 500
+    bad = tmp_path / "bad.glb"
+    doc.save_binary(str(bad))
+    res = run_mpi(2, ["walkthrough", "--model", str(bad), "--grid", "1x2", "--tile", "32x32", "--frames", "2",
+                      "--out", str(tmp_path / "o"), "--no-progress"])
+    assert res.returncode == 2, res.stderr[-2000:]
+    lines = [ln for ln in res.stderr.splitlines() if "target.node" in ln]
+    assert lines and "Traceback" not in res.stderr and str(bad) in lines[0], res.stderr[-2000:]
+    res = run_mpi(2, ["walkthrough", "--model", "models/pump-running.glb", "--animation", "spin", "--grid", "1x2",
+                      "--tile", "32x32", "--frames", "2", "--out", str(tmp_path / "o2"), "--no-progress"])
+    assert res.returncode == 2 and "it has: 'run', 'lift'" in res.stderr and "Traceback" not in res.stderr
