@@ -194,3 +194,32 @@ def test_scene_time_is_the_frames_and_what_moves_is_known_from_the_spec(swarm, p
 def test_motion_flags_are_checked_at_the_door(field, value, words):
     with pytest.raises(InputError, match=words):
         SceneSpec(**{field: value})
+
+
+def test_the_scene_clock_is_the_paths_time_until_steered_then_holds_jumps_and_runs_on():
+    from multigpu.core.motion import SceneClock
+
+    clock = SceneClock(speed=1.5)
+    assert all(clock.at(f) == scene_time(f, 1.5) for f in range(0, 400, 7))  # bit for bit: a replay's time
+    held = clock.at(400, toggles=1)  # paused at frame 400
+    assert held == scene_time(400, 1.5) and clock.paused
+    assert clock.at(410) == held and clock.at(500) == held  # it stands
+    assert clock.at(501, set_to=3.0) == 3.0 and clock.at(520) == 3.0  # a jump, still paused
+    assert clock.at(521, scrub=-1.0) == 2.0
+    assert clock.at(530, toggles=1) == 2.0 and not clock.paused  # played on from where it stood
+    assert clock.at(560) == pytest.approx(2.0 + scene_time(30, 1.5))
+    assert clock.at(561, pause=True) == clock.at(600) and clock.paused  # the page's pause: no toggle
+    assert clock.at(601, pause=False) == clock.at(601) and not clock.paused
+
+
+def test_the_keys_pause_and_scrub_the_scene():
+    import glfw
+
+    from multigpu.display.controls import SCRUB_SHIFT, Controls
+
+    c = Controls(glfw)
+    for key, mods in ((glfw.KEY_T, 0), (glfw.KEY_RIGHT_BRACKET, 0), (glfw.KEY_RIGHT_BRACKET, glfw.MOD_SHIFT),
+                      (glfw.KEY_LEFT_BRACKET, 0)):
+        c.on_key(None, key, 0, glfw.PRESS, mods)
+    got = c.take()
+    assert got.scene_pause == 1 and got.scrub == SCRUB_SHIFT and c.take().scene_pause == 0

@@ -138,3 +138,80 @@ def test_a_bad_animation_ends_the_job_in_one_line_with_exit_2(tmp_path):
     res = run_mpi(2, ["walkthrough", "--model", "models/pump-running.glb", "--animation", "spin", "--grid", "1x2",
                       "--tile", "32x32", "--frames", "2", "--out", str(tmp_path / "o2"), "--no-progress"])
     assert res.returncode == 2 and "it has: 'run', 'lift'" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_the_page_pauses_and_scrubs_scene_time_and_the_recording_replays_it(tmp_path):
+    """A moving scene steered from the page: its time paused (the frames stand still, the camera
+    too), set to 3 s, played on; the page shows the time; ``--record`` stores each frame's time,
+    so a replay on another wall shows the same frames bit for bit."""
+    import asyncio
+
+    from test_panel_mpi import Job
+    from websockets.asyncio.client import connect
+
+    from multigpu.core.motion import FRAME_SECONDS
+    from multigpu.scene.paths import load_path
+
+    out, rec = tmp_path / "out", tmp_path / "rec.json"
+    job = Job(["walkthrough", *SWARM, "--grid", "1x2", "--tile", "60x96", "--frames", "100000", "--mosaic-every", "1",
+               "--no-overlay", "--panel", "127.0.0.1:0", "--record", str(rec), "--out", str(out)])
+
+    async def drive(url: str) -> dict:
+        base, query = url.split("?", 1)
+        async with connect(base.replace("http", "ws", 1) + "ws?" + query, open_timeout=60) as ws:
+            seen = {"rows": 0, "status": {}, "times": [], "summary": None}
+
+            async def until(cond, timeout=90.0):
+                deadline = asyncio.get_running_loop().time() + timeout
+                while not cond():
+                    left = deadline - asyncio.get_running_loop().time()
+                    assert left > 0, f"timed out: {seen['rows']} rows, {seen['status']}"
+                    try:
+                        m = json.loads(await asyncio.wait_for(ws.recv(), left))
+                    except (asyncio.TimeoutError, TypeError, ValueError):
+                        continue
+                    seen["rows"] += len(m.get("rows", []))
+                    seen["status"].update(m.get("status", {}))
+                    if m.get("status", {}).get("scene_time") is not None:
+                        seen["times"].append(m["status"]["scene_time"])
+                    seen["summary"] = m.get("summary", seen["summary"])
+
+            async def rows(n):
+                at = seen["rows"]
+                await until(lambda: seen["rows"] >= at + n)
+
+            await rows(5)
+            await ws.send(json.dumps({"do": "scene_pause"}))
+            await until(lambda: seen["status"].get("scene_paused"))
+            await rows(6)
+            await ws.send(json.dumps({"do": "scene_time", "value": 3.0}))
+            await rows(4)
+            await ws.send(json.dumps({"do": "scene_play"}))
+            await until(lambda: seen["status"].get("scene_paused") is False)
+            await rows(6)
+            await ws.send(json.dumps({"do": "stop"}))
+            await until(lambda: seen["summary"] is not None)
+            return seen
+
+    try:
+        seen = asyncio.run(drive(job.url()))
+        code = job.wait(120)
+    finally:
+        if job.proc.poll() is None:
+            job.kill()
+            job.wait(30)
+    assert code == 0, job.output[-3000:]
+    assert 3.0 in seen["times"]  # the page showed the scene's time
+    flown = load_path(rec)
+    times, n = flown.times, len(flown)
+    assert times is not None and n >= 20
+    steps = np.diff(times)
+    held = np.flatnonzero(steps == 0)
+    assert len(held) >= 4 and times[0] == 0.0  # paused: the time stood
+    assert 3.0 in times and (np.isclose(steps, FRAME_SECONDS) | (steps == 0) | (times[1:] == 3.0)).all()
+    shots = frames_of(out, n)
+    for f in held:  # the camera still and the time held: the very same picture
+        assert (shots[f + 1] == shots[f]).all()
+    replay = walk(tmp_path / "replay", (2, 2), (60, 48), ["--path", str(rec)],
+                  scene=[a for a in SWARM if a not in ("--path-kind", "still")], frames=n)
+    same(frames_of(replay, n), shots)

@@ -27,13 +27,15 @@ VALID = [{"do": "pause"}, {"do": "resume"}, {"do": "stop"}, {"do": "balance", "n
          {"do": "target_fps", "value": 30}, {"do": "target_fps", "value": None}, {"do": "render_scale", "value": 0.5},
          {"do": "lod_error", "value": 2.5}, {"do": "keys", "held": ["forward", "left"]}, {"do": "keys", "held": []},
          {"do": "drag", "dx": -12.5, "dy": 3}, {"do": "speed", "steps": -2}, {"do": "orbit"}, {"do": "reset"},
-         {"do": "record", "on": False}, {"do": "head", "dx": 0.05, "dy": 0, "dz": -0.25}, {"do": "head_home"}]
+         {"do": "record", "on": False}, {"do": "head", "dx": 0.05, "dy": 0, "dz": -0.25}, {"do": "head_home"},
+         {"do": "scene_pause"}, {"do": "scene_play"}, {"do": "scene_time", "value": -2.5}]
 TAMPERED = ['{"do": "exec", "cmd": "rm -rf /"}', "not json", "[1, 2]", '"pause"', '{"do": "pause", "x": 1}',
             '{"do": "balance", "name": "../etc/passwd"}', '{"do": "render_scale", "value": 1e9}',
             '{"do": "render_scale", "value": "NaN"}', '{"do": "render_scale", "value": true}',
             '{"do": "drag", "dx": Infinity, "dy": 0}', '{"do": "keys", "held": ["forward", "__class__"]}',
             '{"do": "speed", "steps": 1.5}', '{"do": "head", "dx": 2, "dy": 0, "dz": 0}',
             '{"do": "head", "dx": 0.1}', '{"do": "lod_error"}', '{"do": null}', '{"do": {"do": "stop"}}',
+            '{"do": "scene_time", "value": 1e300}', '{"do": "scene_time", "value": NaN}', '{"do": "scene_time"}',
             "x" * (MOST_MESSAGE + 1)]
 
 

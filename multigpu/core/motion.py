@@ -178,3 +178,27 @@ class Posed:
     def bmin_bmax(self) -> tuple[np.ndarray, np.ndarray]:
         """(N, 3) the moved boxes' corners (tests, tools)."""
         return (self.center - self.half).T, (self.center + self.half).T
+
+
+class SceneClock:
+    """A moving scene's time as an operator steers it (``rank/steer.py``, rank 0): the frame's
+    time on the path (``scene_time``, bit for bit) until someone pauses, resumes or scrubs it;
+    from then on ``base`` plus the path's time since frame ``anchor`` while it runs, ``base``
+    while it stands. Every rank receives what rank 0's clock says."""
+
+    def __init__(self, speed: float = 1.0):
+        self.speed = float(speed)
+        self.base, self.anchor, self.paused = 0.0, 0, False
+
+    def now(self, frame: int) -> float:
+        return self.base if self.paused else self.base + scene_time(frame - self.anchor, self.speed)
+
+    def at(self, frame: int, toggles: int = 0, scrub: float = 0.0, set_to: float | None = None,
+           pause: bool | None = None) -> float:
+        """Frame ``frame``'s time after the operator's ``toggles`` (pause/resume presses), ``pause``
+        (the page's pause or play), ``set_to`` (a time to jump to) and ``scrub`` (seconds on)."""
+        want = self.paused != bool(toggles % 2) if pause is None else bool(pause)
+        if want != self.paused or scrub or set_to is not None:
+            now = self.now(frame) if set_to is None else float(set_to)
+            self.base, self.anchor, self.paused = now + float(scrub), frame, want
+        return self.now(frame)

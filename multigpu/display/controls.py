@@ -16,10 +16,13 @@ from multigpu.core.navigate import Input
 HELP = ("W/S or Up/Down: forward/back; A/D or Left/Right: left/right; E/Q or PageUp/PageDown: up/down; "
         "mouse drag: turn; Shift: faster; +/- or the wheel: speed; O: orbit the centre; R: back to the start; "
         "P: partition overlay; I: statistics overlay; B / Shift+B: next / previous --balance; "
+        "T: pause / resume a moving scene's time; [ / ]: its time back / on 1 s (Shift: 5 s); "
         "J/L, U/M, Y/N: the viewer's head left/right, up/down, nearer/farther (5 cm, Shift: 25 cm; a wall with a "
         "viewer); K: the head home; H: this help; Escape: quit")
 #: metres a head key moves the viewer's head (Shift: five times as far)
 HEAD_STEP = 0.05
+#: seconds a scrub key moves a moving scene's time with Shift (1 without)
+SCRUB_SHIFT = 5.0
 #: the most speed steps one wheel event takes
 MOST_WHEEL = 10
 
@@ -32,7 +35,8 @@ def _keymap(glfw) -> tuple[dict, dict]:
                 glfw.KEY_I: "stats", glfw.KEY_B: "balance", glfw.KEY_H: "help", glfw.KEY_EQUAL: "faster",
                 glfw.KEY_KP_ADD: "faster", glfw.KEY_MINUS: "slower", glfw.KEY_KP_SUBTRACT: "slower",
                 glfw.KEY_J: "head-x", glfw.KEY_L: "head+x", glfw.KEY_M: "head-y", glfw.KEY_U: "head+y",
-                glfw.KEY_Y: "head-z", glfw.KEY_N: "head+z", glfw.KEY_K: "head home"}
+                glfw.KEY_Y: "head-z", glfw.KEY_N: "head+z", glfw.KEY_K: "head home", glfw.KEY_T: "scene pause",
+                glfw.KEY_LEFT_BRACKET: "scene back", glfw.KEY_RIGHT_BRACKET: "scene on"}
     return moves, commands
 
 
@@ -47,6 +51,8 @@ class Taken:
     help: bool = False
     head: tuple = (0.0, 0.0, 0.0)  # metres the viewer's head moved (room axes)
     head_home: bool = False  # the head back home before the move
+    scene_pause: int = 0  # times T was pressed (a moving scene's time paused / resumed)
+    scrub: float = 0.0  # seconds the scene's time was moved on (back: below 0)
 
 
 class Controls:
@@ -65,8 +71,9 @@ class Controls:
         self.tapped: set[str] = set()
         self.drag = [0.0, 0.0]
         self.counts = {"orbit": 0, "reset": 0, "partition": 0, "stats": 0, "balance": 0, "help": 0, "speed": 0,
-                       "head home": 0}
+                       "head home": 0, "scene pause": 0}
         self.head = [0.0, 0.0, 0.0]
+        self.scrub = 0.0
         self.shift = False
 
     def attach_mouse(self, window) -> None:
@@ -101,6 +108,8 @@ class Controls:
             self.counts["speed"] -= 1
         elif what == "balance":
             self.counts["balance"] += -1 if shift else 1
+        elif what in ("scene back", "scene on"):
+            self.scrub += (-1.0 if what == "scene back" else 1.0) * (SCRUB_SHIFT if shift else 1.0)
         elif what is not None and what.startswith("head") and what != "head home":
             self.head["xyz".index(what[-1])] += (-1 if what[4] == "-" else 1) * HEAD_STEP * (5 if shift else 1)
         elif what is not None:
@@ -128,7 +137,8 @@ class Controls:
         fast = self.shift or self.shift_held
         nav = Input(frozenset(self.held | self.tapped), (self.drag[0], self.drag[1]), fast, c["speed"],
                     c["orbit"] % 2 == 1, c["reset"] > 0)
-        got = Taken(nav, c["partition"], c["stats"], c["balance"], c["help"] > 0, tuple(self.head), c["head home"] > 0)
+        got = Taken(nav, c["partition"], c["stats"], c["balance"], c["help"] > 0, tuple(self.head), c["head home"] > 0,
+                    c["scene pause"], self.scrub)
         self._clear()
         return got
 

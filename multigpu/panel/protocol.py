@@ -28,6 +28,8 @@ MOST_LOD_PX = 1000.0
 MOST_FPS = 1000.0
 #: the most metres one message may move the viewer's head by, on each axis
 MOST_HEAD_M = 1.0
+#: the furthest a page may set a moving scene's time (seconds either side of 0)
+MOST_SCENE_S = 1e6
 
 
 def _number(lo: float, hi: float, none: bool = False):
@@ -58,6 +60,9 @@ ACTIONS: dict[str, dict] = {
     "head": {axis: (_number(-MOST_HEAD_M, MOST_HEAD_M), f"metres -{MOST_HEAD_M:g}..{MOST_HEAD_M:g}")
              for axis in ("dx", "dy", "dz")},
     "head_home": {},
+    "scene_pause": {},
+    "scene_play": {},
+    "scene_time": {"value": (_number(-MOST_SCENE_S, MOST_SCENE_S), f"seconds -{MOST_SCENE_S:g}..{MOST_SCENE_S:g}")},
 }
 
 

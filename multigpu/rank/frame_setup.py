@@ -89,7 +89,11 @@ def _live(cfg: WalkConfig, comm, scene, path, planner: Planner, presenter, monit
             controls = take_input(presenter, *([monitor.window] if monitor is not None else []))
         if cfg.path == INTERACTIVE:
             start = unshifted(path.camera(0), cfg.offset)
-    return Live(cfg, comm, scene, planner.balances, planner.using, controls, monitor, start, panel)
+    from multigpu.core.motion import SceneClock
+    from multigpu.scene.moves import moves
+
+    clock = SceneClock(cfg.scene.anim_speed) if moves(scene, cfg.scene) else None  # the operator may steer its time
+    return Live(cfg, comm, scene, planner.balances, planner.using, controls, monitor, start, panel, clock)
 
 
 def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDir | None, load_info: dict,

@@ -119,7 +119,7 @@ class FrameLog:
             rows[:, self.col["swap_ms"]] = (at - at.min()) * 1e3
             rows[:, self.col["swap_skew_ms"]] = (at.max() - at.min()) * 1e3
         if recorded is not None:
-            self.record.camera(recorded)
+            self.record.camera(*recorded)
         self.write(self.record.rows, f, rows)
         return rows
 

@@ -94,7 +94,7 @@ class Frames:
         t = Timer()
         self.rows.push()
         control = None if self.live is None else self.live.steer(  # a window run's input phase
-            t, self.flight.values(), self.log, self.planner, self.fidelity)
+            t, self.flight.values(), self.log, self.planner, self.fidelity, f)
         camera = control.camera if control is not None and control.camera is not None else self.path.camera(f)
         with t.phase("learn"):
             if FAULT_SPEC:
@@ -106,8 +106,11 @@ class Frames:
         if self.head is not None:  # the newest pose, every rank the same from this frame
             with t.phase("input"):
                 self.planner.pose, head_at = self.head.pose()
-        if self.moving is not None:  # the bodies where they are at the frame's scene time
-            self.moving.pose(t, self.moving.time_of(f))
+        when = None
+        if self.moving is not None:  # the bodies where they are at the frame's scene time (the operator's, if steered)
+            steered = control is not None and control.scene_time is not None
+            when = control.scene_time if steered else self.moving.time_of(f, self.path)
+            self.moving.pose(t, when)
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
             quality, levels, tris = self.fidelity.frame(f, camera, rects, self.moving is not None)
@@ -127,7 +130,7 @@ class Frames:
         recorded = None
         if (self.cfg.record or self.cfg.panel) and self.rank == 0:  # the frame's camera, in path-file coordinates
             live = self.live.recorded() if self.live is not None and self.interactive else None
-            recorded = live if live is not None else unshifted(camera, self.cfg.offset)
+            recorded = (live if live is not None else unshifted(camera, self.cfg.offset), when)
         return InFlight(f, t, control, work, plan, pending, self.draw.drawn, work.objects(self.rank),
                         self.balance_ids[self.planner.using], recorded, quality, composed, picks, head_at)
 

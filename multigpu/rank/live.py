@@ -48,7 +48,7 @@ class Live:
     only; ``start`` (rank 0, ``--path interactive``) is where the hand-flown camera begins."""
 
     def __init__(self, cfg, comm, scene, balances: list[str], balance: int, controls=None, monitor=None,
-                 start=None, panel=None):
+                 start=None, panel=None, clock=None):
         self.comm, self.cfg = comm, cfg
         self.rank, self.K = comm.Get_rank(), comm.Get_size()
         self.balances = balances
@@ -59,7 +59,7 @@ class Live:
             navigator = Navigator(lo - off, hi - off, start)
         self.steering = Steering(comm, cfg.timeout, balances, balance, controls, navigator, cfg.offset,
                                  interactive=cfg.path == INTERACTIVE, panel=panel,
-                                 quality=(cfg.target_fps, cfg.render_scale, cfg.lod_error))
+                                 quality=(cfg.target_fps, cfg.render_scale, cfg.lod_error), clock=clock)
         self.monitor, self.panel = monitor, panel
         self.tiles = cfg.canvas.tiles()
         # the shrunk wall travels to rank 0 for the monitor's window and the panel's thumbnail
@@ -79,18 +79,18 @@ class Live:
         self.fps, self.last = 0.0, None
         self.col = {c: i for i, c in enumerate(COLUMNS)}
 
-    def control(self) -> Control:
-        """The input phase: this frame's camera and settings, the same on every rank."""
-        control = self.steering.last_control = self.steering.next()
+    def control(self, frame: int = 0) -> Control:
+        """The input phase: frame ``frame``'s camera and settings, the same on every rank."""
+        control = self.steering.last_control = self.steering.next(frame)
         return control
 
-    def steer(self, t, in_flight, log, planner, fidelity) -> Control:
+    def steer(self, t, in_flight, log, planner, fidelity, frame: int = 0) -> Control:
         """The input phase of a frame (every rank the same camera and settings from here on): a
         pause left out of every time (this frame's ``t``, the frames ``in_flight``, the ``log``'s
         period), and the page's or the keys' strategy, quality and head applied to the
         ``planner`` and ``fidelity`` at this frame on every rank."""
         with t.phase("input"):
-            control = self.control()
+            control = self.control(frame)
         if control.paused_s:  # the page paused the run: no frame's time holds the pause
             t.paused(control.paused_s, "input")
             for x in in_flight:

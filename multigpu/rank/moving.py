@@ -34,8 +34,12 @@ class Moving:
         self.movers = np.zeros(scene.n_objects, dtype=bool)  # told the renderer once, with the first maps
         self.movers[self.posed.objects] = True
 
-    def time_of(self, f: int) -> float:
-        """Frame ``f``'s scene time as the path plays it."""
+    def time_of(self, f: int, path=None) -> float:
+        """Frame ``f``'s scene time as the path plays it: the time its file recorded for the frame
+        (a replay of a steered run), else the frame's own (``scene_time``)."""
+        times = getattr(path, "times", None)
+        if times is not None and 0 <= f < len(times):
+            return float(times[f])
         return scene_time(f, self.speed)
 
     def pose(self, t: Timer, when: float) -> None:

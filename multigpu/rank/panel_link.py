@@ -55,6 +55,7 @@ class PanelLink:
         self._fly_clear()
         self.head = [0.0, 0.0, 0.0]  # metres the page moved the viewer's head since the last frame
         self.head_home = False
+        self.scene: dict = {}  # a moving scene's time as the page set it: "pause" (bool), "time" (seconds)
         self.held: frozenset = frozenset()
         self.recording = None  # scene.pathfile.PathAppender while the page records
         self.recordings = 0
@@ -123,6 +124,10 @@ class PanelLink:
             self.reset += 1
         elif do == "record":
             self._record(args["on"])
+        elif do in ("scene_pause", "scene_play"):
+            self.scene["pause"] = do == "scene_pause"
+        elif do == "scene_time":
+            self.scene["time"] = args["value"]
         elif do == "head_home":
             self.head, self.head_home = [0.0, 0.0, 0.0], True
         elif do == "head":
@@ -151,8 +156,9 @@ class PanelLink:
         row (``panel.state.names``); its camera while recording."""
         self.state.add_row(plot_rows(rows[None], col)[0])
         if self.recording is not None and recorded is not None:
-            cam = recorded
-            self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far])
+            cam, when = recorded
+            self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far,
+                                 float("nan") if when is None else when])
             if len(self.cameras) >= 100:
                 self._flush()
 
@@ -162,7 +168,8 @@ class PanelLink:
                               balance=balances[control.balance] if control is not None else None,
                               target_fps=fidelity.target_fps, render_scale=fidelity.scale,
                               lod_error=fidelity.lod_error, interactive=self.interactive,
-                              viewer=self.viewer)
+                              viewer=self.viewer, scene_time=None if control is None else control.scene_time,
+                              scene_paused=bool(control is not None and control.scene_paused))
 
     def _record(self, on: bool) -> None:
         """Start (a new file in the run's outputs) or stop recording the cameras shown."""

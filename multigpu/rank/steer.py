@@ -23,8 +23,8 @@ from multigpu.rank.exchange import wait_all
 
 #: position 3, target 3, up 3, fov, near, far, strategy index, partition, stats, orbiting, paused, frame-rate
 #: target (0: none), render scale, level-of-detail bound, the page's thumbnail wanted this frame, the viewer's head
-#: moved from its place by the keys (x, y, z metres)
-SIZE = 24
+#: moved from its place by the keys (x, y, z metres), a moving scene's time (seconds) and whether it stands
+SIZE = 26
 #: seconds between the input phase's broadcasts while the run is paused (the page's commands read each time)
 PAUSE_TICK = 0.05
 
@@ -42,6 +42,8 @@ class Control:
     paused_s: float = 0.0  # seconds the run stood paused before this frame (no frame's time counts them)
     thumb: bool = False  # the operator's page wants a thumbnail of this frame (every rank sends its tile shrunk)
     head: tuple = (0.0, 0.0, 0.0)  # metres the keys moved the viewer's head from its place (a wall with a viewer)
+    scene_time: float | None = None  # a moving scene's time this frame (None: the scene stands still)
+    scene_paused: bool = False  # the operator holds the scene's time
 
 
 class Steering:
@@ -51,9 +53,11 @@ class Steering:
     render scale and level-of-detail bound at the start."""
 
     def __init__(self, comm, timeout: float, balances, balance: int, controls=None, navigator=None,
-                 offset=(0.0, 0.0, 0.0), interactive: bool = False, panel=None, quality=(None, 1.0, 0.0)):
+                 offset=(0.0, 0.0, 0.0), interactive: bool = False, panel=None, quality=(None, 1.0, 0.0),
+                 clock=None):
         self.comm, self.timeout = comm, timeout
         self.controls, self.navigator, self.panel = controls, navigator, panel
+        self.clock = clock  # a moving scene's ``core.motion.SceneClock`` (rank 0 steers it), or None
         self.interactive = interactive
         self.offset = np.asarray(offset, dtype=np.float64)
         self.balances = list(balances)
@@ -94,9 +98,14 @@ class Steering:
         s[20] = float(p.wants())
         return taken
 
-    def _read(self) -> None:
+    def _read(self, frame: int) -> None:
         """Rank 0: the input since the last frame into ``state``."""
         taken = self._taken()
+        if self.clock is not None:  # the page's and the keys' pauses and scrubs, then this frame's time
+            scene = self.panel.scene if self.panel is not None else {}
+            self.state[24] = self.clock.at(frame, taken.scene_pause, taken.scrub, scene.pop("time", None),
+                                           scene.pop("pause", None))
+            self.state[25] = float(self.clock.paused)
         now = time.perf_counter()
         dt, self.last = now - self.last, now
         s = self.state
@@ -118,14 +127,14 @@ class Steering:
             s[6:9], s[9:12] = cam.up, (cam.fov, cam.near, cam.far)
             s[15] = float(self.navigator.orbiting)
 
-    def next(self) -> Control:
+    def next(self, frame: int = 0) -> Control:
         """This frame's control, agreed by every rank (one broadcast from rank 0). While the page
         has the run paused, every rank waits here, a broadcast each ``PAUSE_TICK``, until it
         resumes or stops it, or a signal reaches rank 0 (the frames in flight wait with it)."""
         began = None
         while True:
             if self.comm.Get_rank() == 0:
-                self._read()
+                self._read(frame)
                 if self.state[16] and self.stopping():  # Ctrl-C or SIGTERM ends a pause: the frame
                     self.state[16] = 0.0  # loop then stops after this frame, as it does unpaused
             if self.comm.Get_size() > 1:
@@ -142,4 +151,4 @@ class Steering:
             camera = Camera(tuple(s[0:3]), tuple(s[3:6]), tuple(s[6:9]), float(s[9]), float(s[10]), float(s[11]))
         quality = (float(s[17]) or None, float(s[18]), float(s[19]))
         return Control(camera, int(s[12]), bool(s[13]), bool(s[14]), bool(s[15]), quality, paused, bool(s[20]),
-                       (float(s[21]), float(s[22]), float(s[23])))
+                       (float(s[21]), float(s[22]), float(s[23])), float(s[24]) if self.clock else None, bool(s[25]))

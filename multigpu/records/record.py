@@ -95,7 +95,7 @@ class RunRecord:
             from multigpu.scene.pathfile import PathAppender
 
             self.path = PathAppender(self.record_to)
-        self.cameras: list = []  # (12,) position, target, up, fov, near, far of the frames not yet in the path file
+        self.cameras: list = []  # (13,) position, target, up, fov, near, far, scene time of the frames not yet written
         self.failed: WriteFailed | None = None  # the first output that could not be written
         self.extra: dict = {}  # figures the frame loop adds to summary.json at the end
         self.done = resume_at
@@ -123,9 +123,11 @@ class RunRecord:
         """Frames in the path file on disk."""
         return self.path.frames if self.path is not None else 0
 
-    def camera(self, cam) -> None:
-        """The next frame's camera (path-file coordinates), kept for ``--record``."""
-        self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far])
+    def camera(self, cam, time: float | None = None) -> None:
+        """The next frame's camera (path-file coordinates) and a moving scene's time, kept for
+        ``--record``."""
+        self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far,
+                             float("nan") if time is None else time])
 
     def _save_path(self) -> None:
         """Append the cameras of the frames written since the last time to the ``--record`` file."""

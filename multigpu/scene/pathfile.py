@@ -28,11 +28,14 @@ class PathAppender:
         self.end = 0  # where the closing brackets start
 
     def append(self, cams: np.ndarray) -> None:
-        """``cams``: (F, 12) rows of position, target, up, fov, near, far."""
+        """``cams``: (F, 12) rows of position, target, up, fov, near, far, or (F, 13) with a
+        moving scene's time last (NaN: none; written as each camera's ``time``)."""
         if len(cams) == 0:
             return
         text = ",\n".join(json.dumps({"position": c[0:3].tolist(), "target": c[3:6].tolist(), "up": c[6:9].tolist(),
-                                      "fov": float(c[9]), "near": float(c[10]), "far": float(c[11])}) for c in cams)
+                                      "fov": float(c[9]), "near": float(c[10]), "far": float(c[11]),
+                                      **({"time": float(c[12])} if len(c) > 12 and np.isfinite(c[12]) else {})})
+                           for c in cams)
         if self.fd is not None:
             return self._write((",\n" + text).encode(), len(cams))
         self.fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
@@ -64,8 +67,8 @@ class PathAppender:
         cameras kept (rewritten once; nothing kept where the file is missing or unreadable)."""
         try:
             cams = json.loads(self.path.read_text())["cameras"][:frames]
-            rows = np.array([[*c["position"], *c["target"], *c["up"], c["fov"], c["near"], c["far"]] for c in cams],
-                            dtype=np.float64).reshape(-1, 12)
+            rows = np.array([[*c["position"], *c["target"], *c["up"], c["fov"], c["near"], c["far"],
+                              c.get("time", np.nan)] for c in cams], dtype=np.float64).reshape(-1, 13)
         except (OSError, ValueError, KeyError, TypeError):
             return
         self.append(rows)

@@ -32,7 +32,9 @@ MAX_COORD = 1e15  # world coordinates beyond this lose all float64 precision bel
 
 @dataclass
 class CameraPath:
-    """Per-frame cameras as arrays: position, target, up (F, 3); fov, near, far (F,)."""
+    """Per-frame cameras as arrays: position, target, up (F, 3); fov, near, far (F,); ``times``
+    (F,): a moving scene's time at each frame where the file gives one (a steered run's
+    recording), else None (the frame's own: ``core.motion.scene_time``)."""
 
     position: np.ndarray
     target: np.ndarray
@@ -40,6 +42,7 @@ class CameraPath:
     fov: np.ndarray
     near: np.ndarray
     far: np.ndarray
+    times: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.position.shape[0])
@@ -51,7 +54,7 @@ class CameraPath:
     def translated(self, offset) -> "CameraPath":
         """The same path moved by ``offset`` world units."""
         off = np.asarray(offset, dtype=np.float64).reshape(3)
-        return CameraPath(self.position + off, self.target + off, self.up, self.fov, self.near, self.far)
+        return CameraPath(self.position + off, self.target + off, self.up, self.fov, self.near, self.far, self.times)
 
     def to_json(self) -> dict:
         cams = [{"position": self.position[i].tolist(), "target": self.target[i].tolist(),
@@ -175,7 +178,11 @@ def load_path(path: str | Path) -> CameraPath:
             raise InputError(f"{path}: field 'cameras' must be a non-empty list")
         cams = [_check_camera(c, f"{path}: cameras[{i}]", defaults) for i, c in enumerate(cams)]
         arr = lambda k: np.array([c[k] for c in cams], dtype=np.float64)
-        return CameraPath(arr("position"), arr("target"), arr("up"), arr("fov"), arr("near"), arr("far"))
+        times = [c.get("time") for c in doc["cameras"]]
+        if any(t is not None for t in times):  # a scene's time per frame: every camera's, finite
+            times = [_number(t, f"{path}: cameras[{i}].time", -1e15, 1e15) for i, t in enumerate(times)]
+        return CameraPath(arr("position"), arr("target"), arr("up"), arr("fov"), arr("near"), arr("far"),
+                          None if times[0] is None else np.asarray(times, dtype=np.float64))
     if "keyframes" not in doc:
         raise InputError(f"{path}: needs a field 'keyframes' or 'cameras'")
     keys = doc["keyframes"]

@@ -146,6 +146,11 @@ function showStatus(s) {
   for (const k of ["target_fps", "render_scale", "lod_error"]) {
     if (document.activeElement !== $(k)) $(k).value = s[k] == null ? "" : s[k];
   }
+  $("scene").hidden = s.scene_time == null;  // a scene that moves: its own time, paused and scrubbed apart
+  if (s.scene_time != null) {
+    $("scenetime").textContent = s.scene_time.toFixed(2);
+    $("scenepause").textContent = s.scene_paused ? "play scene" : "pause scene";
+  }
   $("fly").hidden = !s.interactive;
   $("head").hidden = !s.viewer;
   $("controls").hidden = !!s.view;  // a finished run (multigpu view): nothing to control
@@ -174,6 +179,8 @@ function showSummary(s) {
 // -- controls
 $("pause").onclick = () => send({ do: status.paused ? "resume" : "pause" });
 $("stop").onclick = () => send({ do: "stop" });
+$("scenepause").onclick = () => send({ do: status.scene_paused ? "scene_play" : "scene_pause" });
+$("sceneat").onchange = (e) => { if (e.target.value !== "") send({ do: "scene_time", value: +e.target.value }); };
 $("record").onclick = () => send({ do: "record", on: !status.recording });
 $("overlay").onchange = () => drawParts(pieces);
 $("balance").onchange = (e) => send({ do: "balance", name: e.target.value });
