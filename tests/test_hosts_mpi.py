@@ -93,6 +93,25 @@ def test_each_host_shares_memory_and_messages_cross_hosts(tmp_path, hosts, launc
         assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} px"
 
 
+@pytest.mark.parametrize("extra", [["--scene", "swarm", "--path-kind", "still"],
+                                   ["--moving", "0.3", "--decomposition", "hybrid", "--projection", "shared"]],
+                         ids=["swarm", "machinery-hybrid"])
+def test_a_moving_scene_on_two_hosts_composes_like_one_rank(tmp_path, hosts, launcher, extra):
+    """Scenes that move, across hosts: every rank on either host poses the same frame at the same
+    scene time, so the wall equals one rank's render of each frame, and the frames change."""
+    env = {**hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache")}
+    res = run_mpi(4, args(tmp_path / "wall", extra=extra), env=env, launcher=launcher, hosts=HOSTS, timeout=180)
+    assert res.returncode == 0, res.stderr[-3000:]
+    ref = run_mpi(1, [*args(tmp_path / "one", extra=extra), "--grid", "1x1", "--tile", f"{W}x{H}"],
+                  env={"MULTIGPU_CACHE": str(tmp_path / "cache")})
+    assert ref.returncode == 0, ref.stderr[-3000:]
+    want = frames_of(tmp_path / "one")
+    assert (want[-1] != want[0]).any()
+    for f, (got, one) in enumerate(zip(frames_of(tmp_path / "wall"), want)):
+        assert (got == one).all(), f"frame {f}: {(got != one).any(axis=2).sum()} px"
+    assert json.loads((tmp_path / "wall" / "summary.json").read_text())["cpu"]["posing_cpu_ms"] > 0
+
+
 def test_shared_exchange_across_hosts_is_refused_in_one_line(tmp_path, hosts, launcher):
     res = run_mpi(4, args(tmp_path / "shared", extra=["--exchange", "shared"]), launcher=launcher, hosts=HOSTS,
                   env={**hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache")}, timeout=180)

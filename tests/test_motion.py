@@ -223,3 +223,28 @@ def test_the_keys_pause_and_scrub_the_scene():
         c.on_key(None, key, 0, glfw.PRESS, mods)
     got = c.take()
     assert got.scene_pause == 1 and got.scrub == SCRUB_SHIFT and c.take().scene_pause == 0
+
+
+def test_the_draw_groups_and_the_order_sort_last_ranges_follow_agree():
+    """Where some objects stand still the renderer draws groups in turn (at rest, moving; the wide
+    ones last): every object in exactly one group, and ``pass_order`` lists them in that order,
+    so db's and hybrid's ranges keep the lower rank's fragment where a one-rank render keeps its."""
+    from multigpu.core.drawlist import pass_groups, pass_order
+
+    rng = np.random.default_rng(9)
+    wide, movers = rng.random(200) < 0.2, rng.random(200) < 0.3
+    order = rng.permutation(200)
+    groups = pass_groups(wide, movers)
+    assert np.array_equal(np.sum([g for g, _ in groups], axis=0), np.ones(200))
+    assert [p for _, p in groups] == [0, 1, 0, 1]
+    got = pass_order(order, wide, movers)
+    assert sorted(got) == list(range(200))
+    rank = np.empty(200, dtype=np.int64)
+    rank[got] = np.arange(200)
+    for i, (g, _) in enumerate(groups):  # each group after the last, in draw order within
+        members = order[g[order]]
+        assert (np.diff(rank[members]) == 1).all()
+        if i:
+            assert rank[members].min() > rank[order[groups[i - 1][0][order]]].max()
+    assert pass_groups(wide, None) is None and pass_groups(wide, np.ones(200, bool)) is None
+    assert np.array_equal(pass_order(order, wide, None), order)

@@ -81,6 +81,28 @@ def scene_order(scene) -> tuple[np.ndarray, np.ndarray]:
     return draw_order(scene.centers, wide), wide
 
 
+def pass_groups(wide: np.ndarray, movers: np.ndarray | None) -> list[tuple[np.ndarray, int]] | None:
+    """The groups of objects a frame draws in turn where some of a moving scene's objects stand
+    still, each with its pass (0: without the maps, 1: with; ``gpu.render``): at rest, then
+    moving; the wide objects after all others, at rest then moving. None where one pass draws
+    every object in draw order (nothing moves, or everything)."""
+    if movers is None or movers.all():
+        return None
+    wide = np.asarray(wide, dtype=bool)
+    groups = [(~wide & ~movers, 0), (~wide & movers, 1), (wide & ~movers, 0), (wide & movers, 1)]
+    return [(g, p) for g, p in groups if g.any()]
+
+
+def pass_order(order: np.ndarray, wide: np.ndarray, movers: np.ndarray | None) -> np.ndarray:
+    """The order objects are drawn in, ``pass_groups``' groups in turn (each in ``order``): the
+    order a sort-last decomposition's ranges follow, so the lower rank's fragment wins a depth
+    tie exactly where a one-rank render's earlier one does."""
+    if pass_groups(wide, movers) is None:
+        return order
+    key = 2 * np.asarray(wide, dtype=np.int64)[order] + np.asarray(movers, dtype=np.int64)[order]
+    return order[np.argsort(key, kind="stable")]
+
+
 def owners(starts: np.ndarray, s: int, e: int) -> np.ndarray:
     """The object of every position in ``[s, e)``, objects laid out back to back from
     ``starts`` ((N+1,) cumulative, from 0)."""

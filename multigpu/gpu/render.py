@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.core.camera import model_view, region_clip
-from multigpu.core.drawlist import DrawList
+from multigpu.core.drawlist import DrawList, pass_groups
 from multigpu.errors import InputError
 from multigpu.gpu import texturing
 from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
@@ -169,10 +169,9 @@ class RegionRenderer:
             *([(self.obo, "1u", "in_obj")] if m or not per_vertex else []),
             *([(self.uvl, "3f", "in_uvl")] if textured else [])], index_buffer=self.ibo, index_element_size=4)
         self.vao = vao(self.prog, moving)
-        # the programs a frame is drawn with, in order, and their commands' counts (``_commands``): where
-        # the scene moves, the objects at rest (``pose``'s) are drawn first without the maps (their reads
-        # cost llvmpipe a quarter of a frame), then the moving ones
-        self.passes, self._runs, self.movers = [(self.prog, self.vao)], (0,), None
+        # the programs a frame is drawn with: where the scene moves, the objects at rest (``pose``'s
+        # ``groups``) go without the maps (their reads cost llvmpipe a quarter of a frame)
+        self.passes, self._runs, self.groups = [(self.prog, self.vao)], [(0, 0)], None
         if moving and not textured:
             still = program(False)
             self.passes.insert(0, (still, vao(still, False)))
@@ -263,16 +262,15 @@ class RegionRenderer:
 
     def _commands(self, mask, seen, levels) -> np.ndarray:
         """The draw commands of the objects in ``mask`` (of their ``seen`` parts) at their ``levels``
-        of detail (None: as modelled), each pass's in turn (``_runs``); ``_tris``: their triangles."""
-        if self.movers is None:  # every object through the last pass (all move, or none does)
+        of detail (None: as modelled), each group's in turn (``groups``, ``_runs``: (pass, commands));
+        ``_tris``: their triangles."""
+        if self.groups is None:  # every object through the last pass (all move, or none does)
             cmds = self.draws.leveled(mask, levels, seen)
-            self._runs = (0,) * (len(self.passes) - 1) + (len(cmds),)
+            self._runs = [(len(self.passes) - 1, len(cmds))]
         else:
-            mask = self._every if mask is None else mask
-            runs = [self.draws.leveled(mask & ~self.movers, levels, seen),
-                    self.draws.leveled(mask & self.movers, levels, seen)]
+            runs = [self.draws.leveled(g if mask is None else mask & g, levels, seen) for g, _ in self.groups]
             cmds = np.concatenate(runs)
-            self._runs = (len(runs[0]), len(runs[1]))
+            self._runs = [(p, len(r)) for (_, p), r in zip(self.groups, runs)]
         self.last_commands = len(cmds)
         self._tris = int(cmds[:, 0].sum()) // 3
         return cmds
@@ -290,9 +288,10 @@ class RegionRenderer:
             self._issue(mvp)
 
     def _issue(self, mvp) -> None:
-        """The uploaded commands drawn, each pass's with its program (``_runs``)."""
+        """The uploaded commands drawn, each group's with its pass's program (``_runs``)."""
         first, m = 0, np.ascontiguousarray(mvp.T, dtype=np.float32)
-        for (prog, vao), n in zip(self.passes, self._runs):  # one or two passes
+        for p, n in self._runs:  # a few groups
+            prog, vao = self.passes[p]
             if n:
                 prog["mvp"].write(m)
                 vao.render_indirect(self.indirect, count=n, first=first)
@@ -424,10 +423,9 @@ class RegionRenderer:
         move (the others are drawn without their maps); None keeps the last."""
         self.mbo.orphan()
         self.mbo.write(rows)
-        if movers is not None and len(self.passes) > 1:
-            movers = np.asarray(movers, dtype=bool)
-            self.movers = None if movers.all() else movers
-            self._every = np.ones(len(movers), dtype=bool)
+        if movers is not None:  # one program for both (a textured scene's) keeps the groups' order
+            got = pass_groups(self.draws.wide, np.asarray(movers, dtype=bool))
+            self.groups = None if got is None else [(g, min(p, len(self.passes) - 1)) for g, p in got]
 
     @property
     def framebuffer_bytes(self) -> int:
