@@ -225,7 +225,7 @@ class WalkConfig:
         "without a value: the wall file's monitor position, else right of the wall)"))
     device: int | None = option(None, group=WALL, metavar="I", type=int, valid=lambda v: v is None or v >= 0,
                                 must="must be >= 0", help="EGL device index (default: local rank modulo device count)")
-    subfrustum: str = option("auto", group=WALL, choices=_names("multigpu.gpu.render", "METHODS"),
+    subfrustum: str = option("auto", group=WALL, choices=_names("multigpu.gpu.methods", "METHODS"),
                              help="how a rank renders its region (docs/ACCURACY.md)")
     displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY (wall file)
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place (wall file)

@@ -174,12 +174,73 @@ def test_bad_animations_are_refused_in_one_line_naming_the_field(tmp_path, chang
     assert "\n" not in str(got.value) and str(path) in str(got.value)
 
 
-@pytest.mark.skipif(not SAMPLES.is_dir(), reason="Debian's assimp-testmodels is not installed")
-@pytest.mark.parametrize("name,words", [
-    ("glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf", "morph target weights"),
-    ("simple_skin/simple_skin.gltf", "skin(s) not played yet")])
-def test_files_other_tools_wrote_load_and_say_what_is_not_played(name, words):
-    scene = load_model(SAMPLES / name)
-    assert scene.meta["gltf"]["animations"] and any(words in w for w in scene.meta["warnings"])
-    GltfMotion(scene).at(0.7)  # their channels read and sampled
+needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason="Debian's assimp-testmodels is not installed")
+MORPH_CUBE = SAMPLES / "glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf"
 
+
+@needs_samples
+def test_a_skinned_file_other_tools_wrote_loads_and_says_its_skin_is_not_played():
+    scene = load_model(SAMPLES / "simple_skin/simple_skin.gltf")
+    assert scene.meta["gltf"]["animations"] and any("skin(s) not played yet" in w for w in scene.meta["warnings"])
+    GltfMotion(scene).at(0.7)  # its channels read and sampled
+
+
+@needs_samples
+def test_morph_target_weights_play_as_sampled_and_the_bounds_hold_the_morphed_vertices():
+    """Khronos' AnimatedMorphCube: its weights channel sampled LINEAR between its keyframes, every
+    vertex moved by the weighted deltas (in world space), inside the posed bounds."""
+    import pygltflib
+
+    from multigpu.scene.gltf_motion import accessor
+
+    scene = load_model(MORPH_CUBE)
+    assert scene.morph_deltas.shape[1] == 2 and not scene.meta["warnings"]
+    m = GltfMotion(scene)
+    assert m.moving.all() and m.morph_of.tolist() == [[0, 2]]
+    doc = pygltflib.GLTF2().load(str(MORPH_CUBE))
+    s = doc.animations[0].samplers[0]
+    times, values = accessor(doc, MORPH_CUBE, s.input, {})[:, 0], accessor(doc, MORPH_CUBE, s.output, {})
+    values = values.reshape(len(times), 2)
+    posed = Posed(scene, m)
+    tri, obj = triangle_objects(scene)
+    for t in (0.0, 0.37, 1.5, 2.2, times[-1] - 0.01):
+        posed.at(t)
+        want = np.array([np.interp(t, times, values[:, k]) for k in range(2)])
+        assert np.allclose(m.last_weights, want, atol=1e-9), t
+        local = scene.vertices[:, :3].astype(np.float64)
+        rows = scene.morph_rows
+        moved = local.copy()
+        has = rows >= 0
+        moved[has] += (scene.morph_deltas[rows[has]] * m.last_weights[None, :, None]).sum(axis=1)
+        A, b = m.at(t)
+        world = moved[tri] @ A[0].T + b[0] + scene.origin
+        lo, hi = posed.bmin_bmax()
+        tol = 1e-5 * np.abs(local).max()
+        assert (world >= lo[obj][:, None] - tol).all() and (world <= hi[obj][:, None] + tol).all(), t
+    assert np.ptp(posed.at(0.0).half) != np.ptp(posed.at(2.2).half)  # the box follows the morph
+
+
+def _morph_broken(tmp_path, change) -> Path:
+    import shutil
+
+    import pygltflib
+
+    for f in MORPH_CUBE.parent.iterdir():
+        shutil.copy(f, tmp_path / f.name)
+    doc = pygltflib.GLTF2().load(str(tmp_path / MORPH_CUBE.name))
+    change(doc)
+    out = tmp_path / "broken.gltf"
+    doc.save(str(out))
+    return out
+
+
+@needs_samples
+@pytest.mark.parametrize("change,field", [
+    (lambda d: setattr(d.accessors[7], "count", 23), r"meshes\[0\]\.primitives\[0\]\.targets\[1\]\.POSITION: holds 23"),
+    (lambda d: setattr(d.accessors[11], "count", 253), r"animations\[0\]\.samplers\[0\]\.output"),
+], ids=["target-counts-differ", "weights-count"])
+def test_bad_morph_targets_are_refused_in_one_line(tmp_path, change, field):
+    path = _morph_broken(tmp_path, change)
+    with pytest.raises(InputError, match=field) as got:
+        GltfMotion(load_model(path))
+    assert "\n" not in str(got.value) and str(path) in str(got.value)

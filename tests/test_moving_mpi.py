@@ -215,3 +215,17 @@ def test_the_page_pauses_and_scrubs_scene_time_and_the_recording_replays_it(tmp_
     replay = walk(tmp_path / "replay", (2, 2), (60, 48), ["--path", str(rec)],
                   scene=[a for a in SWARM if a not in ("--path-kind", "still")], frames=n)
     same(frames_of(replay, n), shots)
+
+
+MORPH_CUBE = "/usr/share/assimp/models/glTF2/glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf"
+
+
+@pytest.mark.skipif(not os.path.exists(MORPH_CUBE), reason="Debian's assimp-testmodels is not installed")
+def test_khronos_morph_cube_plays_on_a_2x2_wall_like_one_rank(tmp_path):
+    """A file other tools wrote: its morph target weights animate the cube's vertices, the
+    composites equal one rank's render of every frame (screen, and hybrid in flight)."""
+    scene = ["--model", MORPH_CUBE, "--path-kind", "still", "--cluster", "0", "--no-progress"]
+    ref = frames_of(walk(tmp_path / "one", (1, 1), (128, 96), scene=scene, frames=12), 12)
+    assert (ref[-1] != ref[0]).any()
+    for extra in ([], ["--decomposition", "hybrid", "--latency", "2"]):
+        same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=scene, frames=12), 12), ref)

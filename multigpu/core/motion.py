@@ -138,7 +138,50 @@ class Posed:
                           np.ascontiguousarray((pmax - pmin)[rows] * 0.5))
             self.part_center = np.ascontiguousarray(((pmin + pmax) * 0.5).T)
             self.part_half = np.ascontiguousarray(((pmax - pmin) * 0.5).T)
+        self.morph = self._morphs(scene, motion, body)
         self.t = None
+
+    def _morphs(self, scene, motion, body: np.ndarray):
+        """Of the moving objects, those a morph target moves (``Scene.morph_lo``/``morph_hi`` and the
+        motion's ``morph_of``): their positions among the moving objects, extents, weight slots; and
+        the part rows of each (its position, -1: a part of an object that does not morph)."""
+        of = getattr(motion, "morph_of", None)
+        if scene.morph_lo is None or of is None:
+            return None
+        per = np.asarray(of, dtype=np.int64)[body[self.objects]]  # (first slot, count) of each moving object
+        sel = np.flatnonzero(per[:, 1] > 0)
+        if not sel.size:
+            return None
+        T = scene.morph_lo.shape[1]
+        valid = np.arange(T) < per[sel, 1:2]
+        slots = np.where(valid, per[sel, :1] + np.arange(T), 0)
+        obj = self.objects[sel]
+        parts = None
+        if self.parts is not None:
+            where = np.full(scene.n_objects, -1, dtype=np.int64)
+            where[obj] = np.arange(sel.size)
+            part_obj = np.repeat(np.arange(scene.n_objects), np.diff(scene.part_start))
+            parts = where[part_obj[self.parts[0]]]
+        return sel, np.asarray(scene.morph_lo)[obj], np.asarray(scene.morph_hi)[obj], slots, valid, parts
+
+    def grown(self, weights: np.ndarray):
+        """The moving objects' rest boxes and spheres (``c0``, ``h0``, ``r0``) and the moving parts'
+        (``pc``, ``ph``), grown by their morph targets' deltas at ``weights``: each axis by the sum
+        over the targets of the least and greatest weighted delta."""
+        sel, lo, hi, slots, valid, parts = self.morph
+        w = np.where(valid, np.asarray(weights, dtype=np.float64)[slots], 0.0)[:, :, None]
+        dlo, dhi = np.minimum(w * lo, w * hi).sum(axis=1), np.maximum(w * lo, w * hi).sum(axis=1)
+        c0, h0, r0 = self.c0.copy(), self.h0.copy(), self.r0.copy()
+        c0[sel] += (dlo + dhi) * 0.5
+        h0[sel] += (dhi - dlo) * 0.5
+        r0[sel] += np.linalg.norm(np.maximum(-dlo, dhi), axis=1)
+        pc = ph = None
+        if self.parts is not None:
+            pc, ph = self.parts[2].copy(), self.parts[3].copy()
+            has = parts >= 0
+            pc[has] += (dlo + dhi)[parts[has]] * 0.5
+            ph[has] += (dhi - dlo)[parts[has]] * 0.5
+        return c0, h0, r0, pc, ph
 
     @property
     def n_moving(self) -> int:
@@ -146,29 +189,36 @@ class Posed:
 
     def at(self, t: float) -> "Posed":
         """Every array above at time ``t`` (rewritten in place; this object, for chaining)."""
-        return self.place(*self.motion.at(float(t)), t)
+        A, b = self.motion.at(float(t))
+        return self.place(A, b, t, getattr(self.motion, "last_weights", None))
 
-    def place(self, A: np.ndarray, b: np.ndarray, t: float | None = None) -> "Posed":
-        """Every array above for the bodies' maps ``A``, ``b`` (``Motion.at``'s, at time ``t``)."""
+    def place(self, A: np.ndarray, b: np.ndarray, t: float | None = None, weights=None) -> "Posed":
+        """Every array above for the bodies' maps ``A``, ``b`` (``Motion.at``'s, at time ``t``), the
+        morphing objects' rest bounds grown first by their targets at ``weights``."""
+        c0, h0, s0, r0 = self.c0, self.h0, self.s0, self.r0
+        parts = self.parts
+        if self.morph is not None and weights is not None:
+            c0, h0, r0, pc, ph = self.grown(weights)
+            parts = parts if parts is None else (*parts[:2], pc, ph)
         if self.compiled:  # one pass (``motion_kernel.py``), the same numbers
             A, b = np.ascontiguousarray(A, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)
-            kernel._pose(A, b, self.body, self.objects, self.c0, self.h0, self.s0, self.r0, self.origin, ORTHOGONAL,
+            kernel._pose(A, b, self.body, self.objects, c0, h0, s0, r0, self.origin, ORTHOGONAL,
                          self.spheres, self.center, self.half, self.centers, self.radii, self.rows)
-            if self.parts is not None:
-                kernel._boxes(A, b, *self.parts, self.origin, self.part_center, self.part_half)
+            if parts is not None:
+                kernel._boxes(A, b, *parts, self.origin, self.part_center, self.part_half)
             self.t = t
             return self
         Ao, bo = A[self.body], b[self.body]
         idx = self.objects
-        c, h = moved_boxes(self.c0, self.h0, Ao, bo)
+        c, h = moved_boxes(c0, h0, Ao, bo)
         self.center[:, idx] = (c + self.origin).T
         self.half[:, idx] = h.T
         if self.spheres:
-            self.centers[idx] = apply(Ao, self.s0) + bo + self.origin
-            self.radii[idx] = self.r0 * stretch(Ao)
+            self.centers[idx] = apply(Ao, s0) + bo + self.origin
+            self.radii[idx] = r0 * stretch(Ao)
         self.rows[idx] = shader_rows(Ao, bo)
-        if self.parts is not None:
-            rows, pbody, pc, ph = self.parts
+        if parts is not None:
+            rows, pbody, pc, ph = parts
             c, h = moved_boxes(pc, ph, A[pbody], b[pbody])
             self.part_center[:, rows] = (c + self.origin).T
             self.part_half[:, rows] = h.T

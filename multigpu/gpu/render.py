@@ -26,6 +26,8 @@ from multigpu.core.drawlist import DrawList, pass_groups
 from multigpu.errors import InputError
 from multigpu.gpu import texturing
 from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
+from multigpu.gpu.methods import choose_method, gl_limits
+from multigpu.gpu.morphs import MorphBuffers
 from multigpu.gpu.pending import Pending, _disjoint
 from multigpu.gpu.shaders import fragment_shader, vertex_shader
 
@@ -88,46 +90,6 @@ def create_context(device: int | None = None, local_rank: int = 0, host_ranks: i
         raise EglUnavailable(f"{EGL_HELP} ({exc.__class__.__name__}: {why})") from None
 
 
-METHODS = ("auto", "viewport", "scissor", "offaxis")
-
-
-def gl_limits(ctx) -> dict:
-    """The GL limits that bound each sub-frustum method (pixels)."""
-    info = ctx.info
-    vw, vh = info.get("GL_MAX_VIEWPORT_DIMS", (16384, 16384))
-    lo, _ = info.get("GL_VIEWPORT_BOUNDS_RANGE", (-32768, 32767))
-    return {"viewport": (int(vw), int(vh)), "bounds_low": int(lo),
-            "renderbuffer": int(info.get("GL_MAX_RENDERBUFFER_SIZE", 16384))}
-
-
-def choose_method(method: str, size: tuple[int, int], limits: dict) -> str:
-    """The sub-frustum method to use for a ``size`` display, or a clear error.
-
-    ``scissor`` (bit-exact): full-display framebuffer scissored to the region; needs W, H
-    within GL_MAX_RENDERBUFFER_SIZE and costs W*H*8 bytes per rank. ``viewport``:
-    region-sized framebuffer, the full-display viewport shifted by the region's origin; needs
-    W, H within GL_MAX_VIEWPORT_DIMS and the shift within GL_VIEWPORT_BOUNDS_RANGE; the
-    shifted viewport transform rounds differently, so a few edge pixels per frame differ.
-    ``offaxis``: region-sized framebuffer, the region's own off-axis frustum; any display size;
-    not bit-exact either. docs/ACCURACY.md measures all three. ``auto``: the first that fits,
-    in that order.
-    """
-    if method not in METHODS:
-        raise InputError.of("subfrustum", f"must be one of {', '.join(METHODS)}, got '{method}'")
-    W, H = size
-    fits_viewport = W <= limits["viewport"][0] and H <= limits["viewport"][1] and max(W, H) <= -limits["bounds_low"]
-    fits_scissor = max(W, H) <= limits["renderbuffer"]
-    if method == "auto":
-        return "scissor" if fits_scissor else "viewport" if fits_viewport else "offaxis"
-    if method == "viewport" and not fits_viewport:
-        raise InputError.of("subfrustum", f"viewport: a {W}x{H} display exceeds this GL's maximum viewport "
-                         f"{limits['viewport'][0]}x{limits['viewport'][1]} (use offaxis or auto)")
-    if method == "scissor" and not fits_scissor:
-        raise InputError.of("subfrustum", f"scissor: a {W}x{H} display exceeds this GL's maximum framebuffer "
-                         f"{limits['renderbuffer']} pixels per side (use viewport, offaxis or auto)")
-    return method
-
-
 class RegionRenderer:
     """Draws any subset of a scene's objects into any region of a ``size`` display.
 
@@ -153,8 +115,11 @@ class RegionRenderer:
         per_vertex = colors == "model" and scene.vertex_colors is not None
         textured = colors == "model" and scene.texcoords is not None and scene.texels is not None
         self.texture_path = texturing.texture_path() if textured else None
-        program = lambda m: ctx.program(vertex_shader=vertex_shader(per_vertex, textured, m),  # noqa: E731
-                                        fragment_shader=fragment_shader(textured, self.texture_path))
+        # a glTF model's morph targets (``morphs.py``), drawn by the moving program
+        self.morphs = MorphBuffers(ctx, scene) if moving and scene.morph_rows is not None else None
+        program = lambda m: ctx.program(  # noqa: E731
+            vertex_shader=vertex_shader(per_vertex, textured, m, m and self.morphs is not None),
+            fragment_shader=fragment_shader(textured, self.texture_path))
         self.prog = program(moving)
         self.draws = DrawList(scene)
         bufs = self._buffers(scene, shared, per_vertex, textured, self.texture_path == "pool")
@@ -167,7 +132,9 @@ class RegionRenderer:
         vao = lambda prog, m: ctx.vertex_array(prog, [  # noqa: E731
             (self.vbo, "3f 1u", "in_pos", "in_nrm"), *([(self.rgba, "1u", "in_rgba")] if per_vertex else []),
             *([(self.obo, "1u", "in_obj")] if m or not per_vertex else []),
-            *([(self.uvl, "3f", "in_uvl")] if textured else [])], index_buffer=self.ibo, index_element_size=4)
+            *([(self.uvl, "3f", "in_uvl")] if textured else []),
+            *([self.morphs.attribute()] if m and self.morphs is not None else [])],
+            index_buffer=self.ibo, index_element_size=4)
         self.vao = vao(self.prog, moving)
         # the programs a frame is drawn with: where the scene moves, the objects at rest (``pose``'s
         # ``groups``) go without the maps (their reads cost llvmpipe a quarter of a frame)
@@ -307,6 +274,8 @@ class RegionRenderer:
         self.cbo.bind_to_storage_buffer(0)
         if self.mbo is not None:
             self.mbo.bind_to_storage_buffer(4)
+        if self.morphs is not None:
+            self.morphs.bind(self.prog)
         if self.texture is not None:
             self.layers.bind_to_storage_buffer(1)
             if self.texels is not None:  # the pool: its level table and texels (a pinned buffer's
@@ -417,10 +386,13 @@ class RegionRenderer:
         self.last_triangles = total
         return Pending(None, self.fbo, drawn, depth)
 
-    def pose(self, rows: np.ndarray, movers: np.ndarray | None = None) -> None:
+    def pose(self, rows: np.ndarray, movers: np.ndarray | None = None, weights=None, morph_of=None) -> None:
         """Every object's (N, 12) float32 map (``core.motion``) from now on; frames still being drawn
         keep theirs (the buffer is orphaned first). ``movers``: (N,) bool, the objects that may
-        move (the others are drawn without their maps); None keeps the last."""
+        move (the others are drawn without their maps); None keeps the last. ``weights``, ``morph_of``:
+        a model's morph target weights, and each object's (``morphs.MorphBuffers.update``)."""
+        if self.morphs is not None:
+            self.morphs.update(weights, morph_of)
         self.mbo.orphan()
         self.mbo.write(rows)
         if movers is not None:  # one program for both (a textured scene's) keeps the groups' order
@@ -443,5 +415,7 @@ class RegionRenderer:
                     *(p for p, _ in self.passes)):
             if obj is not None:
                 obj.release()
+        if self.morphs is not None:
+            self.morphs.release()
         self._maps = None  # the file's maps outlive the GL buffers drawing from them
 

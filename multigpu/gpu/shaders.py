@@ -31,6 +31,13 @@ in uint in_obj;
 #ifdef MOVING
 layout(std430, binding = 4) readonly buffer Motions { vec4 motions[]; };  // 3 rows of [A | b] per object
 #endif
+#ifdef MORPH
+in int in_morph;  // this vertex's row of deltas (-1: it does not morph)
+uniform int morph_targets;
+layout(std430, binding = 5) readonly buffer MorphDeltas { vec4 deltas[]; };  // morph_targets a row
+layout(std430, binding = 6) readonly buffer MorphWeights { float weights[]; };
+layout(std430, binding = 7) readonly buffer MorphOf { ivec2 morph_of[]; };  // per object: first weight, count
+#endif
 #ifdef TEXTURED
 in vec3 in_uvl;  // UV and texture layer (-1: none)
 out vec2 v_uv;
@@ -46,6 +53,12 @@ void main() {
 #ifdef MOVING
     vec4 r0 = motions[3u * in_obj], r1 = motions[3u * in_obj + 1u], r2 = motions[3u * in_obj + 2u];
     vec4 p = vec4(in_pos, 1.0);
+#ifdef MORPH
+    if (in_morph >= 0) {  // the morph targets' deltas at this frame's weights, then the map
+        ivec2 w = morph_of[in_obj];
+        for (int k = 0; k < w.y; ++k) p.xyz += weights[w.x + k] * deltas[in_morph * morph_targets + k].xyz;
+    }
+#endif
     gl_Position = mvp * vec4(dot(r0, p), dot(r1, p), dot(r2, p), 1.0);
     vec3 a0 = vec3(r0.x, r1.x, r2.x), a1 = vec3(r0.y, r1.y, r2.y), a2 = vec3(r0.z, r1.z, r2.z);
     n = mat3(cross(a1, a2), cross(a2, a0), cross(a0, a1)) * n;  // the cofactor: normals stay normal
@@ -156,11 +169,13 @@ def _defined(source: str, names: list[str]) -> str:
 TEXTURE_PATHS = ("pool", "array")
 
 
-def vertex_shader(per_vertex_colors: bool, textured: bool = False, moving: bool = False) -> str:
+def vertex_shader(per_vertex_colors: bool, textured: bool = False, moving: bool = False, morph: bool = False) -> str:
     """The vertex shader, reading the model's per-vertex colours or its objects' colours, and
     its texture coordinates where it is ``textured``; ``moving``: each vertex moved by its
-    object's map (``core/motion.py``) before the camera's."""
-    return _defined(VERTEX, ["VERTEX_COLORS"] * per_vertex_colors + ["TEXTURED"] * textured + ["MOVING"] * moving)
+    object's map (``core/motion.py``) before the camera's, its morph targets' deltas added first
+    where it has any (``morph``)."""
+    return _defined(VERTEX, ["VERTEX_COLORS"] * per_vertex_colors + ["TEXTURED"] * textured + ["MOVING"] * moving
+                    + ["MORPH"] * (moving and morph))
 
 
 def fragment_shader(textured: bool = False, path: str = "pool") -> str:

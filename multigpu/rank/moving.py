@@ -46,10 +46,12 @@ class Moving:
         """Every body where it is at scene time ``when``, for the frame planned next: where the
         motion puts them and their maps to the GL (the ``animate`` phase: the scene's own work, a
         part of rendering), their bounds moved (``pose``: a part of balancing)."""
+        motion = self.posed.motion
         with t.phase("animate"):
-            A, b = self.posed.motion.at(when)
+            A, b = motion.at(when)
+            weights = getattr(motion, "last_weights", None)  # a model's morph target weights
         with t.phase("pose"):
-            p = self.posed.place(A, b, when)
+            p = self.posed.place(A, b, when, weights)
             project = self.planner.project
             if isinstance(project, BoxProjector):
                 project.place(p.center, p.half)
@@ -61,6 +63,8 @@ class Moving:
             if self.culler is not None and p.parts is not None:
                 self.culler.place(p.part_center, p.part_half)
         with t.phase("animate"):
-            self.renderer.pose(p.rows, self.movers)
+            morph_of = getattr(motion, "morph_of", None) if self.movers is not None else None
+            self.renderer.pose(p.rows, self.movers, weights,
+                               None if morph_of is None else morph_of[self.posed.motion.bodies])
             self.movers = None
         self.time = when

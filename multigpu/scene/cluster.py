@@ -124,5 +124,6 @@ def cut(scene: Scene, max_tris: int) -> tuple[Scene, np.ndarray]:
                  index_count=new_counts.astype(np.int64) * 3, base_vertex=base, bmin=bmin, bmax=bmax,
                  centers=centers, radii=radii, colors=scene.colors[parent], origin=scene.origin, name=scene.name,
                  body=(np.arange(scene.n_objects) if scene.body is None else scene.body)[parent],
+                 **{k: getattr(scene, k)[parent] for k in ("morph_lo", "morph_hi") if getattr(scene, k) is not None},
                  **{k: getattr(scene, k) for k in Scene.PER_VERTEX},
                  meta={**scene.meta, "cluster": int(max_tris), "modelled_objects": scene.n_objects}), n_clusters

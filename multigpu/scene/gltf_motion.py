@@ -180,12 +180,20 @@ class Sampler:
         return out
 
 
+def targets_of(doc) -> np.ndarray:
+    """(n,) how many morph targets each node's mesh has (its primitives' most; 0: none)."""
+    per_mesh = [max([len(p.targets or []) for p in m.primitives], default=0) for m in doc.meshes]
+    return np.array([per_mesh[nd.mesh] if isinstance(nd.mesh, int) and 0 <= nd.mesh < len(per_mesh) else 0
+                     for nd in doc.nodes], dtype=np.int64)
+
+
 def channels(doc, path: Path, played: list[int]) -> tuple[list[Sampler], set[str]]:
-    """The played animations' TRS channels, checked, grouped by property; and the properties
-    read but not played (morph target ``weights``)."""
+    """The played animations' channels, checked, grouped by property (morph target ``weights`` by
+    their count); and the properties read but not played."""
     skipped: set[str] = set()
     cache: dict = {}
-    got: dict[str, tuple[list, list, list]] = {p: ([], [], []) for p in PATHS}
+    got: dict = {p: ([], [], []) for p in PATHS}
+    targets = targets_of(doc)
     for ai in played:  # animations and their channels: read once, at the start
         anim = doc.animations[ai]
         keys = []
@@ -198,10 +206,13 @@ def channels(doc, path: Path, played: list[int]) -> tuple[list[Sampler], set[str
                                                           f"(the file has {len(doc.nodes)})")
             if not isinstance(ch.sampler, int) or not 0 <= ch.sampler < len(anim.samplers):
                 raise _bad(path, f"{where}.sampler", f"{ch.sampler} is not a sampler of the animation")
-            if target.path not in PATHS:  # morph target weights: read, not played
-                skipped.add(target.path)
+            if target.path not in (*PATHS, "weights"):
+                skipped.add(str(target.path))
                 keys.append(None)
                 continue
+            if target.path == "weights" and not targets[node]:
+                raise _bad(path, f"{where}.target.path", f"animates the weights of node {node}, whose mesh has no "
+                                                          "morph targets")
             s = anim.samplers[ch.sampler]
             where = f"animations[{ai}].samplers[{ch.sampler}]"
             times = accessor(doc, path, s.input, cache)[:, 0]
@@ -211,7 +222,9 @@ def channels(doc, path: Path, played: list[int]) -> tuple[list[Sampler], set[str
             if mode not in ("LINEAR", "STEP", "CUBICSPLINE"):
                 raise _bad(path, f"{where}.interpolation", f"'{mode}' is not LINEAR, STEP or CUBICSPLINE")
             values = accessor(doc, path, s.output, cache)
-            w, per = PATHS[target.path], 3 if mode == "CUBICSPLINE" else 1
+            w, per = PATHS.get(target.path, int(targets[node])), 3 if mode == "CUBICSPLINE" else 1
+            if target.path == "weights":  # scalars, one per target a keyframe
+                values = values.reshape(-1, w) if values.shape[1] == 1 and values.size % w == 0 else values
             if values.shape != (per * len(times), w) or not np.isfinite(values).all():
                 raise _bad(path, f"{where}.output", f"holds {values.shape[0]} finite values of {values.shape[1]}; "
                                                     f"{per * len(times)} of {w} wanted")
@@ -219,15 +232,16 @@ def channels(doc, path: Path, played: list[int]) -> tuple[list[Sampler], set[str
                 tin, values, tout = values[0::3], values[1::3], values[2::3]
             else:
                 tin = tout = np.zeros_like(values)
-            keys.append((target.path, node, (times, values, tin, tout, mode)))
+            key = ("weights", w) if target.path == "weights" else target.path
+            keys.append((key, node, (times, values, tin, tout, mode)))
         length = max([k[2][0][-1] for k in keys if k is not None], default=0.0)
         for k in keys:
             if k is not None:
-                nodes, ks, lengths = got[k[0]]
+                nodes, ks, lengths = got.setdefault(k[0], ([], [], []))
                 nodes.append(k[1])
                 ks.append(k[2])
                 lengths.append(length)
-    return [Sampler(p, *got[p]) for p in PATHS if got[p][0]], skipped
+    return [Sampler(p if isinstance(p, str) else p[0], *got[p]) for p in got if got[p][0]], skipped
 
 
 
@@ -252,6 +266,37 @@ def _levels(parent: np.ndarray) -> list[np.ndarray]:
     return [np.flatnonzero(depth == d) for d in range(int(depth.max()) + 1)] if len(parent) else []
 
 
+def hierarchy(doc, path: Path) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """(parent (n,), the nodes a depth level at a time, rest local matrices (n, 4, 4)), checked:
+    a child named twice, by itself or out of range, and cycles, are refused."""
+    n = len(doc.nodes)
+    parent = np.full(n, -1, dtype=np.int64)
+    for i, node in enumerate(doc.nodes):  # the model's nodes, read once
+        for c in node.children or []:
+            if not isinstance(c, int) or not 0 <= c < n or parent[c] >= 0 or c == i:
+                raise _bad(path, f"nodes[{i}].children", f"names node {c}, not a node of its own")
+            parent[c] = i
+    levels = _levels(parent)
+    if sum(len(lv) for lv in levels) != n:
+        raise _bad(path, "nodes", "the node hierarchy has a cycle")
+    rest = np.stack([node_matrix(node) for node in doc.nodes]) if n else np.zeros((0, 4, 4))
+    return parent, levels, rest
+
+
+def world_of(local: np.ndarray, parent: np.ndarray, levels: list[np.ndarray]) -> np.ndarray:
+    """(n, 4, 4) world matrices from local ones, a depth level at a time."""
+    world = local.copy()
+    for lv in levels[1:]:
+        world[lv] = world[parent[lv]] @ local[lv]
+    return world
+
+
+def rest_world(doc, path: Path) -> np.ndarray:
+    """(n, 4, 4) every node's world matrix at rest."""
+    parent, levels, rest = hierarchy(doc, path)
+    return world_of(rest, parent, levels)
+
+
 class GltfMotion:
     """A glTF file's node animations as a ``core.motion.Motion`` of the scene loaded from it
     (``scene.meta['gltf']``: the file and the node each modelled object hangs from)."""
@@ -269,26 +314,19 @@ class GltfMotion:
         if which not in ("all", "none") and not played:
             raise InputError.of("animation", f"'{which}': {path} has no such animation (it has: "
                                 f"{', '.join(repr(x) for x in self.names) or 'none'})")
-        self.parent = np.full(n, -1, dtype=np.int64)
-        for i, node in enumerate(doc.nodes):  # the model's nodes, read once
-            for c in node.children or []:
-                if not isinstance(c, int) or not 0 <= c < n or self.parent[c] >= 0 or c == i:
-                    raise _bad(path, f"nodes[{i}].children", f"names node {c}, not a node of its own")
-                self.parent[c] = i
-        self.levels = _levels(self.parent)
-        if sum(len(lv) for lv in self.levels) != n:
-            raise _bad(path, "nodes", "the node hierarchy has a cycle")
-        self.rest = np.stack([node_matrix(node) for node in doc.nodes]) if n else np.zeros((0, 4, 4))
+        self.parent, self.levels, self.rest = hierarchy(doc, path)
         self.fixed = np.array([bool(node.matrix) and len(node.matrix) == 16 for node in doc.nodes])
         self.trs = (np.array([node.translation or [0.0, 0, 0] for node in doc.nodes], dtype=np.float64).reshape(n, 3),
                     np.array([node.rotation or [0.0, 0, 0, 1] for node in doc.nodes], dtype=np.float64).reshape(n, 4),
                     np.array([node.scale or [1.0, 1, 1] for node in doc.nodes], dtype=np.float64).reshape(n, 3))
         self.samplers, self.skipped = channels(doc, path, played)  # skipped: read, not played (morph weights)
-        animated = np.zeros(n, dtype=bool)
+        animated, morphed = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         for s in self.samplers:
-            animated[s.nodes] = True
+            (morphed if s.path == "weights" else animated)[s.nodes] = True
         for lv in self.levels[1:]:  # a node moves where an ancestor does
             animated[lv] |= animated[self.parent[lv]]
+        self._morphs(doc, body_node)
+        animated |= morphed  # a mesh whose weights play moves too (its own vertices, not its children)
         if body_node.size and (body_node.min() < 0 or body_node.max() >= n):
             raise _bad(path, "nodes", "the scene cache names a node the file does not have (rebuild the cache)")
         self.node = body_node
@@ -296,17 +334,33 @@ class GltfMotion:
         self.rest_inverse = np.linalg.inv(self._world(self.rest)[body_node])
         self.o = np.asarray(scene.origin, dtype=np.float64) - np.asarray(scene.meta.get("offset", 0.0))
 
+    def _morphs(self, doc, body_node: np.ndarray) -> None:
+        """Each morphing node's slots in the weight vector (``slot``), their values at rest (the
+        node's ``weights``, else its mesh's, else 0), and each body's (first slot, count)."""
+        count = targets_of(doc)
+        self.slot = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
+        rest = np.zeros(int(count.sum()))
+        for i in np.flatnonzero(count):  # the morphing nodes, read once
+            node = doc.nodes[i]
+            given = getattr(node, "weights", None) or getattr(doc.meshes[node.mesh], "weights", None) or []
+            given = np.asarray(given, dtype=np.float64)[:count[i]]
+            rest[self.slot[i]:self.slot[i] + len(given)] = given
+        self.rest_weights, self.last_weights = rest, rest.copy()
+        self.morph_of = np.stack([self.slot[body_node], count[body_node]], axis=1).astype(np.int32).reshape(-1, 2)
+
     def _world(self, local: np.ndarray) -> np.ndarray:
-        """(n, 4, 4) world matrices from local ones, a depth level at a time."""
-        world = local.copy()
-        for lv in self.levels[1:]:
-            world[lv] = world[self.parent[lv]] @ local[lv]
-        return world
+        return world_of(local, self.parent, self.levels)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         T, R, S = (a.copy() for a in self.trs)
-        for s in self.samplers:  # translation, rotation, scale
+        weights = self.rest_weights.copy()
+        for s in self.samplers:  # translation, rotation, scale, weights
+            if s.path == "weights":
+                got = s.at(t)
+                weights[self.slot[s.nodes][:, None] + np.arange(got.shape[1])] = got
+                continue
             {"translation": T, "rotation": R, "scale": S}[s.path][s.nodes] = s.at(t)
+        self.last_weights = weights  # the morph targets' weights at ``t`` (``Posed``, the renderer)
         local = trs(T, R, S)
         local[self.fixed] = self.rest[self.fixed]  # a node given by its matrix is not animated
         M = self._world(local)[self.node] @ self.rest_inverse  # the node's map, world to world
@@ -315,11 +369,9 @@ class GltfMotion:
 
 
 def not_played(doc) -> list[str]:
-    """What of a file's animation is not played yet, one warning line each (morph target
-    weights, skins): those meshes stand at rest."""
+    """What of a file's animation is not played yet, one warning line each (skins): those
+    meshes stand in their rest pose."""
     out = []
-    if any(ch.target.path == "weights" for a in doc.animations for ch in a.channels):
-        out.append("morph target weights are animated in the file but not played yet: those meshes stand at rest")
     if doc.skins:
         out.append(f"{len(doc.skins)} skin(s) not played yet: skinned meshes stand in their rest pose")
     return out

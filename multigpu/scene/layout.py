@@ -19,10 +19,10 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-#: 9: each object's body (the modelled object it was cut from: they move as one)
+#: 10: a glTF model's morph targets; 9: each object's body (the modelled object it was cut from)
 #: 7: the model's own colours and normals (vertex colours, materials, crease-angle normals); 6: levels of
 #: detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
-FORMAT_VERSION = 9
+FORMAT_VERSION = 10
 
 
 @dataclass
@@ -57,6 +57,10 @@ class Scene:
     (None: no levels; ``scene/lod.py`` makes them)
     body : (N,) int64  the modelled object each object was cut from (``scene/cluster.py``): a
         moving scene moves them as one (None: every object a body of its own)
+    morph_rows : (V,) int32  a glTF model's morph targets (``scene/gltf_load.py``): each vertex's row
+        of ``morph_deltas`` (M, T, 3) float32, its world-space position delta per target (-1: none);
+    morph_lo, morph_hi : (N, T, 3) float64  each object's least and greatest delta per target (0
+        held): its bounds grown by a frame's weights (None: no morph targets)
     """
 
     vertices: np.ndarray
@@ -85,6 +89,10 @@ class Scene:
     texture_levels: np.ndarray | None = None
     texture_modes: np.ndarray | None = None
     body: np.ndarray | None = None
+    morph_rows: np.ndarray | None = None
+    morph_deltas: np.ndarray | None = None
+    morph_lo: np.ndarray | None = None
+    morph_hi: np.ndarray | None = None
 
     @property
     def n_objects(self) -> int:
@@ -110,10 +118,12 @@ class Scene:
         return sum(a.nbytes for a in self._arrays().values())
 
     #: the arrays with one row per object (``objects`` picks rows of these)
-    PER_OBJECT = ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors", "body")
+    PER_OBJECT = ("first_index", "index_count", "base_vertex", "bmin", "bmax", "centers", "radii", "colors", "body",
+                  "morph_lo", "morph_hi")
 
     #: a model's look beyond its objects' colours (None where it has none)
-    PER_VERTEX = ("vertex_colors", "texcoords", "texels", "texture_levels", "texture_modes")
+    PER_VERTEX = ("vertex_colors", "texcoords", "texels", "texture_levels", "texture_modes", "morph_rows",
+                  "morph_deltas")
 
     #: the parts' arrays (``part_start`` indexes the others)
     PARTS = ("part_start", "part_count", "part_bmin", "part_bmax")
@@ -169,7 +179,7 @@ class Scene:
         frame loop once the GL buffers hold them: bounds, draw ranges, colours and meta stay.
         Dropping the last reference to a mapped buffer unmaps it, so its pages leave the rank."""
         empty = {"vertices": np.empty((0, 6), dtype=np.float32), "indices": np.empty(0, dtype=np.uint32)}
-        for k in ("vertex_colors", "texcoords", "texels"):
+        for k in ("vertex_colors", "texcoords", "texels", "morph_rows", "morph_deltas"):
             a = getattr(self, k)
             if a is not None:
                 empty[k] = np.empty((0, *a.shape[1:]), dtype=a.dtype)
