@@ -178,11 +178,49 @@ needs_samples = pytest.mark.skipif(not SAMPLES.is_dir(), reason="Debian's assimp
 MORPH_CUBE = SAMPLES / "glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf"
 
 
+SKIN = SAMPLES / "simple_skin/simple_skin.gltf"
+
+
 @needs_samples
-def test_a_skinned_file_other_tools_wrote_loads_and_says_its_skin_is_not_played():
-    scene = load_model(SAMPLES / "simple_skin/simple_skin.gltf")
-    assert scene.meta["gltf"]["animations"] and any("skin(s) not played yet" in w for w in scene.meta["warnings"])
-    GltfMotion(scene).at(0.7)  # its channels read and sampled
+@pytest.mark.parametrize("t", [0.0, 0.8, 1.9, 3.3, 5.4])
+def test_a_skin_plays_by_its_joints_and_the_bounds_hold_every_pose(t):
+    """Khronos' simple_skin: each vertex the weighted mean of its joints' maps (joint world
+    matrix times inverse bind matrix), inside the posed bounds at every time."""
+    scene = load_model(SKIN)
+    assert scene.skin_joints.shape == (len(scene.vertices), 4) and not scene.meta["warnings"]
+    m = GltfMotion(scene)
+    assert m.moving.all() and m.skinned.all()
+    posed = Posed(scene, m).at(t)
+    A, b = m.last_palette
+    local = scene.vertices[:, :3].astype(np.float64)
+    w, j = scene.skin_weights.astype(np.float64), scene.skin_joints.astype(np.int64)
+    moved = np.einsum("vk,vkij,vj->vi", w, A[j], local) + np.einsum("vk,vki->vi", w, b[j])
+    tri, obj = triangle_objects(scene)
+    world = moved[tri] + scene.origin
+    lo, hi = posed.bmin_bmax()
+    tol = 1e-5 * max(np.abs(local).max(), 1.0)
+    assert (world >= lo[obj][:, None] - tol).all() and (world <= hi[obj][:, None] + tol).all()
+    if t == 1.9:  # the second joint turned: the strip bends (its top no longer above its foot)
+        top = moved[np.argmax(local[:, 1])]
+        assert abs(top[0] - local[np.argmax(local[:, 1]), 0]) > 0.1
+
+
+@needs_samples
+def test_a_joint_index_beyond_the_skin_is_refused_in_one_line(tmp_path):
+    import shutil
+
+    import pygltflib
+
+    shutil.copy(SKIN, tmp_path / "skin.gltf")
+    doc = pygltflib.GLTF2().load(str(tmp_path / "skin.gltf"))
+    doc.skins[0].joints = doc.skins[0].joints[:1]  # its vertices lean on joint 1, which is no more
+    doc.accessors[4].count = 1
+    out = tmp_path / "broken.gltf"
+    doc.save(str(out))
+    with pytest.raises(InputError, match=r"meshes\[0\]\.primitives\[0\]\.attributes\.JOINTS_0: joint index 1 exceeds "
+                                         r"skin 0's 1 joints") as got:
+        load_model(out)
+    assert "\n" not in str(got.value)
 
 
 @needs_samples

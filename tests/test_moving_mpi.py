@@ -229,3 +229,16 @@ def test_khronos_morph_cube_plays_on_a_2x2_wall_like_one_rank(tmp_path):
     assert (ref[-1] != ref[0]).any()
     for extra in ([], ["--decomposition", "hybrid", "--latency", "2"]):
         same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=scene, frames=12), 12), ref)
+
+
+SKIN = "/usr/share/assimp/models/glTF2/simple_skin/simple_skin.gltf"
+
+
+@pytest.mark.skipif(not os.path.exists(SKIN), reason="Debian's assimp-testmodels is not installed")
+def test_khronos_simple_skin_plays_on_a_2x2_wall_like_one_rank(tmp_path):
+    """A skinned file other tools wrote: its joints bend the strip in the vertex shader, the
+    composites equal one rank's render of every frame (screen, and db in flight)."""
+    scene = ["--model", SKIN, "--path-kind", "orbit", "--cluster", "0", "--no-progress"]
+    ref = frames_of(walk(tmp_path / "one", (1, 1), (128, 96), scene=scene, frames=12), 12)
+    for extra in ([], ["--decomposition", "db", "--latency", "2"]):
+        same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=scene, frames=12), 12), ref)

@@ -139,7 +139,46 @@ class Posed:
             self.part_center = np.ascontiguousarray(((pmin + pmax) * 0.5).T)
             self.part_half = np.ascontiguousarray(((pmax - pmin) * 0.5).T)
         self.morph = self._morphs(scene, motion, body)
+        self.skin = self._skins(scene, motion, body)
         self.t = None
+
+    def _skins(self, scene, motion, body: np.ndarray):
+        """Of the moving objects, the skinned ones (``Scene.skin_pairs``, the motion's
+        ``last_palette``): their positions among the moving objects and bodies, each (body,
+        joint) pair's rest box (local), and the part rows of each (its position, -1: none)."""
+        if scene.skin_pairs is None or getattr(motion, "palette", None) is None:
+            return None
+        known = np.unique(scene.body) if scene.body is not None else np.arange(scene.n_objects)
+        pb = np.searchsorted(known, scene.skin_pairs[:, 0])  # the pairs' bodies, as ``body`` numbers them
+        sel = np.flatnonzero(np.isin(body[self.objects], pb))
+        boxes = np.asarray(scene.skin_boxes, dtype=np.float64)
+        pc, ph = (boxes[:, :3] + boxes[:, 3:]) * 0.5 - self.origin, (boxes[:, 3:] - boxes[:, :3]) * 0.5
+        parts = None
+        if self.parts is not None:
+            where = np.full(int(body.max()) + 1, -1, dtype=np.int64)
+            where[body[self.objects[sel]]] = body[self.objects[sel]]
+            part_obj = np.repeat(np.arange(scene.n_objects), np.diff(scene.part_start))
+            parts = where[body[part_obj[self.parts[0]]]]
+        return sel, body[self.objects[sel]], pb, np.asarray(scene.skin_pairs[:, 1]), pc, ph, parts
+
+    def skinned(self, palette, c0, h0, s0, r0, pc, ph):
+        """The skinned objects' boxes this frame (the bodies' boxes: every (body, joint) pair's rest
+        box moved by its joint, united), into copies of the rest arrays given."""
+        sel, bodies, pb, pj, bc, bh, parts = self.skin
+        A, b = palette
+        c, h = moved_boxes(bc, bh, A[pj], b[pj])
+        n = int(max(pb.max(), bodies.max())) + 1
+        lo, hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+        np.minimum.at(lo, pb, c - h)
+        np.maximum.at(hi, pb, c + h)
+        c0, h0, s0, r0 = c0.copy(), h0.copy(), s0.copy(), r0.copy()
+        c0[sel], h0[sel] = (lo + hi)[bodies] * 0.5, (hi - lo)[bodies] * 0.5
+        s0[sel], r0[sel] = c0[sel], np.linalg.norm(h0[sel], axis=1)
+        if parts is not None:
+            has = parts >= 0
+            pc, ph = pc.copy(), ph.copy()
+            pc[has], ph[has] = (lo + hi)[parts[has]] * 0.5, (hi - lo)[parts[has]] * 0.5
+        return c0, h0, s0, r0, pc, ph
 
     def _morphs(self, scene, motion, body: np.ndarray):
         """Of the moving objects, those a morph target moves (``Scene.morph_lo``/``morph_hi`` and the
@@ -199,6 +238,11 @@ class Posed:
         parts = self.parts
         if self.morph is not None and weights is not None:
             c0, h0, r0, pc, ph = self.grown(weights)
+            parts = parts if parts is None else (*parts[:2], pc, ph)
+        palette = getattr(self.motion, "last_palette", None)
+        if self.skin is not None and palette is not None:
+            pc, ph = (None, None) if parts is None else parts[2:]
+            c0, h0, s0, r0, pc, ph = self.skinned(palette, c0, h0, s0, r0, pc, ph)
             parts = parts if parts is None else (*parts[:2], pc, ph)
         if self.compiled:  # one pass (``motion_kernel.py``), the same numbers
             A, b = np.ascontiguousarray(A, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)

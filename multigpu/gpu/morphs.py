@@ -42,3 +42,32 @@ class MorphBuffers:
     def release(self) -> None:
         for b in (self.rows, self.deltas, self.of, self.weights):
             b.release()
+
+
+class SkinBuffers:
+    """The GL buffers of ``scene``'s skins: each vertex's joints and weights (vertex attributes)
+    and the frame's joint palette (a storage buffer of three rows ``[A | b]`` a joint)."""
+
+    def __init__(self, ctx, scene):
+        self.joints = ctx.buffer(np.ascontiguousarray(scene.skin_joints, dtype=np.uint16))
+        self.weights = ctx.buffer(np.ascontiguousarray(scene.skin_weights, dtype=np.float32))
+        self.palette = ctx.buffer(reserve=48)
+
+    def attributes(self) -> list:
+        return [(self.joints, "4u2", "in_joints"), (self.weights, "4f", "in_weights")]
+
+    def update(self, palette) -> None:
+        """A frame's joint maps ((J, 3, 3), (J, 3): ``GltfMotion.last_palette``), orphaned first."""
+        if palette is None:
+            return
+        A, b = palette
+        rows = np.ascontiguousarray(np.concatenate([A, b[:, :, None]], axis=2), dtype=np.float32)
+        self.palette.orphan(rows.nbytes)
+        self.palette.write(rows)
+
+    def bind(self) -> None:
+        self.palette.bind_to_storage_buffer(8)
+
+    def release(self) -> None:
+        for b in (self.joints, self.weights, self.palette):
+            b.release()

@@ -27,7 +27,7 @@ from multigpu.errors import InputError
 from multigpu.gpu import texturing
 from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
 from multigpu.gpu.methods import choose_method, gl_limits
-from multigpu.gpu.morphs import MorphBuffers
+from multigpu.gpu.morphs import MorphBuffers, SkinBuffers
 from multigpu.gpu.pending import Pending, _disjoint
 from multigpu.gpu.shaders import fragment_shader, vertex_shader
 
@@ -117,8 +117,10 @@ class RegionRenderer:
         self.texture_path = texturing.texture_path() if textured else None
         # a glTF model's morph targets (``morphs.py``), drawn by the moving program
         self.morphs = MorphBuffers(ctx, scene) if moving and scene.morph_rows is not None else None
+        self.skins = SkinBuffers(ctx, scene) if moving and scene.skin_joints is not None else None
         program = lambda m: ctx.program(  # noqa: E731
-            vertex_shader=vertex_shader(per_vertex, textured, m, m and self.morphs is not None),
+            vertex_shader=vertex_shader(per_vertex, textured, m, m and self.morphs is not None,
+                                        m and self.skins is not None),
             fragment_shader=fragment_shader(textured, self.texture_path))
         self.prog = program(moving)
         self.draws = DrawList(scene)
@@ -133,7 +135,8 @@ class RegionRenderer:
             (self.vbo, "3f 1u", "in_pos", "in_nrm"), *([(self.rgba, "1u", "in_rgba")] if per_vertex else []),
             *([(self.obo, "1u", "in_obj")] if m or not per_vertex else []),
             *([(self.uvl, "3f", "in_uvl")] if textured else []),
-            *([self.morphs.attribute()] if m and self.morphs is not None else [])],
+            *([self.morphs.attribute()] if m and self.morphs is not None else []),
+            *(self.skins.attributes() if m and self.skins is not None else [])],
             index_buffer=self.ibo, index_element_size=4)
         self.vao = vao(self.prog, moving)
         # the programs a frame is drawn with: where the scene moves, the objects at rest (``pose``'s
@@ -276,6 +279,8 @@ class RegionRenderer:
             self.mbo.bind_to_storage_buffer(4)
         if self.morphs is not None:
             self.morphs.bind(self.prog)
+        if self.skins is not None:
+            self.skins.bind()
         if self.texture is not None:
             self.layers.bind_to_storage_buffer(1)
             if self.texels is not None:  # the pool: its level table and texels (a pinned buffer's
@@ -386,13 +391,17 @@ class RegionRenderer:
         self.last_triangles = total
         return Pending(None, self.fbo, drawn, depth)
 
-    def pose(self, rows: np.ndarray, movers: np.ndarray | None = None, weights=None, morph_of=None) -> None:
+    def pose(self, rows: np.ndarray, movers: np.ndarray | None = None, weights=None, morph_of=None,
+             palette=None) -> None:
         """Every object's (N, 12) float32 map (``core.motion``) from now on; frames still being drawn
         keep theirs (the buffer is orphaned first). ``movers``: (N,) bool, the objects that may
         move (the others are drawn without their maps); None keeps the last. ``weights``, ``morph_of``:
-        a model's morph target weights, and each object's (``morphs.MorphBuffers.update``)."""
+        a model's morph target weights, and each object's (``morphs.MorphBuffers.update``);
+        ``palette``: its skins' joint maps."""
         if self.morphs is not None:
             self.morphs.update(weights, morph_of)
+        if self.skins is not None:
+            self.skins.update(palette)
         self.mbo.orphan()
         self.mbo.write(rows)
         if movers is not None:  # one program for both (a textured scene's) keeps the groups' order
@@ -415,7 +424,8 @@ class RegionRenderer:
                     *(p for p, _ in self.passes)):
             if obj is not None:
                 obj.release()
-        if self.morphs is not None:
-            self.morphs.release()
+        for extra in (self.morphs, self.skins):
+            if extra is not None:
+                extra.release()
         self._maps = None  # the file's maps outlive the GL buffers drawing from them
 

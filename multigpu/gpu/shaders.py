@@ -38,6 +38,11 @@ layout(std430, binding = 5) readonly buffer MorphDeltas { vec4 deltas[]; };  // 
 layout(std430, binding = 6) readonly buffer MorphWeights { float weights[]; };
 layout(std430, binding = 7) readonly buffer MorphOf { ivec2 morph_of[]; };  // per object: first weight, count
 #endif
+#ifdef SKIN
+in uvec4 in_joints;  // the joints this vertex leans on (the palette's), and how much
+in vec4 in_weights;
+layout(std430, binding = 8) readonly buffer Palette { vec4 palette[]; };  // 3 rows of [A | b] per joint
+#endif
 #ifdef TEXTURED
 in vec3 in_uvl;  // UV and texture layer (-1: none)
 out vec2 v_uv;
@@ -57,6 +62,20 @@ void main() {
     if (in_morph >= 0) {  // the morph targets' deltas at this frame's weights, then the map
         ivec2 w = morph_of[in_obj];
         for (int k = 0; k < w.y; ++k) p.xyz += weights[w.x + k] * deltas[in_morph * morph_targets + k].xyz;
+    }
+#endif
+#ifdef SKIN
+    if (in_weights != vec4(0.0)) {  // a weighted mean of its joints' maps (the mesh's own is the identity)
+        vec3 q = vec3(0.0), m = vec3(0.0);
+        for (int i = 0; i < 4; ++i) {
+            uint j = 3u * in_joints[i];
+            vec4 a = palette[j], b = palette[j + 1u], c = palette[j + 2u];
+            vec3 s0 = vec3(a.x, b.x, c.x), s1 = vec3(a.y, b.y, c.y), s2 = vec3(a.z, b.z, c.z);
+            q += in_weights[i] * vec3(dot(a, p), dot(b, p), dot(c, p));
+            m += in_weights[i] * (mat3(cross(s1, s2), cross(s2, s0), cross(s0, s1)) * n);
+        }
+        p = vec4(q, 1.0);
+        n = m;
     }
 #endif
     gl_Position = mvp * vec4(dot(r0, p), dot(r1, p), dot(r2, p), 1.0);
@@ -169,13 +188,14 @@ def _defined(source: str, names: list[str]) -> str:
 TEXTURE_PATHS = ("pool", "array")
 
 
-def vertex_shader(per_vertex_colors: bool, textured: bool = False, moving: bool = False, morph: bool = False) -> str:
+def vertex_shader(per_vertex_colors: bool, textured: bool = False, moving: bool = False, morph: bool = False,
+                  skin: bool = False) -> str:
     """The vertex shader, reading the model's per-vertex colours or its objects' colours, and
     its texture coordinates where it is ``textured``; ``moving``: each vertex moved by its
     object's map (``core/motion.py``) before the camera's, its morph targets' deltas added first
-    where it has any (``morph``)."""
+    where it has any (``morph``), and its joints' maps before that where it is skinned (``skin``)."""
     return _defined(VERTEX, ["VERTEX_COLORS"] * per_vertex_colors + ["TEXTURED"] * textured + ["MOVING"] * moving
-                    + ["MORPH"] * (moving and morph))
+                    + ["MORPH"] * (moving and morph) + ["SKIN"] * (moving and skin))
 
 
 def fragment_shader(textured: bool = False, path: str = "pool") -> str:

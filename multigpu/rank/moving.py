@@ -65,6 +65,7 @@ class Moving:
         with t.phase("animate"):
             morph_of = getattr(motion, "morph_of", None) if self.movers is not None else None
             self.renderer.pose(p.rows, self.movers, weights,
-                               None if morph_of is None else morph_of[self.posed.motion.bodies])
+                               None if morph_of is None else morph_of[self.posed.motion.bodies],
+                               getattr(motion, "last_palette", None))
             self.movers = None
         self.time = when

@@ -19,10 +19,9 @@ import numpy as np
 from multigpu.errors import InputError
 from multigpu.scene import looks, textures
 from multigpu.scene.blocks import blocks, per_object
-from multigpu.scene.gltf_load import animated, joined, mesh_deltas
+from multigpu.scene.gltf_load import animated, joined, mesh_deltas, mesh_skins, nodes_of, skin_pack
 from multigpu.scene.gltf_load import pack as pack_morphs
 from multigpu.scene.gltf_motion import check as check_animations
-from multigpu.scene.gltf_motion import nodes_of
 from multigpu.scene.labels import face_labels
 from multigpu.scene.layout import Scene
 
@@ -67,7 +66,7 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
         what = f"{exc.__class__.__name__}: {why}"
         raise InputError.of("model", f"{path}: cannot read as {kind} ({what}){promise}") from None
     warnings: list[str] = []
-    nodes = morph = None  # an animated glTF's node of each mesh, its morph targets' deltas
+    nodes = morph = skin = None  # an animated glTF's node of each mesh, its morph targets' deltas, its skins
     if isinstance(loaded, trimesh.Scene):
         meshes = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh)]
         meshes = [m for m in meshes if len(m.faces)]
@@ -75,10 +74,12 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
             raise InputError.of("model", f"{path}: the file holds no triangles (empty, or not a {kind} file)")
         nodes = nodes_of(path, loaded, meshes) if path.suffix.lower() in (".gltf", ".glb") else None
         morph = mesh_deltas(path, meshes, nodes)  # (V, T, 3) world deltas of a glTF's morph targets, or None
+        skin = mesh_skins(path, meshes, nodes)  # its skins' (V, 4) joints and weights, or None
         if len(meshes) > 1:
             del loaded  # the meshes (transforms applied) are copies: _from_meshes lets them go
             morph = None if morph is None else joined(morph, [len(m.vertices) for m in meshes])
-            return animated(_from_meshes(meshes, path, warnings, split, merge_below, nodes, morph), path, nodes, split)
+            return animated(_from_meshes(meshes, path, warnings, split, merge_below, nodes, morph, skin), path, nodes,
+                            split)
         morph = None if morph is None else joined(morph, [len(meshes[0].vertices)])
         mesh = meshes.pop()  # the list lets it go with the rest
     elif isinstance(loaded, trimesh.Trimesh):
@@ -100,7 +101,7 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     faces = _clean_faces(verts, faces, path, warnings)
     split = "components" if split == "auto" else split
     look = Look(rgba, normals, None, {"colors": colors_from, "materials": int(colors_from == "material")},
-                texcoords, layers.pack(warnings), morph)
+                texcoords, layers.pack(warnings), morph, skin)
     scene = _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings,
                          {"split": split}, look)
     return animated(scene, path, None if nodes is None else nodes * scene.n_objects, "auto")
@@ -259,6 +260,7 @@ class Look:
     texcoords: np.ndarray | None = None  # (V, 3) UV and layer (-1: untextured), ``textures.mesh_texture``
     textures: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # ``textures.Layers.pack``
     morph: np.ndarray | None = None  # (V, T, 3) a glTF's morph target deltas (``gltf_load.mesh_deltas``)
+    skin: tuple | None = None  # (V, 4) joints and weights of a glTF's skins (``gltf_load.mesh_skins``)
 
 
 def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None = None) -> Scene:
@@ -278,6 +280,7 @@ def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None =
         rgba = rgba[source] if rgba is not None else None
         uvl = uvl[source] if uvl is not None else None
         look.morph = look.morph[source] if look.morph is not None else None
+        look.skin = None if look.skin is None else tuple(a[source] for a in look.skin)
     else:
         looked["normals"] = "from the file"
     order = np.argsort(labels, kind="stable")
@@ -322,6 +325,7 @@ def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None =
                  texcoords=None if uvl is None else np.ascontiguousarray(uvl[used], dtype=np.float32),
                  **({} if uvl is None else dict(zip(("texels", "texture_levels", "texture_modes"), look.textures))),
                  **({} if look.morph is None else pack_morphs(look.morph, used, sorted_blocks, n)),
+                 **({} if look.skin is None else skin_pack(*look.skin, verts, used, sorted_blocks)),
                  name=Path(path).stem, meta={**meta, "source": str(path), "warnings": warnings, "look": looked,
                                               **guess_up(Path(path).suffix.lower(), bmin, bmax)})
 
@@ -339,7 +343,7 @@ def guess_up(suffix: str, bmin, bmax) -> dict:
 
 
 def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int = 64,
-                 nodes: list[int] | None = None, morph: np.ndarray | None = None) -> Scene:
+                 nodes: list[int] | None = None, morph: np.ndarray | None = None, skin=None) -> Scene:
     """One object per scene-graph node instance (transforms already applied by trimesh), or
     the whole graph's triangles cut by an explicit ``--split components|grid:N``; ``nodes``: the
     glTF node of each mesh (an animated file's), kept per object in ``meta['gltf_nodes']``."""
@@ -410,7 +414,7 @@ def _from_meshes(meshes, path, warnings, split: str = "auto", merge_below: int =
         warnings.append(f"dropped {int(degenerate.sum())} degenerate faces")
         faces, labels = faces[~degenerate], labels[~degenerate]
     look = Look(rgba if any_rgba else None, normals if all_normals else None, labels, look_meta, uvl,
-                layers.pack(warnings) if uvl is not None else None, morph)
+                layers.pack(warnings) if uvl is not None else None, morph, skin)
     if split != "auto":
         objects = face_labels(verts, faces, split, merge_below)
         return _from_labels(verts, faces, objects, path, warnings, {"split": split}, look)

@@ -291,6 +291,23 @@ def world_of(local: np.ndarray, parent: np.ndarray, levels: list[np.ndarray]) ->
     return world
 
 
+def palette_of(doc, path: Path) -> tuple[list[int], np.ndarray]:
+    """The skinned nodes (those with a ``skin``) and where each one's joints start in the palette
+    (``GltfMotion``: one block of joint matrices per skinned node), every skin checked."""
+    nodes = [i for i, nd in enumerate(doc.nodes) if getattr(nd, "skin", None) is not None]
+    sizes = []
+    for i in nodes:  # skinned nodes: a few
+        s = doc.nodes[i].skin
+        if not isinstance(s, int) or not 0 <= s < len(doc.skins):
+            raise _bad(path, f"nodes[{i}].skin", f"names skin {s}, which does not exist (the file has "
+                                                   f"{len(doc.skins)})")
+        joints = doc.skins[s].joints or []
+        if not joints or any(not isinstance(j, int) or not 0 <= j < len(doc.nodes) for j in joints):
+            raise _bad(path, f"skins[{s}].joints", f"must name nodes of the file ({len(doc.nodes)}), got {joints[:8]}")
+        sizes.append(len(joints))
+    return nodes, np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+
+
 def rest_world(doc, path: Path) -> np.ndarray:
     """(n, 4, 4) every node's world matrix at rest."""
     parent, levels, rest = hierarchy(doc, path)
@@ -331,6 +348,7 @@ class GltfMotion:
             raise _bad(path, "nodes", "the scene cache names a node the file does not have (rebuild the cache)")
         self.node = body_node
         self.moving = animated[body_node] if body_node.size else np.zeros(0, dtype=bool)
+        self._skins(doc, path, body_node, animated)
         self.rest_inverse = np.linalg.inv(self._world(self.rest)[body_node])
         self.o = np.asarray(scene.origin, dtype=np.float64) - np.asarray(scene.meta.get("offset", 0.0))
 
@@ -338,6 +356,7 @@ class GltfMotion:
         """Each morphing node's slots in the weight vector (``slot``), their values at rest (the
         node's ``weights``, else its mesh's, else 0), and each body's (first slot, count)."""
         count = targets_of(doc)
+        count[[i for i, nd in enumerate(doc.nodes) if getattr(nd, "skin", None) is not None]] = 0  # its skin alone
         self.slot = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
         rest = np.zeros(int(count.sum()))
         for i in np.flatnonzero(count):  # the morphing nodes, read once
@@ -347,6 +366,35 @@ class GltfMotion:
             rest[self.slot[i]:self.slot[i] + len(given)] = given
         self.rest_weights, self.last_weights = rest, rest.copy()
         self.morph_of = np.stack([self.slot[body_node], count[body_node]], axis=1).astype(np.int32).reshape(-1, 2)
+
+    def _skins(self, doc, path: Path, body_node: np.ndarray, animated: np.ndarray) -> None:
+        """The joint palette (``palette``: joint nodes, inverse bind matrices, the skinned node's
+        rest world inverse), and which bodies are skinned (``skinned``: their node's own transform
+        is not applied, as the specification says; they move where a joint does)."""
+        nodes, start = palette_of(doc, path)
+        joints, ibm, mesh_inv, cache = [], [], [], {}
+        world = self._world(self.rest)
+        for i in nodes:  # skinned nodes: a few
+            s = doc.nodes[i].skin
+            js = doc.skins[s].joints
+            if doc.skins[s].inverseBindMatrices is None:
+                m = np.tile(np.eye(4), (len(js), 1, 1))
+            else:
+                m = accessor(doc, path, doc.skins[s].inverseBindMatrices, cache)
+                if m.shape != (len(js), 16) or not np.isfinite(m).all():
+                    raise _bad(path, f"skins[{s}].inverseBindMatrices", f"holds {m.shape[0]} matrices of "
+                                                                         f"{m.shape[1]}; {len(js)} of 16 wanted")
+                m = m.reshape(-1, 4, 4).transpose(0, 2, 1)  # column-major
+            joints += list(js)
+            ibm.append(m)
+            mesh_inv.append(np.tile(np.linalg.inv(world[i]), (len(js), 1, 1)))
+        self.skinned = np.isin(body_node, nodes) if nodes else np.zeros(len(body_node), dtype=bool)
+        self.palette = None
+        if nodes:
+            self.palette = (np.asarray(joints, dtype=np.int64), np.concatenate(ibm), np.concatenate(mesh_inv))
+            moves = any(animated[doc.skins[doc.nodes[i].skin].joints].any() for i in nodes)
+            self.moving = self.moving | (self.skinned & moves)
+        self.last_palette = None
 
     def _world(self, local: np.ndarray) -> np.ndarray:
         return world_of(local, self.parent, self.levels)
@@ -363,41 +411,15 @@ class GltfMotion:
         self.last_weights = weights  # the morph targets' weights at ``t`` (``Posed``, the renderer)
         local = trs(T, R, S)
         local[self.fixed] = self.rest[self.fixed]  # a node given by its matrix is not animated
-        M = self._world(local)[self.node] @ self.rest_inverse  # the node's map, world to world
-        A = M[:, :3, :3]
-        return np.ascontiguousarray(A), M[:, :3, 3] + np.einsum("nij,j->ni", A, self.o) - self.o
+        world = self._world(local)
+        M = world[self.node] @ self.rest_inverse  # the node's map, world to world
+        M[self.skinned] = np.eye(4)  # a skinned mesh moves by its joints alone (``last_palette``)
+        if self.palette is not None:
+            joints, ibm, mesh_inv = self.palette
+            self.last_palette = self._local(world[joints] @ ibm @ mesh_inv)
+        return self._local(M)
 
-
-def not_played(doc) -> list[str]:
-    """What of a file's animation is not played yet, one warning line each (skins): those
-    meshes stand in their rest pose."""
-    out = []
-    if doc.skins:
-        out.append(f"{len(doc.skins)} skin(s) not played yet: skinned meshes stand in their rest pose")
-    return out
-
-
-def nodes_of(path: Path, loaded, meshes) -> list[int] | None:
-    """The glTF node each dumped mesh (``Scene.dump``'s, in order) hangs from, where the file has
-    animations (None otherwise): trimesh names its graph's nodes as its glTF loader does
-    (``unique_name`` over the nodes in order), a primitive's frame under its node's."""
-    from trimesh.util import unique_name
-
-    from multigpu.scene.textures import gltf_json
-
-    doc = gltf_json(path)
-    if not doc or not doc.get("animations"):
-        return None
-    index: dict = {}
-    counts: dict = {}
-    for i, node in enumerate(doc.get("nodes", [])):
-        index[unique_name(node.get("name", str(i)), index, counts=counts)] = i
-    parents = loaded.graph.transforms.parents
-    out = []
-    for m in meshes:
-        name = m.metadata.get("node")
-        got = index.get(name, index.get(parents.get(name)))
-        if got is None:
-            return None
-        out.append(int(got))
-    return out
+    def _local(self, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World-to-world maps as maps of the scene's local coordinates (about its origin)."""
+        A = np.ascontiguousarray(M[:, :3, :3])
+        return A, M[:, :3, 3] + np.einsum("nij,j->ni", A, self.o) - self.o

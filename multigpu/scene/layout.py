@@ -19,7 +19,7 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-#: 10: a glTF model's morph targets; 9: each object's body (the modelled object it was cut from)
+#: 10: a glTF model's morph targets and skins; 9: each object's body (the modelled object it was cut from)
 #: 7: the model's own colours and normals (vertex colours, materials, crease-angle normals); 6: levels of
 #: detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
 FORMAT_VERSION = 10
@@ -61,6 +61,10 @@ class Scene:
         of ``morph_deltas`` (M, T, 3) float32, its world-space position delta per target (-1: none);
     morph_lo, morph_hi : (N, T, 3) float64  each object's least and greatest delta per target (0
         held): its bounds grown by a frame's weights (None: no morph targets)
+    skin_joints, skin_weights : (V, 4) uint16, float32  a glTF model's skins: each vertex's joints in
+        the palette and their weights (0: not skinned); skin_pairs (P, 2) int64 (body, joint) and
+        skin_boxes (P, 6) float64 world min and max of the body's vertices leaning on the joint
+        (None: no skins; ``scene/gltf_load.py``)
     """
 
     vertices: np.ndarray
@@ -93,6 +97,10 @@ class Scene:
     morph_deltas: np.ndarray | None = None
     morph_lo: np.ndarray | None = None
     morph_hi: np.ndarray | None = None
+    skin_joints: np.ndarray | None = None
+    skin_weights: np.ndarray | None = None
+    skin_pairs: np.ndarray | None = None
+    skin_boxes: np.ndarray | None = None
 
     @property
     def n_objects(self) -> int:
@@ -123,7 +131,7 @@ class Scene:
 
     #: a model's look beyond its objects' colours (None where it has none)
     PER_VERTEX = ("vertex_colors", "texcoords", "texels", "texture_levels", "texture_modes", "morph_rows",
-                  "morph_deltas")
+                  "morph_deltas", "skin_joints", "skin_weights", "skin_pairs", "skin_boxes")
 
     #: the parts' arrays (``part_start`` indexes the others)
     PARTS = ("part_start", "part_count", "part_bmin", "part_bmax")
@@ -179,7 +187,7 @@ class Scene:
         frame loop once the GL buffers hold them: bounds, draw ranges, colours and meta stay.
         Dropping the last reference to a mapped buffer unmaps it, so its pages leave the rank."""
         empty = {"vertices": np.empty((0, 6), dtype=np.float32), "indices": np.empty(0, dtype=np.uint32)}
-        for k in ("vertex_colors", "texcoords", "texels", "morph_rows", "morph_deltas"):
+        for k in ("vertex_colors", "texcoords", "texels", "morph_rows", "morph_deltas", "skin_joints", "skin_weights"):
             a = getattr(self, k)
             if a is not None:
                 empty[k] = np.empty((0, *a.shape[1:]), dtype=a.dtype)
