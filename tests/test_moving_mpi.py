@@ -242,3 +242,13 @@ def test_khronos_simple_skin_plays_on_a_2x2_wall_like_one_rank(tmp_path):
     ref = frames_of(walk(tmp_path / "one", (1, 1), (128, 96), scene=scene, frames=12), 12)
     for extra in ([], ["--decomposition", "db", "--latency", "2"]):
         same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=scene, frames=12), 12), ref)
+
+
+def test_the_shipped_arm_waves_its_clusters_as_one_body_like_one_rank(tmp_path):
+    """models/arm.glb, skinned, cut into clusters for the wall: every cluster of the arm bends
+    with it (one body), on a 2x2 hybrid wall as on one rank."""
+    scene = ["--model", "models/arm.glb", "--path-kind", "orbit", "--cluster", "64", "--no-progress"]
+    ref = frames_of(walk(tmp_path / "one", (1, 1), (128, 96), scene=scene, frames=10), 10)
+    got = walk(tmp_path / "wall", (2, 2), (64, 48), ["--decomposition", "hybrid"], scene=scene, frames=10)
+    same(frames_of(got, 10), ref)
+    assert json.loads((got / "summary.json").read_text())["config"]["scene"]["objects"] > 4  # cut into clusters
