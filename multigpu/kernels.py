@@ -11,6 +11,7 @@ Each kernel sits beside the code it serves, as ``<module>_kernel.py``, with its 
 * ``core/culling_kernel.py``: the parts of the objects a region needs that reach it;
 * ``core/lod_kernel.py``: each object's level of detail from its distance and the pixel bound;
 * ``core/motion_kernel.py``: a moving scene's objects posed: their boxes, spheres and GPU maps;
+* ``scene/swarm_kernel.py``: the swarm's flight, every object's map;
 * ``core/work_kernel.py``: a frame's transfers, every (piece, tile) overlap in message order;
 * ``strategies/cross_kernel.py``: cross-segment balancing (profiles, shares, cuts, piece masks);
 * ``strategies/cost_kernel.py``: the cost model's least-squares fit and term selection;
@@ -45,6 +46,7 @@ from multigpu.core.tree import gpu_tree
 from multigpu.core.work_kernel import _parts
 from multigpu.scene.parts import with_parts
 from multigpu.scene.plant import generate_plant
+from multigpu.scene.swarm_kernel import _fly
 from multigpu.strategies import REGISTRY
 from multigpu.strategies.base_kernel import rank_pixels
 from multigpu.strategies.cost_kernel import fit_terms
@@ -52,6 +54,7 @@ from multigpu.strategies.cost_kernel import fit_terms
 #: every kernel module, for the tests that check them all (compiled, cached, no Python objects)
 MODULES = ("multigpu.core.bounds_kernel", "multigpu.core.balance_kernel", "multigpu.core.splits_kernel",
            "multigpu.core.culling_kernel", "multigpu.core.lod_kernel", "multigpu.core.motion_kernel",
+           "multigpu.scene.swarm_kernel",
            "multigpu.core.drawlist_kernel", "multigpu.core.work_kernel", "multigpu.strategies.cross_kernel",
            "multigpu.strategies.cost_kernel", "multigpu.strategies.base_kernel",
            "multigpu.strategies.adaptive_kernel", "multigpu.strategies.auto_kernel",
@@ -94,6 +97,8 @@ def warm() -> float:
             np.empty(1, dtype=np.int64))
     one, idx = np.zeros((1, 3)), np.zeros(1, dtype=np.int64)
     _rotations(one, np.zeros(1), np.empty((1, 3, 3)))
+    _fly(0.5, 0.0, 0.0, 0.0, one, one, np.zeros(1), one, np.zeros(1), 2.0, 12.0, 16.0, np.empty((1, 3, 3)),
+         np.empty((1, 3)))
     _pose(np.zeros((1, 3, 3)), one, idx, idx, one, one, one, np.ones(1), np.zeros(3), 1e-12, True, np.empty((3, 1)),
           np.empty((3, 1)), np.empty((1, 3)), np.empty(1), np.empty((1, 12), dtype=np.float32))
     return time.perf_counter() - t0

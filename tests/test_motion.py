@@ -248,3 +248,11 @@ def test_the_draw_groups_and_the_order_sort_last_ranges_follow_agree():
             assert rank[members].min() > rank[order[groups[i - 1][0][order]]].max()
     assert pass_groups(wide, None) is None and pass_groups(wide, np.ones(200, bool)) is None
     assert np.array_equal(pass_order(order, wide, None), order)
+
+
+@needs_numba
+def test_the_compiled_flight_makes_the_references_maps(swarm):
+    fast, slow = Swarm(swarm, compiled=True), Swarm(swarm, compiled=False)
+    for t in (0.0, 0.3, 1.7, 5.2, 13.1, -1.0):
+        for got, want in zip(fast.at(t), slow.at(t)):
+            assert np.array_equal(got, want), t

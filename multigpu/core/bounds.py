@@ -126,8 +126,11 @@ class BoxProjector:
         np.copyto(self.half, half, casting="unsafe")
         self.plain_boxes = (center, half)
         self.plain = 1
-        if self.compiled:
-            self._boxes = (*self._boxes[:6], center, half)
+        if self.compiled:  # the groups go (no memory held for them): the kernel never reads them again
+            none = np.empty((3, 0))
+            self.grouped = (np.empty(0, dtype=np.int64), none, none, np.zeros(1, dtype=np.int64), np.empty((6, 0)))
+            order, c, h, starts, gbox = self.grouped
+            self._boxes = (c, self.half, h, order, starts, gbox, center, half)
 
     def __call__(self, view, proj, coverage: np.ndarray | None = None) -> np.ndarray:
         """(N, 4) float64 normalized rects (a view of a coordinate-major array), NaN if unseen.

@@ -108,7 +108,7 @@ class Posed:
     def __init__(self, scene, motion: Motion, compiled: bool | None = None, spheres: bool = True):
         self.motion = motion
         self.compiled = jit.use(compiled)
-        self.spheres = bool(spheres)  # the spheres posed too (levels of detail, sphere bounds read them)
+        self.spheres = spheres = bool(spheres)  # the spheres posed too (levels of detail, sphere bounds read them)
         self.origin = np.asarray(scene.origin, dtype=np.float64)
         body = np.asarray(motion.bodies, dtype=np.int64)
         if body.shape != (scene.n_objects,):
@@ -125,8 +125,9 @@ class Posed:
         self.r0 = np.asarray(scene.radii, dtype=np.float64)[self.objects]
         self.center = np.ascontiguousarray(((bmin + bmax) * 0.5).T)
         self.half = np.ascontiguousarray(((bmax - bmin) * 0.5).T)
-        self.centers = np.array(scene.centers, dtype=np.float64)
-        self.radii = np.array(scene.radii, dtype=np.float64)
+        # the spheres only where they are read (levels of detail, sphere bounds)
+        self.centers = np.array(scene.centers, dtype=np.float64) if spheres else np.empty((0, 3))
+        self.radii = np.array(scene.radii, dtype=np.float64) if spheres else np.empty(0)
         self.rows = np.tile(np.array([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0], dtype=np.float32), (scene.n_objects, 1))
         self.parts = None
         start = scene.part_start

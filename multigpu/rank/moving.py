@@ -28,7 +28,7 @@ class Moving:
         self.planner, self.culler, self.renderer = planner, culler, renderer
         self.sub = getattr(projection, "sub", None)  # a shared projection's slice of the boxes
         self.span = (projection.lo, projection.hi) if self.sub is not None else None
-        if chooser is not None:  # reads the posed spheres from now on
+        if chooser is not None and self.posed.spheres:  # reads the posed spheres from now on
             chooser.centers, chooser.radii = self.posed.centers, self.posed.radii
         self.time = 0.0  # the scene time of the last frame posed
         self.movers = np.zeros(scene.n_objects, dtype=bool)  # told the renderer once, with the first maps

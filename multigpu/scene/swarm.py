@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.core import jit
 from multigpu.core.motion import apply, bodies_of, rotations
 from multigpu.scene.layout import Scene, assemble
 
@@ -70,7 +71,7 @@ def generate_swarm(triangles: int, seed: int = 0) -> Scene:
 class Swarm:
     """The swarm's flight (a ``core.motion.Motion``): every object a body of its own."""
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, compiled: bool | None = None):
         self.bodies = bodies_of(scene)
         n = int(self.bodies.max()) + 1 if self.bodies.size else 0
         rest = np.zeros((n, 3))
@@ -85,6 +86,8 @@ class Swarm:
         self.axis = axis / np.linalg.norm(axis, axis=1, keepdims=True)
         self.spin = rng.uniform(-2.0, 2.0, n)  # radians a second
         self.moving = None  # every body moves
+        self.compiled = jit.use(compiled)  # the flight in one compiled pass (``swarm_kernel.py``)
+        self._A, self._b = (np.empty((n, 3, 3)), np.empty((n, 3))) if self.compiled else (None, None)
 
     @staticmethod
     def gather_point(t: float) -> np.ndarray:
@@ -101,6 +104,14 @@ class Swarm:
         return np.where(u > 0, smooth(cycle / GATHER_S) * (1 - smooth((cycle - SCATTER_S) / GATHER_S)), 0.0)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Every object's map at ``t`` (compiled: the swarm's own arrays, valid till the next call)."""
+        if self.compiled:
+            from multigpu.scene.swarm_kernel import _fly
+
+            gx, gy, gz = (float(v) for v in self.gather_point(t))
+            _fly(float(t), gx, gy, gz, self.home, self.place, self.lag, self.axis, self.spin, GATHER_S, SCATTER_S,
+                 CYCLE_S, self._A, self._b)
+            return self._A, self._b
         s = self.gathered(t)[:, None]
         where = self.home + s * (self.gather_point(t) + self.place - self.home)
         A = rotations(self.axis, self.spin * t)

@@ -13,6 +13,9 @@ summaries (per-rank CPU time; the emulated frame is the slowest rank's phase CPU
    alternated: the emulated frame's ratio.
 4. **Memory**: the host's peak proportional set size (every rank's ``Pss`` summed) of the moving
    plant and of the 100k swarm against the same scenes at rest (``--anim-speed 0``).
+5. **Models that animate** (rigid ``models/pump-running.glb``, skinned ``models/arm.glb``, and
+   Khronos' morphing ``AnimatedMorphCube`` where Debian's ``assimp-testmodels`` is installed)
+   against themselves at rest, alternated: what their animation adds to the emulated frame.
 
 Results in ``out/moving/`` (``moving.csv``, one row per figure). Figures only, no asserts.
 """
@@ -82,6 +85,31 @@ def memory(triangles_plant: int, triangles_swarm: int, frames: int) -> list[dict
     return rows
 
 
+#: part 5's models: (name, flags); the morph cube where it is installed
+MODELS = (("rigid: pump-running", ["--model", "models/pump-running.glb", "--path-kind", "still"]),
+          ("skinned: arm", ["--model", "models/arm.glb", "--path-kind", "orbit"]),
+          ("morphed: AnimatedMorphCube", ["--model", "/usr/share/assimp/models/glTF2/glTF-Sample-Models/"
+                                          "AnimatedMorphCube-glTF/AnimatedMorphCube.gltf", "--path-kind", "still"]))
+
+
+def models(frames: int, rounds: int) -> list[dict]:
+    """Part 5: each animated model against itself at rest (``--anim-speed 0``), paired by round."""
+    from multigpu.studies.runs import alternated, medians
+
+    rows = []
+    for name, flags in MODELS:
+        if not Path(flags[1]).exists():
+            continue
+        arms = {"at rest": ["--anim-speed", "0"], "animated": []}
+        got = alternated(tuple(arms), rounds, lambda arm, folder: _run(folder, [*flags, "--frames", str(frames),
+                                                                                 *arms[arm]]))
+        extra = float(np.median([a["emulated_ms"] - r["emulated_ms"] for a, r in zip(got["animated"], got["at rest"])]))
+        ratio = float(np.median([a["emulated_ms"] / r["emulated_ms"] for a, r in zip(got["animated"], got["at rest"])]))
+        rows.append({"part": "model", "arm": name, **medians(got["animated"]), "extra_ms": extra,
+                     "default_speedup": ratio})
+    return rows
+
+
 def bench_moving(quick: bool) -> list[dict]:
     frames, rounds = (60, 1) if quick else (240, 3)
     small, big, plant_tris = (20_000, 200_000, 20_000) if quick else (200_000, 2_000_000, 100_000)
@@ -99,6 +127,10 @@ def bench_moving(quick: bool) -> list[dict]:
     got = plant(frames, rounds, plant_tris)
     rows += got
     print(f"  plant, 20% of its objects moving: emulated frame {got[1]['default_speedup']:.3f}x the still plant's")
+    for r in (got := models(frames // 2, rounds)):
+        print(f"  {r['arm']}: animated {r['emulated_ms']:.2f} ms a frame, {r['extra_ms']:+.2f} ms "
+              f"({r['default_speedup']:.3f}x) against itself at rest")
+    rows += got
     mem = memory(plant_tris, big, 20 if quick else 60)
     for r in mem:
         print(f"  memory, {r['arm']}: {r['moving_mib']:.0f} MiB moving against {r['rest_mib']:.0f} MiB at rest "
