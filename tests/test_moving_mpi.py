@@ -121,6 +121,8 @@ def test_an_animated_gltf_plays_on_a_2x2_wall_like_one_rank(tmp_path):
     assert all((ref[f] != ref[f - 1]).any() for f in range(1, 8))  # the camera still, the pump running
     for extra in ([], ["--decomposition", "hybrid", "--latency", "2"]):
         same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=PUMP, frames=8), 8), ref)
+    same(frames_of(walk(tmp_path / "ompi", (2, 2), (64, 48), scene=PUMP, frames=8, launcher=mpi_named("openmpi")), 8),
+         ref)  # Open MPI too
 
 
 def test_a_bad_animation_ends_the_job_in_one_line_with_exit_2(tmp_path):
@@ -229,6 +231,8 @@ def test_khronos_morph_cube_plays_on_a_2x2_wall_like_one_rank(tmp_path):
     assert (ref[-1] != ref[0]).any()
     for extra in ([], ["--decomposition", "hybrid", "--latency", "2"]):
         same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=scene, frames=12), 12), ref)
+    same(frames_of(walk(tmp_path / "ompi", (2, 2), (64, 48), scene=scene, frames=12, launcher=mpi_named("openmpi")),
+                   12), ref)  # Open MPI too
 
 
 SKIN = "/usr/share/assimp/models/glTF2/simple_skin/simple_skin.gltf"
@@ -242,6 +246,8 @@ def test_khronos_simple_skin_plays_on_a_2x2_wall_like_one_rank(tmp_path):
     ref = frames_of(walk(tmp_path / "one", (1, 1), (128, 96), scene=scene, frames=12), 12)
     for extra in ([], ["--decomposition", "db", "--latency", "2"]):
         same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=scene, frames=12), 12), ref)
+    same(frames_of(walk(tmp_path / "ompi", (2, 2), (64, 48), scene=scene, frames=12, launcher=mpi_named("openmpi")),
+                   12), ref)  # Open MPI too
 
 
 def test_the_shipped_arm_waves_its_clusters_as_one_body_like_one_rank(tmp_path):
