@@ -103,6 +103,13 @@ def pass_order(order: np.ndarray, wide: np.ndarray, movers: np.ndarray | None) -
     return order[np.argsort(key, kind="stable")]
 
 
+def drawn_order(scene) -> tuple[np.ndarray, np.ndarray]:
+    """(order, wide): the order the renderer draws ``scene``'s objects in (``pass_order`` of its
+    ``movers``, where a run set them) and its wide objects: what sort-last ranges follow."""
+    order, wide = scene_order(scene)
+    return pass_order(order, wide, getattr(scene, "movers", None)), wide
+
+
 def owners(starts: np.ndarray, s: int, e: int) -> np.ndarray:
     """The object of every position in ``[s, e)``, objects laid out back to back from
     ``starts`` ((N+1,) cumulative, from 0)."""

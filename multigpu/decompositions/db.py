@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.core.drawlist import drawn_order
 from multigpu.core.regions import pixel_spans
 from multigpu.core.work import Work
-from multigpu.scene.moves import drawn_order
 
 RANGES = ("visible", "static")
 
@@ -57,7 +57,7 @@ class Database:
 
     @classmethod
     def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Database":
-        return cls(cfg.grid, cfg.size, drawn_order(scene, cfg.scene)[0], scene.tris, cfg.db_ranges)
+        return cls(cfg.grid, cfg.size, drawn_order(scene)[0], scene.tris, cfg.db_ranges)
 
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:
         spans, onscreen = pixel_spans(rects, self.size)

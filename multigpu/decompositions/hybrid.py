@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.core.drawlist import drawn_order
 from multigpu.core.regions import pixel_spans
 from multigpu.core.work import Work, from_partition
-from multigpu.scene.moves import drawn_order
 
 
 def fill_ranges(weight: np.ndarray, loads: np.ndarray) -> np.ndarray:
@@ -62,7 +62,7 @@ class Hybrid:
     def from_config(cls, cfg, scene, balance: str, rank: int | None = None) -> "Hybrid":
         from multigpu.strategies import make_strategy
 
-        order, wide = drawn_order(scene, cfg.scene)
+        order, wide = drawn_order(scene)
         return cls(make_strategy(balance, cfg.grid, cfg.size, cfg.strips), cfg.grid, cfg.size, order, wide)
 
     def plan(self, frame: int, rects: np.ndarray, tris: np.ndarray, coverage: np.ndarray | None = None) -> Work:

@@ -37,7 +37,7 @@ from multigpu.rank.frames import Frames
 from multigpu.records.outdir import OutputDir
 from multigpu.records.recovery import mark, restarts
 from multigpu.scene.models import load_scene
-from multigpu.scene.moves import motion_of, moves
+from multigpu.scene.moves import motion_of, movers_of, moves
 from multigpu.scene.paths import CameraPath, check_cameras, generate, load_path
 
 
@@ -242,6 +242,7 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
         raise
     setup = None
     try:
+        scene.movers = movers_of(scene, cfg.scene)  # the order sort-last ranges follow (core.drawlist.drawn_order)
         setup = build(cfg, comm, scene, path, renderer, presenter, out, load_info, placement, monitor, panel,
                       tracker)
         summary = Frames(cfg, comm, job, scene, path, renderer, presenter, setup).run()

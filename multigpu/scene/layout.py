@@ -65,6 +65,8 @@ class Scene:
         the palette and their weights (0: not skinned); skin_pairs (P, 2) int64 (body, joint) and
         skin_boxes (P, 6) float64 world min and max of the body's vertices leaning on the joint
         (None: no skins; ``scene/gltf_load.py``)
+    movers : (N,) bool  the objects a run's motion moves where some stand still (``scene/moves.py``:
+        set by the run, never cached): the order they are drawn in (``core.drawlist.drawn_order``)
     """
 
     vertices: np.ndarray
@@ -101,6 +103,7 @@ class Scene:
     skin_weights: np.ndarray | None = None
     skin_pairs: np.ndarray | None = None
     skin_boxes: np.ndarray | None = None
+    movers: np.ndarray | None = None
 
     @property
     def n_objects(self) -> int:

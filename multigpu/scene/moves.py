@@ -102,15 +102,6 @@ def movers_of(scene, spec) -> np.ndarray | None:
     return None if movers.all() else movers
 
 
-def drawn_order(scene, spec) -> tuple[np.ndarray, np.ndarray]:
-    """(order, wide): the order the renderer draws ``scene``'s objects in under ``spec``
-    (``core.drawlist.pass_order``: its moving objects after those at rest) and its wide objects."""
-    from multigpu.core.drawlist import pass_order, scene_order
-
-    order, wide = scene_order(scene)
-    return pass_order(order, wide, movers_of(scene, spec)), wide
-
-
 def motion_of(scene, spec):
     """The scene's motion for ``spec`` (a ``models.SceneSpec``), or None where it stands still."""
     if not moves(scene, spec):
