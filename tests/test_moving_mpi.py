@@ -146,10 +146,8 @@ def test_the_page_pauses_and_scrubs_scene_time_and_the_recording_replays_it(tmp_
     """A moving scene steered from the page: its time paused (the frames stand still, the camera
     too), set to 3 s, played on; the page shows the time; ``--record`` stores each frame's time,
     so a replay on another wall shows the same frames bit for bit."""
-    import asyncio
-
+    from pageclient import drive
     from test_panel_mpi import Job
-    from websockets.asyncio.client import connect
 
     from multigpu.core.motion import FRAME_SECONDS
     from multigpu.scene.paths import load_path
@@ -158,52 +156,22 @@ def test_the_page_pauses_and_scrubs_scene_time_and_the_recording_replays_it(tmp_
     job = Job(["walkthrough", *SWARM, "--grid", "1x2", "--tile", "60x96", "--frames", "100000", "--mosaic-every", "1",
                "--no-overlay", "--panel", "127.0.0.1:0", "--record", str(rec), "--out", str(out)])
 
-    async def drive(url: str) -> dict:
-        base, query = url.split("?", 1)
-        async with connect(base.replace("http", "ws", 1) + "ws?" + query, open_timeout=60) as ws:
-            seen = {"rows": 0, "status": {}, "times": [], "summary": None}
+    async def script(page) -> None:
+        await page.more_rows(5)
+        await page.send(do="scene_pause")
+        await page.until(lambda: page.status.get("scene_paused"))
+        await page.more_rows(6)
+        await page.send(do="scene_time", value=3.0)
+        await page.more_rows(4)
+        await page.send(do="scene_play")
+        await page.until(lambda: page.status.get("scene_paused") is False)
+        await page.more_rows(6)
+        await page.send(do="stop")
+        await page.until(lambda: page.summary is not None)
 
-            async def until(cond, timeout=90.0):
-                deadline = asyncio.get_running_loop().time() + timeout
-                while not cond():
-                    left = deadline - asyncio.get_running_loop().time()
-                    assert left > 0, f"timed out: {seen['rows']} rows, {seen['status']}"
-                    try:
-                        m = json.loads(await asyncio.wait_for(ws.recv(), left))
-                    except (asyncio.TimeoutError, TypeError, ValueError):
-                        continue
-                    seen["rows"] += len(m.get("rows", []))
-                    seen["status"].update(m.get("status", {}))
-                    if m.get("status", {}).get("scene_time") is not None:
-                        seen["times"].append(m["status"]["scene_time"])
-                    seen["summary"] = m.get("summary", seen["summary"])
-
-            async def rows(n):
-                at = seen["rows"]
-                await until(lambda: seen["rows"] >= at + n)
-
-            await rows(5)
-            await ws.send(json.dumps({"do": "scene_pause"}))
-            await until(lambda: seen["status"].get("scene_paused"))
-            await rows(6)
-            await ws.send(json.dumps({"do": "scene_time", "value": 3.0}))
-            await rows(4)
-            await ws.send(json.dumps({"do": "scene_play"}))
-            await until(lambda: seen["status"].get("scene_paused") is False)
-            await rows(6)
-            await ws.send(json.dumps({"do": "stop"}))
-            await until(lambda: seen["summary"] is not None)
-            return seen
-
-    try:
-        seen = asyncio.run(drive(job.url()))
-        code = job.wait(120)
-    finally:
-        if job.proc.poll() is None:
-            job.kill()
-            job.wait(30)
+    code, page = drive(job, script)
     assert code == 0, job.output[-3000:]
-    assert 3.0 in seen["times"]  # the page showed the scene's time
+    assert 3.0 in page.times  # the page showed the scene's time
     flown = load_path(rec)
     times, n = flown.times, len(flown)
     assert times is not None and n >= 20
@@ -219,35 +187,24 @@ def test_the_page_pauses_and_scrubs_scene_time_and_the_recording_replays_it(tmp_
     same(frames_of(replay, n), shots)
 
 
-MORPH_CUBE = "/usr/share/assimp/models/glTF2/glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf"
+KHRONOS = "/usr/share/assimp/models/glTF2/"
 
 
-@pytest.mark.skipif(not os.path.exists(MORPH_CUBE), reason="Debian's assimp-testmodels is not installed")
-def test_khronos_morph_cube_plays_on_a_2x2_wall_like_one_rank(tmp_path):
-    """A file other tools wrote: its morph target weights animate the cube's vertices, the
-    composites equal one rank's render of every frame (screen, and hybrid in flight)."""
-    scene = ["--model", MORPH_CUBE, "--path-kind", "still", "--cluster", "0", "--no-progress"]
+@pytest.mark.skipif(not os.path.isdir(KHRONOS), reason="Debian's assimp-testmodels is not installed")
+@pytest.mark.parametrize("model,kind,extra", [
+    ("glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf", "still",
+     ["--decomposition", "hybrid", "--latency", "2"]),
+    ("simple_skin/simple_skin.gltf", "orbit", ["--decomposition", "db", "--latency", "2"])], ids=["morph", "skin"])
+def test_khronos_files_play_on_a_2x2_wall_like_one_rank(tmp_path, model, kind, extra):
+    """Files other tools wrote: a cube's morph target weights, a strip bent by its skin's joints
+    in the vertex shader; the composites equal one rank's render of every frame (screen, a
+    sort-last decomposition in flight, Open MPI)."""
+    scene = ["--model", KHRONOS + model, "--path-kind", kind, "--cluster", "0", "--no-progress"]
     ref = frames_of(walk(tmp_path / "one", (1, 1), (128, 96), scene=scene, frames=12), 12)
     assert (ref[-1] != ref[0]).any()
-    for extra in ([], ["--decomposition", "hybrid", "--latency", "2"]):
-        same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=scene, frames=12), 12), ref)
-    same(frames_of(walk(tmp_path / "ompi", (2, 2), (64, 48), scene=scene, frames=12, launcher=mpi_named("openmpi")),
-                   12), ref)  # Open MPI too
-
-
-SKIN = "/usr/share/assimp/models/glTF2/simple_skin/simple_skin.gltf"
-
-
-@pytest.mark.skipif(not os.path.exists(SKIN), reason="Debian's assimp-testmodels is not installed")
-def test_khronos_simple_skin_plays_on_a_2x2_wall_like_one_rank(tmp_path):
-    """A skinned file other tools wrote: its joints bend the strip in the vertex shader, the
-    composites equal one rank's render of every frame (screen, and db in flight)."""
-    scene = ["--model", SKIN, "--path-kind", "orbit", "--cluster", "0", "--no-progress"]
-    ref = frames_of(walk(tmp_path / "one", (1, 1), (128, 96), scene=scene, frames=12), 12)
-    for extra in ([], ["--decomposition", "db", "--latency", "2"]):
-        same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), extra, scene=scene, frames=12), 12), ref)
-    same(frames_of(walk(tmp_path / "ompi", (2, 2), (64, 48), scene=scene, frames=12, launcher=mpi_named("openmpi")),
-                   12), ref)  # Open MPI too
+    for flags, launcher in (([], None), (extra, None), ([], mpi_named("openmpi"))):
+        same(frames_of(walk(tmp_path / "wall", (2, 2), (64, 48), flags, scene=scene, frames=12, launcher=launcher),
+                       12), ref)
 
 
 def test_the_shipped_arm_waves_its_clusters_as_one_body_like_one_rank(tmp_path):

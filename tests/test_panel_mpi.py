@@ -231,10 +231,7 @@ def test_fly_record_and_set_quality_from_the_page(tmp_path):
     """A headless interactive run flown from the page alone (no window): held keys and a drag
     move the camera, a recording started and stopped on the page replays as a path file, and a
     render scale set on the page reaches every rank at the same frame."""
-    import asyncio
-    import json
-
-    from websockets.asyncio.client import connect
+    from pageclient import drive
 
     from multigpu.scene.paths import load_path
 
@@ -242,54 +239,24 @@ def test_fly_record_and_set_quality_from_the_page(tmp_path):
     job = Job(["walkthrough", "--grid", "1x2", "--tile", "96x64", *SMALL, "--path", "interactive",
                "--mosaic-every", "0", "--panel", "127.0.0.1:0", "--out", str(out)])
 
-    async def drive(url: str) -> dict:
-        base, query = url.split("?", 1)
-        async with connect(base.replace("http", "ws", 1) + "ws?" + query, open_timeout=60) as ws:
-            seen = {"rows": 0, "summary": None, "errors": [], "status": {}}
+    async def script(page) -> None:
+        await page.until(lambda: page.rows >= 5 and page.status.get("interactive"))
+        await page.send(do="record", on=True)
+        await page.until(lambda: page.status.get("recording"))
+        await page.send(do="keys", held=["forward"])
+        await page.more_rows(10)
+        await page.send(do="keys", held=[])
+        await page.send(do="drag", dx=300, dy=0)
+        await page.send(do="render_scale", value=0.5)
+        await page.until(lambda: page.status.get("render_scale") == 0.5)
+        await page.more_rows(5)
+        await page.send(do="record", on=False)
+        await page.until(lambda: not page.status.get("recording"))
+        await page.send(do="stop")
+        await page.until(lambda: page.summary is not None)
 
-            async def until(cond, timeout=90.0):
-                deadline = asyncio.get_running_loop().time() + timeout
-                while not cond():
-                    left = deadline - asyncio.get_running_loop().time()
-                    assert left > 0, f"timed out: {seen['rows']} rows, {seen['status']}"
-                    try:
-                        m = await asyncio.wait_for(ws.recv(), left)
-                    except asyncio.TimeoutError:
-                        continue
-                    if isinstance(m, str):
-                        m = json.loads(m)
-                        seen["rows"] += len(m.get("rows", []))
-                        seen["status"].update(m.get("status", {}))
-                        seen["summary"] = m.get("summary", seen["summary"])
-                        if "error" in m:
-                            seen["errors"].append(m["error"])
-
-            await until(lambda: seen["rows"] >= 5 and seen["status"].get("interactive"))
-            await ws.send(json.dumps({"do": "record", "on": True}))
-            await until(lambda: seen["status"].get("recording"))
-            await ws.send(json.dumps({"do": "keys", "held": ["forward"]}))
-            at = seen["rows"]
-            await until(lambda: seen["rows"] >= at + 10)
-            await ws.send(json.dumps({"do": "keys", "held": []}))
-            await ws.send(json.dumps({"do": "drag", "dx": 300, "dy": 0}))
-            await ws.send(json.dumps({"do": "render_scale", "value": 0.5}))
-            await until(lambda: seen["status"].get("render_scale") == 0.5)
-            at = seen["rows"]
-            await until(lambda: seen["rows"] >= at + 5)
-            await ws.send(json.dumps({"do": "record", "on": False}))
-            await until(lambda: not seen["status"].get("recording"))
-            await ws.send(json.dumps({"do": "stop"}))
-            await until(lambda: seen["summary"] is not None)
-            return seen
-
-    try:
-        seen = asyncio.run(drive(job.url()))
-        code = job.wait(120)
-    finally:
-        if job.proc.poll() is None:
-            job.kill()
-            job.wait(30)
-    assert code == 0 and not seen["errors"], job.output[-3000:]
+    code, page = drive(job, script)
+    assert code == 0 and not page.errors, job.output[-3000:]
     assert "stop (the panel)" in job.output
     flown = load_path(out / "recorded-01.json")
     assert len(flown) >= 15
