@@ -92,12 +92,9 @@ def test_a_recovered_wall_resumes_at_the_same_scene_time(tmp_path):
             "--mosaic-every", "1", "--no-overlay", "--out", str(out), "--recover", "1", "--liveness", "3"]
     proc = start_launcher(args, {"LP_NUM_THREADS": "1"})
     try:
-        import time
+        from test_recovery_mpi import wait_rows
 
-        t = time.monotonic()
-        while not (out / "timings.csv").exists() or (out / "timings.csv").read_text().count("\n") < 2 * 40:
-            assert proc.poll() is None and time.monotonic() - t < 90, end_launcher(proc, 5)[1][-3000:]
-            time.sleep(0.1)
+        wait_rows(proc, out, 2 * 40)
         os.kill(rank_pids(out)[-1], signal.SIGKILL)
         _, err = end_launcher(proc, 150)
     finally:
