@@ -97,10 +97,10 @@ def warm() -> float:
             np.empty(1, dtype=np.int64))
     one, idx = np.zeros((1, 3)), np.zeros(1, dtype=np.int64)
     _rotations(one, np.zeros(1), np.empty((1, 3, 3)))
-    _fly(0.5, 0.0, 0.0, 0.0, one, one, np.zeros(1), one, np.zeros(1), 2.0, 12.0, 16.0, np.empty((1, 3, 3)),
+    _fly(0.5, 0.0, 0.0, 0.0, one, np.ones((1, 8), dtype=np.float32), 2.0, 12.0, 16.0, np.empty((1, 3, 3)),
          np.empty((1, 3)))
     _pose(np.zeros((1, 3, 3)), one, idx, idx, one, one, one, np.ones(1), np.zeros(3), 1e-12, True, np.empty((3, 1)),
-          np.empty((3, 1)), np.empty((1, 3)), np.empty(1), np.empty((1, 12), dtype=np.float32))
+          np.empty((3, 1)), np.empty((1, 3)), np.empty(1), np.empty((1, 12), dtype=np.float32), 0)
     return time.perf_counter() - t0
 
 

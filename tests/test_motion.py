@@ -126,6 +126,34 @@ def test_the_compiled_pose_makes_the_references_numbers(swarm, plant, which):
             assert np.array_equal(getattr(a, name), getattr(b, name)), name
 
 
+@pytest.mark.parametrize("compiled", [False, True] if jit.available() else [False])
+def test_a_swarm_posed_a_span_at_a_time_is_posed_whole(swarm, monkeypatch, compiled):
+    """Posing the swarm's bodies a span at a time (no rank holds every map) gives the numbers of
+    posing them all at once."""
+    import multigpu.core.motion as motion_module
+
+    monkeypatch.setattr(motion_module, "SPAN", 300)
+    flight = Swarm(swarm)
+
+    class Whole:  # the same flight, offered whole only
+        bodies, moving, at = flight.bodies, None, flight.at
+
+    spanned, whole = Posed(swarm, flight, compiled=compiled), Posed(swarm, Whole(), compiled=compiled)
+    assert spanned.spanned and not whole.spanned and spanned.spans() == [(0, 300), (300, 600), (600, 900),
+                                                                         (900, 1000)]
+    assert spanned.c0 is None and len(spanned.rows) == 300  # rest bounds from the scene's arrays, rows a span's
+    rows = np.zeros_like(whole.rows)
+
+    def sink(got, lo):
+        rows[lo:lo + len(got)] = got
+
+    for t in (0.0, 2.5, 7.1):
+        spanned.at(t, sink), whole.at(t)
+        for name in ("center", "half", "centers", "radii"):
+            assert np.array_equal(getattr(spanned, name), getattr(whole, name)), name
+        assert np.array_equal(rows, whole.rows)
+
+
 def test_a_projector_of_moved_boxes_gives_the_rects_of_the_moved_boxes(swarm):
     posed = Posed(swarm, Swarm(swarm)).at(3.0)
     view, proj = look_at([0, -160, 40], [0, 0, 0], [0, 0, 1]), perspective(50, 1.3, 0.5, 500)
@@ -141,7 +169,7 @@ def test_the_swarm_rests_at_time_0_gathers_and_stays_in_its_cube(swarm):
     motion = Swarm(swarm)
     A, b = motion.at(0.0)
     assert np.array_equal(A, np.broadcast_to(np.eye(3), A.shape)) and not b.any()
-    home = motion.home + swarm.origin
+    home = motion.home() + swarm.origin
     spread = lambda p: np.linalg.norm(p - p.mean(axis=0), axis=1).mean()  # noqa: E731
     posed = Posed(swarm, motion)
     gathered = posed.at(GATHER_S + 0.6).centers

@@ -84,6 +84,8 @@ def stretch(A: np.ndarray) -> np.ndarray:
 
 #: columns whose dot products stay under this share of their squared lengths count as orthogonal
 ORTHOGONAL = 1e-12
+#: bodies posed at a time where a motion gives its maps a span at a time (``Posed.spans``)
+SPAN = 8192
 
 
 def moved_boxes(center: np.ndarray, half: np.ndarray, A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -118,11 +120,7 @@ class Posed:
         self.objects = (np.arange(scene.n_objects) if moving is None
                         else np.flatnonzero(np.asarray(moving, dtype=bool)[body]))  # the objects that move
         self.body = body[self.objects]
-        # rest boxes and spheres of the moving objects, local
-        self.c0 = np.ascontiguousarray((bmin + bmax)[self.objects] * 0.5 - self.origin)
-        self.h0 = np.ascontiguousarray((bmax - bmin)[self.objects] * 0.5)
-        self.s0 = np.asarray(scene.centers, dtype=np.float64)[self.objects] - self.origin
-        self.r0 = np.asarray(scene.radii, dtype=np.float64)[self.objects]
+        self.rest = (bmin, bmax, np.asarray(scene.centers, dtype=np.float64), np.asarray(scene.radii, dtype=np.float64))
         self.center = np.ascontiguousarray(((bmin + bmax) * 0.5).T)
         self.half = np.ascontiguousarray(((bmax - bmin) * 0.5).T)
         # the spheres only where they are read (levels of detail, sphere bounds)
@@ -141,7 +139,35 @@ class Posed:
             self.part_half = np.ascontiguousarray(((pmax - pmin) * 0.5).T)
         self.morph = self._morphs(scene, motion, body)
         self.skin = self._skins(scene, motion, body)
+        # span by span (``spans``): every object a body of its own that moves, and nothing more
+        self.spanned = (callable(getattr(motion, "at_span", None)) and moving is None and self.parts is None
+                        and self.morph is None and self.skin is None
+                        and np.array_equal(body, np.arange(scene.n_objects)))
+        self.count = int(self.objects.size)
+        if self.spanned:  # the rest bounds read a span at a time from the scene's (the host's) arrays,
+            self.c0 = self.h0 = self.s0 = self.r0 = self.body = None  # the rows a span's (``place_span``)
+            self.objects = slice(0, self.count)
+            self.rows = self.rows[:SPAN].copy()
+        else:  # rest boxes and spheres of the moving objects, local
+            self.c0, self.h0, self.s0, self.r0 = self._rest(self.objects)
         self.t = None
+
+    def _rest(self, idx) -> tuple:
+        """Objects ``idx``'s (an index array or a slice) rest boxes and spheres, local."""
+        bmin, bmax, centers, radii = self.rest
+        c0 = np.ascontiguousarray((bmin[idx] + bmax[idx]) * 0.5 - self.origin)
+        h0 = np.ascontiguousarray((bmax[idx] - bmin[idx]) * 0.5)
+        if not self.spheres and self.spanned:
+            return c0, h0, np.empty((0, 3)), np.empty(0)
+        return c0, h0, np.ascontiguousarray(centers[idx] - self.origin), np.ascontiguousarray(radii[idx])
+
+    def spans(self) -> list[tuple[int, int]]:
+        """The bodies' spans ``place_span`` takes, each of at most ``SPAN`` (the whole where the
+        motion cannot give a span of its bodies' maps: ``Motion.at_span``)."""
+        n = self.count
+        if not self.spanned:
+            return [(0, n)]
+        return [(lo, min(lo + SPAN, n)) for lo in range(0, n, SPAN)]
 
     def _skins(self, scene, motion, body: np.ndarray):
         """Of the moving objects, the skinned ones (``Scene.skin_pairs``, the motion's
@@ -225,16 +251,56 @@ class Posed:
 
     @property
     def n_moving(self) -> int:
-        return int(self.objects.size)
+        return self.count
 
-    def at(self, t: float) -> "Posed":
-        """Every array above at time ``t`` (rewritten in place; this object, for chaining)."""
-        A, b = self.motion.at(float(t))
-        return self.place(A, b, t, getattr(self.motion, "last_weights", None))
+    def at(self, t: float, sink=None) -> "Posed":
+        """Every array above at time ``t`` (rewritten in place; this object, for chaining).
+        ``sink(rows, lo)`` takes each span's rows (objects lo:lo + len(rows)) as they are made:
+        where the bodies are posed a span at a time, ``rows`` holds the last span's only."""
+        if self.spanned:
+            for lo, hi in self.spans():
+                self.place_span(*self.motion.at_span(float(t), lo, hi), lo, hi)
+                if sink is not None:
+                    sink(self.rows[:hi - lo], lo)
+            self.t = t
+            return self
+        self.place(*self.motion.at(float(t)), t, getattr(self.motion, "last_weights", None))
+        if sink is not None:
+            sink(self.rows, 0)
+        return self
+
+    def place_span(self, A: np.ndarray, b: np.ndarray, lo: int, hi: int) -> "Posed":
+        """Objects lo:hi (bodies of their own: ``spanned``) moved by their maps ``A``, ``b``
+        (``Motion.at_span``'s): the arrays ``place`` writes, a span of them (``rows``: this span's,
+        from row 0)."""
+        c0, h0, s0, r0 = self._rest(slice(lo, hi))
+        if self.compiled:
+            A, b = np.ascontiguousarray(A, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)
+            kernel._pose(A, b, np.arange(hi - lo), np.arange(lo, hi), c0, h0, s0, r0, self.origin, ORTHOGONAL,
+                         self.spheres, self.center, self.half, self.centers, self.radii, self.rows, lo)
+            return self
+        self._put(slice(lo, hi), A, b, c0, h0, s0, r0, slice(0, hi - lo))
+        return self
+
+    def _put(self, idx, Ao: np.ndarray, bo: np.ndarray, c0, h0, s0, r0, rows=None) -> None:
+        """Objects ``idx``'s moved boxes, spheres and rows (``rows``: where in ``self.rows``; the
+        reference)."""
+        c, h = moved_boxes(c0, h0, Ao, bo)
+        self.center[:, idx] = (c + self.origin).T
+        self.half[:, idx] = h.T
+        if self.spheres:
+            self.centers[idx] = apply(Ao, s0) + bo + self.origin
+            self.radii[idx] = r0 * stretch(Ao)
+        self.rows[idx if rows is None else rows] = shader_rows(Ao, bo)
 
     def place(self, A: np.ndarray, b: np.ndarray, t: float | None = None, weights=None) -> "Posed":
         """Every array above for the bodies' maps ``A``, ``b`` (``Motion.at``'s, at time ``t``), the
         morphing objects' rest bounds grown first by their targets at ``weights``."""
+        if self.spanned:
+            for lo, hi in self.spans():
+                self.place_span(A[lo:hi], b[lo:hi], lo, hi)
+            self.t = t
+            return self
         c0, h0, s0, r0 = self.c0, self.h0, self.s0, self.r0
         parts = self.parts
         if self.morph is not None and weights is not None:
@@ -248,20 +314,12 @@ class Posed:
         if self.compiled:  # one pass (``motion_kernel.py``), the same numbers
             A, b = np.ascontiguousarray(A, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)
             kernel._pose(A, b, self.body, self.objects, c0, h0, s0, r0, self.origin, ORTHOGONAL,
-                         self.spheres, self.center, self.half, self.centers, self.radii, self.rows)
+                         self.spheres, self.center, self.half, self.centers, self.radii, self.rows, 0)
             if parts is not None:
                 kernel._boxes(A, b, *parts, self.origin, self.part_center, self.part_half)
             self.t = t
             return self
-        Ao, bo = A[self.body], b[self.body]
-        idx = self.objects
-        c, h = moved_boxes(c0, h0, Ao, bo)
-        self.center[:, idx] = (c + self.origin).T
-        self.half[:, idx] = h.T
-        if self.spheres:
-            self.centers[idx] = apply(Ao, s0) + bo + self.origin
-            self.radii[idx] = r0 * stretch(Ao)
-        self.rows[idx] = shader_rows(Ao, bo)
+        self._put(self.objects, A[self.body], b[self.body], c0, h0, s0, r0)
         if parts is not None:
             rows, pbody, pc, ph = parts
             c, h = moved_boxes(pc, ph, A[pbody], b[pbody])

@@ -44,8 +44,10 @@ def _boxes(A, b, rows, body, c0, h0, origin, center, half):
             half[i, o] = abs(A[k, i, 0]) * h0[j, 0] + abs(A[k, i, 1]) * h0[j, 1] + abs(A[k, i, 2]) * h0[j, 2]
 
 
-def _pose(A, b, body, objects, c0, h0, s0, r0, origin, orthogonal, spheres, center, half, centers, radii, rows):
-    """The moving objects' boxes, spheres (``spheres``) and shader rows (``motion.Posed.place``)."""
+def _pose(A, b, body, objects, c0, h0, s0, r0, origin, orthogonal, spheres, center, half, centers, radii, rows,
+          row0):
+    """The moving objects' boxes, spheres (``spheres``) and shader rows (``motion.Posed.place``;
+    object ``o``'s at ``rows[o - row0]``)."""
     _boxes(A, b, objects, body, c0, h0, origin, center, half)
     for j in range(objects.shape[0]):
         k, o = body[j], objects[j]
@@ -53,10 +55,10 @@ def _pose(A, b, body, objects, c0, h0, s0, r0, origin, orthogonal, spheres, cent
             if spheres:
                 centers[o, i] = (A[k, i, 0] * s0[j, 0] + A[k, i, 1] * s0[j, 1] + A[k, i, 2] * s0[j, 2] + b[k, i]
                                  + origin[i])
-            rows[o, 4 * i] = A[k, i, 0]
-            rows[o, 4 * i + 1] = A[k, i, 1]
-            rows[o, 4 * i + 2] = A[k, i, 2]
-            rows[o, 4 * i + 3] = b[k, i]
+            rows[o - row0, 4 * i] = A[k, i, 0]
+            rows[o - row0, 4 * i + 1] = A[k, i, 1]
+            rows[o - row0, 4 * i + 2] = A[k, i, 2]
+            rows[o - row0, 4 * i + 3] = b[k, i]
         if spheres:
             radii[o] = r0[j] * _stretch(A, k, orthogonal)
 

@@ -391,10 +391,11 @@ class RegionRenderer:
         self.last_triangles = total
         return Pending(None, self.fbo, drawn, depth)
 
-    def pose(self, rows: np.ndarray, movers: np.ndarray | None = None, weights=None, morph_of=None,
+    def pose(self, rows: np.ndarray | None, movers: np.ndarray | None = None, weights=None, morph_of=None,
              palette=None) -> None:
         """Every object's (N, 12) float32 map (``core.motion``) from now on; frames still being drawn
-        keep theirs (the buffer is orphaned first). ``movers``: (N,) bool, the objects that may
+        keep theirs (the buffer is orphaned first; ``rows`` None: ``pose_span`` writes them, every
+        span before the next frame is drawn). ``movers``: (N,) bool, the objects that may
         move (the others are drawn without their maps); None keeps the last. ``weights``, ``morph_of``:
         a model's morph target weights, and each object's (``morphs.MorphBuffers.update``);
         ``palette``: its skins' joint maps."""
@@ -403,10 +404,15 @@ class RegionRenderer:
         if self.skins is not None:
             self.skins.update(palette)
         self.mbo.orphan()
-        self.mbo.write(rows)
+        if rows is not None:
+            self.mbo.write(rows)
         if movers is not None:  # one program for both (a textured scene's) keeps the groups' order
             got = pass_groups(self.draws.wide, np.asarray(movers, dtype=bool))
             self.groups = None if got is None else [(g, min(p, len(self.passes) - 1)) for g, p in got]
+
+    def pose_span(self, rows: np.ndarray, lo: int) -> None:
+        """Objects lo:lo + len(rows)'s maps, after ``pose(None, ...)``."""
+        self.mbo.write(rows, offset=lo * rows.itemsize * 12)
 
     @property
     def framebuffer_bytes(self) -> int:

@@ -46,12 +46,25 @@ class Moving:
         """Every body where it is at scene time ``when``, for the frame planned next: where the
         motion puts them and their maps to the GL (the ``animate`` phase: the scene's own work, a
         part of rendering), their bounds moved (``pose``: a part of balancing)."""
-        motion = self.posed.motion
-        with t.phase("animate"):
-            A, b = motion.at(when)
-            weights = getattr(motion, "last_weights", None)  # a model's morph target weights
+        motion, p = self.posed.motion, self.posed
+        if p.spanned:  # a span of bodies at a time: no rank holds every body's map, nor its rows
+            with t.phase("animate"):
+                self.renderer.pose(None, self.movers)
+            for lo, hi in p.spans():
+                with t.phase("animate"):
+                    A, b = motion.at_span(when, lo, hi)
+                with t.phase("pose"):
+                    p.place_span(A, b, lo, hi)
+                with t.phase("animate"):
+                    self.renderer.pose_span(p.rows[:hi - lo], lo)
+            weights, p.t = None, when
+        else:
+            with t.phase("animate"):
+                A, b = motion.at(when)
+                weights = getattr(motion, "last_weights", None)  # a model's morph target weights
+            with t.phase("pose"):
+                p.place(A, b, when, weights)
         with t.phase("pose"):
-            p = self.posed.place(A, b, when, weights)
             project = self.planner.project
             if isinstance(project, BoxProjector):
                 project.place(p.center, p.half)
@@ -63,9 +76,9 @@ class Moving:
             if self.culler is not None and p.parts is not None:
                 self.culler.place(p.part_center, p.part_half)
         with t.phase("animate"):
-            morph_of = getattr(motion, "morph_of", None) if self.movers is not None else None
-            self.renderer.pose(p.rows, self.movers, weights,
-                               None if morph_of is None else morph_of[self.posed.motion.bodies],
-                               getattr(motion, "last_palette", None))
+            if not p.spanned:
+                morph_of = getattr(motion, "morph_of", None) if self.movers is not None else None
+                self.renderer.pose(p.rows, self.movers, weights, None if morph_of is None else morph_of[motion.bodies],
+                                   getattr(motion, "last_palette", None))
             self.movers = None
         self.time = when

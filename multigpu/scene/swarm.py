@@ -69,25 +69,43 @@ def generate_swarm(triangles: int, seed: int = 0) -> Scene:
 
 
 class Swarm:
-    """The swarm's flight (a ``core.motion.Motion``): every object a body of its own."""
+    """The swarm's flight (a ``core.motion.Motion``): every object a body of its own.
+
+    Its per-object state is one (n, 8) float32 array (place in the flock, lag, spin axis, spin
+    rate): homes are read from the scene's own bounds (the host's mapped copy), and the maps are
+    made a span of bodies at a time (``at_span``) so that a rank never holds every object's map:
+    at 100k objects a moving swarm costs a rank a few MB beside the same swarm at rest."""
 
     def __init__(self, scene: Scene, compiled: bool | None = None):
         self.bodies = bodies_of(scene)
         n = int(self.bodies.max()) + 1 if self.bodies.size else 0
-        rest = np.zeros((n, 3))
-        rest[self.bodies] = (np.asarray(scene.bmin) + np.asarray(scene.bmax)) / 2 - np.asarray(scene.origin)
-        self.home = rest  # each body's centre at rest, local (the cube's centre is the origin)
+        self.n = n
+        self.origin = np.asarray(scene.origin, dtype=np.float64)
+        self.rest = (np.asarray(scene.bmin), np.asarray(scene.bmax))
+        self.own = np.array_equal(self.bodies, np.arange(scene.n_objects))  # body i is object i
+        if not self.own:  # bodies of several objects: their centres kept
+            rest = np.zeros((n, 3))
+            rest[self.bodies] = (self.rest[0] + self.rest[1]) / 2 - self.origin
+            self._home = rest
         rng = np.random.default_rng(int(scene.meta.get("seed", 0)) + 1)
         place = rng.normal(size=(n, 3))
-        self.place = place / np.linalg.norm(place, axis=1, keepdims=True) * (
+        place = place / np.linalg.norm(place, axis=1, keepdims=True) * (
             FLOCK * SIDE * rng.uniform(0, 1, (n, 1)) ** (1 / 3))  # each one's place in the flock
-        self.lag = rng.uniform(0.0, 0.5, n)  # seconds
-        axis = rng.normal(size=(n, 3))
-        self.axis = axis / np.linalg.norm(axis, axis=1, keepdims=True)
-        self.spin = rng.uniform(-2.0, 2.0, n)  # radians a second
+        self.params = np.empty((n, 8), dtype=np.float32)
+        self.params[:, :3] = place
+        self.params[:, 3] = rng.uniform(0.0, 0.5, n)  # lag, seconds
+        self.params[:, 4:7] = rng.normal(size=(n, 3))  # spin axis (made unit where used)
+        self.params[:, 7] = rng.uniform(-2.0, 2.0, n)  # spin, radians a second
         self.moving = None  # every body moves
         self.compiled = jit.use(compiled)  # the flight in one compiled pass (``swarm_kernel.py``)
-        self._A, self._b = (np.empty((n, 3, 3)), np.empty((n, 3))) if self.compiled else (None, None)
+
+    def home(self, lo: int = 0, hi: int | None = None) -> np.ndarray:
+        """(hi - lo, 3) bodies lo:hi's centres at rest, local (the cube's centre is the origin)."""
+        hi = self.n if hi is None else hi
+        if not self.own:
+            return self._home[lo:hi]
+        bmin, bmax = self.rest
+        return (bmin[lo:hi] + bmax[lo:hi]) / 2 - self.origin
 
     @staticmethod
     def gather_point(t: float) -> np.ndarray:
@@ -97,22 +115,33 @@ class Swarm:
         a, b = TOUR[k % len(TOUR)], TOUR[(k + 1) % len(TOUR)]
         return SIDE * (a + (b - a) * smooth((t / LEG_S - k - 1 / 3) * 1.5))
 
-    def gathered(self, t: float) -> np.ndarray:
-        """(n,) how far each object is from home towards its place in the flock: 0 home, 1 there."""
-        u = t - self.lag
+    @staticmethod
+    def gathered(t: float, lag: np.ndarray) -> np.ndarray:
+        """(n,) how far each object of ``lag`` (seconds) is from home towards its place in the
+        flock: 0 home, 1 there."""
+        u = t - lag
         cycle = np.mod(u, CYCLE_S)
         return np.where(u > 0, smooth(cycle / GATHER_S) * (1 - smooth((cycle - SCATTER_S) / GATHER_S)), 0.0)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Every object's map at ``t`` (compiled: the swarm's own arrays, valid till the next call)."""
+        """Every body's map at ``t`` (new arrays)."""
+        return self.at_span(t, 0, self.n)
+
+    def at_span(self, t: float, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+        """Bodies lo:hi's maps at ``t`` (new arrays of hi - lo)."""
+        home, p = self.home(lo, hi), self.params[lo:hi]
         if self.compiled:
             from multigpu.scene.swarm_kernel import _fly
 
+            A, b = np.empty((hi - lo, 3, 3)), np.empty((hi - lo, 3))
             gx, gy, gz = (float(v) for v in self.gather_point(t))
-            _fly(float(t), gx, gy, gz, self.home, self.place, self.lag, self.axis, self.spin, GATHER_S, SCATTER_S,
-                 CYCLE_S, self._A, self._b)
-            return self._A, self._b
-        s = self.gathered(t)[:, None]
-        where = self.home + s * (self.gather_point(t) + self.place - self.home)
-        A = rotations(self.axis, self.spin * t)
-        return A, where - apply(A, self.home)
+            _fly(float(t), gx, gy, gz, np.ascontiguousarray(home), p, GATHER_S, SCATTER_S, CYCLE_S, A, b)
+            return A, b
+        p = p.astype(np.float64)
+        x, y, z = p[:, 4], p[:, 5], p[:, 6]
+        norm = np.sqrt(x * x + y * y + z * z)
+        axis = np.c_[x / norm, y / norm, z / norm]
+        s = self.gathered(t, p[:, 3])[:, None]
+        where = home + s * (self.gather_point(t) + p[:, :3] - home)
+        A = rotations(axis, p[:, 7] * t)
+        return A, where - apply(A, home)

@@ -1,10 +1,12 @@
-"""The swarm's flight compiled (``swarm.Swarm.at``): every object's map in one pass into arrays
-the swarm keeps, where the reference makes some thirty numpy passes and their temporaries (at
-100k objects tens of MB a frame on every rank). The same arithmetic in the same order."""
+"""The swarm's flight compiled (``swarm.Swarm.at_span``): a span of objects' maps in one pass,
+where the reference makes some thirty numpy passes and their temporaries. The same arithmetic
+in the same order."""
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from multigpu.core.jit import compile_all
 
@@ -14,24 +16,27 @@ def _smooth(x):
     return x * x * (3.0 - 2.0 * x)
 
 
-def _fly(t, gx, gy, gz, home, place, lag, axis, spin, gather_s, scatter_s, cycle_s, A, b):
+def _fly(t, gx, gy, gz, home, params, gather_s, scatter_s, cycle_s, A, b):
     """Object ``i``: its place between home and its place in the flock about (gx, gy, gz), and
-    its spin (``swarm.Swarm.at``), as the map ``A[i]``, ``b[i]``."""
+    its spin (``swarm.Swarm.at_span``; ``params[i]``: place, lag, axis, spin), as ``A[i]``, ``b[i]``."""
     g = (gx, gy, gz)
     for i in range(home.shape[0]):
-        u = t - lag[i]
+        u = t - np.float64(params[i, 3])
         s = 0.0
         if u > 0:
             cycle = u % cycle_s
             s = _smooth(cycle / gather_s) * (1 - _smooth((cycle - scatter_s) / gather_s))
-        c, sn = math.cos(spin[i] * t), math.sin(spin[i] * t)
-        x, y, z = axis[i, 0], axis[i, 1], axis[i, 2]
+        ax, ay, az = np.float64(params[i, 4]), np.float64(params[i, 5]), np.float64(params[i, 6])
+        norm = math.sqrt(ax * ax + ay * ay + az * az)
+        x, y, z = ax / norm, ay / norm, az / norm
+        angle = np.float64(params[i, 7]) * t
+        c, sn = math.cos(angle), math.sin(angle)
         C = 1.0 - c
         A[i, 0, 0], A[i, 0, 1], A[i, 0, 2] = c + x * x * C, x * y * C - z * sn, x * z * C + y * sn
         A[i, 1, 0], A[i, 1, 1], A[i, 1, 2] = y * x * C + z * sn, c + y * y * C, y * z * C - x * sn
         A[i, 2, 0], A[i, 2, 1], A[i, 2, 2] = z * x * C - y * sn, z * y * C + x * sn, c + z * z * C
         for k in range(3):
-            where = home[i, k] + s * ((g[k] + place[i, k]) - home[i, k])
+            where = home[i, k] + s * ((g[k] + np.float64(params[i, k])) - home[i, k])
             b[i, k] = where - (A[i, k, 0] * home[i, 0] + A[i, k, 1] * home[i, 1] + A[i, k, 2] * home[i, 2])
 
 
