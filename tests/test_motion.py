@@ -284,3 +284,12 @@ def test_the_compiled_flight_makes_the_references_maps(swarm):
     for t in (0.0, 0.3, 1.7, 5.2, 13.1, -1.0):
         for got, want in zip(fast.at(t), slow.at(t)):
             assert np.array_equal(got, want), t
+
+
+@needs_numba
+def test_the_compiled_machinery_makes_the_references_maps(plant):
+    fast, slow = Machinery(plant, 0.3, seed=5, compiled=True), Machinery(plant, 0.3, seed=5, compiled=False)
+    assert fast.which.size > 10
+    for t in (0.0, 0.4, 2.9, 17.3, -3.0):
+        for got, want in zip(fast.at(t), slow.at(t)):
+            assert np.array_equal(got, want), t

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multigpu.core import jit
 from multigpu.core.motion import apply, bodies_of, rotations
 
 #: the ways a body of the machinery moves (``Machinery.kind`` indexes this)
@@ -27,7 +28,8 @@ RUN = 16
 class Machinery:
     """``fraction`` of ``scene``'s bodies moving (a ``core.motion.Motion``)."""
 
-    def __init__(self, scene, fraction: float, seed: int = 0):
+    def __init__(self, scene, fraction: float, seed: int = 0, compiled: bool | None = None):
+        self.compiled = jit.use(compiled)  # the maps in one compiled pass (``moves_kernel.py``)
         self.bodies = bodies_of(scene)
         n = int(self.bodies.max()) + 1 if self.bodies.size else 0
         origin = np.asarray(scene.origin, dtype=np.float64)
@@ -59,6 +61,11 @@ class Machinery:
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         up, rate, pivot, slide, pace, phase = self._own
+        if self.compiled:
+            from multigpu.scene.moves_kernel import _machine
+
+            _machine(float(t), self.which, up, rate, pivot, slide, pace, phase, self._A, self._b)
+            return self._A, self._b
         A = rotations(up, rate * t)
         to_and_fro = np.sin(2 * np.pi * pace * t + phase) - np.sin(phase)  # 0 at rest
         self._A[self.which] = A
