@@ -41,7 +41,7 @@ from multigpu.core.culling_kernel import _seen
 from multigpu.core.drawlist_kernel import _commands, _part_commands
 from multigpu.core.jit import available
 from multigpu.core.lod_kernel import _choose
-from multigpu.core.motion_kernel import _pose, _rotations
+from multigpu.core.motion_kernel import _pose, _pose_span, _rotations
 from multigpu.core.tree import gpu_tree
 from multigpu.core.work_kernel import _parts
 from multigpu.scene.moves_kernel import _machine
@@ -98,8 +98,10 @@ def warm() -> float:
             np.empty(1, dtype=np.int64))
     one, idx = np.zeros((1, 3)), np.zeros(1, dtype=np.int64)
     _rotations(one, np.zeros(1), np.empty((1, 3, 3)))
-    _fly(0.5, 0.0, 0.0, 0.0, one, np.ones((1, 8), dtype=np.float32), 2.0, 12.0, 16.0, np.empty((1, 3, 3)),
-         np.empty((1, 3)))
+    _fly(0.5, 0.0, 0.0, 0.0, 0, one, one, np.zeros(3), np.ones((1, 8), dtype=np.float32), 2.0, 12.0, 16.0,
+         np.empty((1, 3, 3)), np.empty((1, 3)))
+    _pose_span(np.zeros((1, 3, 3)), one, 0, one, one, one, np.ones(1), np.zeros(3), 1e-12, True, np.empty((3, 1)),
+               np.empty((3, 1)), np.empty((1, 3)), np.empty(1), np.empty((1, 12), dtype=np.float32))
     _machine(0.5, idx, one, np.zeros(1), one, one, np.zeros(1), np.zeros(1), np.empty((1, 3, 3)), np.empty((1, 3)))
     _pose(np.zeros((1, 3, 3)), one, idx, idx, one, one, one, np.ones(1), np.zeros(3), 1e-12, True, np.empty((3, 1)),
           np.empty((3, 1)), np.empty((1, 3)), np.empty(1), np.empty((1, 12), dtype=np.float32), 0)

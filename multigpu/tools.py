@@ -120,6 +120,15 @@ def scene_info(a) -> int:
         if a.get("mask") or a.get("blend_drawn_opaque"):
             print(f"alpha      MASK: {a['mask']} parts, {a['masked_faces']} faces below the cutoff left out; "
                   f"BLEND: {a['blend_drawn_opaque']} parts drawn opaque")
+    sim = scene.meta.get("simulation")
+    if sim:  # a simulation's fields (``scene/simulation.py``) and what colours the surface
+        for f in sim["fields"]:
+            lo, hi = f["range"]
+            parts = f"{f['components']} components, magnitude" if f["components"] > 1 else "1 component"
+            print(f"field      {f['name']}: per {f['where']}, {parts} {lo:.6g} .. {hi:.6g}")
+        cb = sim.get("color_by")
+        print(f"colour by  {cb['field']} (per {cb['where']}), {cb['colormap']} over {cb['range'][0]:.6g} .. "
+              f"{cb['range'][1]:.6g}" if cb else "colour by  nothing (--color-by FIELD colours the surface)")
     per_tri = scene.nbytes / max(scene.n_triangles, 1)
     lods = scene.meta.get("lods")
     if lods:

@@ -273,12 +273,13 @@ class Posed:
         """Objects lo:hi (bodies of their own: ``spanned``) moved by their maps ``A``, ``b``
         (``Motion.at_span``'s): the arrays ``place`` writes, a span of them (``rows``: this span's,
         from row 0)."""
-        c0, h0, s0, r0 = self._rest(slice(lo, hi))
-        if self.compiled:
+        if self.compiled:  # the rest bounds made in the kernel: no temporaries a span
+            bmin, bmax, centers, radii = self.rest
             A, b = np.ascontiguousarray(A, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)
-            kernel._pose(A, b, np.arange(hi - lo), np.arange(lo, hi), c0, h0, s0, r0, self.origin, ORTHOGONAL,
-                         self.spheres, self.center, self.half, self.centers, self.radii, self.rows, lo)
+            kernel._pose_span(A, b, lo, bmin, bmax, centers, radii, self.origin, ORTHOGONAL, self.spheres,
+                              self.center, self.half, self.centers, self.radii, self.rows)
             return self
+        c0, h0, s0, r0 = self._rest(slice(lo, hi))
         self._put(slice(lo, hi), A, b, c0, h0, s0, r0, slice(0, hi - lo))
         return self
 

@@ -63,4 +63,28 @@ def _pose(A, b, body, objects, c0, h0, s0, r0, origin, orthogonal, spheres, cent
             radii[o] = r0[j] * _stretch(A, k, orthogonal)
 
 
-compile_all(globals(), ("_rotations", "_stretch", "_boxes", "_pose"))
+def _pose_span(A, b, lo, bmin, bmax, centers0, radii0, origin, orthogonal, spheres, center, half, centers, radii,
+               rows):
+    """Objects lo:lo + len(A), each its own body (``motion.Posed.place_span``): ``_pose`` with the
+    rest bounds made here from the scene's (``motion.Posed._rest``'s arithmetic), rows from 0."""
+    for j in range(A.shape[0]):
+        o = lo + j
+        cx, cy, cz = ((bmin[o, 0] + bmax[o, 0]) * 0.5 - origin[0], (bmin[o, 1] + bmax[o, 1]) * 0.5 - origin[1],
+                      (bmin[o, 2] + bmax[o, 2]) * 0.5 - origin[2])
+        hx, hy, hz = (bmax[o, 0] - bmin[o, 0]) * 0.5, (bmax[o, 1] - bmin[o, 1]) * 0.5, (bmax[o, 2] - bmin[o, 2]) * 0.5
+        for i in range(3):
+            c = A[j, i, 0] * cx + A[j, i, 1] * cy + A[j, i, 2] * cz + b[j, i]
+            center[i, o] = c + origin[i]
+            half[i, o] = abs(A[j, i, 0]) * hx + abs(A[j, i, 1]) * hy + abs(A[j, i, 2]) * hz
+            if spheres:
+                sx, sy, sz = centers0[o, 0] - origin[0], centers0[o, 1] - origin[1], centers0[o, 2] - origin[2]
+                centers[o, i] = A[j, i, 0] * sx + A[j, i, 1] * sy + A[j, i, 2] * sz + b[j, i] + origin[i]
+            rows[j, 4 * i] = A[j, i, 0]
+            rows[j, 4 * i + 1] = A[j, i, 1]
+            rows[j, 4 * i + 2] = A[j, i, 2]
+            rows[j, 4 * i + 3] = b[j, i]
+        if spheres:
+            radii[o] = radii0[o] * _stretch(A, j, orthogonal)
+
+
+compile_all(globals(), ("_rotations", "_stretch", "_boxes", "_pose", "_pose_span"))

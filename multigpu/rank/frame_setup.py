@@ -129,6 +129,7 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
         if rank == 0:
             setup.record = RunRecord(out, comm.Get_size(), n_frames, doc, planner.report, cfg.video, cfg.progress,
                                      cfg.overlay, cfg.record, cfg.resume_at)
+            setup.record.legend(scene.meta)  # a simulation's colour bar, on the annotated mosaics
     except BaseException:
         setup.release(collective=False)
         raise

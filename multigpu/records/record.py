@@ -19,6 +19,7 @@ import numpy as np
 from multigpu.config import SUMMARY_EVERY
 from multigpu.core import jit
 from multigpu.decompositions import REGISTRY
+from multigpu.display.colorbar import stamp
 from multigpu.display.hud import overlay
 from multigpu.errors import WriteFailed
 from multigpu.records.mosaic import save_png
@@ -98,6 +99,7 @@ class RunRecord:
         self.cameras: list = []  # (13,) position, target, up, fov, near, far, scene time of the frames not yet written
         self.failed: WriteFailed | None = None  # the first output that could not be written
         self.extra: dict = {}  # figures the frame loop adds to summary.json at the end
+        self.key: np.ndarray | None = None  # a simulation's colour bar (``legend``), on the annotated mosaics
         self.done = resume_at
         self.recovery = Recovery.resumed(resume_at)  # a restarted run goes on with the same files
         if not resume_at:
@@ -154,6 +156,16 @@ class RunRecord:
             self.summary(complete=False)
             self._save_path()
 
+    def legend(self, meta: dict) -> None:
+        """The colour bar of a scene coloured by a field (``display.colorbar``), where it is one."""
+        from multigpu.display.colorbar import color_bar, legend_of
+
+        got = legend_of(meta)
+        if got is not None:
+            from multigpu.scene.simulation import lookup
+
+            self.key = color_bar(got, lookup(got["colormap"]))
+
     def image(self, f: int, img: np.ndarray, rects, mosaic: bool, eyes: list | None = None) -> None:
         """The stitched wall of frame ``f``: a mosaic PNG (and its partition overlay) when
         ``mosaic``, a video frame when recording one. A stereo wall's ``eyes`` (left, right)
@@ -168,7 +180,9 @@ class RunRecord:
                     raise WriteFailed.of(folder / name, exc) from None
                 save_png(eye, folder / name / f"frame_{f:05d}.png")
             if self.overlay:
-                save_png(overlay(img if eyes is None else eyes[0], rects), folder / f"frame_{f:05d}_partition.png")
+                marked = overlay(img if eyes is None else eyes[0], rects)
+                marked = marked if self.key is None else stamp(marked, self.key)  # a simulation's colour bar
+                save_png(marked, folder / f"frame_{f:05d}_partition.png")
         if self.video is not None:
             self.video.append(img)
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError
-from multigpu.scene import looks, textures
+from multigpu.scene import looks, simulation, textures
 from multigpu.scene.blocks import blocks, per_object
 from multigpu.scene.gltf_load import animated, joined, mesh_deltas, mesh_skins, nodes_of, skin_pack
 from multigpu.scene.gltf_load import pack as pack_morphs
@@ -25,7 +25,7 @@ from multigpu.scene.gltf_motion import check as check_animations
 from multigpu.scene.labels import face_labels
 from multigpu.scene.layout import Scene
 
-FORMATS = {".obj", ".ply", ".stl", ".off", ".gltf", ".glb"}
+FORMATS = {".obj", ".ply", ".stl", ".off", ".gltf", ".glb", *simulation.FORMATS}
 #: up axis by format convention, where the format has one (glTF: the specification)
 FORMAT_UP = {".gltf": "+y", ".glb": "+y", ".obj": "+y", ".ply": "+y", ".stl": "+z", ".off": "+z"}
 AXES = {"x": 0, "y": 1, "z": 2}
@@ -47,8 +47,10 @@ def axis_name(v) -> str:
     return ("-" if v[i] < 0 else "+") + "xyz"[i]
 
 
-def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
-    """Load a model file through trimesh into the GPU layout (one object per node or piece)."""
+def load_model(path: Path, split: str = "auto", merge_below: int = 64,
+               coloring: simulation.Coloring | None = None) -> Scene:
+    """Load a model file through trimesh (a simulation's through meshio: ``simulation.py``, coloured
+    by ``coloring``) into the GPU layout (one object per node or piece)."""
     import trimesh
 
     kind = path.suffix.lstrip(".").upper()
@@ -56,16 +58,22 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
     _check_size(path, declared)
     if path.suffix.lower() in (".gltf", ".glb"):
         check_animations(path)
-    try:
-        with np.errstate(all="ignore"):
-            loaded = trimesh.load(str(path), process=False)
-    except Exception as exc:
-        why = str(exc).splitlines()[0] if str(exc) else "corrupt file"
-        promise = (f"; the header promises {declared[0]} vertices and {declared[1]} faces: truncated or corrupt"
-                   if declared and declared[0] >= 0 else "")
-        what = f"{exc.__class__.__name__}: {why}"
-        raise InputError.of("model", f"{path}: cannot read as {kind} ({what}){promise}") from None
     warnings: list[str] = []
+    sim = None
+    if path.suffix.lower() in simulation.FORMATS:
+        coloring = coloring or simulation.Coloring()
+        loaded, sim = simulation.load(path, coloring.color_by, coloring.colormap, coloring.range)
+        warnings += sim.pop("warnings")
+    else:
+        try:
+            with np.errstate(all="ignore"):
+                loaded = trimesh.load(str(path), process=False)
+        except Exception as exc:
+            why = str(exc).splitlines()[0] if str(exc) else "corrupt file"
+            promise = (f"; the header promises {declared[0]} vertices and {declared[1]} faces: truncated or corrupt"
+                       if declared and declared[0] >= 0 else "")
+            what = f"{exc.__class__.__name__}: {why}"
+            raise InputError.of("model", f"{path}: cannot read as {kind} ({what}){promise}") from None
     nodes = morph = skin = None  # an animated glTF's node of each mesh, its morph targets' deltas, its skins
     if isinstance(loaded, trimesh.Scene):
         meshes = [g for g in loaded.dump(concatenate=False) if isinstance(g, trimesh.Trimesh)]
@@ -104,7 +112,10 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64) -> Scene:
                 texcoords, layers.pack(warnings), morph, skin)
     scene = _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings,
                          {"split": split}, look)
+    if sim is not None:
+        scene.meta["simulation"] = sim
     return animated(scene, path, None if nodes is None else nodes * scene.n_objects, "auto")
+
 
 
 def _narrow(faces: np.ndarray, n_verts: int) -> np.ndarray:

@@ -24,6 +24,7 @@ Loaded and generated scenes are cached as ``.npz`` in ``$MULTIGPU_CACHE`` (defau
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import re
 import time
@@ -31,11 +32,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from multigpu.errors import InputError, check_file
-from multigpu.options import check, option
+from multigpu.options import check, option, register
 from multigpu.scene import lod as scene_lod
 from multigpu.scene import parts as scene_parts
 from multigpu.scene.files import FORMATS, axis_name, axis_vector, load_model
 from multigpu.scene.layout import FORMAT_VERSION, Scene
+from multigpu.scene.simulation import FORMATS as SIMULATION
+from multigpu.scene.simulation import Coloring
 from multigpu.scene.textures import image_files
 
 __all__ = ["BUILTIN", "FORMATS", "SceneSpec", "axis_name", "axis_vector", "cache_dir", "load_model", "load_scene"]
@@ -52,6 +55,17 @@ def read_cluster(text: str) -> int | None:
         raise InputError(f"must be 'auto' or a number of triangles (0: never), got '{text}'") from None
 
 
+def read_range(text: str) -> tuple[float, float]:
+    """``--range MIN,MAX``: two finite numbers, the first below the second."""
+    try:
+        lo, hi = (float(v) for v in str(text).split(","))
+    except ValueError:
+        raise InputError(f"must be MIN,MAX (two numbers), got '{text}'") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise InputError(f"must be two finite numbers, MIN below MAX, got '{text}'")
+    return lo, hi
+
+
 @dataclass(frozen=True)
 class SceneSpec:
     """What to load: a built-in scene by name or a model file, and how to split it; each
@@ -59,7 +73,8 @@ class SceneSpec:
 
     scene: str = option("plant", group="scene", metavar=lambda: "|".join(BUILTIN), help="a built-in scene")
     model: str | None = option(None, group="scene", metavar="FILE",
-                               help="model file (OBJ, PLY, STL, OFF, glTF/GLB) instead of --scene")
+                               help="model file (OBJ, PLY, STL, OFF, glTF/GLB; a simulation's VTU, VTK, XDMF, "
+                                    "Exodus, Gmsh, ... through meshio) instead of --scene")
     split: str = option("auto", group="scene", metavar="auto|components|grid:N",
                         valid=lambda v: re.fullmatch(r"auto|components|grid:[1-9][0-9]*", v) is not None,
                         must="must be 'auto', 'components' or 'grid:N' with N >= 1", help=(
@@ -83,6 +98,15 @@ class SceneSpec:
                             valid=lambda v: v is None or re.fullmatch(r"[+-]?[xyz]", v) is not None,
                             must="must be one of x, y, z, -x, -y, -z",
                             help="up axis of the model (default: the format's convention, see scene info)")
+    # -- a simulation's colours (``scene/simulation.py``): a part of the cached scene
+    color_by: str | None = option(None, group="scene", metavar="FIELD[:magnitude|:x|:y|:z|:K]", help=(
+        "colour a simulation's surface by this point or cell field (a vector's magnitude, or a component); "
+        "scene info lists the fields"))
+    colormap: str = option("viridis", group="scene", metavar="NAME", help="the colour map of --color-by "
+                                                                           "(matplotlib's names)")
+    color_range: tuple[float, float] | None = option(None, group="scene", metavar="MIN,MAX", flag="--range",
+                                                     read=read_range, help=(
+        "the --color-by values at the colour map's ends (default: the field's own range)"))
     lods: bool = True  # build (and cache, and hold) levels of detail: only where the run can draw them
     # -- what moves (``scene/moves.py``): no part of the cached scene, only of its motion
     moving: float = option(0.0, group="scene", metavar="FRACTION", type=float,
@@ -102,6 +126,9 @@ class SceneSpec:
         check(self)
         if self.ranks < 1:
             raise InputError(f"ranks must be >= 1, got {self.ranks}")
+
+
+register(SceneSpec)
 
 
 def cache_dir() -> Path:
@@ -126,10 +153,12 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
             raise InputError.of("model", f"{src}: unsupported extension '{src.suffix}' (use {known})")
         st = src.stat()
         images = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in image_files(src) if p.is_file())
+        coloring = Coloring(spec.color_by, spec.colormap, spec.color_range)
         key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, spec.split, spec.merge_below, cluster, wall, images,
-                   *(() if spec.lods else ("no levels of detail",)))
+                   *(() if spec.lods else ("no levels of detail",)),
+                   *(() if src.suffix.lower() not in SIMULATION else (coloring,)))
         name = f"{src.stem}-{key}.npz"
-        make = lambda: load_model(src, spec.split, spec.merge_below)
+        make = lambda: load_model(src, spec.split, spec.merge_below, coloring)
     else:
         key = _key(spec.scene, spec.triangles, spec.copies, spec.seed, cluster, wall,
                    *(() if spec.lods else ("no levels of detail",)))

@@ -129,15 +129,15 @@ class Swarm:
 
     def at_span(self, t: float, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
         """Bodies lo:hi's maps at ``t`` (new arrays of hi - lo)."""
-        home, p = self.home(lo, hi), self.params[lo:hi]
-        if self.compiled:
+        if self.compiled:  # homes made in the kernel from the rest boxes: no temporaries a span
             from multigpu.scene.swarm_kernel import _fly
 
             A, b = np.empty((hi - lo, 3, 3)), np.empty((hi - lo, 3))
             gx, gy, gz = (float(v) for v in self.gather_point(t))
-            _fly(float(t), gx, gy, gz, np.ascontiguousarray(home), p, GATHER_S, SCATTER_S, CYCLE_S, A, b)
+            bmin, bmax, origin = (*self.rest, self.origin) if self.own else (self._home, self._home, np.zeros(3))
+            _fly(float(t), gx, gy, gz, lo, bmin, bmax, origin, self.params, GATHER_S, SCATTER_S, CYCLE_S, A, b)
             return A, b
-        p = p.astype(np.float64)
+        home, p = self.home(lo, hi), self.params[lo:hi].astype(np.float64)
         x, y, z = p[:, 4], p[:, 5], p[:, 6]
         norm = np.sqrt(x * x + y * y + z * z)
         axis = np.c_[x / norm, y / norm, z / norm]

@@ -1,0 +1,149 @@
+"""MPCDI files (2D media): a rig's outputs written by ``warp make`` read back to the same
+projection; a file laid out by the specification as another tool writes it; bad files refused
+in one line naming the file and what is wrong."""
+
+import io
+import struct
+import zipfile
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from multigpu.core.warpblend import decode, output, upsample
+from multigpu.errors import InputError
+from multigpu.warp import mpcdi, pfm
+from multigpu.warp.make import content_coords, outputs
+from multigpu.warp.rig import flat_rig
+
+
+@pytest.mark.parametrize("kind", ["flat", "cylinder"])
+def test_a_rig_written_and_read_back_projects_as_the_rig(tmp_path, kind):
+    rig = flat_rig(3, 0.18, kind=kind)
+    made = outputs(rig)
+    path = mpcdi.write(tmp_path / "wall.mpcdi", (1600, 600), made)
+    size, got = mpcdi.read(path)
+    assert size == (1600, 600) and [o.name for o in got] == ["p1", "p2", "p3"]
+    for a, b in zip(made, got):
+        assert b.size == a.size and b.area == pytest.approx(a.area) and not b.notes
+        assert np.allclose(b.warp, a.warp, atol=1e-6, equal_nan=True)
+        assert np.abs(b.alpha - a.alpha).max() < 2e-4 and np.abs(b.beta - a.beta).max() < 2e-5
+    # the wall's outputs from the file: a white field projects within 2 % everywhere
+    white = np.full((300, 800, 3), 255, np.uint8)
+    pictures = [output(white, content_coords(o, upsample(o.warp, o.size)), o.alpha, o.beta) for o in got]
+    s, t = np.meshgrid(np.linspace(0.01, 0.99, 300), np.linspace(0.02, 0.98, 120))
+    light = rig.light(pictures, s, t)[..., 0]
+    assert np.abs(light / (rig.most() * rig.black + 1 - rig.black) - 1).max() <= 0.02
+
+
+def big_endian_pfm(grid: np.ndarray) -> bytes:
+    h, w, _ = grid.shape
+    return f"PF\n{w} {h}\n1.0\n".encode() + np.ascontiguousarray(grid[::-1]).astype(">f4").tobytes()
+
+
+def png(values: np.ndarray) -> bytes:
+    out = io.BytesIO()
+    Image.fromarray(values).save(out, format="PNG")
+    return out.getvalue()
+
+
+SPEC_XML = """<?xml version="1.0" encoding="UTF-8"?>
+<MPCDI profile="2d" geometry="1" color="1" version="2.0">
+  <display>
+    <buffer id="Main" xResolution="1280" yResolution="480">
+      <region id="left" x="0.0" y="0.0" xSize="0.55" ySize="1.0" xResolution="64" yResolution="48"/>
+      <region id="right" x="0.45" y="0.0" xSize="0.55" ySize="1.0" xResolution="64" yResolution="48"/>
+    </buffer>
+  </display>
+  <files>
+    <fileset region="left">
+      <geometryWarpFile>
+        <path>left/warp.pfm</path>
+        <interpolation>linear</interpolation>
+        <originOf2DData>topLeft</originOf2DData>
+      </geometryWarpFile>
+      <alphaMap>
+        <path>left/alpha.png</path>
+        <componentDepth>1</componentDepth>
+        <bitDepth>8</bitDepth>
+        <gammaEmbedded>2.2</gammaEmbedded>
+      </alphaMap>
+    </fileset>
+    <fileset region="right">
+      <geometryWarpFile>
+        <path>right/warp.pfm</path>
+        <interpolation>linear</interpolation>
+      </geometryWarpFile>
+    </fileset>
+  </files>
+</MPCDI>
+"""
+
+
+def spec_file(tmp_path, xml: str = SPEC_XML, members: dict | None = None):
+    """An MPCDI file laid out as the specification says, with another tool's choices: a
+    big-endian warp of 5 x 4 samples, an 8-bit alpha map at half the output's size."""
+    grid = np.zeros((4, 5, 3), np.float32)
+    grid[..., 0], grid[..., 1] = np.linspace(0, 1, 5)[None, :], np.linspace(0, 1, 4)[:, None]
+    grid[0, 0, :2] = np.nan  # the corner shows nothing
+    alpha = np.tile(np.linspace(255, 0, 32).round().astype(np.uint8), (24, 1))
+    files = {"mpcdi.xml": xml, "left/warp.pfm": big_endian_pfm(grid), "left/alpha.png": png(alpha),
+             "right/warp.pfm": pfm.write(grid), **(members or {})}
+    path = tmp_path / "other.mpcdi"
+    with zipfile.ZipFile(path, "w") as z:
+        for name, data in files.items():
+            if data is not None:
+                z.writestr(name, data)
+    return path
+
+
+def test_a_file_another_tool_wrote_is_read(tmp_path):
+    size, (left, right) = mpcdi.read(spec_file(tmp_path))
+    assert size == (1280, 480) and (left.name, right.name) == ("left", "right")
+    assert left.size == (64, 48) and left.area == (0.0, 0.0, 0.55, 1.0) and right.area[0] == 0.45
+    assert left.warp.shape == (4, 5, 2) and np.isnan(left.warp[0, 0]).all()
+    assert left.warp[3, 4] == pytest.approx([1.0, 1.0]) and left.warp[1, 2] == pytest.approx([0.5, 1 / 3])
+    # the alpha map: resampled from 32 x 24 to the output's 64 x 48 (said so), gamma taken off
+    assert left.alpha.shape == (48, 64) and left.notes == [
+        "alphaMap left/alpha.png of 32 x 24 resampled to the output's 64 x 48"]
+    assert left.alpha[0, 0] == pytest.approx(1.0) and left.alpha[0, -1] == pytest.approx(0.0)
+    assert left.alpha[10, 31] == pytest.approx(decode(np.linspace(255, 0, 32).round()[15:17]).mean(), abs=0.02)
+    assert right.alpha is None and right.beta is None
+
+
+@pytest.mark.parametrize("change,message", [
+    ({"xml": SPEC_XML.replace('profile="2d"', 'profile="3d"')}, r"profile '3d' is not supported"),
+    ({"xml": SPEC_XML.replace('<fileset region="right">', '<fileset region="middle">')},
+     r"a fileset names region 'middle', which the buffer does not have \(its regions: left, right\)"),
+    ({"xml": SPEC_XML.replace('<region id="right"', '<region id="right" ').replace(
+        '<fileset region="right">', '<fileset region="left">')}, r"region 'right' has no fileset"),
+    ({"members": {"left/warp.pfm": b"Pf\n5 4\n-1.0\n" + bytes(80)}}, r"warp left/warp.pfm has 1 channel"),
+    ({"members": {"left/warp.pfm": pfm.write(np.zeros((1, 1, 3)))}}, r"is 1 x 1 samples for an output of 64 x 48"),
+    ({"members": {"left/warp.pfm": pfm.write(np.full((4, 5, 3), np.nan))}}, r"every value of the PFM is NaN"),
+    ({"members": {"left/warp.pfm": pfm.write(np.full((4, 5, 3), 40.0))}}, r"maps outside the content"),
+    ({"members": {"left/warp.pfm": pfm.write(np.zeros((4, 5, 3)))[:60]}}, r"a truncated PFM"),
+    ({"members": {"left/warp.pfm": b"P6\n5 4\n255\n" + bytes(60)}}, r"not a PFM file \(it starts with b'P6'"),
+    ({"members": {"left/alpha.png": None}}, r"region 'left': its alphaMap 'left/alpha.png' is not in the file"),
+])
+def test_bad_files_are_refused_in_one_line(tmp_path, change, message):
+    path = spec_file(tmp_path, change.get("xml", SPEC_XML), change.get("members"))
+    with pytest.raises(InputError, match=message) as got:
+        mpcdi.read(path)
+    assert str(got.value).startswith(str(path)) and "\n" not in str(got.value)
+
+
+def test_a_truncated_zip_is_refused_in_one_line(tmp_path):
+    whole = spec_file(tmp_path).read_bytes()
+    cut = tmp_path / "cut.mpcdi"
+    cut.write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(InputError, match=r"cut.mpcdi: not a complete MPCDI \(ZIP\) file"):
+        mpcdi.read(cut)
+
+
+def test_pfm_round_trips_either_byte_order():
+    img = np.random.default_rng(3).normal(size=(3, 4, 3)).astype(np.float32)
+    assert np.array_equal(pfm.read(pfm.write(img), "a.pfm"), img)
+    assert np.array_equal(pfm.read(big_endian_pfm(img), "b.pfm"), img)
+    one = pfm.read(pfm.write(img[..., 0]), "c.pfm")
+    assert one.shape == (3, 4, 1) and np.array_equal(one[..., 0], img[..., 0])
+    assert struct.unpack("<f", pfm.write(img)[-4:])[0] == img[0, -1, 2]  # the top row last
