@@ -80,6 +80,17 @@ COMMANDS: tuple[Command, ...] = (
     Command(("wall", "test"), "show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)",
             "multigpu.tools:wall_test",
             (arg("file", help="wall file (JSON)"), frames("stop after N frames (default: at Escape)"))),
+    Command(("warp", "make"), "write an MPCDI file (2D media) for a described projector rig: projectors side by "
+            "side on a flat or cylindrical screen, their warps and blends", "multigpu.tools:warp_make",
+            (arg("out", help="MPCDI file to write (.mpcdi)"),
+             arg("--screen", default="flat", choices=("flat", "cylinder"), help="flat | cylinder (default flat)"),
+             arg("--projectors", type=int, default=3, help="projectors side by side (default 3)"),
+             arg("--overlap", type=float, default=0.18, help="neighbours overlap by this share of an image's "
+                                                             "width (default 0.18)"),
+             arg("--size", default="1920x1080", help="each projector's pixels WxH (default 1920x1080)")),
+            group_help={"warp": "projector warp and blend tools"}),
+    Command(("warp", "check"), "read an MPCDI file (2D media) and print its regions, warps and blend maps",
+            "multigpu.tools:warp_check", (arg("file", help="MPCDI file (.mpcdi)"),)),
     Command(("monitor-view",), "the operator's view on a PC of its own (started by the launcher from the wall "
             "file's monitor.host)", "multigpu.tools:monitor_view",
             (arg("--display", help="X display (default $DISPLAY)"),

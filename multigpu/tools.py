@@ -177,3 +177,50 @@ def tree(a) -> int:
         print(f"GPU{label} tile{t.tile_of(label)} depth {t.depth(label)}: {info}")
     return 0
 
+
+
+def warp_make(a) -> int:
+    from pathlib import Path
+
+    from multigpu.warp import make, mpcdi
+    from multigpu.warp.rig import flat_rig
+
+    if not 2 <= a.projectors <= 16:
+        raise InputError.of("projectors", f"must be 2..16, got {a.projectors}")
+    if not 0.0 < a.overlap < 0.5:
+        raise InputError.of("overlap", f"must be above 0 and below 0.5, got {a.overlap}")
+    try:
+        w, h = (int(v) for v in a.size.lower().split("x"))
+    except ValueError:
+        raise InputError.of("size", f"must be WxH in pixels, got '{a.size}'") from None
+    if not (16 <= w <= 16384 and 16 <= h <= 16384):
+        raise InputError.of("size", f"must be 16..16384 pixels each way, got {w}x{h}")
+    rig = flat_rig(a.projectors, a.overlap, (w, h), kind=a.screen)
+    out = mpcdi.write(Path(a.out), make.buffer_size(rig), make.outputs(rig))
+    print(f"wrote {out}: {a.projectors} projectors of {w}x{h} on a {a.screen} screen, {a.overlap:.0%} overlap")
+    return 0
+
+
+def warp_check(a) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from multigpu.errors import check_file
+    from multigpu.warp import mpcdi
+
+    size, outs = mpcdi.read(check_file(a.file, None, "MPCDI file"))
+    print(f"buffer     {size[0]}x{size[1]}, {len(outs)} regions ({Path(a.file).name})")
+    for o in outs:
+        x, y, w, h = o.area
+        finite = o.warp[np.isfinite(o.warp).all(axis=-1)]
+        lo, hi = (finite.min(axis=0), finite.max(axis=0)) if len(finite) else ((np.nan,) * 2, (np.nan,) * 2)
+        print(f"region     {o.name}: {o.size[0]}x{o.size[1]} pixels at x {x:.4f} y {y:.4f}, {w:.4f} x {h:.4f} of "
+              f"the buffer")
+        print(f"  warp     {o.warp.shape[1]}x{o.warp.shape[0]} samples, x {lo[0]:.3f}..{hi[0]:.3f}, "
+              f"y {lo[1]:.3f}..{hi[1]:.3f}, {100 * (1 - len(finite) / max(o.warp[..., 0].size, 1)):.1f} % NaN")
+        for name, m in (("alpha", o.alpha), ("beta", o.beta)):
+            print(f"  {name:<8} " + ("none" if m is None else f"{m.min():.4f}..{m.max():.4f} (linear)"))
+        for note in o.notes:
+            print(f"  note     {note}")
+    return 0

@@ -147,3 +147,23 @@ def test_pfm_round_trips_either_byte_order():
     one = pfm.read(pfm.write(img[..., 0]), "c.pfm")
     assert one.shape == (3, 4, 1) and np.array_equal(one[..., 0], img[..., 0])
     assert struct.unpack("<f", pfm.write(img)[-4:])[0] == img[0, -1, 2]  # the top row last
+
+
+def test_warp_make_writes_a_file_warp_check_reads(tmp_path, capsys):
+    from multigpu.cli import main
+
+    out = tmp_path / "dome.mpcdi"
+    assert main(["warp", "make", str(out), "--screen", "cylinder", "--projectors", "2", "--size", "160x120"]) == 0
+    size, got = mpcdi.read(out)
+    assert [o.name for o in got] == ["p1", "p2"] and got[0].size == (160, 120) and size[1] < 120
+    capsys.readouterr()
+    assert main(["warp", "check", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith(f"buffer     {size[0]}x{size[1]}, 2 regions") and sum("alpha" in s for s in lines) == 2
+    for bad, flag in ((["--overlap", "0.6"], "--overlap"), (["--size", "12"], "--size"),
+                      (["--projectors", "1"], "--projectors")):
+        assert main(["warp", "make", str(tmp_path / "x.mpcdi"), *bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and flag in err[0]
+    assert not (tmp_path / "x.mpcdi").exists()
+    assert main(["warp", "check", str(tmp_path / "x.mpcdi")]) == 2

@@ -45,3 +45,14 @@ def content_coords(o: Output, warp: np.ndarray) -> np.ndarray:
     """A region's warp coordinates (..., 2) as coordinates across the whole buffer."""
     x, y, w, h = o.area
     return np.stack([x + warp[..., 0] * w, y + warp[..., 1] * h], axis=-1)
+
+
+def buffer_size(rig: Rig) -> tuple[int, int]:
+    """(w, h) of a buffer (the wall's canvas) that holds the screen's content at about the
+    projectors' own pixel density."""
+    exact = rig.warp(0)
+    on = ((exact >= 0) & (exact <= 1)).all(axis=-1)
+    st = exact[on]
+    share = st.max(axis=0) - st.min(axis=0)  # of the screen's content one projector shows
+    cols, rows = int(on.any(axis=0).sum()), int(on.any(axis=1).sum())  # its pixels on the screen
+    return int(round(cols / share[0])), int(round(rows / share[1]))
