@@ -230,6 +230,7 @@ class WalkConfig:
     displays: tuple = ()  # per rank label: X display name, or None for $DISPLAY (wall file)
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place (wall file)
     right_eye: tuple = ()  # per rank label: a passive tile's right-eye window position, or None (wall file)
+    mpcdi: str | None = None  # the wall file's MPCDI file: each projector output's picture in the mosaics
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     gpus: tuple = ()  # per rank label: its EGL device (wall file "gpu"), or None for --device / the default
     screen_m: tuple[float, float] | None = option(

@@ -141,7 +141,8 @@ def walk_config(a):
                       fullscreen=tuple(r in wall.fullscreen for r in ranks) if wall.fullscreen else (),
                       gpus=tuple(wall.gpus.get(r) for r in ranks) if wall.gpus else (),
                       corners=tuple(wall.corners.get(r) for r in ranks) if wall.corners else (),
-                      right_eye=tuple(wall.right_eye.get(r) for r in ranks) if wall.right_eye else ())
+                      right_eye=tuple(wall.right_eye.get(r) for r in ranks) if wall.right_eye else (),
+                      mpcdi=wall.mpcdi)
 
 
 def screen_of_bezel(wall, grid, tile, mullion) -> tuple[float, float] | None:

@@ -56,6 +56,7 @@ class Wall:
     stereo: dict = field(default_factory=dict)  # the file's stereo and viewer (--stereo, --eye-separation, ...)
     corners: dict[int, tuple] = field(default_factory=dict)  # rank -> its display's room corners (metres)
     right_eye: dict[int, tuple[int, int]] = field(default_factory=dict)  # rank -> its passive right-eye output's place
+    mpcdi: str | None = None  # the projector outputs' warps and blends (an MPCDI file, checked when read)
 
 
 def rectangle_problem(corners) -> str | None:
@@ -172,7 +173,24 @@ def load_wall(path: str) -> Wall:
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
                 on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]),
                 None if "screen_m" not in doc else tuple(float(v) for v in doc["screen_m"]), doc.get("stereo", {}),
-                corners, right_eye)
+                corners, right_eye, _mpcdi(doc, path, where))
+
+
+def _mpcdi(doc: dict, path: str, where: str) -> str | None:
+    """The wall file's MPCDI file (relative to the wall file), read once here: a bad one ends the
+    job at the door, in one line."""
+    if "mpcdi" not in doc:
+        return None
+    from multigpu.warp import mpcdi
+
+    file = Path(path).parent / doc["mpcdi"]
+    if not file.is_file():
+        raise InputError(f"{where}: mpcdi: {file}: no such file")
+    try:
+        mpcdi.read(file)
+    except InputError as exc:
+        raise InputError(f"{where}: mpcdi: {exc}") from None
+    return str(file)
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:
@@ -377,6 +395,12 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         where = (f"on host {on['host']}, display {on.get('display', '$DISPLAY')} (reached at "
                  f"{on.get('address', on['host'])})" if "host" in on else "on rank 0's display")
         lines.append(f"--monitor: the operator's view at {wall.monitor[0]},{wall.monitor[1]} {where}")
+    if wall.mpcdi is not None:
+        from multigpu.warp import mpcdi
+
+        size, outs = mpcdi.read(Path(wall.mpcdi))
+        lines.append(f"mpcdi {wall.mpcdi}: {len(outs)} projector outputs ({', '.join(o.name for o in outs)}) on a "
+                     f"{size[0]}x{size[1]} buffer: each one's picture in the mosaics (mosaic/outputs/NAME/)")
     return "\n".join(lines)
 
 

@@ -3,6 +3,7 @@ projection; a file laid out by the specification as another tool writes it; bad 
 in one line naming the file and what is wrong."""
 
 import io
+import re
 import struct
 import zipfile
 
@@ -167,3 +168,22 @@ def test_warp_make_writes_a_file_warp_check_reads(tmp_path, capsys):
         assert len(err) == 1 and flag in err[0]
     assert not (tmp_path / "x.mpcdi").exists()
     assert main(["warp", "check", str(tmp_path / "x.mpcdi")]) == 2
+
+
+def test_a_wall_file_names_its_mpcdi_file_and_a_bad_one_ends_it_at_the_door(tmp_path, capsys):
+    import json
+
+    from multigpu.cli import main
+    from multigpu.wall import load_wall
+
+    mpcdi.write(tmp_path / "rig.mpcdi", (400, 100), outputs(flat_rig(2, 0.2, size=(64, 48))))
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"grid": "1x2", "tile": "200x100", "mpcdi": "rig.mpcdi"}))
+    assert load_wall(str(wall)).mpcdi == str(tmp_path / "rig.mpcdi")
+    assert main(["wall", "check", str(wall), "--offline"]) == 0
+    assert "2 projector outputs (p1, p2) on a 400x100 buffer" in capsys.readouterr().out
+    (tmp_path / "bad.mpcdi").write_bytes(b"PK\x03\x04 not a zip")
+    for name, why in (("bad.mpcdi", "not a complete MPCDI (ZIP) file"), ("none.mpcdi", "no such file")):
+        wall.write_text(json.dumps({"grid": "1x2", "tile": "200x100", "mpcdi": name}))
+        with pytest.raises(InputError, match=re.escape(f"--wall {wall}: mpcdi: ") + f".*{re.escape(f'{name}: {why}')}"):
+            load_wall(str(wall))

@@ -130,6 +130,10 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
             setup.record = RunRecord(out, comm.Get_size(), n_frames, doc, planner.report, cfg.video, cfg.progress,
                                      cfg.overlay, cfg.record, cfg.resume_at)
             setup.record.legend(scene.meta)  # a simulation's colour bar, on the annotated mosaics
+            if cfg.mpcdi is not None:  # a projector wall's outputs, each one's picture beside the mosaics
+                from multigpu.records.outputs import OutputPictures
+
+                setup.record.outputs = OutputPictures(cfg.mpcdi)
     except BaseException:
         setup.release(collective=False)
         raise

@@ -100,6 +100,7 @@ class RunRecord:
         self.failed: WriteFailed | None = None  # the first output that could not be written
         self.extra: dict = {}  # figures the frame loop adds to summary.json at the end
         self.key: np.ndarray | None = None  # a simulation's colour bar (``legend``), on the annotated mosaics
+        self.outputs = None  # a projector wall's outputs (``records.outputs``): their pictures beside the mosaics
         self.done = resume_at
         self.recovery = Recovery.resumed(resume_at)  # a restarted run goes on with the same files
         if not resume_at:
@@ -173,6 +174,8 @@ class RunRecord:
         if mosaic:
             folder = self.out.path / "mosaic"
             save_png(img, folder / f"frame_{f:05d}.png")
+            if self.outputs is not None:  # each projector's picture, warped and blended
+                self.outputs.write(folder, f, img)
             for name, eye in zip(("left", "right"), eyes or ()):  # eyes
                 try:
                     (folder / name).mkdir(exist_ok=True)
