@@ -141,6 +141,11 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"multigpu: error: {exc}", file=sys.stderr)
         return exits.BAD_INPUT
+    except BrokenPipeError:  # its reader went away (``| head``): the rest is not wanted, and no traceback
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 def _experiment(a) -> int:
