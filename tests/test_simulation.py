@@ -163,3 +163,22 @@ def test_the_colour_bar_shows_the_map_from_end_to_end_in_a_corner():
     img = np.zeros((40, 500, 3), dtype=np.uint8)
     out = stamp(img, bar)  # a picture lower than the bar: its bottom rows
     assert np.array_equal(out[:, :bar.shape[1]], bar[-40:]) and not out[:, bar.shape[1]:].any() and not img.any()
+
+
+def test_each_tile_stamps_its_part_of_the_colour_bar_and_the_wall_shows_it_whole():
+    from multigpu.core.canvas import Canvas
+    from multigpu.display.colorbar import MARGIN, TileKey, color_bar
+    from multigpu.records.mosaic import stitch
+
+    legend = {"field": "p", "where": "cell", "range": [1.0, 2.0], "colormap": "viridis"}
+    bar = color_bar(legend, lookup("viridis"))
+    canvas = Canvas((2, 2), (100, 40), (0, 0))  # the bar spans all four tiles
+    tiles = np.zeros((4, 40, 100, 3), np.uint8)
+    for k, rect in enumerate(canvas.tiles()):
+        TileKey(bar, rect).stamp(tiles[k])
+    img = stitch(tiles, canvas.tiles(), canvas.size)
+    H = img.shape[0]
+    h, w = min(bar.shape[0], H - MARGIN), bar.shape[1]
+    assert np.array_equal(img[H - MARGIN - h:H - MARGIN, MARGIN:MARGIN + w], bar[bar.shape[0] - h:])
+    assert not img[:, MARGIN + w:].any() and not img[H - MARGIN:].any()
+    assert TileKey.of({}, (0, 0, 10, 10)) is None

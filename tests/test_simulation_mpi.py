@@ -41,3 +41,18 @@ def test_a_coloured_simulation_composes_as_one_rank_renders_it(tmp_path, model, 
     colours = {tuple(p) for p in ref[0].reshape(-1, 3)}
     assert len(colours) > 20  # the field's colours, shaded
     assert np.ptp(ref[0].reshape(-1, 3).astype(int), axis=0).max() > 100
+
+
+def test_the_colour_bar_on_the_wall_composes_as_one_rank_shows_it(tmp_path, model):
+    from multigpu.display.colorbar import MARGIN, color_bar
+    from multigpu.scene.simulation import lookup
+
+    flags = ["--color-by", "pressure", "--color-bar"]
+    ref = walk(tmp_path / "ref", model, (1, 1), (240, 160), flags)
+    got = walk(tmp_path / "wall", model, (2, 2), (120, 80), flags)
+    for f, (g, w) in enumerate(zip(got, ref)):
+        assert (g == w).all(), f"frame {f}: {(g != w).any(axis=2).sum()} pixels differ"
+    legend = {"field": "pressure", "where": "cell", "range": [0.0, 511.0], "colormap": "viridis"}
+    bar = color_bar(legend, lookup("viridis"))
+    h, w = bar.shape[:2]
+    assert np.array_equal(ref[0][160 - MARGIN - h:160 - MARGIN, MARGIN:MARGIN + w], bar)

@@ -18,6 +18,7 @@ from multigpu.core.inflight import read_lag, step
 from multigpu.core.quality import Fidelity
 from multigpu.core.resample import grown
 from multigpu.core.work import transfers
+from multigpu.display.colorbar import TileKey
 from multigpu.errors import WriteFailed
 from multigpu.rank.drawing import Drawing
 from multigpu.rank.exchange import agree, broadcast_partition
@@ -59,6 +60,7 @@ class Frames:
         self.balance_ids = [BALANCE_NAMES.index(b) for b in self.planner.balances]  # the CSV's balance column
         self.relay = self._relay if cfg.partition == "broadcast" and self.K > 1 else None  # screen only (door)
         self.back = np.zeros((th, tw, 3), dtype=np.uint8)  # composed tile
+        self.key = TileKey.of(scene.meta, self.tiles[self.rank]) if cfg.scene.color_bar else None  # --color-bar
         self.zback = np.ones((th, tw), dtype=np.float32) if self.planner.depth else None
         self.latency, ahead = cfg.latency, read_lag(cfg.latency) > 0
         self.draw = Drawing(scene, renderer, self.planner, self.canvas, self.stereo, self.rank, ahead)
@@ -162,6 +164,8 @@ class Frames:
                 self.back[:] = self.background
                 self.zback[:] = 1.0
             sent = self.exchange.finish(x.started, self.tiles[self.rank], self.back, self.zback if depth else None)
+        if self.key is not None:  # the colour bar's part on this tile, as the wall shows it
+            self.key.stamp(self.back)
         x.rendered = x.started = None
         swapped, stop = self.showing.present(t, self.back, work, x.control, self.rows.allrows)
         if self.head is not None:

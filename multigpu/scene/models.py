@@ -107,6 +107,8 @@ class SceneSpec:
     color_range: tuple[float, float] | None = option(None, group="scene", metavar="MIN,MAX", flag="--range",
                                                      read=read_range, help=(
         "the --color-by values at the colour map's ends (default: the field's own range)"))
+    color_bar: bool = option(False, group="scene", switch=True, help=(
+        "show the --color-by colour bar on the wall too (bottom left; the annotated mosaics always carry it)"))
     lods: bool = True  # build (and cache, and hold) levels of detail: only where the run can draw them
     # -- what moves (``scene/moves.py``): no part of the cached scene, only of its motion
     moving: float = option(0.0, group="scene", metavar="FRACTION", type=float,
