@@ -469,3 +469,22 @@ def test_a_recording_after_a_restart_keeps_the_ones_before(tmp_path):
     assert link.recording.path == tmp_path / "recorded-02.json"
     link._apply(Command("record", {"on": False}))
     assert (tmp_path / "recorded-01.json").read_text() == "kept"
+
+
+def test_the_page_gets_a_simulations_colour_bar():
+    """A scene coloured by a field: the page's header carries the field, its range and the map's
+    colours (drawn beside the wall, ``colorBar`` in panel.js); a scene without one carries none."""
+    from pathlib import Path
+
+    from multigpu.rank.panel_link import header, legend
+
+    meta = {"simulation": {"color_by": {"field": "p", "where": "cell", "range": [0.0, 2.0], "colormap": "viridis"}}}
+    got = legend(meta)
+    assert got["field"] == "p" and got["range"] == [0.0, 2.0] and len(got["colors"]) == 11
+    assert (got["colors"][0], got["colors"][-1]) == ("#440154", "#fde725")  # viridis from end to end
+    assert legend({}) is None
+    cfg = WalkConfig(grid=(1, 2), tile=(8, 8))
+    assert header(cfg, "t", BALANCES, got)["color_by"] == got and "color_by" not in header(cfg, "t", BALANCES)
+    page = Path(__file__).resolve().parents[1] / "multigpu" / "panel" / "page"
+    js, html = (page / "panel.js").read_text(), (page / "index.html").read_text()
+    assert "colorBar(head.color_by)" in js and all(f'id="{i}"' in html for i in ("colorbar", "cbstrip", "cbname"))

@@ -28,10 +28,26 @@ TOKEN_ENV = "MULTIGPU_PANEL_TOKEN"
 SETTINGS = ("target_fps", "render_scale", "lod_error")
 
 
-def header(cfg, title: str, balances) -> dict:
-    """The run's facts, as the page's table shows them."""
+def legend(meta: dict, stops: int = 11) -> dict | None:
+    """A simulation's colour bar for the page (``display.colorbar.legend_of``): the field, where it
+    lives, the range, the map and its colours at ``stops`` even steps (#rrggbb), or None."""
+    from multigpu.display.colorbar import legend_of
+
+    got = legend_of(meta)
+    if got is None:
+        return None
+    from multigpu.scene.simulation import lookup
+
+    table = lookup(got["colormap"])
+    picks = table[np.linspace(0, len(table) - 1, stops).round().astype(np.int64), :3]
+    return {**got, "colors": ["#%02x%02x%02x" % tuple(int(v) for v in c) for c in picks]}
+
+
+def header(cfg, title: str, balances, color_by: dict | None = None) -> dict:
+    """The run's facts, as the page's table shows them (``color_by``: a simulation's colour bar,
+    ``legend``, drawn beside the wall)."""
     W, H = cfg.canvas.size
-    return {"title": title, "scene": cfg.scene.model or cfg.scene.scene,
+    return {"title": title, **({"color_by": color_by} if color_by else {}), "scene": cfg.scene.model or cfg.scene.scene,
             "wall": f"{cfg.grid[0]}x{cfg.grid[1]} tiles of {cfg.tile[0]}x{cfg.tile[1]}",
             "wall_pixels": [W, H], "ranks": cfg.ranks, "decomposition": cfg.decomposition,
             "balance": cfg.balance, "strategies": list(balances), "latency": cfg.latency,
@@ -62,11 +78,11 @@ class PanelLink:
         self.cameras: list = []
 
     @classmethod
-    def open(cls, cfg, title: str, balances, out_dir, events: list[str]) -> "PanelLink":
+    def open(cls, cfg, title: str, balances, out_dir, events: list[str], color_by: dict | None = None) -> "PanelLink":
         """Start serving (raises OSError where the address cannot be listened on) and print the URL."""
         address, port = cfg.panel
         token = os.environ.get(TOKEN_ENV) or secrets.token_urlsafe(24)
-        state = PanelState(header(cfg, title, balances), tuple(balances), cfg.ranks, events)
+        state = PanelState(header(cfg, title, balances, color_by), tuple(balances), cfg.ranks, events)
         server = PanelServer(state, address, port, token)
         url = server.start()
         print(f"multigpu: the panel: {url}", flush=True)

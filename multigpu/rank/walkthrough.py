@@ -365,14 +365,14 @@ def check_record(record: str) -> None:
 def _panel(cfg: WalkConfig, scene, out):
     """Rank 0's operator page (``--panel``), serving once this returns (its URL printed)."""
     from multigpu.planner import balances_of
-    from multigpu.rank.panel_link import PanelLink
+    from multigpu.rank.panel_link import PanelLink, legend
     from multigpu.records.record import run_title
 
     events = [f"restart {restarts()}: resumed at frame {cfg.resume_at}"] if cfg.resume_at else []
     if cfg.dark:
         events.append(f"dark tiles (their PC gone): {', '.join(map(str, cfg.dark))}")
     try:
-        return PanelLink.open(cfg, run_title(cfg, scene), balances_of(cfg), out.path, events)
+        return PanelLink.open(cfg, run_title(cfg, scene), balances_of(cfg), out.path, events, legend(scene.meta))
     except OSError as exc:
         address, port = cfg.panel
         raise InputError.of("panel", f"cannot serve the page on {address}:{port} ({exc})") from None

@@ -50,10 +50,11 @@ function hello(h) {
   const head = h.header;
   $("title").textContent = head.title || "";
   wallWidth = (head.wall_pixels || [0])[0];
+  colorBar(head.color_by);
   const table = $("header");
   table.replaceChildren();
   for (const [k, v] of Object.entries(head)) {
-    if (k === "title") continue;
+    if (k === "title" || k === "color_by") continue;
     const tr = table.insertRow();
     tr.insertCell().textContent = k;
     tr.insertCell().textContent = typeof v === "object" ? JSON.stringify(v) : String(v);
@@ -62,6 +63,16 @@ function hello(h) {
   sel.replaceChildren(...h.balances.map((b) => new Option(b, b)));
   sel.disabled = h.balances.length < 2;
   makePlots();
+}
+
+function colorBar(cb) {
+  // a simulation's colour bar: the field, its range and its colour map as a strip
+  $("colorbar").hidden = !cb;
+  if (!cb) return;
+  $("cbname").textContent = `${cb.field} (${cb.colormap})`;
+  $("cblo").textContent = Number(cb.range[0]).toPrecision(4);
+  $("cbhi").textContent = Number(cb.range[1]).toPrecision(4);
+  $("cbstrip").style.background = `linear-gradient(to right, ${cb.colors.join(", ")})`;
 }
 
 function makePlots() {
