@@ -126,3 +126,61 @@ def test_upsample_keeps_nan_cells_dark_and_sample_blacks_outside_the_content():
     img = np.full((4, 4, 3), 200.0)
     got = sample(img, np.array([[[0.5, 0.5], [1.2, 0.5], [np.nan, 0.1]]]))
     assert got[0, 0, 0] == 200.0 and not got[0, 1:].any()
+
+
+def test_a_content_to_output_mesh_reads_as_the_output_to_content_warp(tmp_path):
+    """Paul Bourke's mesh (nodes placed on the output for a regular grid of content) read back
+    gives every output pixel the content the rig's geometry gives it (under half a pixel)."""
+    from multigpu.errors import InputError
+    from multigpu.warp import bourke
+
+    rig = flat_rig(3, 0.18)
+    p = rig.projectors[1]
+    w, h = p.size
+    s, t = np.meshgrid(np.linspace(0, 1, 81), np.linspace(0, 1, 31))
+    uv = p.pixel(rig.screen.point(s, t))  # where each content node lands on this projector's output
+    seen = np.isfinite(uv[..., 0])
+    x = np.where(seen, (uv[..., 0] / w * 2 - 1) * (w / h), 0.0)
+    y = np.where(seen, 1 - uv[..., 1] / h * 2, 0.0)
+    rows = [f"{a:.9f} {b:.9f} {c:.9f} {d:.9f} {e:g}" for a, b, c, d, e in
+            zip(x.ravel(), y.ravel(), s.ravel(), 1 - t.ravel(), np.where(seen, 1.0, -1.0).ravel())]
+    path = tmp_path / "p2.data"
+    path.write_text("2\n81 31\n" + "\n".join(rows) + "\n")
+    out = bourke.read(path, (w, h))
+    exact = rig.warp(1)
+    both = np.isfinite(out.warp).all(axis=-1) & ((exact >= 0) & (exact <= 1)).all(axis=-1)
+    assert both.mean() > 0.6 and out.alpha[both].min() == 1.0 and out.alpha[~np.isfinite(out.warp[..., 0])].max() == 0
+    per_pixel = np.stack([np.gradient(exact[..., 0], axis=1), np.gradient(exact[..., 1], axis=0)], axis=-1)
+    assert np.abs((out.warp - exact)[both] / per_pixel[both]).max() <= 0.5
+    path.write_text("2\n81 31\n0 0 0 0 1\n")
+    with pytest.raises(InputError, match=r"p2.data: 81 x 31 nodes promised, 1 of 5 values found"):
+        bourke.read(path, (w, h))
+    path.write_text("7\n2 2\n" + "0 0 0 0 1\n" * 4)
+    with pytest.raises(InputError, match=r"mesh type 7"):
+        bourke.read(path, (w, h))
+
+
+def test_a_bare_pfm_and_alpha_png_read_as_nDisplay_takes_them(tmp_path):
+    from PIL import Image
+
+    from multigpu.errors import InputError
+    from multigpu.warp import bare, pfm
+
+    rig = flat_rig(3, 0.18)
+    p = rig.projectors[0]
+    grid = rig.warp(0, GRID)
+    (tmp_path / "p1.pfm").write_bytes(pfm.write(np.concatenate([grid, np.zeros(grid.shape[:2] + (1,))], axis=2)))
+    alpha, _ = rig.blend_maps(0)
+    h, w = alpha.shape
+    small = alpha.reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))  # half size (each pixel four's mean)
+    half = np.round(small ** (1 / 2.2) * 255).astype(np.uint8)  # 8 bits, gamma-embedded
+    Image.fromarray(half).save(tmp_path / "p1_alpha.png")
+    out = bare.read(tmp_path / "p1.pfm", p.size, tmp_path / "p1_alpha.png", gamma_embedded=2.2)
+    assert np.allclose(out.warp, grid, atol=1e-6) and out.area == (0.0, 0.0, 1.0, 1.0)
+    assert out.notes == [f"p1_alpha.png of {p.size[0] // 2} x {p.size[1] // 2} resampled to the output's "
+                         f"{p.size[0]} x {p.size[1]}"]
+    err = np.abs(out.alpha - alpha)  # half the samples: off only where alpha jumps (the screen's edges)
+    assert np.percentile(err, 90) < 0.005 and err.mean() < 0.02
+    (tmp_path / "far.pfm").write_bytes(pfm.write(np.concatenate([grid * 300, grid[..., :1]], axis=2)))  # pixels
+    with pytest.raises(InputError, match=r"far.pfm: maps outside the content"):
+        bare.read(tmp_path / "far.pfm", p.size)
