@@ -87,7 +87,9 @@ COMMANDS: tuple[Command, ...] = (
              arg("--projectors", type=int, default=3, help="projectors side by side (default 3)"),
              arg("--overlap", type=float, default=0.18, help="neighbours overlap by this share of an image's "
                                                              "width (default 0.18)"),
-             arg("--size", default="1920x1080", help="each projector's pixels WxH (default 1920x1080)")),
+             arg("--size", default="1920x1080", help="each projector's pixels WxH (default 1920x1080)"),
+             arg("--canvas", default=None, help="the wall's canvas WxH: the screen takes its shape and the file's "
+                                                "buffer its size (default: the projectors' own density)")),
             group_help={"warp": "projector warp and blend tools"}),
     Command(("warp", "check"), "read an MPCDI file (2D media) and print its regions, warps and blend maps",
             "multigpu.tools:warp_check", (arg("file", help="MPCDI file (.mpcdi)"),)),

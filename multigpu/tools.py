@@ -195,8 +195,19 @@ def warp_make(a) -> int:
         raise InputError.of("size", f"must be WxH in pixels, got '{a.size}'") from None
     if not (16 <= w <= 16384 and 16 <= h <= 16384):
         raise InputError.of("size", f"must be 16..16384 pixels each way, got {w}x{h}")
-    rig = flat_rig(a.projectors, a.overlap, (w, h), kind=a.screen)
-    out = mpcdi.write(Path(a.out), make.buffer_size(rig), make.outputs(rig))
+    canvas = None
+    if a.canvas is not None:
+        try:
+            canvas = tuple(int(v) for v in a.canvas.lower().split("x"))
+            assert len(canvas) == 2 and min(canvas) >= 16
+        except (ValueError, AssertionError):
+            raise InputError.of("canvas", f"must be WxH in pixels (16 and more), got '{a.canvas}'") from None
+    try:
+        rig = flat_rig(a.projectors, a.overlap, (w, h), kind=a.screen,
+                       aspect=None if canvas is None else canvas[0] / canvas[1])
+    except ValueError as exc:
+        raise InputError.of("canvas", str(exc)) from None
+    out = mpcdi.write(Path(a.out), canvas or make.buffer_size(rig), make.outputs(rig))
     print(f"wrote {out}: {a.projectors} projectors of {w}x{h} on a {a.screen} screen, {a.overlap:.0%} overlap")
     return 0
 

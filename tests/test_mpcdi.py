@@ -168,6 +168,12 @@ def test_warp_make_writes_a_file_warp_check_reads(tmp_path, capsys):
         assert len(err) == 1 and flag in err[0]
     assert not (tmp_path / "x.mpcdi").exists()
     assert main(["warp", "check", str(tmp_path / "x.mpcdi")]) == 2
+    # a wall's canvas: the screen takes its shape, the buffer its size; one too tall is refused
+    assert main(["warp", "make", str(out), "--size", "160x120", "--canvas", "480x100"]) == 0
+    assert mpcdi.read(out)[0] == (480, 100)
+    capsys.readouterr()
+    assert main(["warp", "make", str(tmp_path / "x.mpcdi"), "--size", "160x120", "--canvas", "480x400"]) == 2
+    assert "--canvas a screen of aspect 1.2 is taller than 3 projectors" in capsys.readouterr().err
 
 
 def test_a_wall_file_names_its_mpcdi_file_and_a_bad_one_ends_it_at_the_door(tmp_path, capsys):

@@ -2,7 +2,8 @@
 
 Each projector becomes a region of the buffer (the wall's canvas): the box of the content it
 shows, its warp (a grid of samples, ``GRID`` output pixels apart, in the region's normalized
-coordinates; beyond the screen's edges they run on outside 0..1 and the content there is black),
+coordinates; beyond the screen's edges they run on outside 0..1 and the content there is black,
+NaN where they lie far off it),
 and its alpha and beta maps at its own size. A wall can be aligned by hand from such a file, and
 the tests read it back (``mpcdi.read``) to simulate the projection the wall would give.
 """
@@ -11,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multigpu.warp.mpcdi import Output
+from multigpu.warp.mpcdi import REACH, Output
 from multigpu.warp.rig import Rig
 
 #: output pixels between a warp grid's samples
@@ -36,6 +37,8 @@ def outputs(rig: Rig, step: int = GRID) -> list[Output]:
         area = (float(lo[0]), float(lo[1]), float(hi[0] - lo[0]), float(hi[1] - lo[1]))
         grid = rig.warp(i, grid_shape(p.size, step))
         warp = (grid - lo) / (hi - lo)  # in the region's own coordinates
+        far = ((warp < -REACH) | (warp > 1 + REACH)).any(axis=-1)  # far off the screen: shows nothing
+        warp[far] = np.nan
         alpha, beta = rig.blend_maps(i)
         out.append(Output(p.name, p.size, area, warp, alpha, beta))
     return out

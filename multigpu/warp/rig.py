@@ -193,15 +193,22 @@ class Rig:
 
 
 def flat_rig(n: int = 3, overlap: float = 0.18, size: tuple[int, int] = (256, 192), kind: str = "flat",
-             black: float = 0.002) -> Rig:
+             black: float = 0.002, aspect: float | None = None) -> Rig:
     """``n`` projectors side by side lighting a screen (``kind``: flat or cylinder), neighbours
     overlapping by ``overlap`` of an image's width, each a little askew (turned and tilted a few
     degrees, lens shifted) so that no warp is a plain scale; their images overfill the screen
-    above and below (the margins are off it)."""
+    above and below (the margins are off it). ``aspect``: the screen's width over its height (a
+    wall's canvas's; default: 0.8 of the images' height)."""
     screen = Screen(kind)
-    span = 1.06 * (screen.width if kind == "flat" else np.radians(screen.arc) * screen.distance)  # overfilled
+    across = screen.width if kind == "flat" else np.radians(screen.arc) * screen.distance
+    span = 1.06 * across  # overfilled
     each = span / (n - (n - 1) * overlap)  # an image's width on the screen
-    screen = Screen(kind, height=0.8 * each * size[1] / size[0])  # the images overfill it above and below
+    tall = each * size[1] / size[0]
+    high = 0.8 * tall if aspect is None else across / aspect
+    if high > 0.95 * tall:
+        raise ValueError(f"a screen of aspect {aspect:.3g} is taller than {n} projectors of {size[0]}x{size[1]} "
+                         f"side by side can fill: use a wider canvas or more overlap")
+    screen = Screen(kind, height=high)  # the images overfill it above and below
     projectors = []
     for i in range(n):
         centre = (i + 0.5) * each * (1 - overlap) + each * overlap / 2 - span / 2  # along the screen
