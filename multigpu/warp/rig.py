@@ -17,7 +17,7 @@ viewer at the origin looking down -z; a flat screen lies in the plane z = -dista
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -122,7 +122,7 @@ class Rig:
     projectors: tuple[Projector, ...]
     black: float = 0.002
     gamma: float = GAMMA
-    ramp: float = field(default=2.0)  # the blend weights' power of the distance to the edge
+    ramp: float = 2.0  # the blend weights' power of the distance to the edge
 
     def warp(self, i: int, grid: tuple[int, int] | None = None) -> np.ndarray:
         """(rows, cols, 2) projector ``i``'s warp: the content at each sample, outside 0..1 beyond
