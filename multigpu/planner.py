@@ -169,6 +169,18 @@ class Planner:
         # ~12 us of CPU per frame with the caches cold)
         self.tris = scene.tris
 
+    def rescene(self, scene) -> None:
+        """Plan ``scene`` from the next frame on (a series' next step): its bounds, triangles and
+        the decompositions' per-scene state made anew (each at its first use); frames planned
+        before keep theirs."""
+        self.scene = scene
+        self.project = make_projector(scene, self.cfg.bounds)
+        self.coverage = np.ones(scene.n_objects)
+        self.tris = scene.tris  # (the zero-parallax plane stays where the first step put it)
+        self._built.clear()
+        self._split.clear()
+        self._d = None
+
     @property
     def decomposition(self):
         """The decomposition planning with the strategy in use (built at its first use)."""

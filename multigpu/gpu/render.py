@@ -1,9 +1,9 @@
 """Headless GL rendering of one rank's screen region (moderngl on EGL; textures: ``texturing.py``).
 
-One context per rank, the whole scene uploaded once. A frame is ONE ``render_indirect`` call
-(two where some of a moving scene's objects stand still: ``pose``) over the draw commands of
-the objects in the rank's T' mask (one command per run of visible objects in the spatially
-ordered index buffer, built with numpy: see ``drawlist.py``), into a
+One context per rank, the whole scene uploaded once (a series' next step swapped in: ``rescene``).
+A frame is ONE ``render_indirect`` call (two where some of a moving scene's objects stand still:
+``pose``) over the draw commands of the objects in the rank's T' mask (one command per run of
+visible objects in the spatially ordered index buffer, built with numpy: see ``drawlist.py``), into a
 full-display-sized framebuffer with the full-display viewport and projection, scissored to the
 rank's region (``scissor``, the default where the display fits one framebuffer): viewport and
 projection are those of a one-rank full render, so the pixels a rank produces are bit-identical
@@ -15,8 +15,6 @@ a few differing edge pixels. docs/ACCURACY.md measures all three.
 
 from __future__ import annotations
 
-import os
-import re
 from pathlib import Path
 
 import numpy as np
@@ -26,68 +24,13 @@ from multigpu.core.drawlist import DrawList, pass_groups
 from multigpu.errors import InputError
 from multigpu.gpu import texturing
 from multigpu.gpu.buffers import can_pin, map_buffers, pack_vertices, pinned, upload
+from multigpu.gpu.context import EGL_HELP, EglUnavailable, create_context, raster_threads  # noqa: F401 (their home)
 from multigpu.gpu.methods import choose_method, gl_limits
 from multigpu.gpu.morphs import MorphBuffers, SkinBuffers
 from multigpu.gpu.pending import Pending, _disjoint
 from multigpu.gpu.shaders import fragment_shader, vertex_shader
 
-EGL_HELP = ("EGL headless OpenGL is not available: install Mesa's EGL and GL drivers "
-            "(Debian/Ubuntu: sudo apt install libegl1 libgl1-mesa-dri) or an NVIDIA driver with EGL")
-
 BACKGROUND = (0.08, 0.09, 0.12)
-
-
-class EglUnavailable(RuntimeError):
-    """No headless EGL context could be made on this machine."""
-
-
-def raster_threads(host_ranks: int) -> str:
-    """Choose llvmpipe's rasterizer threads for a rank (``LP_NUM_THREADS``, unless the user set
-    it; call before the first GL context) and return the value in effect.
-
-    One thread when this host has a core to spare for it beside its ranks: the raster work
-    overlaps the rank's own. None (0: the rank rasterizes on its own thread) when the ranks
-    already fill the cores: a thread per rank then only competes for them, and its queued
-    scenes cost memory. Measured at 4.28 M triangles on 4 ranks of 2 cores (docs/BENCHMARKS.md):
-    0 threads, 4 % less CPU and wall time, ~100 MiB less per rank. The value never changes a
-    pixel. A real GPU ignores it."""
-    if "LP_NUM_THREADS" not in os.environ:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-        os.environ["LP_NUM_THREADS"] = "1" if host_ranks < cores else "0"
-    return os.environ["LP_NUM_THREADS"]
-
-
-def create_context(device: int | None = None, local_rank: int = 0, host_ranks: int = 1):
-    """A standalone EGL context, and the device index it is on.
-
-    ``device`` picks an EGL device explicitly (``--device``); by default a rank takes
-    ``local_rank`` modulo the machine's device count, so the ranks of one node spread over its
-    GPUs. glcontext selects the device (``device_index``; its ``GLCONTEXT_DEVICE_INDEX``
-    variable overrides both) and reports the device count when an index is out of range,
-    which is all the counting needed. ``host_ranks``: the ranks on this host (``raster_threads``)."""
-    raster_threads(host_ranks)
-    import moderngl
-
-    index = local_rank if device is None else device
-
-    def make(i: int):
-        return moderngl.create_standalone_context(backend="egl", require=430, device_index=i)
-
-    try:
-        return make(index), index
-    except Exception as exc:
-        found = re.search(r"found (\d+) devices", str(exc))
-        if found and int(found.group(1)) > 0:
-            count = int(found.group(1))
-            if device is not None:
-                raise InputError.of("device", f"{device}: this machine has {count} EGL device(s) "
-                                              f"(0..{count - 1})") from None
-            try:
-                return make(index % count), index % count
-            except Exception as again:
-                exc = again
-        why = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        raise EglUnavailable(f"{EGL_HELP} ({exc.__class__.__name__}: {why})") from None
 
 
 class RegionRenderer:
@@ -103,7 +46,7 @@ class RegionRenderer:
                  colors: str = "model", moving: bool = False):
         import moderngl
 
-        from multigpu.scene.looks import COLOR_VIEWS, palette
+        from multigpu.scene.looks import COLOR_VIEWS
 
         if colors not in COLOR_VIEWS:
             raise InputError.of("colors", f"must be one of {', '.join(COLOR_VIEWS)}, got '{colors}'")
@@ -111,7 +54,6 @@ class RegionRenderer:
         self.size = W, H = size
         self.limits = gl_limits(ctx)
         self.method = choose_method(method, size, self.limits)
-        self.origin = np.asarray(scene.origin, dtype=np.float64)
         per_vertex = colors == "model" and scene.vertex_colors is not None
         textured = colors == "model" and scene.texcoords is not None and scene.texels is not None
         self.texture_path = texturing.texture_path() if textured else None
@@ -123,28 +65,14 @@ class RegionRenderer:
                                         m and self.skins is not None),
             fragment_shader=fragment_shader(textured, self.texture_path))
         self.prog = program(moving)
-        self.draws = DrawList(scene)
-        bufs = self._buffers(scene, shared, per_vertex, textured, self.texture_path == "pool")
-        self.vbo, self.ibo, self.obo = bufs["vertices"], bufs["indices"], bufs["objects"]
-        self.rgba, self.uvl, self.texels = bufs.get("colors"), bufs.get("texcoords"), bufs.get("texels")
-        self._texel_bytes = 4 * int(scene.texels.shape[0]) if textured else 0
-        self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
-        object_colors = scene.colors if colors == "model" else palette(scene.n_objects)
-        self.cbo = ctx.buffer(np.ascontiguousarray(object_colors, dtype=np.float32).ravel())
-        vao = lambda prog, m: ctx.vertex_array(prog, [  # noqa: E731
-            (self.vbo, "3f 1u", "in_pos", "in_nrm"), *([(self.rgba, "1u", "in_rgba")] if per_vertex else []),
-            *([(self.obo, "1u", "in_obj")] if m or not per_vertex else []),
-            *([(self.uvl, "3f", "in_uvl")] if textured else []),
-            *([self.morphs.attribute()] if m and self.morphs is not None else []),
-            *(self.skins.attributes() if m and self.skins is not None else [])],
-            index_buffer=self.ibo, index_element_size=4)
-        self.vao = vao(self.prog, moving)
+        self.per_vertex, self.textured, self.colors = per_vertex, textured, colors
+        self._load(scene, shared)
         # the programs a frame is drawn with: where the scene moves, the objects at rest (``pose``'s
         # ``groups``) go without the maps (their reads cost llvmpipe a quarter of a frame)
-        self.passes, self._runs, self.groups = [(self.prog, self.vao)], [(0, 0)], None
+        self.passes, self._runs, self.groups = [(self.prog, self._array(self.prog, moving))], [(0, 0)], None
         if moving and not textured:
             still = program(False)
-            self.passes.insert(0, (still, vao(still, False)))
+            self.passes.insert(0, (still, self._array(still, False)))
         self.texture, self.samplers, self.layers = (texturing.make(ctx, self.prog, scene, self.texture_path)
                                                     if textured else (None, [], None))
         # each object's map where the scene moves (``pose``), at rest till then
@@ -160,6 +88,45 @@ class RegionRenderer:
         if self.method == "scissor":
             self._framebuffer((W, H))
         self.depth_test = moderngl.DEPTH_TEST
+
+    def _load(self, scene, shared: Path | None) -> None:
+        """The scene's geometry into GL buffers (``_buffers``) and its objects' colours."""
+        from multigpu.scene.looks import palette
+
+        self.origin = np.asarray(scene.origin, dtype=np.float64)
+        self.draws = DrawList(scene)
+        bufs = self._buffers(scene, shared, self.per_vertex, self.textured, self.texture_path == "pool")
+        self.vbo, self.ibo, self.obo = bufs["vertices"], bufs["indices"], bufs["objects"]
+        self.rgba, self.uvl, self.texels = bufs.get("colors"), bufs.get("texcoords"), bufs.get("texels")
+        self._texel_bytes = 4 * int(scene.texels.shape[0]) if self.textured else 0
+        self.draws.uploaded()  # the GL buffers hold them now: the frame loop keeps only the commands' tables
+        object_colors = scene.colors if self.colors == "model" else palette(scene.n_objects)
+        self.cbo = self.ctx.buffer(np.ascontiguousarray(object_colors, dtype=np.float32).ravel())
+
+    def _array(self, prog, m: bool):
+        """The vertex array of ``prog`` over the geometry's buffers (``m``: the moving program's)."""
+        per_vertex, textured = self.per_vertex, self.textured
+        return self.ctx.vertex_array(prog, [
+            (self.vbo, "3f 1u", "in_pos", "in_nrm"), *([(self.rgba, "1u", "in_rgba")] if per_vertex else []),
+            *([(self.obo, "1u", "in_obj")] if m or not per_vertex else []),
+            *([(self.uvl, "3f", "in_uvl")] if textured else []),
+            *([self.morphs.attribute()] if m and self.morphs is not None else []),
+            *(self.skins.attributes() if m and self.skins is not None else [])],
+            index_buffer=self.ibo, index_element_size=4)
+
+    def rescene(self, scene, shared: Path | None = None) -> None:
+        """Draw ``scene`` from the next frame on: a series' next step, with the same kinds of vertex
+        data (colours, no textures, no motion). The GL first finishes what it was given (frames in
+        flight were drawn from the old buffers, which may be a file's pages: they go after)."""
+        if self.textured or self.mbo is not None:
+            raise ValueError("a textured or moving scene's geometry is not swapped")
+        self.ctx.finish()
+        old = (*(v for _, v in self.passes), self.vbo, self.ibo, self.obo, self.rgba, self.cbo)
+        self._load(scene, shared)
+        self.passes = [(p, self._array(p, False)) for p, _ in self.passes]
+        for obj in old:
+            if obj is not None:
+                obj.release()
 
     def _buffers(self, scene, shared: Path | None, per_vertex: bool, textured: bool, pool: bool) -> dict:
         """The vertex, index and vertex-id GL buffers, the vertex colours' where they are drawn

@@ -28,5 +28,6 @@ class InFlight:
     composed: Work | None = None  # a stereo wall's: both eyes' parts where they are composed (core/stereo.py)
     picks: list | None = None  # a stereo wall's: where each composed part comes from
     head_at: float = 0.0  # rank 0, a tracked head: when the frame's pose reached the host (time.time)
+    step: tuple = ()  # a series': (the step shown, whether it is late) at the frame's submit
     rendered: list | None = None
     started: object = None

@@ -92,7 +92,8 @@ def _live(cfg: WalkConfig, comm, scene, path, planner: Planner, presenter, monit
     from multigpu.core.motion import SceneClock
     from multigpu.scene.moves import moves
 
-    clock = SceneClock(cfg.scene.anim_speed) if moves(scene, cfg.scene) else None  # the operator may steer its time
+    steered = moves(scene, cfg.scene) or "series" in scene.meta  # the operator may steer its time
+    clock = SceneClock(cfg.scene.anim_speed) if steered else None
     return Live(cfg, comm, scene, planner.balances, planner.using, controls, monitor, start, panel, clock)
 
 

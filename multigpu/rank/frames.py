@@ -28,6 +28,7 @@ from multigpu.rank.frame_setup import FrameSetup, planned_frames
 from multigpu.rank.framelog import FrameLog
 from multigpu.rank.moving import Moving
 from multigpu.rank.rows import Rows
+from multigpu.rank.series import series_stepping
 from multigpu.rank.showing import Showing
 from multigpu.rank.timer import Timer
 from multigpu.records.record import run_title
@@ -68,6 +69,7 @@ class Frames:
         self.moving = None if motion is None else Moving(scene, motion, cfg.scene.anim_speed, self.planner,
                                                          self.projection, self.draw.culler, self.fidelity.chooser,
                                                          renderer, spheres=self.fidelity.chooser.levels > 1)
+        self.stepping = series_stepping(scene, cfg.scene, self.rank, cfg.timeout)  # ``rank/series.py``
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col
@@ -86,6 +88,22 @@ class Frames:
         """``--partition broadcast``: rank 0 computes the partition, every rank receives it."""
         part = partition() if self.rank == 0 else None
         return broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
+
+    def rescene(self, scene, shared) -> None:
+        """A series' next step drawn and planned from this frame on, on every rank at once (its
+        geometry in the renderer, its bounds and objects in the planner, culler and level chooser;
+        the frames in flight keep theirs)."""
+        from multigpu.core.culling import PartCuller
+        from multigpu.core.lod import LevelChooser
+        from multigpu.scene.moves import movers_of
+
+        self.renderer.rescene(scene, shared)
+        light = scene.without_geometry()  # the GL buffers hold its geometry now
+        light.movers = movers_of(light, self.cfg.scene)
+        self.planner.rescene(light)
+        self.draw.culler = PartCuller(light) if self.renderer.draws.parts else None
+        self.fidelity.chooser = LevelChooser(light, self.canvas.size[1])
+        self.scene = light
 
     # -- phases of one frame
 
@@ -108,14 +126,23 @@ class Frames:
         if self.head is not None:  # the newest pose, every rank the same from this frame
             with t.phase("input"):
                 self.planner.pose, head_at = self.head.pose()
-        when = None
+        when, step = None, ()
         if self.moving is not None:  # the bodies where they are at the frame's scene time (the operator's, if steered)
             steered = control is not None and control.scene_time is not None
             when = control.scene_time if steered else self.moving.time_of(f, self.path)
             self.moving.pose(t, when)
+        if self.stepping is not None:  # the series' step the frame's scene time wants, where every rank holds it
+            steered = control is not None and control.scene_time is not None
+            when = control.scene_time if steered else self.stepping.time_of(f, self.path)
+            with t.phase("animate"):  # the scene's own work: a step swapped in
+                swap = self.stepping.frame(when)
+                if swap is not None:
+                    self.rescene(*swap)
+            step = (self.stepping.shown, self.stepping.want != self.stepping.shown)
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
-            quality, levels, tris = self.fidelity.frame(f, camera, rects, self.moving is not None)
+            quality, levels, tris = self.fidelity.frame(f, camera, rects, self.moving is not None or
+                                                        self.stepping is not None)
         with t.phase("plan"):
             work = self.planner.work(f, rects, self.relay, None if levels is None else tris.copy())
             # the planner's arrays may be its own again by the time the frame is shown (frames in flight)
@@ -134,7 +161,7 @@ class Frames:
             live = self.live.recorded() if self.live is not None and self.interactive else None
             recorded = (live if live is not None else unshifted(camera, self.cfg.offset), when)
         return InFlight(f, t, control, work, plan, pending, self.draw.drawn, work.objects(self.rank),
-                        self.balance_ids[self.planner.using], recorded, quality, composed, picks, head_at)
+                        self.balance_ids[self.planner.using], recorded, quality, composed, picks, head_at, step)
 
     def send(self, x: "InFlight") -> None:
         """A frame's second stage: its pixels read back (``readback``: waiting for the GL) and,
@@ -171,13 +198,18 @@ class Frames:
         if self.head is not None:
             self.head.shown(x.head_at)
         # a signal, a window event or a failed write seen here stops every rank after the same frame
-        for landed in self.rows.post(x.f, self.log.row(x, sent, swapped), self.log.stop_flag(stop), x.recorded):
+        values = self.log.row(x, sent, swapped)
+        if self.stepping is not None:  # the step shown, the one held ready (every rank agrees on it once landed)
+            values.update(self.stepping.row(*x.step))
+        for landed in self.rows.post(x.f, values, self.log.stop_flag(stop), x.recorded):
             self.landed(*landed)
         self.log.show(x.f, work, self.back)
 
     def landed(self, f: int, every: np.ndarray, recorded) -> None:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
         self.learn.append((f, every[:, self.col["rendering_cpu_ms"]].copy()))
+        if self.stepping is not None:
+            self.stepping.landed(every[:, self.col["step_ready"]])
         self.fidelity.landed(f, float(every[:, self.col["frame_ms"]].mean()))  # a frame-rate target learns
         rows = self.log.landed(f, every, recorded if self.cfg.record else None)  # rank 0's records
         if self.live is not None and rows is not None:  # the page's plots (and its recording)
@@ -238,6 +270,8 @@ class Frames:
             self._keep_shown()
             raise
         finally:
+            if self.stepping is not None:
+                self.stepping.close()
             if self.rank == 0:
                 summary = self.log.close(complete, stopped_by, (process_time() - began, self.done - shown),
                                          self.head, panel, served)

@@ -40,6 +40,8 @@ class EachRank:
 def make_projection(cfg, comm, planner, n_objects: int) -> "tuple[EachRank | SharedProjection, str | None]":
     """``--projection``'s backend for this job, and why not the shared one where it was asked for
     and cannot be (None otherwise): every rank of the job the same."""
+    if cfg.projection == "shared" and "series" in planner.scene.meta:
+        return EachRank(planner), "a series' objects change with its steps"
     if cfg.projection == "shared" and comm.Get_size() > 1 and cfg.bounds == "box" and planner.viewer is None:
         shared, why = SharedProjection.make(comm, planner, n_objects, cfg.timeout)
         if shared is not None:

@@ -23,6 +23,7 @@ Loaded and generated scenes are cached as ``.npz`` in ``$MULTIGPU_CACHE`` (defau
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import os
@@ -37,6 +38,8 @@ from multigpu.scene import lod as scene_lod
 from multigpu.scene import parts as scene_parts
 from multigpu.scene.files import FORMATS, axis_name, axis_vector, load_model
 from multigpu.scene.layout import FORMAT_VERSION, Scene
+from multigpu.scene.series import ENDS, find_series, is_series, series_range
+from multigpu.scene.series import describe as describe_series
 from multigpu.scene.simulation import FORMATS as SIMULATION
 from multigpu.scene.simulation import Coloring
 from multigpu.scene.textures import image_files
@@ -72,9 +75,10 @@ class SceneSpec:
     setting declared once with its flag (``options.py``)."""
 
     scene: str = option("plant", group="scene", metavar=lambda: "|".join(BUILTIN), help="a built-in scene")
-    model: str | None = option(None, group="scene", metavar="FILE",
+    model: str | None = option(None, group="scene", metavar="FILE|'GLOB'|SERIES.pvd",
                                help="model file (OBJ, PLY, STL, OFF, glTF/GLB; a simulation's VTU, VTK, XDMF, "
-                                    "Exodus, Gmsh, ... through meshio) instead of --scene")
+                                    "Exodus, Gmsh, ... through meshio) instead of --scene; a simulation's time "
+                                    "series as a quoted glob of its step files or ParaView's .pvd")
     split: str = option("auto", group="scene", metavar="auto|components|grid:N",
                         valid=lambda v: re.fullmatch(r"auto|components|grid:[1-9][0-9]*", v) is not None,
                         must="must be 'auto', 'components' or 'grid:N' with N >= 1", help=(
@@ -121,6 +125,19 @@ class SceneSpec:
         "scene time runs at S seconds a second of the path (frames at 30 a second; 0 holds the scene at rest, "
         "below 0 plays it backwards)"))
 
+    # -- a time series (``scene/series.py``): how its steps play
+    steps_per_second: float = option(10.0, group="scene", metavar="R", type=float,
+                                     valid=lambda v: 0.0 < v <= 1000.0, must="must be in (0, 1000]", help=(
+        "a series' steps a second of scene time (--anim-speed scales it; the panel pauses, steps and scrubs)"))
+    at_end: str = option("loop", group="scene", metavar="|".join(ENDS), valid=lambda v: v in ENDS,
+                         must=f"must be one of {', '.join(ENDS)}", help=(
+        "after a series' last step: play it again from the first, or hold the last"))
+    late_step: str = option("hold", group="scene", metavar="hold|wait", valid=lambda v: v in ("hold", "wait"),
+                            must="must be 'hold' or 'wait'", help=(
+        "a series' step not read in time: the wall holds the step it shows (a live wall never waits), or waits "
+        "for it (every step at its own frames: recordings, videos)"))
+    step: int = 0  # the step of a series this spec loads (the frame loop's reader asks for each)
+
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
             known = ", ".join(BUILTIN)
@@ -144,7 +161,32 @@ def _key(*parts) -> str:
 
 
 def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
-    """The scene for ``spec`` and load facts (seconds, whether the cache was hit)."""
+    """The scene for ``spec`` and load facts (seconds, whether the cache was hit): of a series
+    (``scene/series.py``), its step ``spec.step``, coloured over every step (a bad input's line
+    names the step)."""
+    if not is_series(spec.model):
+        return _load_scene(spec, use_cache)
+    series = find_series(spec.model)
+    k = spec.step
+    if not 0 <= k < len(series):
+        raise InputError.of("model", f"{spec.model}: no step {k} (the series has {len(series)})")
+    fixed, left_out = spec.color_range, []
+    if spec.color_by is not None and fixed is None:  # over the whole series, never per step
+        lo, hi, left_out = series_range(series, spec.color_by, cache_dir() if use_cache else None)
+        fixed = (lo, hi)
+    try:
+        scene, info = _load_scene(dataclasses.replace(spec, model=str(series.paths[k]), color_range=fixed, step=0),
+                                  use_cache)
+    except InputError as exc:
+        raise InputError.of(exc.field or "model", f"step {k} of the series: {exc.message}") from None
+    scene.meta["series"] = {**describe_series(series), "step": k, "time": series.times[k]}
+    scene.meta["warnings"] = [*scene.meta.get("warnings", []), *series.warnings, *left_out]
+    scene.name = series.name
+    return scene, info
+
+
+def _load_scene(spec: SceneSpec, use_cache: bool) -> tuple[Scene, dict]:
+    """``load_scene`` of a built-in scene or one model file."""
     t0 = time.perf_counter()
     cluster = "auto" if spec.cluster is None else spec.cluster
     wall = spec.ranks if spec.cluster is None else None  # the automatic choice depends on the wall

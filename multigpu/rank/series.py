@@ -1,0 +1,213 @@
+"""A simulation's time series in the frame loop: its steps read ahead in a thread of their own and
+shown whole, on every rank from the same frame, never waited for.
+
+Each frame's scene time (``core.motion.scene_time``, the operator's where a run steers it) says
+the step it wants (``scene.series.step_at``). The ``Reader`` loads the step wanted next (a cached
+scene and its buffers file: one copy per host in the page cache, one rank of the host builds it
+while the others wait on a file lock); each rank's timing row says which step it holds ready
+(``step_ready``), and once every rank's row of a frame has landed (the same frame on every rank)
+each one knows whether all hold the same step. If that step is on the way to the wanted one, every
+rank swaps it in at its next frame: the renderer's buffers, the planner's bounds and
+decompositions, the part culler and the level chooser (``Frames.rescene``). A step that is late
+leaves the wall on the step it shows (``step_late`` in the row), unless ``--late-step wait`` asks every
+rank to wait for it at the frame that wants it (every step at its own frames, as a recording wants;
+no agreement is needed then). A step that cannot be read is said once, and the series plays on past
+it. A part of the frame loop with one job.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fcntl
+import hashlib
+import sys
+import threading
+from collections import deque
+
+import numpy as np
+
+from multigpu.core.motion import scene_time
+from multigpu.errors import InputError
+from multigpu.scene.series import after, on_the_way, step_at
+
+#: seconds a rank waits for another rank of its host to build a step before building it itself
+LOCK_WAIT = 600.0
+
+
+class Reader:
+    """Loads the steps of ``spec``'s series in a daemon thread, the one asked for last first:
+    ``newest`` is the last one loaded, and every loaded step stays until ``keep`` lets it go."""
+
+    def __init__(self, spec, n: int, say=None):
+        self.spec, self.n, self.say = spec, n, say
+        self.loaded: dict[int, tuple] = {}  # step -> (scene, buffers file)
+        self.newest = -1
+        self.bad: dict[int, str] = {}  # steps that could not be read, and why
+        self.asked: int | None = None
+        self._cv = threading.Condition()
+        self._closed = False
+        self.thread = threading.Thread(target=self._run, name="series reader", daemon=True)
+        self.thread.start()
+
+    def ask(self, k: int) -> None:
+        """Load step ``k`` next (a step loaded or refused already is not loaded again)."""
+        with self._cv:
+            if k in self.loaded:  # loaded already (kept for a row): the one this rank says it holds
+                self.newest = k
+                return
+            if k in self.bad or k == self.asked:
+                return
+            self.asked = k
+            self._cv.notify()
+
+    def wait_for(self, k: int, timeout: float) -> tuple | None:
+        """Step ``k``'s (scene, buffers file) once loaded (asked for now), None if it cannot be read;
+        a ``TimeoutError`` after ``timeout`` seconds."""
+        self.ask(k)
+        with self._cv:
+            if not self._cv.wait_for(lambda: k in self.loaded or k in self.bad, timeout):
+                raise TimeoutError(f"step {k} of the series was not read in {timeout:g} s (--timeout)")
+            if k in self.loaded:
+                self.newest = k
+                return self.loaded[k]
+            return None
+
+    def take(self, k: int) -> tuple:
+        """Step ``k``'s (scene, buffers file): loaded (every rank said so)."""
+        with self._cv:
+            return self.loaded[k]
+
+    def keep(self, steps: set[int]) -> None:
+        """Let every loaded step but ``steps`` go (the newest stays: a row may yet say it)."""
+        with self._cv:
+            for k in [k for k in self.loaded if k not in steps and k != self.newest]:
+                del self.loaded[k]
+
+    def close(self) -> None:
+        with self._cv:
+            self._closed = True
+            self.loaded.clear()
+            self._cv.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cv:
+                while self.asked is None and not self._closed:
+                    self._cv.wait()
+                if self._closed:
+                    return
+                k = self.asked
+            try:
+                got = load_step(self.spec, k)
+            except Exception as exc:  # noqa: BLE001 (a thread's failure must never reach the frame loop)
+                why = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
+                with self._cv:
+                    self.bad[k] = why
+                    if self.asked == k:
+                        self.asked = None
+                    self._cv.notify_all()
+                if self.say is not None:
+                    self.say(k, why)
+                continue
+            with self._cv:
+                if self._closed:
+                    return
+                self.loaded[k], self.newest = got, k
+                if self.asked == k:
+                    self.asked = None
+                self._cv.notify_all()
+
+
+def load_step(spec, k: int) -> tuple:
+    """Step ``k`` of ``spec``'s series: its scene (the cache's) and buffers file, built by one
+    rank of the host at a time (a file lock beside the cache: the others then map what it wrote)."""
+    from multigpu.gpu.buffers import ensure_buffers
+    from multigpu.scene.models import cache_dir, load_scene
+
+    step = dataclasses.replace(spec, step=k)
+    where = cache_dir()
+    where.mkdir(parents=True, exist_ok=True)
+    name = hashlib.sha1(f"{spec.model}\0{k}".encode()).hexdigest()[:16]
+    with open(where / f".series-{name}.lock", "a+") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released by the kernel if this process dies
+        try:
+            scene, info = load_scene(step)
+            return scene, ensure_buffers(info.get("cache"), scene)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+class Stepping:
+    """The series of ``scene`` (its first step, shown now) played at ``spec``'s rate: each frame's
+    step decided (``frame``), each row's say (``row``), every rank's rows heard (``landed``)."""
+
+    def __init__(self, scene, spec, rank: int, timeout: float = 60.0):
+        info = scene.meta["series"]
+        self.wait, self.timeout = spec.late_step == "wait", float(timeout)
+        self.n, self.shown, self.want = int(info["steps"]), int(info["step"]), int(info["step"])
+        self.rate, self.end, self.speed = float(spec.steps_per_second), spec.at_end, float(spec.anim_speed)
+        self.rank = rank
+        self.reader = Reader(spec, self.n, self._say if rank == 0 else None)
+        self.agreed = -1  # the step every rank held ready in the last landed rows (-1: none)
+        self.posted: deque[int] = deque()  # the ready steps of this rank's rows not landed yet
+        self.swaps = 0
+
+    def _say(self, k: int, why: str) -> None:
+        """A step that cannot be read, once (rank 0; every rank finds the same)."""
+        print(f"multigpu: warning: step {k} of the series: {why.removeprefix('--model ')}; the wall shows "
+              f"the last step it could read", file=sys.stderr, flush=True)
+
+    def time_of(self, f: int, path=None) -> float:
+        """Frame ``f``'s scene time: the path file's (a replay of a steered run), else the frame's."""
+        times = getattr(path, "times", None)
+        if times is not None and 0 <= f < len(times):
+            return float(times[f])
+        return scene_time(f, self.speed)
+
+    def frame(self, when: float) -> tuple | None:
+        """The step scene time ``when`` wants: the (scene, buffers file) to swap in now where every
+        rank holds one on the way to it (None: the wall keeps its step); the next step asked for."""
+        self.want = want = step_at(when, self.rate, self.n, self.end)
+        swap = None
+        if self.wait and want != self.shown and want not in self.reader.bad:  # every rank waits for it here
+            swap = self.reader.wait_for(want, self.timeout)
+            if swap is not None:
+                self.shown, self.swaps = want, self.swaps + 1
+        elif self.agreed >= 0 and on_the_way(self.shown, self.agreed, want, self.n, self.end):
+            swap = self.reader.take(self.agreed)
+            self.shown, self.swaps = self.agreed, self.swaps + 1
+        nxt = want if want != self.shown else after(self.shown, self.n, self.end)
+        for _ in range(self.n):  # past steps that cannot be read: the wall holds, the one after them loads
+            if nxt is None or nxt == self.shown or nxt not in self.reader.bad:
+                break
+            nxt = after(nxt, self.n, self.end)
+        if nxt is not None and nxt != self.shown:
+            self.reader.ask(nxt)
+        return swap
+
+    def row(self, shown: int, late: bool) -> dict:
+        """This rank's say in a frame's row: the step it showed (``shown``, ``late``: at the frame's
+        submit) and the one it holds ready now."""
+        ready = self.reader.newest
+        self.posted.append(ready)
+        return {"step": shown, "step_ready": ready, "step_late": int(late)}
+
+    def landed(self, ready: np.ndarray) -> None:
+        """Every rank's ``step_ready`` of a landed frame (the same on every rank, at the same frame)."""
+        if self.posted:
+            self.posted.popleft()
+        first = int(ready[0])
+        self.agreed = first if first >= 0 and (ready == first).all() else -1
+        self.reader.keep({self.agreed, *self.posted})
+
+    def close(self) -> None:
+        self.reader.close()
+
+
+def series_stepping(scene, spec, rank: int, timeout: float = 60.0) -> Stepping | None:
+    """The frame loop's series part, where the scene is a series' step (None otherwise)."""
+    if "series" not in scene.meta:
+        return None
+    if spec.moving:
+        raise InputError.of("moving", "a series' steps do not move as machinery (leave --moving out)")
+    return Stepping(scene, spec, rank, timeout)

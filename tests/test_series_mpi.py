@@ -1,0 +1,142 @@
+"""A simulation's time series played on a 2x2 wall: every step at its own frames (``--late-step
+wait``), every step's composite equal to one rank's render of that step's file alone (the colour
+range of the whole series given), for screen, db and hybrid; a live wall (``hold``) never waits and
+shows one step on every rank at every frame; a first step that cannot be read ends the job with one
+line (exit 2), a later one is said once and the run plays on past it. Each job runs under a hard
+timeout."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from mpirun import read_png, run_mpi
+from test_series import surface, write_series
+
+pytestmark = pytest.mark.mpi
+FRAMES = 40
+#: 3 steps a second of scene time at 30 frames a second: a step every 10 frames
+RATE = "3"
+CASES = {"screen": [], "db": ["--decomposition", "db"], "hybrid": ["--decomposition", "hybrid", "--latency", "2"]}
+#: each frame's step: a step every 10 frames, round the loop of 4
+WANTED = [(f // 10) % 4 for f in range(FRAMES)]
+
+
+def arguments(out, model, grid, tile, extra, path, frames=FRAMES) -> list[str]:
+    return ["walkthrough", "--model", str(model), "--frames", str(frames), "--grid", f"{grid[0]}x{grid[1]}",
+            "--tile", f"{tile[0]}x{tile[1]}", "--mosaic-every", "1", "--no-overlay", "--no-progress",
+            "--path", str(path), "--out", str(out), *extra]
+
+
+def walk(out, model, grid, tile, extra, path, frames=FRAMES):
+    return run_mpi(grid[0] * grid[1], arguments(out, model, grid, tile, extra, path, frames), timeout=180)
+
+
+def warm(steps, *args) -> None:
+    """The cache of each of ``steps`` built as the run with ``args`` (``arguments``) reads it: the
+    run's first load of a step then maps it (a cold one builds it: a second and more here, under
+    load, and the wall holds the step before it meanwhile, as it should)."""
+    from multigpu.cli import joined_negatives
+    from multigpu.flags import walk_config, walkthrough_parser
+    from multigpu.rank.series import load_step
+
+    spec = walk_config(walkthrough_parser().parse_args(joined_negatives(arguments(*args)[1:]))).scene
+    for k in steps:
+        load_step(spec, k)
+
+
+def steps_shown(out) -> list[int]:
+    """Each frame's step, checked the same on every rank."""
+    rows = list(csv.DictReader(open(out / "timings.csv")))
+    by_frame: dict[int, set] = {}
+    for r in rows:
+        by_frame.setdefault(int(r["frame"]), set()).add(int(r["step"]))
+    assert all(len(s) == 1 for s in by_frame.values()), {f: s for f, s in by_frame.items() if len(s) > 1}
+    return [by_frame[f].pop() for f in sorted(by_frame)]
+
+
+@pytest.fixture(scope="module")
+def series(tmp_path_factory):
+    """Four steps (the third with a third fewer cells), a still camera, and one rank's render of each
+    step's file alone (the series' range given): the references."""
+    where = write_series(tmp_path_factory.mktemp("series"), 4, drop=2)
+    cams = [{"position": [0.5, -1.1, 1.2], "target": [0.5, 0.45, 0.0], "up": [0, 0, 1], "fov": 50.0,
+             "near": 0.05, "far": 20.0}] * FRAMES
+    path = where / "still.json"
+    path.write_text(json.dumps({"version": 1, "cameras": cams}))
+    heights = np.concatenate([surface(k).point_data["height"] for k in range(4)])
+    rng = f"{float(heights.min())!r},{float(heights.max())!r}"
+    refs = []
+    for k in range(4):
+        res = walk(where / f"ref{k}", where / f"step_{k}.vtu", (1, 1), (96, 80), ["--color-by", "height", "--range",
+                                                                                  rng], path, frames=1)
+        assert res.returncode == 0, res.stderr[-3000:]
+        refs.append(read_png(where / f"ref{k}" / "mosaic" / "frame_00000.png"))
+    assert all((refs[k] != refs[k + 1]).any() for k in range(3))  # the steps differ
+    warm(range(4), where / "o", where / "run.pvd", (2, 2), (48, 40), ["--color-by", "height"], path)
+    return where, path, refs
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_every_step_composes_as_one_rank_renders_its_file(tmp_path, series, name):
+    where, path, refs = series
+    res = walk(tmp_path / "wall", where / "run.pvd", (2, 2), (48, 40),
+               ["--color-by", "height", "--steps-per-second", RATE, "--late-step", "wait", *CASES[name]], path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert steps_shown(tmp_path / "wall") == WANTED  # every step at its own frames
+    for f, k in enumerate(WANTED):
+        got = read_png(tmp_path / "wall" / "mosaic" / f"frame_{f:05d}.png")
+        assert (got == refs[k]).all(), f"frame {f} (step {k}): {(got != refs[k]).any(axis=2).sum()} pixels differ"
+    summary = json.loads((tmp_path / "wall" / "summary.json").read_text())
+    assert summary["complete"] and summary["frames"] == FRAMES
+
+
+def test_a_live_wall_never_waits_and_shows_one_step_everywhere(tmp_path, series):
+    where, path, refs = series
+    res = walk(tmp_path / "wall", where / "run.pvd", (2, 2), (48, 40),
+               ["--color-by", "height", "--steps-per-second", RATE, "--latency", "1"], path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    shown = steps_shown(tmp_path / "wall")  # the same step on every rank at every frame
+    assert shown[0] == 0 and len(set(shown)) >= 2, shown  # the series played
+    # a step shows no earlier than its time, and the wall moves forward (round the loop)
+    assert all(k == 0 or f >= 10 * k for f, k in enumerate(shown)), shown
+    assert all(b >= a or (a, b) == (3, 0) for a, b in zip(shown, shown[1:])), shown
+    for f, k in enumerate(shown):
+        got = read_png(tmp_path / "wall" / "mosaic" / f"frame_{f:05d}.png")
+        assert (got == refs[k]).all(), f"frame {f} (step {k}): {(got != refs[k]).any(axis=2).sum()} pixels differ"
+
+
+def test_a_first_step_that_cannot_be_read_ends_the_job_in_one_line(tmp_path, series):
+    where, path, _ = series
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "step_0.vtu").write_bytes(b"<VTKFile>cut short")
+    (bad / "step_1.vtu").write_bytes((where / "step_1.vtu").read_bytes())
+    res = walk(tmp_path / "o", bad / "step_*.vtu", (1, 2), (48, 40), ["--color-by", "height"], path, frames=5)
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("multigpu: error:")]
+    assert res.returncode == 2 and len(lines) == 1, res.stderr[-3000:]
+    assert "step 0 of the series" in lines[0] and "step_0.vtu" in lines[0], lines
+
+
+def test_a_later_step_that_cannot_be_read_is_said_once_and_the_run_goes_on(tmp_path, series):
+    where, path, refs = series
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for k in (0, 1, 3):
+        (bad / f"step_{k}.vtu").write_bytes((where / f"step_{k}.vtu").read_bytes())
+    (bad / "step_2.vtu").write_bytes(b"<VTKFile>cut short")
+    heights = np.concatenate([surface(k).point_data["height"] for k in range(4)])
+    flags = ["--color-by", "height", "--range", f"{float(heights.min())!r},{float(heights.max())!r}",
+             "--steps-per-second", RATE, "--at-end", "hold", "--late-step", "wait"]
+    warm((0, 1, 3), tmp_path / "o", bad / "step_*.vtu", (1, 2), (48, 80), flags, path)
+    res = walk(tmp_path / "o", bad / "step_*.vtu", (1, 2), (48, 80), flags, path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    said = [ln for ln in res.stderr.splitlines() if "step 2 of the series" in ln]
+    assert len(said) == 1 and said[0].startswith("multigpu: warning: ") and "step_2.vtu" in said[0], res.stderr[-2000:]
+    shown = steps_shown(tmp_path / "o")
+    assert shown == [1 if k == 2 else k for k in WANTED[:30]] + [3] * 10, shown  # step 1 held through step 2's time
+    late = [int(r["step_late"]) for r in csv.DictReader(open(tmp_path / "o" / "timings.csv")) if r["rank"] == "0"]
+    assert late == [int(20 <= f < 30) for f in range(FRAMES)], late
+    for f, k in enumerate(shown):
+        got = read_png(tmp_path / "o" / "mosaic" / f"frame_{f:05d}.png")
+        assert (got == refs[k]).all(), f"frame {f} (step {k})"
