@@ -96,6 +96,11 @@ def scene_info(a) -> int:
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     tris = scene.tris
     print(f"scene      {scene.name}")
+    series = scene.meta.get("series")
+    if series:  # a time series (``scene/series.py``): what follows is its first step's
+        t0, t1 = series["times"]
+        print(f"series     {series['steps']} steps ({series['source']}), times {t0:g} .. {t1:g}; step "
+              f"{series['step']} below ({Path(series['first']).name} .. {Path(series['last']).name})")
     print(f"objects    {scene.n_objects}")
     median = int(sorted(tris)[len(tris) // 2]) if len(tris) else 0
     print(f"triangles  {scene.n_triangles} (per object: min {tris.min()}, median {median}, max {tris.max()})")

@@ -488,3 +488,25 @@ def test_the_page_gets_a_simulations_colour_bar():
     page = Path(__file__).resolve().parents[1] / "multigpu" / "panel" / "page"
     js, html = (page / "panel.js").read_text(), (page / "index.html").read_text()
     assert "colorBar(head.color_by)" in js and all(f'id="{i}"' in html for i in ("colorbar", "cbstrip", "cbname"))
+
+
+def test_the_page_gets_a_series_step_and_whether_it_is_late():
+    """A series playing: the page's status carries the step on the wall (from rank 0's landed row)
+    and whether the wall holds it late; the header the series' step count; another run none."""
+    from pathlib import Path
+
+    from multigpu.rank.panel_link import PanelLink
+    from multigpu.records.report import COLUMNS
+
+    col = {c: i for i, c in enumerate(COLUMNS)}
+    rows = np.zeros((2, len(COLUMNS) + 1))
+    rows[:, col["step"]], rows[:, col["step_late"]] = 3, 1
+    for steps, want in ((5, {"step": 3, "step_late": True}), (0, {})):
+        state = PanelState({"title": "t"}, BALANCES, 2, [])
+        link = PanelLink(state, None, "", Path("."), False, False, steps)
+        link.landed(0, rows, col, None)
+        link.status(None, BALANCES, type("F", (), {"target_fps": None, "scale": 1.0, "lod_error": 0.0})())
+        assert {k: state.status[k] for k in ("step", "step_late") if k in state.status} == want
+    page = Path(__file__).resolve().parents[1] / "multigpu" / "panel" / "page"
+    js, html = (page / "panel.js").read_text(), (page / "index.html").read_text()
+    assert "seen.header.series_steps" in js and all(f'id="{i}"' in html for i in ("step", "steps", "steplate"))

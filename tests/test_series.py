@@ -176,3 +176,23 @@ def test_the_reader_loads_what_is_asked_and_names_a_step_it_cannot_read(tmp_path
         assert reader.newest == 2
     finally:
         reader.close()
+
+
+def test_scene_info_names_the_steps_and_the_series_range(tmp_path, capsys, monkeypatch):
+    from multigpu.cli import main as cli
+
+    monkeypatch.setenv("MULTIGPU_CACHE", str(tmp_path / "cache"))
+    write_series(tmp_path / "s", 3)
+    heights = np.concatenate([surface(k).point_data["height"] for k in range(3)])
+    assert cli(["scene", "info", str(tmp_path / "s" / "run.pvd"), "--color-by", "height"]) == 0
+    out = capsys.readouterr().out
+    assert f"series     3 steps (pvd {tmp_path / 's' / 'run.pvd'}), times 0 .. 1; step 0 below (step_0.vtu .. " \
+           "step_2.vtu)" in out
+    assert f"colour by  height (per point), viridis over {heights.min():.6g} .. {heights.max():.6g}" in out
+
+
+def test_a_negative_first_number_is_a_flag_value_not_a_flag():
+    from multigpu.cli import joined_negatives
+
+    got = joined_negatives(["walkthrough", "--range", "-1,1", "--offset", "-5,0,0", "--anim-speed", "-2", "-h"])
+    assert got == ["walkthrough", "--range=-1,1", "--offset=-5,0,0", "--anim-speed", "-2", "-h"]

@@ -89,6 +89,7 @@ def test_every_step_composes_as_one_rank_renders_its_file(tmp_path, series, name
         assert (got == refs[k]).all(), f"frame {f} (step {k}): {(got != refs[k]).any(axis=2).sum()} pixels differ"
     summary = json.loads((tmp_path / "wall" / "summary.json").read_text())
     assert summary["complete"] and summary["frames"] == FRAMES
+    assert summary["series"] == {"steps_shown": 4, "step_changes": 3, "late_frames": 0, "last_step": 3}
 
 
 def test_a_live_wall_never_waits_and_shows_one_step_everywhere(tmp_path, series):

@@ -60,8 +60,9 @@ class PanelLink:
     """The page of one run, served from rank 0 (``open`` starts it and prints its URL)."""
 
     def __init__(self, state: PanelState, server: PanelServer, url: str, out_dir, interactive: bool,
-                 viewer: bool = False):
+                 viewer: bool = False, steps: int = 0):
         self.state, self.server, self.url = state, server, url
+        self.steps, self.step = steps, (0, False)  # a series' steps, and the one shown (late or not)
         self.out_dir, self.interactive, self.viewer = out_dir, interactive, viewer
         self.last_thumb = 0.0
         self.stop = False
@@ -78,8 +79,10 @@ class PanelLink:
         self.cameras: list = []
 
     @classmethod
-    def open(cls, cfg, title: str, balances, out_dir, events: list[str], color_by: dict | None = None) -> "PanelLink":
-        """Start serving (raises OSError where the address cannot be listened on) and print the URL."""
+    def open(cls, cfg, title: str, balances, out_dir, events: list[str], color_by: dict | None = None,
+             steps: int = 0) -> "PanelLink":
+        """Start serving (raises OSError where the address cannot be listened on) and print the URL
+        (``steps``: a series' steps, the page shows the one on the wall)."""
         address, port = cfg.panel
         token = os.environ.get(TOKEN_ENV) or secrets.token_urlsafe(24)
         state = PanelState(header(cfg, title, balances, color_by), tuple(balances), cfg.ranks, events)
@@ -88,7 +91,9 @@ class PanelLink:
         print(f"multigpu: the panel: {url}", flush=True)
         from multigpu.config import INTERACTIVE
 
-        return cls(state, server, url, out_dir, cfg.path == INTERACTIVE, cfg.viewer is not None)
+        if steps:
+            state.header["series_steps"] = steps
+        return cls(state, server, url, out_dir, cfg.path == INTERACTIVE, cfg.viewer is not None, steps)
 
     # -- a view of the wall (live.Live)
 
@@ -171,6 +176,7 @@ class PanelLink:
         """Frame ``f``'s rows, every rank's as rank 0 records them (the swap skew on each): one plot
         row (``panel.state.names``); its camera while recording."""
         self.state.add_row(plot_rows(rows[None], col)[0])
+        self.step = (int(rows[0, col["step"]]), bool(rows[0, col["step_late"]]))  # a series' step, if one plays
         if self.recording is not None and recorded is not None:
             cam, when = recorded
             self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far,
@@ -185,7 +191,8 @@ class PanelLink:
                               target_fps=fidelity.target_fps, render_scale=fidelity.scale,
                               lod_error=fidelity.lod_error, interactive=self.interactive,
                               viewer=self.viewer, scene_time=None if control is None else control.scene_time,
-                              scene_paused=bool(control is not None and control.scene_paused))
+                              scene_paused=bool(control is not None and control.scene_paused),
+                              **({"step": self.step[0], "step_late": self.step[1]} if self.steps else {}))
 
     def _record(self, on: bool) -> None:
         """Start (a new file in the run's outputs) or stop recording the cameras shown."""

@@ -372,7 +372,8 @@ def _panel(cfg: WalkConfig, scene, out):
     if cfg.dark:
         events.append(f"dark tiles (their PC gone): {', '.join(map(str, cfg.dark))}")
     try:
-        return PanelLink.open(cfg, run_title(cfg, scene), balances_of(cfg), out.path, events, legend(scene.meta))
+        return PanelLink.open(cfg, run_title(cfg, scene), balances_of(cfg), out.path, events, legend(scene.meta),
+                              scene.meta.get("series", {}).get("steps", 0))
     except OSError as exc:
         address, port = cfg.panel
         raise InputError.of("panel", f"cannot serve the page on {address}:{port} ({exc})") from None

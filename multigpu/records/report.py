@@ -167,6 +167,10 @@ def table(summary: dict, title: str = "") -> str:
                      f"{t['reduced_frames']} frames below full quality (render scale "
                      f"{q.get('render_scale_mean', 1.0):.2f}, LOD bound {q.get('lod_error_px_mean', 0.0):.2f} px "
                      "on average)")
+    if "series" in summary:  # a simulation's time series (``rank/series.py``)
+        sr = summary["series"]
+        lines.append(f"Series: {sr['steps_shown']} steps shown, {sr['step_changes']} step changes, "
+                     f"{sr['late_frames']} frames showing a step late (the wall held the one before)")
     return "\n".join(lines)
 
 

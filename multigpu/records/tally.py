@@ -92,6 +92,9 @@ class RunningSummary:
         groups = list(dict.fromkeys(hosts)) if hosts else []
         self.hosts = {str(h): ([k for k, x in enumerate(hosts) if x == h], Quantiles()) for h in groups}
         self.t = {"judged": 0, "within": 0, "rate": 0, "reduced": 0, "period": 0.0}
+        # a series' steps (rank 0's column: every rank shows the same step at a frame)
+        self.steps: set[int] = set()
+        self.step = {"late": 0, "swaps": 0, "last": None, "seen": False}
 
     def add(self, per: np.ndarray) -> None:
         """``per``: (F, K, C) rows of F whole frames, each frame's ranks in rank order."""
@@ -127,6 +130,18 @@ class RunningSummary:
             q.add(swap[:, mine].max(axis=1) - swap[:, mine].min(axis=1))
         if self.target is not None:
             self._target(per, period)
+        self._steps(per[:, 0, _C["step"]].astype(np.int64), per[:, 0, _C["step_late"]],
+                    per[:, :, _C["step_ready"]])
+
+    def _steps(self, step: np.ndarray, late: np.ndarray, ready: np.ndarray) -> None:
+        """A series' steps shown, the frames that showed a step late and the step changes."""
+        st = self.step
+        st["seen"] = st["seen"] or bool(step.any() or late.any() or (ready < 0).any())
+        self.steps.update(np.unique(step).tolist())
+        st["late"] += int((late > 0).sum())
+        prev = step[0] if st["last"] is None else st["last"]
+        st["swaps"] += int((np.diff(np.r_[prev, step]) != 0).sum())
+        st["last"] = int(step[-1])
 
     def _target(self, per: np.ndarray, period: np.ndarray) -> None:
         """How the frames after the controller's warm-up held ``--target-fps``."""
@@ -184,6 +199,9 @@ class RunningSummary:
             "input_to_photon_frames": s["latency"] / F / frame_ms,
             "quality": {"render_scale_mean": first("render_scale"), "lod_error_px_mean": first("lod_error_px")},
         }
+        if self.step["seen"]:  # a series played
+            out["series"] = {"steps_shown": len(self.steps), "step_changes": self.step["swaps"],
+                             "late_frames": self.step["late"], "last_step": self.step["last"]}
         if self.hosts:  # per host, its own ranks' swap skew: whether each PC's monitors swap together
             out["present"]["swap_skew_ms_by_host"] = {h: q.quantile(50) for h, (_, q) in self.hosts.items()}
         if self.target is not None:

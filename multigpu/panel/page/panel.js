@@ -47,7 +47,7 @@ function connect() {
 
 function hello(h) {
   series = h.series; ranks = h.ranks;
-  const head = h.header;
+  const head = seen.header = h.header;
   $("title").textContent = head.title || "";
   wallWidth = (head.wall_pixels || [0])[0];
   colorBar(head.color_by);
@@ -161,6 +161,12 @@ function showStatus(s) {
   if (s.scene_time != null) {
     $("scenetime").textContent = s.scene_time.toFixed(2);
     $("scenepause").textContent = s.scene_paused ? "play scene" : "pause scene";
+  }
+  $("stepof").hidden = s.step == null;  // a simulation's time series: the step on the wall (counted from 1)
+  if (s.step != null) {
+    $("step").textContent = s.step + 1;
+    $("steps").textContent = (seen.header && seen.header.series_steps) || "?";
+    $("steplate").hidden = !s.step_late;
   }
   $("fly").hidden = !s.interactive;
   $("head").hidden = !s.viewer;
