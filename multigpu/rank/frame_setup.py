@@ -45,6 +45,7 @@ class FrameSetup:
     record: RunRecord | None = None
     live: object = None  # parallel.live.Live
     head: object = None  # rank.head_link.HeadLink: the tracked head (--head-tracker)
+    spool: object = None  # rank 0 of a stream's run: its reader (``rank/spool.py``)
 
     def release(self, collective: bool) -> None:
         """Let the shared segments and the live state go; ``collective``: every rank finished the
@@ -53,7 +54,9 @@ class FrameSetup:
         for part in (self.exchange, self.live, self.projection, self.head):
             if part is not None:
                 part.close(collective)
-        self.exchange = self.live = self.projection = self.head = None
+        if self.spool is not None:
+            self.spool.close()
+        self.exchange = self.live = self.projection = self.head = self.spool = None
 
 
 def clear_colour(renderer, n_objects: int) -> np.ndarray:

@@ -8,6 +8,7 @@ Built by ``walkthrough.run`` once setup has been agreed on every rank; every wai
 from __future__ import annotations
 
 import itertools
+import sys
 from time import process_time
 
 import numpy as np
@@ -33,7 +34,7 @@ from multigpu.rank.showing import Showing
 from multigpu.rank.timer import Timer
 from multigpu.records.record import run_title
 from multigpu.records.report import BALANCE_NAMES
-from multigpu.records.stops import stopped_by_flags
+from multigpu.records.stops import STOP_FLAG, STOPS, stopped_by_flags
 from multigpu.scene.moves import motion_of
 
 
@@ -69,7 +70,8 @@ class Frames:
         self.moving = None if motion is None else Moving(scene, motion, cfg.scene.anim_speed, self.planner,
                                                          self.projection, self.draw.culler, self.fidelity.chooser,
                                                          renderer, spheres=self.fidelity.chooser.levels > 1)
-        self.stepping = series_stepping(scene, cfg.scene, self.rank, cfg.timeout)  # ``rank/series.py``
+        self.said = None  # the stream's state last said (``_step_note``)
+        self.stepping = series_stepping(scene, cfg.scene, self.rank, cfg.timeout, setup.spool)  # rank/series.py
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col
@@ -105,6 +107,14 @@ class Frames:
         self.fidelity.chooser = LevelChooser(light, self.canvas.size[1])
         self.scene = light
 
+    def _step_note(self, note: str | None) -> None:
+        """Rank 0: a stream's state (waited for, ended) said once as it changes, and on the panel."""
+        if note is not None and note != self.said:
+            print(f"multigpu: {note}", file=sys.stderr, flush=True)
+        self.said = note
+        if self.live is not None and self.live.panel is not None:
+            self.live.panel.step_note = note
+
     # -- phases of one frame
 
     def submit(self, f: int) -> "InFlight":
@@ -139,6 +149,8 @@ class Frames:
                 if swap is not None:
                     self.rescene(*swap)
             step = (self.stepping.shown, self.stepping.want != self.stepping.shown)
+            if self.rank == 0:
+                self._step_note(self.stepping.note())
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
             quality, levels, tris = self.fidelity.frame(f, camera, rects, self.moving is not None or
@@ -198,6 +210,8 @@ class Frames:
         if self.head is not None:
             self.head.shown(x.head_at)
         # a signal, a window event or a failed write seen here stops every rank after the same frame
+        if self.stepping is not None and self.stepping.ended():  # --at-end stop: every rank after this frame
+            stop = stop or STOP_FLAG[STOPS[-7]]
         values = self.log.row(x, sent, swapped)
         if self.stepping is not None:  # the step shown, the one held ready (every rank agrees on it once landed)
             values.update(self.stepping.row(*x.step))
@@ -209,7 +223,7 @@ class Frames:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
         self.learn.append((f, every[:, self.col["rendering_cpu_ms"]].copy()))
         if self.stepping is not None:
-            self.stepping.landed(every[:, self.col["step_ready"]])
+            self.stepping.landed(every[:, self.col["step_ready"]], every[:, self.col["step_wanted"]])
         self.fidelity.landed(f, float(every[:, self.col["frame_ms"]].mean()))  # a frame-rate target learns
         rows = self.log.landed(f, every, recorded if self.cfg.record else None)  # rank 0's records
         if self.live is not None and rows is not None:  # the page's plots (and its recording)

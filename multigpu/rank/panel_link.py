@@ -63,6 +63,7 @@ class PanelLink:
                  viewer: bool = False, steps: int = 0):
         self.state, self.server, self.url = state, server, url
         self.steps, self.step = steps, (0, False)  # a series' steps, and the one shown (late or not)
+        self.step_note: str | None = None  # a stream's state (``Stepping.note``: waited for, ended)
         self.out_dir, self.interactive, self.viewer = out_dir, interactive, viewer
         self.last_thumb = 0.0
         self.stop = False
@@ -192,7 +193,8 @@ class PanelLink:
                               lod_error=fidelity.lod_error, interactive=self.interactive,
                               viewer=self.viewer, scene_time=None if control is None else control.scene_time,
                               scene_paused=bool(control is not None and control.scene_paused),
-                              **({"step": self.step[0], "step_late": self.step[1]} if self.steps else {}))
+                              **({"step": self.step[0], "step_late": self.step[1], "step_note": self.step_note}
+                                 if self.steps else {}))
 
     def _record(self, on: bool) -> None:
         """Start (a new file in the run's outputs) or stop recording the cameras shown."""

@@ -22,6 +22,7 @@ import fcntl
 import hashlib
 import sys
 import threading
+import time
 from collections import deque
 
 import numpy as np
@@ -141,11 +142,15 @@ class Stepping:
     """The series of ``scene`` (its first step, shown now) played at ``spec``'s rate: each frame's
     step decided (``frame``), each row's say (``row``), every rank's rows heard (``landed``)."""
 
-    def __init__(self, scene, spec, rank: int, timeout: float = 60.0):
+    def __init__(self, scene, spec, rank: int, timeout: float = 60.0, spool=None):
         info = scene.meta["series"]
         self.wait, self.timeout = spec.late_step == "wait", float(timeout)
         self.n, self.shown, self.want = int(info["steps"]), int(info["step"]), int(info["step"])
         self.rate, self.end, self.speed = float(spec.steps_per_second), spec.at_end, float(spec.anim_speed)
+        # a live stream's (``rank/spool.py``): the newest step rank 0 kept is the one wanted; no loop
+        self.live, self.spool, self.past_end = bool(spec.live), spool, False
+        if self.live and self.end == "loop":
+            self.end = "hold"
         self.rank = rank
         self.reader = Reader(spec, self.n, self._say if rank == 0 else None)
         self.agreed = -1  # the step every rank held ready in the last landed rows (-1: none)
@@ -167,7 +172,11 @@ class Stepping:
     def frame(self, when: float) -> tuple | None:
         """The step scene time ``when`` wants: the (scene, buffers file) to swap in now where every
         rank holds one on the way to it (None: the wall keeps its step); the next step asked for."""
-        self.want = want = step_at(when, self.rate, self.n, self.end)
+        if self.live:  # the newest step rank 0 named (``landed``): a stream's steps as they come
+            want, self.n = self.want, max(self.n, self.want + 1)
+        else:
+            self.want = want = step_at(when, self.rate, self.n, self.end)
+            self.past_end = when * self.rate >= self.n
         swap = None
         if self.wait and want != self.shown and want not in self.reader.bad:  # every rank waits for it here
             swap = self.reader.wait_for(want, self.timeout)
@@ -190,24 +199,47 @@ class Stepping:
         submit) and the one it holds ready now."""
         ready = self.reader.newest
         self.posted.append(ready)
-        return {"step": shown, "step_ready": ready, "step_late": int(late)}
+        kept = self.spool.count - 1 if self.spool is not None else -1  # rank 0 of a stream's run: its newest
+        return {"step": shown, "step_ready": ready, "step_late": int(late), "step_wanted": kept}
 
-    def landed(self, ready: np.ndarray) -> None:
-        """Every rank's ``step_ready`` of a landed frame (the same on every rank, at the same frame)."""
+    def landed(self, ready: np.ndarray, wanted: np.ndarray | None = None) -> None:
+        """Every rank's ``step_ready`` (and ``step_wanted``: rank 0's newest kept step of a stream) of a
+        landed frame: the same on every rank, at the same frame."""
         if self.posted:
             self.posted.popleft()
+        if self.live and wanted is not None:
+            self.want = max(self.want, int(wanted[0]))
         first = int(ready[0])
         self.agreed = first if first >= 0 and (ready == first).all() else -1
         self.reader.keep({self.agreed, *self.posted})
+
+    def ended(self) -> bool:
+        """``--at-end stop``: the series' last step was shown and its time is over (a stream: the
+        writer closed it and its last step is on the wall; rank 0 knows it, its row stops every rank)."""
+        if self.end != "stop":
+            return False
+        if self.live:
+            return self.spool is not None and self.spool.ended and self.shown == self.spool.count - 1
+        return self.past_end and self.shown == self.n - 1
+
+    def note(self) -> str | None:
+        """What the operator should know of the steps now (rank 0): a stream waited for."""
+        if self.spool is None:
+            return None
+        if self.spool.ended:
+            return f"the stream ended after {self.spool.count} steps"
+        if time.monotonic() - self.spool.arrived > 1.0 and self.shown == self.spool.count - 1:
+            return f"waiting for step {self.spool.count}"
+        return None
 
     def close(self) -> None:
         self.reader.close()
 
 
-def series_stepping(scene, spec, rank: int, timeout: float = 60.0) -> Stepping | None:
+def series_stepping(scene, spec, rank: int, timeout: float = 60.0, spool=None) -> Stepping | None:
     """The frame loop's series part, where the scene is a series' step (None otherwise)."""
     if "series" not in scene.meta:
         return None
     if spec.moving:
         raise InputError.of("moving", "a series' steps do not move as machinery (leave --moving out)")
-    return Stepping(scene, spec, rank, timeout)
+    return Stepping(scene, spec, rank, timeout, spool)

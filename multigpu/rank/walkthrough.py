@@ -34,6 +34,8 @@ from multigpu.rank.exchange import agree, allgather_text
 from multigpu.rank.fault import fault
 from multigpu.rank.frame_setup import build
 from multigpu.rank.frames import Frames
+from multigpu.rank.spool import NAME as STEP_FILE
+from multigpu.rank.spool import Spool, is_stream, spool_dir, spool_glob
 from multigpu.records.outdir import OutputDir
 from multigpu.records.recovery import mark, restarts
 from multigpu.scene.models import load_scene
@@ -193,14 +195,15 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
         raise InputError.of("grid", f"{cfg.grid[0]}x{cfg.grid[1]} needs {cfg.ranks} ranks but the job has {K} "
                          f"(start it with mpiexec -n {cfg.ranks})")
     wait = setup_timeout(cfg)
-    # -- setup: rank 0 takes the output directory and builds the scene cache first
-    error, out, scene, path, load_info, shared = _first(cfg, ready) if rank == 0 else (None,) * 6
+    # -- setup: rank 0 takes the output directory and builds the scene cache first (a stream's first step first)
+    error, out, scene, path, load_info, shared, spool = _first(cfg, ready) if rank == 0 else (None,) * 7
     presenter = renderer = monitor = panel = tracker = None
     try:
         fault(rank, "setup")
         error = agree(comm, error, wait)
         if error:
             raise InputError(error)
+        cfg = streamed(cfg)  # a stream's steps: the series rank 0 keeps of them
         try:
             from multigpu.gpu.render import raster_threads
 
@@ -237,6 +240,8 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
         _close(renderer, presenter, monitor, panel)
         if tracker is not None:
             tracker.close()
+        if spool is not None:
+            spool.close()
         if out is not None:
             out.abandon()
         raise
@@ -245,6 +250,7 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
         scene.movers = movers_of(scene, cfg.scene)  # the order sort-last ranges follow (core.drawlist.drawn_order)
         setup = build(cfg, comm, scene, path, renderer, presenter, out, load_info, placement, monitor, panel,
                       tracker)
+        setup.spool, spool = spool, None  # rank 0's stream reader: the frame loop's now
         summary = Frames(cfg, comm, job, scene, path, renderer, presenter, setup).run()
         if panel is not None:
             panel.finish(summary)
@@ -258,22 +264,29 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
         _close(renderer, presenter, monitor, panel)
         if tracker is not None:
             tracker.close()
+        if spool is not None:
+            spool.close()
         if out is not None:
             out.release()
 
 
 def _first(cfg: WalkConfig, ready: Ready | None = None) -> tuple:
-    """Rank 0's setup before the others': ``(error, out, scene, path, load_info, buffers file)``
-    (``error``: the bad input's line; the output directory is then released). ``ready``: a
-    standby's scene and buffers file."""
+    """Rank 0's setup before the others': ``(error, out, scene, path, load_info, buffers file,
+    stream reader)`` (``error``: the bad input's line; the output directory is then released).
+    ``ready``: a standby's scene and buffers file. A stream's first step is kept before the scene
+    is made of it (``rank/spool.py``)."""
     mark("imported")  # a restarted job's steps (records/recovery.py)
-    out = scene = path = load_info = shared = None
+    out = scene = path = load_info = shared = spool = None
     try:
         out = OutputDir(cfg.out)
         if cfg.video:
             _check_video()
         if cfg.record:
             check_record(cfg.record)
+        if is_stream(cfg.scene.model):
+            spool = Spool(cfg.scene.model, spool_dir(cfg.out), setup_timeout(cfg))
+            spool.first()
+            cfg = streamed(cfg)
         scene, path, load_info = load_world(cfg, ready)
         mark("scene")
         motion_of(scene, cfg.scene)  # a model's animations checked here: bad input ends the job now, in one line
@@ -282,8 +295,26 @@ def _first(cfg: WalkConfig, ready: Ready | None = None) -> tuple:
         # once, before the others map it
         shared = ready.shared if ready is not None else ensure_buffers(load_info.get("cache"), scene)
     except InputError as exc:
-        return str(exc), out, scene, path, load_info, shared
-    return None, out, scene, path, load_info, shared
+        if spool is not None:
+            spool.close()
+        return str(exc), out, scene, path, load_info, shared, None
+    return None, out, scene, path, load_info, shared, spool
+
+
+def streamed(cfg: WalkConfig) -> WalkConfig:
+    """A stream's run (``--model adios2:NAME``) as the series of the steps rank 0 keeps in its outputs
+    (every rank the same): coloured over ``--range``, else over the first step's own range."""
+    if not is_stream(cfg.scene.model):
+        return cfg
+    import dataclasses
+
+    from multigpu.scene.series import first_range
+
+    spec, fixed = cfg.scene, cfg.scene.color_range
+    if spec.color_by is not None and fixed is None:
+        fixed = first_range(spool_dir(cfg.out) / STEP_FILE.format(0), spec.color_by)
+    live = dataclasses.replace(spec, model=spool_glob(cfg.out), color_range=fixed, live=True)
+    return dataclasses.replace(cfg, scene=live)
 
 
 def warn_once(cfg: WalkConfig, scene) -> None:

@@ -6,7 +6,7 @@ import numpy as np
 
 #: the stop flag of a frame's row: > 0 a signal number, < 0 a window event or a failed write
 STOPS = {-1: "escape key", -2: "window closed", -3: "escape key (the monitor)", -4: "window closed (the monitor)",
-         -5: "an output could not be written", -6: "stop (the panel)"}
+         -5: "an output could not be written", -6: "stop (the panel)", -7: "the series ended (--at-end stop)"}
 STOP_FLAG = {why: flag for flag, why in STOPS.items()}
 
 
@@ -22,5 +22,6 @@ def stopped_by_flags(signum: int, flags: np.ndarray | None, ranks: int) -> str |
         why = STOPS[int(flags[r])]
         if why == STOPS[-5]:
             return f"{why} (rank {r})"
-        return why if why.endswith(("(the monitor)", "(the panel)")) else f"{why} (rank {r}'s window)"
+        whole = why.endswith(("(the monitor)", "(the panel)", "(--at-end stop)"))  # no window's
+        return why if whole else f"{why} (rank {r}'s window)"
     return None

@@ -75,10 +75,12 @@ class SceneSpec:
     setting declared once with its flag (``options.py``)."""
 
     scene: str = option("plant", group="scene", metavar=lambda: "|".join(BUILTIN), help="a built-in scene")
-    model: str | None = option(None, group="scene", metavar="FILE|'GLOB'|SERIES.pvd",
+    model: str | None = option(None, group="scene", metavar="FILE|'GLOB'|SERIES.pvd|adios2:NAME",
                                help="model file (OBJ, PLY, STL, OFF, glTF/GLB; a simulation's VTU, VTK, XDMF, "
                                     "Exodus, Gmsh, ... through meshio) instead of --scene; a simulation's time "
-                                    "series as a quoted glob of its step files or ParaView's .pvd")
+                                    "series as a quoted glob of its step files or ParaView's .pvd; a running "
+                                    "code's steps as adios2:STREAM (SST) or adios2:FILE.bp (BP5, followed as it "
+                                    "grows)")
     split: str = option("auto", group="scene", metavar="auto|components|grid:N",
                         valid=lambda v: re.fullmatch(r"auto|components|grid:[1-9][0-9]*", v) is not None,
                         must="must be 'auto', 'components' or 'grid:N' with N >= 1", help=(
@@ -131,12 +133,14 @@ class SceneSpec:
         "a series' steps a second of scene time (--anim-speed scales it; the panel pauses, steps and scrubs)"))
     at_end: str = option("loop", group="scene", metavar="|".join(ENDS), valid=lambda v: v in ENDS,
                          must=f"must be one of {', '.join(ENDS)}", help=(
-        "after a series' last step: play it again from the first, or hold the last"))
+        "after a series' last step (a stream's end): play it again from the first (a file series), hold the "
+        "last, or stop the run once it was shown"))
     late_step: str = option("hold", group="scene", metavar="hold|wait", valid=lambda v: v in ("hold", "wait"),
                             must="must be 'hold' or 'wait'", help=(
         "a series' step not read in time: the wall holds the step it shows (a live wall never waits), or waits "
         "for it (every step at its own frames: recordings, videos)"))
     step: int = 0  # the step of a series this spec loads (the frame loop's reader asks for each)
+    live: bool = False  # the series is a live stream's, growing as the run goes (``rank/spool.py``)
 
     def __post_init__(self):
         if self.model is None and self.scene not in BUILTIN:
@@ -164,6 +168,9 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
     """The scene for ``spec`` and load facts (seconds, whether the cache was hit): of a series
     (``scene/series.py``), its step ``spec.step``, coloured over every step (a bad input's line
     names the step)."""
+    if str(spec.model).startswith("adios2:"):
+        raise InputError.of("model", f"{spec.model}: a stream is read by a walkthrough's rank 0 as it runs "
+                                     "(its kept steps, steps/step_*.vtu in the run's outputs, are a series)")
     if not is_series(spec.model):
         return _load_scene(spec, use_cache)
     series = find_series(spec.model)

@@ -27,8 +27,8 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-#: what ``--at-end`` may say: start again, or keep showing the last step
-ENDS = ("loop", "hold")
+#: what ``--at-end`` may say: start again, keep showing the last step, or end the run once it was shown
+ENDS = ("loop", "hold", "stop")
 #: the characters that make ``--model`` a glob
 GLOB = re.compile(r"[*?\[]")
 
@@ -177,6 +177,16 @@ def series_range(series: Series, field: str, cache: Path | None = None) -> tuple
         except OSError:
             pass  # a read-only cache only costs time
     return lo, hi, left_out
+
+
+def first_range(path: Path, field: str) -> tuple[float, float]:
+    """The finite values' range of ``field`` in one step's file (a live stream's first step: the
+    colours of the steps to come compare with it)."""
+    from multigpu.scene import simulation
+
+    mesh = simulation.read(path)
+    values, _, _ = simulation.field(mesh, field, path)
+    return simulation.value_range(values, None)
 
 
 def describe(series: Series) -> dict:

@@ -167,6 +167,7 @@ function showStatus(s) {
     $("step").textContent = s.step + 1;
     $("steps").textContent = (seen.header && seen.header.series_steps) || "?";
     $("steplate").hidden = !s.step_late;
+    $("stepnote").textContent = s.step_note || "";  // a stream: "waiting for step N", or its end
   }
   $("fly").hidden = !s.interactive;
   $("head").hidden = !s.viewer;

@@ -1,0 +1,157 @@
+"""A running simulation's ADIOS2 stream, read on rank 0 as its steps come (``--model adios2:NAME``).
+
+``NAME`` ending in ``.bp`` is a BP5 file, read as it grows (a run that records its steps, followed
+live, or replayed once written); any other name is an SST stream (the writer's ``NAME.sst`` contact
+file: a live code, its steps handed over the network). Each step's variables (``scene/stream_mesh.py``)
+are written as the next file of a series in the run's outputs (``steps/step_NNNNNN.vtu``: the steps
+kept beside the mosaics, readable by ParaView), which the wall plays as any series
+(``rank/series.py``): every rank loads the newest step rank 0 names, and it appears on every rank
+at the same frame. A step the wall cannot use is said in one line and left out; a variable that
+fits nothing is named once. The reader is a daemon thread: nothing from the stream raises in the
+frame loop. The ``adios2`` wheel is imported here only.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+from multigpu.errors import InputError
+
+PREFIX = "adios2:"
+#: the series file of step k in the spool
+NAME = "step_{:06d}.vtu"
+#: seconds a read of a BP5 file waits for a step before looking again (and at ``close``)
+POLL = 0.1
+
+
+def is_stream(model: str | None) -> bool:
+    """Whether ``--model`` names an ADIOS2 stream or file."""
+    return model is not None and str(model).startswith(PREFIX)
+
+
+def spool_dir(out) -> Path:
+    """Where a run keeps its stream's steps: ``steps/`` in its output directory."""
+    return Path(out) / "steps"
+
+
+def spool_glob(out) -> str:
+    """The series (``scene/series.py``) of the steps kept in ``out``."""
+    return str(spool_dir(out) / "step_*.vtu")
+
+
+class Spool:
+    """Reads the stream ``model`` (``adios2:NAME``) in a daemon thread into ``where``: ``count``
+    steps kept so far, ``ended`` once the writer closed it, ``error`` a line where it could not be
+    opened; ``arrived`` when the last step came (``time.monotonic``)."""
+
+    def __init__(self, model: str, where: Path, timeout: float, say=print):
+        self.name = str(model)[len(PREFIX):]
+        self.model, self.where, self.timeout, self.say = str(model), Path(where), float(timeout), say
+        self.where.mkdir(parents=True, exist_ok=True)
+        self.count, self.ended, self.error, self.arrived = 0, False, None, time.monotonic()
+        self.refused = 0  # steps that could not be used
+        self._noted: set[str] = set()
+        self._closed = False
+        self.engine = "BP5" if self.name.lower().rstrip("/").endswith(".bp") else "SST"
+        self.thread = threading.Thread(target=self._run, name="adios2 stream", daemon=True)
+        self.thread.start()
+
+    def first(self) -> None:
+        """Wait (bounded: ``timeout``) for the first step, or raise the one line saying why none came."""
+        end = time.monotonic() + self.timeout
+        while self.count == 0 and self.error is None and not self.ended and time.monotonic() < end:
+            time.sleep(0.02)
+        if self.count:
+            return
+        why = self.error or ("the stream ended before a step the wall could use" if self.ended else
+                             f"no step arrived in {self.timeout:g} s (--timeout; is the simulation writing "
+                             f"{self.name}{'' if self.engine == 'BP5' else '.sst'}?)")
+        raise InputError.of("model", f"{self.model}: {why}")
+
+    def close(self) -> None:
+        self._closed = True
+
+    def _run(self) -> None:
+        try:
+            import adios2
+        except ImportError as exc:
+            self.error = f"the adios2 package is not installed (pip install adios2): {exc}"
+            return
+        try:
+            io = adios2.Adios().declare_io("multigpu")
+            io.set_engine(self.engine)
+            io.set_parameters({"OpenTimeoutSecs": str(max(1, int(self.timeout)))})
+            stream = adios2.Stream(io, self.name, "r")
+        except Exception as exc:  # noqa: BLE001 (ADIOS2 raises RuntimeError with its own words)
+            self.error = f"cannot open as {self.engine} ({_first_line(exc)})"
+            return
+        ok, not_ready = adios2.bindings.StepStatus.OK, adios2.bindings.StepStatus.NotReady
+        # SST waits for the next step (the 2.12 wheel crashed here after short timeouts' NotReady: measured);
+        # a BP5 file is looked at again every POLL seconds as it grows
+        wait = -1.0 if self.engine == "SST" else POLL
+        try:
+            while not self._closed:
+                status = stream.begin_step(timeout=wait)
+                if status == not_ready:
+                    continue
+                if status != ok:
+                    break
+                values, skipped = {}, []
+                for name, info in stream.available_variables().items():
+                    if info.get("Type") == "string":
+                        skipped.append(name)
+                        continue
+                    values[name] = stream.read(name)
+                stream.end_step()
+                self._keep(values, skipped)
+        except Exception as exc:  # noqa: BLE001 (a broken stream ends what the wall gets, never the frame loop)
+            self._note(f"{self.model}: the stream failed ({_first_line(exc)}); the wall holds its last step")
+        finally:
+            self.ended = True
+            try:
+                stream.close()
+            except Exception:  # noqa: BLE001
+                pass
+
+    def _keep(self, values: dict, skipped: list[str]) -> None:
+        """One step's variables as the next file of the series (written whole, then renamed)."""
+        import meshio
+
+        from multigpu.scene.stream_mesh import step_mesh
+
+        for name in skipped:
+            self._note(f"{self.model}: variable '{name}' is a string: left out")
+        try:
+            mesh, _, notes = step_mesh(values, self.count + self.refused, self.model)
+        except InputError as exc:
+            self.refused += 1
+            self._say(f"{exc.message}; the step is left out")
+            return
+        for n in notes:
+            self._note(n.split(": step ", 1)[0] + ": " + n.split(": ", 2)[-1])
+        path = self.where / NAME.format(self.count)
+        tmp = path.with_name(f".{path.stem}-{os.getpid()}.vtu")
+        meshio.write(tmp, mesh, binary=True)
+        tmp.replace(path)
+        self.count += 1
+        self.arrived = time.monotonic()
+
+    def _note(self, line: str) -> None:
+        """``line`` once per run."""
+        if line not in self._noted:
+            self._noted.add(line)
+            self._say(line)
+
+    def _say(self, line: str) -> None:
+        self.say(f"multigpu: warning: {line}", file=sys.stderr, flush=True)
+
+
+def _first_line(exc: Exception) -> str:
+    import re
+
+    text = re.sub(r"\x1b\[[0-9;]*m", "", str(exc)).strip()  # ADIOS2 colours its messages
+    return (text.splitlines()[-1] if text else exc.__class__.__name__).strip()
