@@ -17,7 +17,8 @@ pytestmark = pytest.mark.mpi
 FRAMES = 40
 #: 3 steps a second of scene time at 30 frames a second: a step every 10 frames
 RATE = "3"
-CASES = {"screen": [], "db": ["--decomposition", "db"], "hybrid": ["--decomposition", "hybrid", "--latency", "2"]}
+CASES = {"screen": [], "db": ["--decomposition", "db", "--latency", "0"],
+         "hybrid": ["--decomposition", "hybrid", "--latency", "3"]}
 #: each frame's step: a step every 10 frames, round the loop of 4
 WANTED = [(f // 10) % 4 for f in range(FRAMES)]
 

@@ -10,7 +10,7 @@ and on the wall (docs/USAGE.md, "A running simulation"):
     launch/walkthrough --model adios2:heat --color-by temperature --range 0,1 --path-kind orbit
 
 Each step holds ``points`` (N*N, 3), ``quad`` (cells, 4) point indices, the ``temperature`` per
-point, the ``source`` distance per cell and the step's ``time``: what ``multigpu/scene/stream_mesh.py``
+point, the ``source`` distance per cell, the step's ``time`` and when it was ``written``: what ``multigpu/scene/stream_mesh.py``
 reads. The writer never waits for a reader (SST's queue drops the oldest step when the wall is slow).
 """
 
@@ -82,6 +82,7 @@ def main(argv: list[str] | None = None) -> int:
             dist = np.hypot(centres[0] - cx, centres[1] - cy)
             out.write("source", dist, dist.shape, [0], dist.shape)
             out.write("time", np.array([t]))
+            out.write("written", np.array([time.time()]))  # the wall measures its delay from it
             out.end_step()
             if a.every > 0:
                 time.sleep(a.every)

@@ -155,6 +155,7 @@ class Stepping:
         self.reader = Reader(spec, self.n, self._say if rank == 0 else None)
         self.agreed = -1  # the step every rank held ready in the last landed rows (-1: none)
         self.posted: deque[int] = deque()  # the ready steps of this rank's rows not landed yet
+        self.last_shown = self.shown  # the step of the last frame shown (``row``: a stream's delay)
         self.swaps = 0
 
     def _say(self, k: int, why: str) -> None:
@@ -200,7 +201,12 @@ class Stepping:
         ready = self.reader.newest
         self.posted.append(ready)
         kept = self.spool.count - 1 if self.spool is not None else -1  # rank 0 of a stream's run: its newest
-        return {"step": shown, "step_ready": ready, "step_late": int(late), "step_wanted": kept}
+        row = {"step": shown, "step_ready": ready, "step_late": int(late), "step_wanted": kept}
+        if self.spool is not None and shown != self.last_shown and shown in self.spool.stamps:  # first shown now
+            written, came = self.spool.stamps[shown]
+            row.update(step_delay_ms=(time.time() - written) * 1e3, step_transfer_ms=(came - written) * 1e3)
+        self.last_shown = shown
+        return row
 
     def landed(self, ready: np.ndarray, wanted: np.ndarray | None = None) -> None:
         """Every rank's ``step_ready`` (and ``step_wanted``: rank 0's newest kept step of a stream) of a

@@ -7,8 +7,10 @@ are written as the next file of a series in the run's outputs (``steps/step_NNNN
 kept beside the mosaics, readable by ParaView), which the wall plays as any series
 (``rank/series.py``): every rank loads the newest step rank 0 names, and it appears on every rank
 at the same frame. A step the wall cannot use is said in one line and left out; a variable that
-fits nothing is named once. The reader is a daemon thread: nothing from the stream raises in the
-frame loop. The ``adios2`` wheel is imported here only.
+fits nothing is named once. A step stamped ``written`` (the writer's ``time.time()``) gives the
+delay from its write to the first frame that shows it (``step_delay_ms`` in the timings; the
+``step_transfer_ms`` of it until rank 0 had read it). The reader is a daemon thread: nothing from
+the stream raises in the frame loop. The ``adios2`` wheel is imported here only.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ import sys
 import threading
 import time
 from pathlib import Path
+
+import numpy as np
 
 from multigpu.errors import InputError
 
@@ -54,6 +58,7 @@ class Spool:
         self.where.mkdir(parents=True, exist_ok=True)
         self.count, self.ended, self.error, self.arrived = 0, False, None, time.monotonic()
         self.refused = 0  # steps that could not be used
+        self.stamps: dict[int, tuple[float, float]] = {}  # kept step -> (written, came), where stamped
         self._noted: set[str] = set()
         self._closed = False
         self.engine = "BP5" if self.name.lower().rstrip("/").endswith(".bp") else "SST"
@@ -100,14 +105,14 @@ class Spool:
                     continue
                 if status != ok:
                     break
-                values, skipped = {}, []
+                values, skipped, came = {}, [], time.time()
                 for name, info in stream.available_variables().items():
                     if info.get("Type") == "string":
                         skipped.append(name)
                         continue
                     values[name] = stream.read(name)
                 stream.end_step()
-                self._keep(values, skipped)
+                self._keep(values, skipped, came)
         except Exception as exc:  # noqa: BLE001 (a broken stream ends what the wall gets, never the frame loop)
             self._note(f"{self.model}: the stream failed ({_first_line(exc)}); the wall holds its last step")
         finally:
@@ -117,8 +122,11 @@ class Spool:
             except Exception:  # noqa: BLE001
                 pass
 
-    def _keep(self, values: dict, skipped: list[str]) -> None:
-        """One step's variables as the next file of the series (written whole, then renamed)."""
+    def _keep(self, values: dict, skipped: list[str], came: float) -> None:
+        """One step's variables as the next file of the series (written whole, then renamed); where
+        the writer stamped it (``written``: its clock's seconds, a host's clock), when it was written
+        and when it came (``stamps``: the delay to the wall, in the timings)."""
+        written = values.pop("written", None)
         import meshio
 
         from multigpu.scene.stream_mesh import step_mesh
@@ -137,6 +145,8 @@ class Spool:
         tmp = path.with_name(f".{path.stem}-{os.getpid()}.vtu")
         meshio.write(tmp, mesh, binary=True)
         tmp.replace(path)
+        if written is not None and np.size(written) == 1 and np.isfinite(written).all():
+            self.stamps[self.count] = (float(np.ravel(written)[0]), came)
         self.count += 1
         self.arrived = time.monotonic()
 

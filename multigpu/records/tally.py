@@ -95,6 +95,7 @@ class RunningSummary:
         # a series' steps (rank 0's column: every rank shows the same step at a frame)
         self.steps: set[int] = set()
         self.step = {"late": 0, "swaps": 0, "last": None, "seen": False}
+        self.delays = Quantiles()  # a stream's steps: from their write to the first frame showing them (ms)
 
     def add(self, per: np.ndarray) -> None:
         """``per``: (F, K, C) rows of F whole frames, each frame's ranks in rank order."""
@@ -132,6 +133,9 @@ class RunningSummary:
             self._target(per, period)
         self._steps(per[:, 0, _C["step"]].astype(np.int64), per[:, 0, _C["step_late"]],
                     per[:, :, _C["step_ready"]])
+        delay = per[:, 0, _C["step_delay_ms"]]
+        if (delay > 0).any():
+            self.delays.add(delay[delay > 0])
 
     def _steps(self, step: np.ndarray, late: np.ndarray, ready: np.ndarray) -> None:
         """A series' steps shown, the frames that showed a step late and the step changes."""
@@ -202,6 +206,10 @@ class RunningSummary:
         if self.step["seen"]:  # a series played
             out["series"] = {"steps_shown": len(self.steps), "step_changes": self.step["swaps"],
                              "late_frames": self.step["late"], "last_step": self.step["last"]}
+            if self.delays.n:  # a stream's stamped steps: write to first frame shown
+                d = self.delays.quantile(50)
+                out["series"].update(delay_ms_median=d, delay_frames_median=d / max(q["period"].quantile(50), 1e-9),
+                                     delays=self.delays.n)
         if self.hosts:  # per host, its own ranks' swap skew: whether each PC's monitors swap together
             out["present"]["swap_skew_ms_by_host"] = {h: q.quantile(50) for h, (_, q) in self.hosts.items()}
         if self.target is not None:

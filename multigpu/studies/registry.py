@@ -36,6 +36,7 @@ BENCHES = {
     "head": ("head_bench:bench_head", "a tracked head over UDP: motion to photon at latency 0, 1, 2"),
     "memory": ("memory_bench:bench_memory", "memory per rank and per host"),
     "moving": ("moving_bench:bench_moving", "moving scenes: per-frame balancing against static and none, their cost"),
+    "series": ("series_bench:bench_series", "a simulation's time series against one still step: p99 frame, memory"),
     "memory-steps": ("memory_bench:bench_memory_steps", "memory step by step through setup"),
     "model-load": ("memory_bench:bench_model_load", "loading a model file: time and peak memory"),
     "textures": ("texture_bench:bench_textures", "a textured model against the same untextured: time, memory"),
