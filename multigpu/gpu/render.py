@@ -83,6 +83,8 @@ class RegionRenderer:
         self.fbo_size = (0, 0)
         self._ring = None  # the scissor method's two framebuffers once a frame is submitted ahead (``submit``)
         self._tris = 0
+        self._submits = 0  # frames submitted; a swapped-out step's buffers go ``keep`` frames after it
+        self._retired: list = []  # (submits when they go, GL objects, the file maps they draw from)
         # the largest framebuffer side a region chunk may use
         self.chunk = self.limits["renderbuffer"]
         if self.method == "scissor":
@@ -114,19 +116,25 @@ class RegionRenderer:
             *(self.skins.attributes() if m and self.skins is not None else [])],
             index_buffer=self.ibo, index_element_size=4)
 
-    def rescene(self, scene, shared: Path | None = None) -> None:
+    def rescene(self, scene, shared: Path | None = None, keep: int = 8) -> None:
         """Draw ``scene`` from the next frame on: a series' next step, with the same kinds of vertex
-        data (colours, no textures, no motion). The GL first finishes what it was given (frames in
-        flight were drawn from the old buffers, which may be a file's pages: they go after)."""
+        data (colours, no textures, no motion). Frames in flight were drawn from the old buffers
+        (their storage may be a file's pages the GL reads as it draws): those go once ``keep`` more
+        frames were submitted (frames in flight have been read by then), never stalling the GL."""
         if self.textured or self.mbo is not None:
             raise ValueError("a textured or moving scene's geometry is not swapped")
-        self.ctx.finish()
         old = (*(v for _, v in self.passes), self.vbo, self.ibo, self.obo, self.rgba, self.cbo)
+        self._retired.append((self._submits + keep, old, self._maps))
         self._load(scene, shared)
         self.passes = [(p, self._array(p, False)) for p, _ in self.passes]
-        for obj in old:
-            if obj is not None:
-                obj.release()
+
+    def _retire(self) -> None:
+        """Let go the geometry of steps whose frames have all been read (``rescene``)."""
+        while self._retired and self._retired[0][0] <= self._submits:
+            _, objects, _ = self._retired.pop(0)
+            for obj in objects:
+                if obj is not None:
+                    obj.release()
 
     def _buffers(self, scene, shared: Path | None, per_vertex: bool, textured: bool, pool: bool) -> dict:
         """The vertex, index and vertex-id GL buffers, the vertex colours' where they are drawn
@@ -336,6 +344,9 @@ class RegionRenderer:
         next one's triangles are binned; a GPU draws while the CPU plans). Only the scissor
         method with disjoint pieces in one chunk each can wait; others are read at once.
         ``scale`` and ``levels``: the frame's quality, as ``render``'s."""
+        self._submits += 1
+        if self._retired:
+            self._retire()
         if self._ring is not None:  # the other framebuffer than the last frame's (it may be unread yet)
             self._ring.reverse()
             self.fbo = self._ring[0]
@@ -401,4 +412,6 @@ class RegionRenderer:
             if extra is not None:
                 extra.release()
         self._maps = None  # the file's maps outlive the GL buffers drawing from them
+        self._submits += 1 << 30
+        self._retire()
 

@@ -99,7 +99,8 @@ class Frames:
         from multigpu.core.lod import LevelChooser
         from multigpu.scene.moves import movers_of
 
-        self.renderer.rescene(scene, shared)
+        eyes = 1 if self.stereo is None else 2  # submits a frame
+        self.renderer.rescene(scene, shared, keep=(self.latency + 2) * eyes)
         light = scene.without_geometry()  # the GL buffers hold its geometry now
         light.movers = movers_of(light, self.cfg.scene)
         self.planner.rescene(light)
