@@ -39,8 +39,8 @@ class Reader:
     """Loads the steps of ``spec``'s series in a daemon thread, the one asked for last first:
     ``newest`` is the last one loaded, and every loaded step stays until ``keep`` lets it go."""
 
-    def __init__(self, spec, n: int, say=None):
-        self.spec, self.n, self.say = spec, n, say
+    def __init__(self, spec, n: int, say=None, path_of=None):
+        self.spec, self.n, self.say, self.path_of = spec, n, say, path_of
         self.loaded: dict[int, tuple] = {}  # step -> (scene, buffers file)
         self.newest = -1
         self.bad: dict[int, str] = {}  # steps that could not be read, and why
@@ -99,7 +99,7 @@ class Reader:
                     return
                 k = self.asked
             try:
-                got = load_step(self.spec, k)
+                got = load_step(self.spec, k, None if self.path_of is None else self.path_of(k))
             except Exception as exc:  # noqa: BLE001 (a thread's failure must never reach the frame loop)
                 why = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
                 with self._cv:
@@ -119,13 +119,15 @@ class Reader:
                 self._cv.notify_all()
 
 
-def load_step(spec, k: int) -> tuple:
-    """Step ``k`` of ``spec``'s series: its scene (the cache's) and buffers file, built by one
-    rank of the host at a time (a file lock beside the cache: the others then map what it wrote)."""
+def load_step(spec, k: int, path=None) -> tuple:
+    """Step ``k`` of ``spec``'s series: its scene (the cache's) and buffers file, built by one rank
+    of the host at a time (a file lock beside the cache: the others then map what it wrote).
+    ``path``: the step's file, found already (then loaded as that one file, its colours over
+    ``spec``'s fixed range: the same cached scene, without looking for the series again)."""
     from multigpu.gpu.buffers import ensure_buffers
     from multigpu.scene.models import cache_dir, load_scene
 
-    step = dataclasses.replace(spec, step=k)
+    step = dataclasses.replace(spec, step=k) if path is None else dataclasses.replace(spec, model=str(path), step=0)
     where = cache_dir()
     where.mkdir(parents=True, exist_ok=True)
     name = hashlib.sha1(f"{spec.model}\0{k}".encode()).hexdigest()[:16]
@@ -134,8 +136,36 @@ def load_step(spec, k: int) -> tuple:
         try:
             scene, info = load_scene(step)
             return scene, ensure_buffers(info.get("cache"), scene)
+        except InputError as exc:
+            if path is None:
+                raise
+            raise InputError.of(exc.field or "model", f"step {k} of the series: {exc.message}") from None
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def reader_spec(spec, scene):
+    """The spec a series' later steps load with: the colour range its first step was coloured over
+    (the series', found once) fixed, so no step looks for the series again."""
+    got = scene.meta.get("simulation", {}).get("color_by")
+    if spec.color_by is None or spec.color_range is not None or not got:
+        return spec
+    return dataclasses.replace(spec, color_range=(float(got["range"][0]), float(got["range"][1])))
+
+
+def step_paths(spec, scene):
+    """Step k's file: a file series' as found once, a live stream's by the name its reader gives it."""
+    from pathlib import Path
+
+    if spec.live:
+        from multigpu.rank.spool import NAME
+
+        where = Path(spec.model).parent
+        return lambda k: where / NAME.format(k)
+    from multigpu.scene.series import find_series
+
+    paths = find_series(spec.model).paths
+    return lambda k: paths[k]
 
 
 class Stepping:
@@ -152,7 +182,8 @@ class Stepping:
         if self.live and self.end == "loop":
             self.end = "hold"
         self.rank = rank
-        self.reader = Reader(spec, self.n, self._say if rank == 0 else None)
+        self.reader = Reader(reader_spec(spec, scene), self.n, self._say if rank == 0 else None,
+                             step_paths(spec, scene))
         self.agreed = -1  # the step every rank held ready in the last landed rows (-1: none)
         self.posted: deque[int] = deque()  # the ready steps of this rank's rows not landed yet
         self.last_shown = self.shown  # the step of the last frame shown (``row``: a stream's delay)
@@ -191,7 +222,7 @@ class Stepping:
             if nxt is None or nxt == self.shown or nxt not in self.reader.bad:
                 break
             nxt = after(nxt, self.n, self.end)
-        if nxt is not None and nxt != self.shown:
+        if nxt is not None and nxt != self.shown and swap is None:  # (the frame of a swap has enough to do)
             self.reader.ask(nxt)
         return swap
 
