@@ -40,7 +40,7 @@ def test_every_declared_field_has_its_one_flag(cls):
     assert undeclared == ({"scene", "displays", "positions", "fullscreen", "gpus", "poses", "corners", "right_eye",
                            "mpcdi", "focus"}
                           if cls is WalkConfig
-                          else {"ranks", "lods"})
+                          else {"ranks", "lods", "step", "live"})
 
 
 def test_every_choice_and_switch_reaches_its_field():
