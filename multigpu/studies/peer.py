@@ -60,6 +60,52 @@ json.dump({"rank": rank, "frames": len(cams), "wall_ms": 1e3 * wall / len(cams),
 '''
 
 
+#: ParaView playing a series (``bench series``): ``pvbatch --symmetric SCRIPT CAMERAS STEPS W H OUT FIELD LO HI
+#: RATE``, STEPS a JSON list of the step files (one reader, a step per time), coloured by FIELD over LO..HI
+#: (matplotlib's viridis); frame f shows the step multigpu's ``--steps-per-second RATE`` shows (30 frames a
+#: second of scene time, looping), every step read when its frame comes (as ``--late-step wait``)
+PVBATCH_SERIES_SCRIPT = r'''
+import json, math, sys, time
+from paraview.simple import *
+from paraview.modules.vtkRemotingCore import vtkProcessModule
+
+cams_file, steps_file, W, H, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+field, lo, hi, rate = sys.argv[6], float(sys.argv[7]), float(sys.argv[8]), float(sys.argv[9])
+rank = vtkProcessModule.GetProcessModule().GetPartitionId()
+cams = json.load(open(cams_file))["cameras"]
+files = json.load(open(steps_file))
+reader = XMLUnstructuredGridReader(FileName=files)
+times = list(reader.TimestepValues) if len(files) > 1 else [0.0]
+data = RedistributeDataSet(Input=reader)
+view = CreateView("RenderView")
+view.ViewSize = [W, H]
+view.OrientationAxesVisibility = 0
+shown = Show(data, view)
+ColorBy(shown, ("POINTS", field))
+lut = GetColorTransferFunction(field)
+lut.ApplyPreset("Viridis (matplotlib)", True)
+lut.RescaleTransferFunction(lo, hi)
+cam = view.GetActiveCamera()
+
+def put(c):
+    cam.SetPosition(*c["position"]); cam.SetFocalPoint(*c["target"]); cam.SetViewUp(*c["up"])
+    cam.SetViewAngle(c["fov"]); cam.SetClippingRange(c["near"], c["far"])
+
+def at(f):
+    return times[int(math.floor(f / 30.0 * rate + 1e-9)) % len(times)]
+
+put(cams[0]); view.ViewTime = at(0); Render(view)  # the first frame builds what later frames reuse
+w0, c0 = time.perf_counter(), time.process_time()
+for f, c in enumerate(cams):
+    put(c)
+    view.ViewTime = at(f)
+    Render(view)
+wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+json.dump({"rank": rank, "frames": len(cams), "wall_ms": 1e3 * wall / len(cams), "cpu_ms": 1e3 * cpu / len(cams)},
+          open(f"{out}.rank{rank}.json", "w"))
+'''
+
+
 def _tools():
     """(pvbatch, Open MPI's mpiexec) or a one-line error naming what is missing."""
     from multigpu.launcher.mpirun import openmpi_on_path
@@ -75,15 +121,16 @@ def _tools():
 
 
 def paraview(pvbatch: str, mpiexec: str, ranks: int, cams: Path, model: str, size: tuple[int, int], out: Path,
-             env: dict, timeout: float) -> dict:
-    """One ParaView run: rank 0's wall ms per frame, the slowest rank's CPU ms per frame."""
-    script = out / "pvbatch_peer.py"
-    script.write_text(PVBATCH_SCRIPT)
+             env: dict, timeout: float, series: tuple | None = None) -> dict:
+    """One ParaView run: rank 0's wall ms per frame, the slowest rank's CPU ms per frame. ``series``:
+    (field, lo, hi, rate) to play ``model``, then a JSON list of step files (``PVBATCH_SERIES_SCRIPT``)."""
+    script = out / ("pvbatch_series.py" if series else "pvbatch_peer.py")
+    script.write_text(PVBATCH_SERIES_SCRIPT if series else PVBATCH_SCRIPT)
     stem = out / f"paraview-{ranks}-{time.monotonic_ns()}"
     cmd = [mpiexec, "--oversubscribe", "--bind-to", "none", *(["--allow-run-as-root"] if os.geteuid() == 0 else []),
            "-n", str(ranks),
            pvbatch, "--symmetric", "--force-offscreen-rendering", str(script), str(cams), model, str(size[0]),
-           str(size[1]), str(stem)]
+           str(size[1]), str(stem), *(str(v) for v in series or ())]
     clean = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
     job = subprocess.run(cmd, env={**clean, **env}, capture_output=True, text=True, timeout=timeout)
     got = [json.loads(p.read_text()) for p in sorted(out.glob(f"{stem.name}.rank*.json"))]

@@ -13,6 +13,11 @@ play of a series finds them. Headless 2x2 walls of 256x256 tiles (4 ranks) walk 
 2. **Memory**: the host's peak proportional set size (every rank's ``Pss`` summed) of the series
    against the still step, and the difference in steps' worth (one step: its cached scene and GL
    buffers file, which the host's page cache holds once).
+3. **Against ParaView** (``bench peer``'s pair, where ``pvbatch`` and Open MPI are installed): the
+   same series on 4 ranks, the same orbit and 512x512 canvas, colour map and steps at the same
+   frames (``pvbatch --symmetric``, IceT compositing, one reader of the step files; multigpu with
+   ``--late-step wait``: every step at its frames, as ParaView shows them), alternated; wall time
+   per frame (ParaView: rank 0's loop; multigpu: the frame period) and the slowest rank's CPU.
 
 Results in ``out/series/`` (``series.csv``). Figures only, no asserts.
 """
@@ -38,7 +43,7 @@ def write_steps(where: Path, n_side: int, steps: int) -> Path:
     done = where / f"done-{n_side}-{steps}"
     if done.exists():
         return where
-    for old in where.glob("step_*.vtu"):
+    for old in (*where.glob("step_*.vtu"), *where.glob("done-*")):
         old.unlink()
     x, y = np.meshgrid(np.linspace(0, 4, n_side), np.linspace(0, 4, n_side))
     idx = np.arange(n_side * n_side).reshape(n_side, n_side)
@@ -116,11 +121,61 @@ def bench_series(quick: bool) -> list[dict]:
                  "series_mib": mib["series"], "step_mib": step_mib, "extra_steps": extra})
     print(f"  memory (peak PSS, host): series {mib['series']:.0f} MiB against {mib['still']:.0f} MiB still: "
           f"{extra:+.2f} steps' worth (a step: {step_mib:.0f} MiB of cached scene and GL buffers)")
+    rows += against_paraview(data, frames, lo, hi, rounds)
     OUT.mkdir(parents=True, exist_ok=True)
     keys = sorted({k for r in rows for k in r}, key=lambda k: (k not in ("part", "arm"), k))
     write_csv(OUT / "series.csv", [{k: r.get(k, "") for k in keys} for r in rows])
     print(f"results in {OUT}/series.csv")
     return rows
+
+
+def against_paraview(data: Path, frames: int, lo: float, hi: float, rounds: int, ranks: int = 4,
+                     size: tuple[int, int] = (512, 512)) -> list[dict]:
+    """Part 3: ParaView and multigpu playing the same series, alternated (none where ParaView or
+    Open MPI is missing: said in a line)."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+
+    from multigpu.display.xvfb import start_xvfb, stop_xvfb
+    from multigpu.errors import InputError
+    from multigpu.studies.peer import _tools, multigpu, paraview
+
+    try:
+        pvbatch, mpiexec = _tools()
+    except InputError as exc:
+        print(f"  against ParaView: not measured ({exc})")
+        return []
+    files = [str(p.resolve()) for p in sorted(data.glob("step_*.vtu"))]
+    scene = ["--model", str(data.resolve() / "step_*.vtu"), "--color-by", "height", f"--range={lo!r},{hi!r}",
+             "--steps-per-second", str(RATE), "--late-step", "wait"]
+    got: dict = {"paraview": [], "multigpu": []}
+    env = {"LP_NUM_THREADS": "1"}
+    xvfb, display = start_xvfb((size[0] + 16, size[1] + 16))  # Debian's ParaView draws through GLX only
+    try:
+        with tempfile.TemporaryDirectory(prefix="multigpu-series-peer-") as tmp:
+            cams, steps = Path(tmp) / "cameras.json", Path(tmp) / "steps.json"
+            steps.write_text(json.dumps(files))
+            made = subprocess.run([sys.executable, "-m", "multigpu", "path", "make", "orbit", "--model", files[0],
+                                   "--frames", str(frames), "--out", str(cams)], capture_output=True, text=True,
+                                  timeout=1800)
+            if made.returncode != 0:
+                raise RuntimeError(f"bench series: the camera path could not be made\n{made.stderr[-1500:]}")
+            for _ in range(rounds):  # alternated
+                got["paraview"].append(paraview(pvbatch, mpiexec, ranks, cams, str(steps), size, Path(tmp),
+                                                {**env, "DISPLAY": display}, 3600, ("height", lo, hi, RATE)))
+                got["multigpu"].append(multigpu(mpiexec, ranks, cams, scene, size, Path(tmp), env, 3600, []))
+    finally:
+        stop_xvfb(xvfb)
+    med = {k: {m: float(np.median([r[m] for r in v])) for m in ("wall_ms", "cpu_ms")} for k, v in got.items()}
+    lead = med["paraview"]["wall_ms"] / med["multigpu"]["wall_ms"]
+    cpu = med["paraview"]["cpu_ms"] / med["multigpu"]["cpu_ms"]
+    print(f"  against ParaView (pvbatch + IceT), {ranks} ranks, {size[0]}x{size[1]}: wall "
+          f"{med['paraview']['wall_ms']:.1f} against {med['multigpu']['wall_ms']:.1f} ms a frame ({lead:.2f}x), "
+          f"slowest rank's CPU {med['paraview']['cpu_ms']:.1f} against {med['multigpu']['cpu_ms']:.1f} ms ({cpu:.2f}x)")
+    return [{"part": "paraview", "arm": arm, "ranks": ranks, "wall_ms": m["wall_ms"], "cpu_ms": m["cpu_ms"],
+             "wall_lead": lead, "cpu_lead": cpu} for arm, m in med.items()]
 
 
 def _step_mib(data: Path, frames: int, lo: float, hi: float) -> float:
