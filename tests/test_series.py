@@ -165,8 +165,9 @@ def test_the_reader_loads_what_is_asked_and_names_a_step_it_cannot_read(tmp_path
                 time.sleep(0.01)
         assert reader.newest == 0 and sorted(reader.loaded) == [0, 2] and list(reader.bad) == [1]
         assert len(said) == 1 and said[0][0] == 1 and "step_1.vtu" in said[0][1]
-        scene, shared = reader.take(2)
+        scene, shared, (draws, maps) = reader.take(2)
         assert scene.meta["series"]["step"] == 2 and shared is not None and shared.is_file()
+        assert draws.total >= 3 * scene.n_triangles and sorted(maps) == ["colors", "indices", "objects", "vertices"]
         reader.keep(set())  # the newest stays: a row may say it
         assert list(reader.loaded) == [0]
         reader.ask(2)  # asked again once let go: loaded again

@@ -37,6 +37,7 @@ PAGE = mmap.PAGESIZE
 #: bytes per block when a buffer is uploaded or written
 UPLOAD_BLOCK = 16 << 20
 _MADV_DONTNEED = 4
+_MADV_POPULATE_READ = 22  # Linux 5.14: the pages mapped now, in the calling thread
 _GL_EXTERNAL_VIRTUAL_MEMORY_BUFFER_AMD = 0x9160
 _GL_STATIC_DRAW = 0x88E4
 _GL_BUFFER_SIZE = 0x8764
@@ -99,6 +100,18 @@ def _unmap_pages(part: np.ndarray) -> None:
     if end > start:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.madvise(ctypes.c_void_p(start), ctypes.c_size_t(end - start), _MADV_DONTNEED)
+
+
+def populate(maps: dict[str, np.ndarray]) -> None:
+    """Fault in the pages of a buffers file's maps now (``madvise(MADV_POPULATE_READ)``; nothing
+    where the kernel has it not): a series' next step, readied in a thread, so the frame that
+    first draws it does not stop on each page."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    for a in maps.values():
+        if isinstance(a, np.memmap) and a.nbytes:
+            start = a.ctypes.data // PAGE * PAGE
+            libc.madvise(ctypes.c_void_p(start), ctypes.c_size_t(a.ctypes.data + a.nbytes - start),
+                         _MADV_POPULATE_READ)
 
 
 # -- the buffers file ------------------------------------------------------------------------

@@ -33,6 +33,18 @@ from multigpu.gpu.shaders import fragment_shader, vertex_shader
 BACKGROUND = (0.08, 0.09, 0.12)
 
 
+def ready_step(scene, shared: Path | None) -> tuple:
+    """What ``RegionRenderer.rescene`` needs of a series' step beyond GL calls, made where it was
+    read (a thread of its own): its draw list and its buffers file's maps, their pages mapped."""
+    from multigpu.gpu.buffers import populate
+
+    draws = DrawList(scene)
+    maps = map_buffers(shared, scene, draws) if shared is not None else None
+    if maps is not None:
+        populate(maps)
+    return draws, maps
+
+
 class RegionRenderer:
     """Draws any subset of a scene's objects into any region of a ``size`` display.
 
@@ -91,13 +103,14 @@ class RegionRenderer:
             self._framebuffer((W, H))
         self.depth_test = moderngl.DEPTH_TEST
 
-    def _load(self, scene, shared: Path | None) -> None:
-        """The scene's geometry into GL buffers (``_buffers``) and its objects' colours."""
+    def _load(self, scene, shared: Path | None, ready: tuple | None = None) -> None:
+        """The scene's geometry into GL buffers (``_buffers``) and its objects' colours (``ready``:
+        its draw list and buffers file maps, made ahead: ``ready_step``)."""
         from multigpu.scene.looks import palette
 
         self.origin = np.asarray(scene.origin, dtype=np.float64)
-        self.draws = DrawList(scene)
-        bufs = self._buffers(scene, shared, self.per_vertex, self.textured, self.texture_path == "pool")
+        self.draws, maps = ready if ready is not None else (DrawList(scene), None)
+        bufs = self._buffers(scene, shared, self.per_vertex, self.textured, self.texture_path == "pool", maps)
         self.vbo, self.ibo, self.obo = bufs["vertices"], bufs["indices"], bufs["objects"]
         self.rgba, self.uvl, self.texels = bufs.get("colors"), bufs.get("texcoords"), bufs.get("texels")
         self._texel_bytes = 4 * int(scene.texels.shape[0]) if self.textured else 0
@@ -116,16 +129,17 @@ class RegionRenderer:
             *(self.skins.attributes() if m and self.skins is not None else [])],
             index_buffer=self.ibo, index_element_size=4)
 
-    def rescene(self, scene, shared: Path | None = None, keep: int = 8) -> None:
+    def rescene(self, scene, shared: Path | None = None, keep: int = 8, ready: tuple | None = None) -> None:
         """Draw ``scene`` from the next frame on: a series' next step, with the same kinds of vertex
         data (colours, no textures, no motion). Frames in flight were drawn from the old buffers
         (their storage may be a file's pages the GL reads as it draws): those go once ``keep`` more
-        frames were submitted (frames in flight have been read by then), never stalling the GL."""
+        frames were submitted (frames in flight have been read by then), never stalling the GL.
+        ``ready``: ``ready_step``'s, made in the thread that read the step."""
         if self.textured or self.mbo is not None:
             raise ValueError("a textured or moving scene's geometry is not swapped")
         old = (*(v for _, v in self.passes), self.vbo, self.ibo, self.obo, self.rgba, self.cbo)
         self._retired.append((self._submits + keep, old, self._maps))
-        self._load(scene, shared)
+        self._load(scene, shared, ready)
         self.passes = [(p, self._array(p, False)) for p, _ in self.passes]
 
     def _retire(self) -> None:
@@ -136,7 +150,8 @@ class RegionRenderer:
                 if obj is not None:
                     obj.release()
 
-    def _buffers(self, scene, shared: Path | None, per_vertex: bool, textured: bool, pool: bool) -> dict:
+    def _buffers(self, scene, shared: Path | None, per_vertex: bool, textured: bool, pool: bool,
+                 maps: dict | None = None) -> dict:
         """The vertex, index and vertex-id GL buffers, the vertex colours' where they are drawn
         (``per_vertex``), the texture coordinates' (``textured``) and the texel pool's (``pool``),
         by name: the host's shared
@@ -144,7 +159,8 @@ class RegionRenderer:
         uploaded a block at a time (from that file where there is one: already packed).
         ``self.storage`` says which."""
         ctx, draws = self.ctx, self.draws
-        maps = map_buffers(shared, scene, draws) if shared is not None else None
+        if maps is None:
+            maps = map_buffers(shared, scene, draws) if shared is not None else None
         self._maps = None
         names = ("vertices", "indices", "objects", *(("colors",) if per_vertex else ()),
                  *(("texcoords",) if textured else ()), *(("texels",) if pool else ()))

@@ -91,7 +91,7 @@ class Frames:
         part = partition() if self.rank == 0 else None
         return broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
 
-    def rescene(self, scene, shared) -> None:
+    def rescene(self, scene, shared, ready=None) -> None:
         """A series' next step drawn and planned from this frame on, on every rank at once (its
         geometry in the renderer, its bounds and objects in the planner, culler and level chooser;
         the frames in flight keep theirs)."""
@@ -100,7 +100,7 @@ class Frames:
         from multigpu.scene.moves import movers_of
 
         eyes = 1 if self.stereo is None else 2  # submits a frame
-        self.renderer.rescene(scene, shared, keep=(self.latency + 2) * eyes)
+        self.renderer.rescene(scene, shared, keep=(self.latency + 2) * eyes, ready=ready)
         light = scene.without_geometry()  # the GL buffers hold its geometry now
         light.movers = movers_of(light, self.cfg.scene)
         self.planner.rescene(light)

@@ -74,7 +74,7 @@ class Reader:
             return None
 
     def take(self, k: int) -> tuple:
-        """Step ``k``'s (scene, buffers file): loaded (every rank said so)."""
+        """Step ``k``'s (scene, buffers file, its renderer's part): loaded (every rank said so)."""
         with self._cv:
             return self.loaded[k]
 
@@ -120,8 +120,9 @@ class Reader:
 
 
 def load_step(spec, k: int, path=None) -> tuple:
-    """Step ``k`` of ``spec``'s series: its scene (the cache's) and buffers file, built by one rank
-    of the host at a time (a file lock beside the cache: the others then map what it wrote).
+    """Step ``k`` of ``spec``'s series: its scene (the cache's), buffers file and what the renderer
+    takes of them (``gpu.render.ready_step``), built by one rank of the host at a time (a file lock
+    beside the cache: the others then map what it wrote).
     ``path``: the step's file, found already (then loaded as that one file, its colours over
     ``spec``'s fixed range: the same cached scene, without looking for the series again)."""
     from multigpu.gpu.buffers import ensure_buffers
@@ -135,13 +136,16 @@ def load_step(spec, k: int, path=None) -> tuple:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released by the kernel if this process dies
         try:
             scene, info = load_scene(step)
-            return scene, ensure_buffers(info.get("cache"), scene)
+            shared = ensure_buffers(info.get("cache"), scene)
         except InputError as exc:
             if path is None:
                 raise
             raise InputError.of(exc.field or "model", f"step {k} of the series: {exc.message}") from None
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
+    from multigpu.gpu.render import ready_step
+
+    return scene, shared, ready_step(scene, shared)  # its draw list and mapped pages: the swap is GL calls only
 
 
 def reader_spec(spec, scene):

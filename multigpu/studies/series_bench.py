@@ -18,6 +18,10 @@ play of a series finds them. Headless 2x2 walls of 256x256 tiles (4 ranks) walk 
    frames (``pvbatch --symmetric``, IceT compositing, one reader of the step files; multigpu with
    ``--late-step wait``: every step at its frames, as ParaView shows them), alternated; wall time
    per frame (ParaView: rank 0's loop; multigpu: the frame period) and the slowest rank's CPU.
+4. **Live**: the example simulation (``examples/simulation/heat.py``, a 96x96 plate, a step every
+   0.1 s) streaming over SST to a 2x2 wall; from each step's write (the writer's stamp) to the first
+   frame that shows it (the run's own summary: ``series.delay_ms_median``), and the part of it
+   before rank 0 had read the step (the transfer), in ms and in frames of the run's median period.
 
 Results in ``out/series/`` (``series.csv``). Figures only, no asserts.
 """
@@ -122,6 +126,7 @@ def bench_series(quick: bool) -> list[dict]:
     print(f"  memory (peak PSS, host): series {mib['series']:.0f} MiB against {mib['still']:.0f} MiB still: "
           f"{extra:+.2f} steps' worth (a step: {step_mib:.0f} MiB of cached scene and GL buffers)")
     rows += against_paraview(data, frames, lo, hi, rounds)
+    rows += live(300 if quick else 900)
     OUT.mkdir(parents=True, exist_ok=True)
     keys = sorted({k for r in rows for k in r}, key=lambda k: (k not in ("part", "arm"), k))
     write_csv(OUT / "series.csv", [{k: r.get(k, "") for k in keys} for r in rows])
@@ -176,6 +181,45 @@ def against_paraview(data: Path, frames: int, lo: float, hi: float, rounds: int,
           f"slowest rank's CPU {med['paraview']['cpu_ms']:.1f} against {med['multigpu']['cpu_ms']:.1f} ms ({cpu:.2f}x)")
     return [{"part": "paraview", "arm": arm, "ranks": ranks, "wall_ms": m["wall_ms"], "cpu_ms": m["cpu_ms"],
              "wall_lead": lead, "cpu_lead": cpu} for arm, m in med.items()]
+
+
+def live(frames: int) -> list[dict]:
+    """Part 4: the example simulation streamed live to a 2x2 wall; the delays from its summary."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import tempfile
+    import time
+
+    from multigpu.studies.runs import walk
+
+    heat = Path(__file__).resolve().parents[2] / "examples" / "simulation" / "heat.py"
+    with tempfile.TemporaryDirectory(prefix="multigpu-live-") as tmp:
+        sim = subprocess.Popen([sys.executable, str(heat), "--name", f"{tmp}/heat", "--steps", "100000", "--every",
+                                "0.1"], cwd=tmp, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
+        try:
+            for _ in range(600):  # the writer's contact file: the stream is there
+                if Path(f"{tmp}/heat.sst").exists():
+                    break
+                time.sleep(0.05)
+            run = walk(Path(tmp) / "wall", (2, 2), (256, 256),
+                       ["--model", f"adios2:{tmp}/heat", "--color-by", "temperature", "--range", "0,1", "--frames",
+                        str(frames), "--path-kind", "orbit", "--mosaic-every", "0"], 1800)
+        finally:
+            os.killpg(sim.pid, signal.SIGKILL)
+            sim.wait(timeout=30)
+    sr = run.summary["series"]
+    transfer = run.col("step_transfer_ms")[:, 0]
+    transfer = float(np.median(transfer[transfer > 0])) if (transfer > 0).any() else 0.0
+    period = run.summary["frame_ms_median"]
+    after = (sr["delay_ms_median"] - transfer) / period
+    print(f"  live (SST, heat.py 96x96, a step every 0.1 s): {sr['delays']} steps shown; write to first frame "
+          f"{sr['delay_ms_median']:.0f} ms median, of which the transfer {transfer:.1f} ms; the rest "
+          f"{after:.1f} frames of {period:.1f} ms")
+    return [{"part": "live", "arm": "sst", "steps_shown": sr["delays"], "delay_ms": sr["delay_ms_median"],
+             "transfer_ms": transfer, "frame_ms": period, "delay_frames_after_transfer": after}]
 
 
 def _step_mib(data: Path, frames: int, lo: float, hi: float) -> float:
