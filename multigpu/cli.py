@@ -14,7 +14,6 @@ Bad input prints ``multigpu: error: ...`` (one line) and exits 2.
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 
 from multigpu import exits
@@ -119,19 +118,9 @@ def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return sub.choices["bench"]
 
 
-def joined_negatives(argv: list[str]) -> list[str]:
-    """``--flag -1,2`` as ``--flag=-1,2``: argparse takes a value that starts with a minus sign
-    and holds more than one number (``--range -1,1``, ``--offset -5,0,0``) for a flag of its own."""
-    out: list[str] = []
-    for a in argv:
-        if out and out[-1].startswith("--") and "=" not in out[-1] and re.match(r"-[\d.]", a) and "," in a:
-            out[-1] = f"{out[-1]}={a}"
-        else:
-            out.append(a)
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
+    from multigpu.flags import joined_negatives
+
     argv = joined_negatives(sys.argv[1:] if argv is None else list(argv))
     if len(argv) == 3 and argv[0] == "bench" and argv[2] in ("-h", "--help"):  # that benchmark's own flags
         from multigpu.studies.bench import help_for

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field, replace
 
 from multigpu.core.canvas import MOST_TILES, Canvas
@@ -12,6 +11,17 @@ from multigpu.core.inflight import MOST
 from multigpu.core.resample import MIN_SCALE
 from multigpu.errors import InputError
 from multigpu.options import check, option, register
+from multigpu.readers import (  # noqa: F401 (the readers' home; other modules read them from here too)
+    MONITOR_BESIDE,
+    parse_pair,
+    parse_vec3,
+    read_labels,
+    read_monitor,
+    read_mullion,
+    read_pair,
+    read_panel,
+    read_vec3,
+)
 from multigpu.scene.models import SceneSpec
 from multigpu.scene.paths import DEFAULT_FRAMES
 from multigpu.strategies import REGISTRY
@@ -68,88 +78,11 @@ def _codec(text: str) -> bool:
 PROJECTIONS = ("each", "shared")
 #: ``--path interactive``: the camera is flown by hand from rank 0's window
 INTERACTIVE = "interactive"
-#: ``--monitor`` without a place: right of the wall, on a screen that holds the wall's canvas
-MONITOR_BESIDE = (-1, -1)
 
 
 def setup_timeout(cfg: "WalkConfig") -> float:
     """How long a rank waits for the others to finish setup."""
     return max(cfg.timeout, SETUP_SECONDS)
-
-
-def read_vec3(text: str) -> tuple[float, float, float]:
-    """'X,Y,Z' as three floats."""
-    try:
-        v = tuple(float(t) for t in str(text).split(","))
-    except ValueError:
-        v = ()
-    if len(v) != 3:
-        raise InputError(f"must look like X,Y,Z (three numbers), got '{text}'")
-    return v
-
-
-def read_pair(text: str, sep: str = "x") -> tuple[int, int]:
-    """'AxB' as two positive integers."""
-    m = re.fullmatch(rf"\s*(\d+)\s*{sep}\s*(\d+)\s*", str(text))
-    if not m:
-        raise InputError(f"must look like A{sep}B with positive integers, got '{text}'")
-    a, b = int(m.group(1)), int(m.group(2))
-    if a < 1 or b < 1:
-        raise InputError(f"must be positive on both sides, got '{text}'")
-    return a, b
-
-
-def parse_vec3(text: str, flag: str) -> tuple[float, float, float]:
-    """'X,Y,Z' as three floats, or a clear error naming ``flag``."""
-    return _named(read_vec3, flag, text)
-
-
-def parse_pair(text: str, flag: str, sep: str = "x") -> tuple[int, int]:
-    """'AxB' as two positive integers, or a clear error naming ``flag``."""
-    return _named(read_pair, flag, text, sep)
-
-
-def _named(read, flag: str, *args):
-    try:
-        return read(*args)
-    except InputError as exc:
-        raise InputError(f"{flag} {exc.message}") from None
-
-
-def read_mullion(text: str) -> tuple[int, int]:
-    """'MXxMY': pixels >= 0."""
-    m = re.fullmatch(r"\s*(\d+)\s*x\s*(\d+)\s*", str(text))
-    if not m:
-        raise InputError(f"must look like MXxMY with pixels >= 0 (e.g. 40x40), got '{text}'")
-    return int(m.group(1)), int(m.group(2))
-
-
-def read_monitor(text: str) -> tuple[int, int]:
-    """``--monitor`` [X,Y] as a window place (``beside``: the flag without a value)."""
-    if text == "beside":
-        return MONITOR_BESIDE
-    x, y = str(text).split(",", 1) if "," in str(text) else (text, "")
-    if not (x.strip().isdigit() and y.strip().isdigit()):
-        raise InputError(f"must look like X,Y (pixels from the display's top-left corner), got '{text}'")
-    return int(x), int(y)
-
-
-def read_panel(text: str) -> tuple[str, int]:
-    """``--panel [ADDRESS:]PORT`` as (address, port): 127.0.0.1 unless an address is given; port 0:
-    any free one (the console prints the URL)."""
-    address, _, port = str(text).rpartition(":")
-    address = address.strip("[]") or "127.0.0.1"
-    if not port.strip().isdigit() or int(port) > 65535:
-        raise InputError(f"must look like [ADDRESS:]PORT with a port 0..65535, got '{text}'")
-    return address, int(port)
-
-
-def read_labels(text: str) -> tuple[int, ...]:
-    """``--dark-tiles 2,3`` as tile labels."""
-    try:
-        return tuple(sorted({int(v) for v in str(text).split(",") if v.strip()}))
-    except ValueError:
-        raise InputError(f"must be tile numbers separated by commas, got '{text}'") from None
 
 
 def _pair(v) -> str:

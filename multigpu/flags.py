@@ -4,6 +4,7 @@ from them (``walk_config``): argparse in, dataclasses out, no MPI (testable in o
 from __future__ import annotations
 
 import argparse
+import re
 
 from multigpu.errors import InputError
 
@@ -165,3 +166,15 @@ def dark_tiles(a) -> tuple[int, ...]:
         return read_labels(getattr(a, "dark", "") or "")
     except InputError:
         return ()
+
+
+def joined_negatives(argv: list[str]) -> list[str]:
+    """``--flag -1,2`` as ``--flag=-1,2``: argparse takes a value that starts with a minus sign
+    and holds more than one number (``--range -1,1``, ``--offset -5,0,0``) for a flag of its own."""
+    out: list[str] = []
+    for a in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and re.match(r"-[\d.]", a) and "," in a:
+            out[-1] = f"{out[-1]}={a}"
+        else:
+            out.append(a)
+    return out

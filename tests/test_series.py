@@ -193,7 +193,7 @@ def test_scene_info_names_the_steps_and_the_series_range(tmp_path, capsys, monke
 
 
 def test_a_negative_first_number_is_a_flag_value_not_a_flag():
-    from multigpu.cli import joined_negatives
+    from multigpu.flags import joined_negatives
 
     got = joined_negatives(["walkthrough", "--range", "-1,1", "--offset", "-5,0,0", "--anim-speed", "-2", "-h"])
     assert got == ["walkthrough", "--range=-1,1", "--offset=-5,0,0", "--anim-speed", "-2", "-h"]

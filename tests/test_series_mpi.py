@@ -37,8 +37,7 @@ def warm(steps, *args) -> None:
     """The cache of each of ``steps`` built as the run with ``args`` (``arguments``) reads it: the
     run's first load of a step then maps it (a cold one builds it: a second and more here, under
     load, and the wall holds the step before it meanwhile, as it should)."""
-    from multigpu.cli import joined_negatives
-    from multigpu.flags import walk_config, walkthrough_parser
+    from multigpu.flags import joined_negatives, walk_config, walkthrough_parser
     from multigpu.rank.series import load_step
 
     spec = walk_config(walkthrough_parser().parse_args(joined_negatives(arguments(*args)[1:]))).scene

@@ -237,11 +237,7 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
             {"host": socket.gethostname(), "node_rank": local, "egl_device": device,
              "gl_renderer": ctx.info.get("GL_RENDERER"), "gl_buffers": renderer.storage}), wait, "setup")]
     except BaseException:
-        _close(renderer, presenter, monitor, panel)
-        if tracker is not None:
-            tracker.close()
-        if spool is not None:
-            spool.close()
+        _close(renderer, presenter, monitor, panel, tracker, spool)
         if out is not None:
             out.abandon()
         raise
@@ -261,11 +257,7 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
             setup.release(collective=False)  # a failing rank must not wait in a collective free
         raise
     finally:
-        _close(renderer, presenter, monitor, panel)
-        if tracker is not None:
-            tracker.close()
-        if spool is not None:
-            spool.close()
+        _close(renderer, presenter, monitor, panel, tracker, spool)
         if out is not None:
             out.release()
 
@@ -421,7 +413,10 @@ def _tracker(cfg: WalkConfig):
         raise InputError.of("head_tracker", f"cannot listen on udp {address}:{port} ({exc})") from None
 
 
-def _close(renderer, presenter, monitor=None, panel=None) -> None:
+def _close(renderer, presenter, monitor=None, panel=None, tracker=None, spool=None) -> None:
+    for part in (tracker, spool):
+        if part is not None:
+            part.close()
     if panel is not None:
         panel.close()
     if renderer is not None:

@@ -68,8 +68,7 @@ def _flags(data: Path, arm: str, frames: int, lo: float, hi: float) -> list[str]
 
 def _warm(data: Path, steps: int, frames: int, lo: float, hi: float) -> None:
     """Every step's cache built as the walks read them (a series' second play)."""
-    from multigpu.cli import joined_negatives
-    from multigpu.flags import walk_config, walkthrough_parser
+    from multigpu.flags import joined_negatives, walk_config, walkthrough_parser
     from multigpu.rank.series import load_step
 
     args = ["--grid", "2x2", "--tile", "256x256", *_flags(data, "series", frames, lo, hi)]
@@ -185,14 +184,12 @@ def against_paraview(data: Path, frames: int, lo: float, hi: float, rounds: int,
 
 def live(frames: int) -> list[dict]:
     """Part 4: the example simulation streamed live to a 2x2 wall; the delays from its summary."""
-    import os
-    import signal
     import subprocess
     import sys
     import tempfile
     import time
 
-    from multigpu.studies.runs import walk
+    from multigpu.studies.runs import end, walk
 
     heat = Path(__file__).resolve().parents[2] / "examples" / "simulation" / "heat.py"
     with tempfile.TemporaryDirectory(prefix="multigpu-live-") as tmp:
@@ -208,8 +205,7 @@ def live(frames: int) -> list[dict]:
                        ["--model", f"adios2:{tmp}/heat", "--color-by", "temperature", "--range", "0,1", "--frames",
                         str(frames), "--path-kind", "orbit", "--mosaic-every", "0"], 1800)
         finally:
-            os.killpg(sim.pid, signal.SIGKILL)
-            sim.wait(timeout=30)
+            end(sim)  # its whole session
     sr = run.summary["series"]
     transfer = run.col("step_transfer_ms")[:, 0]
     transfer = float(np.median(transfer[transfer > 0])) if (transfer > 0).any() else 0.0
@@ -224,8 +220,7 @@ def live(frames: int) -> list[dict]:
 
 def _step_mib(data: Path, frames: int, lo: float, hi: float) -> float:
     """One step's worth: its cached scene and GL buffers file (MiB)."""
-    from multigpu.cli import joined_negatives
-    from multigpu.flags import walk_config, walkthrough_parser
+    from multigpu.flags import joined_negatives, walk_config, walkthrough_parser
     from multigpu.gpu.buffers import buffers_path
     from multigpu.scene.models import load_scene
 
