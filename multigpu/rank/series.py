@@ -192,6 +192,8 @@ class Stepping:
         self.posted: deque[int] = deque()  # the ready steps of this rank's rows not landed yet
         self.last_shown = self.shown  # the step of the last frame shown (``row``: a stream's delay)
         self.swaps = 0
+        if spool is not None:  # rank 0 of a stream's run: each kept step's cache built as it comes
+            spool.prepare = lambda k, path: load_step(self.reader.spec, k, path)
 
     def _say(self, k: int, why: str) -> None:
         """A step that cannot be read, once (rank 0; every rank finds the same)."""

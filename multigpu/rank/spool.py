@@ -58,6 +58,9 @@ class Spool:
         self.where.mkdir(parents=True, exist_ok=True)
         self.count, self.ended, self.error, self.arrived = 0, False, None, time.monotonic()
         self.refused = 0  # steps that could not be used
+        # made ready for the wall as it is kept (the frame loop sets it: ``rank/series.py``'s cache build),
+        # so every rank maps a step rank 0 names rather than each building it
+        self.prepare = None
         self.stamps: dict[int, tuple[float, float]] = {}  # kept step -> (written, came), where stamped
         self._noted: set[str] = set()
         self._closed = False
@@ -145,6 +148,11 @@ class Spool:
         tmp = path.with_name(f".{path.stem}-{os.getpid()}.vtu")
         meshio.write(tmp, mesh, binary=True)
         tmp.replace(path)
+        if self.prepare is not None:
+            try:
+                self.prepare(self.count, path)
+            except Exception as exc:  # noqa: BLE001 (the wall's own reader says it again, once, if it must)
+                self._note(f"{self.model}: step {self.count + self.refused}: {_first_line(exc)}")
         if written is not None and np.size(written) == 1 and np.isfinite(written).all():
             self.stamps[self.count] = (float(np.ravel(written)[0]), came)
         self.count += 1
