@@ -207,3 +207,26 @@ def test_pixels_between_hosts_cross_the_link_compressed_and_compose_exactly(tmp_
         for f, (got, want) in enumerate(zip(frames_of(tmp_path / compress), frames_of(tmp_path / "one"))):
             assert got.shape == want.shape and (got[shown] == want[shown]).all(), \
                 f"{compress} frame {f}: {(got != want)[shown].any(axis=-1).sum()} px"
+
+
+def test_a_time_series_on_two_hosts_shows_every_step_at_its_frame_like_one_rank(tmp_path, hosts, launcher):
+    """A simulation's time series across hosts: a step a frame, every rank on either host swapping
+    it in at the same frame (``--late-step wait``: each at its own frame), each step built once for
+    both hosts (the cache is shared, its build locked), the wall equal to one rank's render."""
+    from test_series import write_series
+
+    write_series(tmp_path / "series", 4)
+    flags = ["--model", str(tmp_path / "series" / "run.pvd"), "--color-by", "height", "--steps-per-second", "30",
+             "--late-step", "wait", "--path-kind", "orbit"]
+    env = {**hosts.env, "MULTIGPU_CACHE": str(tmp_path / "cache")}
+    res = run_mpi(4, args(tmp_path / "wall", frames=6, extra=flags), env=env, launcher=launcher, hosts=HOSTS,
+                  timeout=180)
+    assert res.returncode == 0, res.stderr[-3000:]
+    ref = run_mpi(1, [*args(tmp_path / "one", frames=6, extra=flags), "--grid", "1x1", "--tile", f"{W}x{H}"],
+                  env={"MULTIGPU_CACHE": str(tmp_path / "cache")})
+    assert ref.returncode == 0, ref.stderr[-3000:]
+    want = frames_of(tmp_path / "one", 6)
+    assert all((want[f] != want[f + 1]).any() for f in range(5))  # a step a frame
+    for f, (got, one) in enumerate(zip(frames_of(tmp_path / "wall", 6), want)):
+        assert (got == one).all(), f"frame {f}: {(got != one).any(axis=2).sum()} px"
+    assert json.loads((tmp_path / "wall" / "summary.json").read_text())["series"]["step_changes"] == 5
