@@ -164,7 +164,7 @@ def path_make(a) -> int:
 
 
 def wall_check(a) -> int:
-    from multigpu.wall import check_command
+    from multigpu.wall_check import check_command
 
     print(check_command(a.file, a.grid_only, a.hosts_only, a.offline))
     return 0

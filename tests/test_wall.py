@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from multigpu.errors import InputError
-from multigpu.wall import hosts_of, load_wall, picture, problems
+from multigpu.wall import hosts_of, load_wall
+from multigpu.wall_check import picture, problems
 
 TWO_PCS = {"grid": "2x2", "tile": "1920x1080", "mullion": "40x40", "displays": [
     {"rank": 0, "host": "pc1", "display": ":0", "position": [0, 0]},
@@ -35,7 +36,8 @@ def test_any_tile_on_any_host_a_pc_per_row(tmp_path):
     """Tiles 0 and 2 (the top row) on pc1, 1 and 3 on pc2: MPI fills pc1 with two processes, then
     pc2, and the processes drive tiles 0, 2, 1, 3 in turn; a file of consecutive tiles keeps the
     identity (today's files unchanged)."""
-    from multigpu.wall import describe, tile_order
+    from multigpu.wall import tile_order
+    from multigpu.wall_check import describe
 
     doc = json.loads(json.dumps(TWO_PCS))
     doc["displays"][1].update(host="pc2")
@@ -226,7 +228,7 @@ def test_a_passive_walls_right_eye_windows_are_placed_and_checked(tmp_path):
     del doc["$schema"]
     wall = load_wall(_wall(tmp_path, doc))
     assert wall.right_eye == {0: (1920, 0), 1: (1920, 0)}
-    from multigpu.wall import describe
+    from multigpu.wall_check import describe
     assert describe(wall, (1, 2), (1920, 1080), (0, 0)).count("right eye's window at 1920,0") == 2
     resolve = lambda h: "1.2.3.4"  # noqa: E731
     assert problems(wall, (1, 2), (1920, 1080), (0, 0), lambda h, d: (3840, 1080), resolve) == []
@@ -237,6 +239,6 @@ def test_a_passive_walls_right_eye_windows_are_placed_and_checked(tmp_path):
     assert "rank 0 and rank 0's right-eye window overlap on :0 of pc1" in problems(
         load_wall(_wall(tmp_path, doc)), (1, 2), (1920, 1080), (0, 0), None, resolve)[0]
     one = {"grid": "1x2", "tile": "64x48", "stereo": {"mode": "passive"}, "displays": [{"rank": 0}, {"rank": 1}]}
-    from multigpu.wall import windows
+    from multigpu.wall_check import windows
     assert [w[2:4] for w in windows(load_wall(_wall(tmp_path, one)), (1, 2), (64, 48), (0, 0))] == [
         (0, 0), (64, 0), (128, 0), (192, 0)]  # the right eyes' wall beside the left eyes'
