@@ -164,6 +164,10 @@ class WalkConfig:
     positions: tuple = ()  # per rank label: window position (x, y), or None for the tile's canvas place (wall file)
     right_eye: tuple = ()  # per rank label: a passive tile's right-eye window position, or None (wall file)
     mpcdi: str | None = None  # the wall file's MPCDI file: each projector output's picture in the mosaics
+    output_colors: dict = field(default_factory=dict)  # the wall file's colour of each output (``warp/colour.py``)
+    blend: str = option("on", group=WALL, choices=lambda: ("on", "off"), help=(
+        "a projector wall's outputs (the wall file's mpcdi): blended in their overlaps, or not (each projector's "
+        "whole picture, for aligning them by eye)"))
     fullscreen: tuple = ()  # per rank label: True where its window fills its monitor (wall file)
     gpus: tuple = ()  # per rank label: its EGL device (wall file "gpu"), or None for --device / the default
     screen_m: tuple[float, float] | None = option(

@@ -143,7 +143,7 @@ def walk_config(a):
                       gpus=tuple(wall.gpus.get(r) for r in ranks) if wall.gpus else (),
                       corners=tuple(wall.corners.get(r) for r in ranks) if wall.corners else (),
                       right_eye=tuple(wall.right_eye.get(r) for r in ranks) if wall.right_eye else (),
-                      mpcdi=wall.mpcdi)
+                      mpcdi=wall.mpcdi, output_colors=wall.outputs)
 
 
 def screen_of_bezel(wall, grid, tile, mullion) -> tuple[float, float] | None:

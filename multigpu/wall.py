@@ -57,6 +57,7 @@ class Wall:
     corners: dict[int, tuple] = field(default_factory=dict)  # rank -> its display's room corners (metres)
     right_eye: dict[int, tuple[int, int]] = field(default_factory=dict)  # rank -> its passive right-eye output's place
     mpcdi: str | None = None  # the projector outputs' warps and blends (an MPCDI file, checked when read)
+    outputs: dict = field(default_factory=dict)  # output name -> {"matrix": (3, 3), "lut": .cube path}: its colour
 
 
 def rectangle_problem(corners) -> str | None:
@@ -97,10 +98,14 @@ def _schema_error(doc, where: str) -> str | None:
     path = list(e.absolute_path)
     node = sch
     for step in path:  # the schema of the value at fault, for its description
-        node = node.get("items", {}) if isinstance(step, int) else node.get("properties", {}).get(step, {})
+        if isinstance(step, int):
+            node = node.get("items", {})
+        else:
+            more = node.get("additionalProperties")
+            node = node.get("properties", {}).get(step, more if isinstance(more, dict) else {})
     at = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
-    entry = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path[:2]).lstrip(".") if path[:1] == [
-        "displays"] and len(path) > 1 else ""
+    entry = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path[:2]).lstrip(".") if path[:1] in (
+        ["displays"], ["outputs"]) and len(path) > 1 else ""
     prefix = f"{where}: {entry}: " if entry else f"{where}: "
     if e.validator == "additionalProperties":
         known = sorted(k for k in node.get("properties", {}) if k not in ("$schema", "comment"))
@@ -173,7 +178,7 @@ def load_wall(path: str) -> Wall:
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
                 on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]),
                 None if "screen_m" not in doc else tuple(float(v) for v in doc["screen_m"]), doc.get("stereo", {}),
-                corners, right_eye, _mpcdi(doc, path, where))
+                corners, right_eye, _mpcdi(doc, path, where), _outputs(doc, path, where))
 
 
 def _mpcdi(doc: dict, path: str, where: str) -> str | None:
@@ -191,6 +196,34 @@ def _mpcdi(doc: dict, path: str, where: str) -> str | None:
     except InputError as exc:
         raise InputError(f"{where}: mpcdi: {exc}") from None
     return str(file)
+
+
+def _outputs(doc: dict, path: str, where: str) -> dict:
+    """Each projector output's colour (``warp/colour.py``), its LUT read once here: an output the
+    MPCDI file does not name, a bad matrix or LUT ends the job at the door, in one line."""
+    if not doc.get("outputs"):
+        return {}
+    from multigpu.warp import colour, mpcdi
+
+    if "mpcdi" not in doc:
+        raise InputError(f"{where}: outputs: give the mpcdi file whose regions they name")
+    names = [o.name for o in mpcdi.read(Path(path).parent / doc["mpcdi"])[1]]
+    out = {}
+    for name, e in doc["outputs"].items():  # a few outputs
+        if name not in names:
+            raise InputError(f"{where}: outputs: {name}: no such region in the mpcdi file ({', '.join(names)})")
+        got = {}
+        if "color_matrix" in e:
+            got["matrix"] = colour.read_matrix(e["color_matrix"], f"{where}: outputs: {name}: color_matrix").tolist()
+        if "lut" in e:
+            lut = Path(path).parent / e["lut"]
+            try:
+                colour.read_cube(lut)
+            except InputError as exc:
+                raise InputError(f"{where}: outputs: {name}: lut: {exc.message}") from None
+            got["lut"] = str(lut)
+        out[name] = got
+    return out
 
 
 def bezel_mullion(wall: Wall, tile: tuple[int, int]) -> tuple[int, int] | None:

@@ -163,6 +163,10 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         size, outs = mpcdi.read(Path(wall.mpcdi))
         lines.append(f"mpcdi {wall.mpcdi}: {len(outs)} projector outputs ({', '.join(o.name for o in outs)}) on a "
                      f"{size[0]}x{size[1]} buffer: each one's picture in the mosaics (mosaic/outputs/NAME/)")
+        for name, c in wall.outputs.items():  # a few outputs
+            how = [*(["a colour matrix"] if "matrix" in c else []), *([f"the LUT {Path(c['lut']).name}"]
+                                                                        if "lut" in c else [])]
+            lines.append(f"output {name}: {' and '.join(how) or 'as the content is'}")
     return "\n".join(lines)
 
 

@@ -81,11 +81,13 @@ def sample(content: np.ndarray, coords: np.ndarray) -> np.ndarray:
 
 
 def blend(values: np.ndarray, alpha: np.ndarray, beta: np.ndarray | float = 0.0, gamma: float = GAMMA,
-          linear: bool = True) -> np.ndarray:
+          linear: bool = True, matrix=None, signal=None) -> np.ndarray:
     """(h, w, C) uint8: display ``values`` (0..255, any float) blended as MPCDI says,
     ``P * alpha * (1 - beta) + beta`` in linear light, the output's ``gamma`` taken off before
     and put back after. ``alpha``, ``beta``: (h, w) or (h, w, C) linear, 0..1. ``linear=False``
-    blends the encoded values instead (what tools that do not linearize do: for comparison)."""
+    blends the encoded values instead (what tools that do not linearize do: for comparison).
+    The output's colour (``warp/colour.py``): ``matrix`` (3x3) maps the content's linear light
+    before the blend; ``signal`` (a function of (h, w, 3) 0..1 values) maps the encoded signal last."""
     a = np.asarray(alpha, dtype=np.float64)
     b = np.asarray(beta, dtype=np.float64)
     a = a[..., None] if a.ndim == 2 else a
@@ -93,7 +95,14 @@ def blend(values: np.ndarray, alpha: np.ndarray, beta: np.ndarray | float = 0.0,
     if not linear:
         v = np.asarray(values, dtype=np.float64) / 255.0
         return np.clip(np.round(255.0 * (v * a * (1 - b) + b)), 0, 255).astype(np.uint8)
-    return encode(decode(values, gamma) * a * (1 - b) + b, gamma)
+    light = decode(values, gamma)
+    if matrix is not None:
+        light = np.clip(light @ np.asarray(matrix, dtype=np.float64).reshape(3, 3).T, 0.0, 1.0)
+    light = light * a * (1 - b) + b
+    if signal is None:
+        return encode(light, gamma)
+    coded = np.clip(light, 0.0, 1.0) ** (1.0 / gamma)
+    return np.clip(np.round(255.0 * np.clip(signal(coded), 0.0, 1.0)), 0, 255).astype(np.uint8)
 
 
 def map_values(image: np.ndarray, bit_depth: int = 8, gamma_embedded: float = 1.0) -> np.ndarray:
@@ -118,7 +127,7 @@ def resample(values: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 
 def output(content: np.ndarray, coords: np.ndarray, alpha: np.ndarray, beta: np.ndarray | float = 0.0,
-           gamma: float = GAMMA, linear: bool = True) -> np.ndarray:
+           gamma: float = GAMMA, linear: bool = True, matrix=None, signal=None) -> np.ndarray:
     """(h, w, C) uint8: an output's final picture: ``content`` sampled through its warp
-    (``coords``, every output pixel's; ``upsample``), then blended (``blend``)."""
-    return blend(sample(content, coords), alpha, beta, gamma, linear)
+    (``coords``, every output pixel's; ``upsample``), then blended and coloured (``blend``)."""
+    return blend(sample(content, coords), alpha, beta, gamma, linear, matrix, signal)

@@ -137,7 +137,7 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
             if cfg.mpcdi is not None:  # a projector wall's outputs, each one's picture beside the mosaics
                 from multigpu.records.outputs import OutputPictures
 
-                setup.record.outputs = OutputPictures(cfg.mpcdi)
+                setup.record.outputs = OutputPictures(cfg.mpcdi, cfg.output_colors, cfg.blend == "on")
     except BaseException:
         setup.release(collective=False)
         raise
