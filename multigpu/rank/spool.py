@@ -19,6 +19,7 @@ import os
 import sys
 import threading
 import time
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -65,8 +66,13 @@ class Spool:
         self._noted: set[str] = set()
         self._closed = False
         self.engine = "BP5" if self.name.lower().rstrip("/").endswith(".bp") else "SST"
+        self.passed = 0  # a live stream's steps passed over while the one before was being kept
+        self._pending: deque = deque()
+        self._cv = threading.Condition()
         self.thread = threading.Thread(target=self._run, name="adios2 stream", daemon=True)
+        self.keeper = threading.Thread(target=self._keeper, name="adios2 steps", daemon=True)
         self.thread.start()
+        self.keeper.start()
 
     def first(self) -> None:
         """Wait (bounded: ``timeout``) for the first step, or raise the one line saying why none came."""
@@ -81,7 +87,9 @@ class Spool:
         raise InputError.of("model", f"{self.model}: {why}")
 
     def close(self) -> None:
-        self._closed = True
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
 
     def _run(self) -> None:
         try:
@@ -115,15 +123,46 @@ class Spool:
                         continue
                     values[name] = stream.read(name)
                 stream.end_step()
-                self._keep(values, skipped, came)
+                self._hand((values, skipped, came))
         except Exception as exc:  # noqa: BLE001 (a broken stream ends what the wall gets, never the frame loop)
             self._note(f"{self.model}: the stream failed ({_first_line(exc)}); the wall holds its last step")
         finally:
-            self.ended = True
+            self._hand(None)  # the end, after every step handed over
             try:
                 stream.close()
             except Exception:  # noqa: BLE001
                 pass
+
+    def _hand(self, item) -> None:
+        """A step read (None: the stream's end) to the keeper: a live stream's newest replaces one
+        not kept yet (the wall shows steps as they come, not late ones), a file's waits its turn."""
+        with self._cv:
+            if item is not None and self.engine == "SST" and self._pending and self._pending[-1] is not None:
+                self._pending.pop()
+                self.passed += 1
+            while item is not None and self.engine != "SST" and len(self._pending) >= 2 and not self._closed:
+                self._cv.wait(0.1)
+            self._pending.append(item)
+            self._cv.notify_all()
+
+    def _keeper(self) -> None:
+        """Keeps the steps read, in a thread apart from the reading (a step read never waits on one kept)."""
+        while True:
+            with self._cv:
+                while not self._pending and not self._closed:
+                    self._cv.wait(0.5)
+                if self._closed:
+                    return
+                item = self._pending.popleft()
+                self._cv.notify_all()
+            if item is None:
+                self.ended = True
+                return
+            try:
+                self._keep(*item)
+            except Exception as exc:  # noqa: BLE001 (a step that cannot be kept is said, never raised)
+                self.refused += 1
+                self._note(f"{self.model}: a step could not be kept ({_first_line(exc)})")
 
     def _keep(self, values: dict, skipped: list[str], came: float) -> None:
         """One step's variables as the next file of the series (written whole, then renamed); where

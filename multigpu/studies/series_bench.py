@@ -19,8 +19,9 @@ play of a series finds them. Headless 2x2 walls of 256x256 tiles (4 ranks) walk 
    ``--late-step wait``: every step at its frames, as ParaView shows them), alternated; wall time
    per frame (ParaView: rank 0's loop; multigpu: the frame period) and the slowest rank's CPU.
 4. **Live**: the example simulation (``examples/simulation/heat.py``, a 96x96 plate, a step every
-   0.1 s) streaming over SST to a 2x2 wall; from each step's write (the writer's stamp) to the first
-   frame that shows it (the run's own summary: ``series.delay_ms_median``), and the part of it
+   0.1 s) streaming over SST to a 2x2 wall (``--late-step wait``: every rank swaps a step in at the
+   frame rank 0's naming of it lands, its cache built by then); from each step's write (the writer's
+   stamp) to the first frame that shows it (the run's own summary: ``series.delay_ms_median``), and the part of it
    before rank 0 had read the step (the transfer), in ms and in frames of the run's median period.
 
 Results in ``out/series/`` (``series.csv``). Figures only, no asserts.
@@ -203,7 +204,7 @@ def live(frames: int) -> list[dict]:
                 time.sleep(0.05)
             run = walk(Path(tmp) / "wall", (2, 2), (256, 256),
                        ["--model", f"adios2:{tmp}/heat", "--color-by", "temperature", "--range", "0,1", "--frames",
-                        str(frames), "--path-kind", "orbit", "--mosaic-every", "0"], 1800)
+                        str(frames), "--path-kind", "orbit", "--mosaic-every", "0", "--late-step", "wait"], 1800)
         finally:
             end(sim)  # its whole session
     sr = run.summary["series"]
