@@ -141,3 +141,44 @@ def test_a_later_step_that_cannot_be_read_is_said_once_and_the_run_goes_on(tmp_p
     for f, k in enumerate(shown):
         got = read_png(tmp_path / "o" / "mosaic" / f"frame_{f:05d}.png")
         assert (got == refs[k]).all(), f"frame {f} (step {k})"
+
+
+PVBATCH_WRITE = """
+import json, sys
+from paraview.simple import *
+files, out = json.load(open(sys.argv[1])), sys.argv[2]
+reader = XMLUnstructuredGridReader(FileName=files)
+SaveData(out, proxy=reader, WriteTimeSteps=1)
+"""
+
+
+def test_a_series_paraview_wrote_plays_as_one_rank_renders_it(tmp_path, series):
+    """The series written again by ParaView (pvbatch's SaveData with every time step: a .pvd and its
+    files, as ParaView users keep results), played on a 2x2 wall exactly as one rank renders it
+    (skipped, naming why, where ParaView is not installed)."""
+    import shutil
+    import subprocess
+
+    pvbatch = shutil.which("pvbatch")
+    if pvbatch is None:
+        pytest.skip("ParaView's pvbatch is not installed (Debian: apt install paraview)")
+    where, path, _ = series
+    (tmp_path / "files.json").write_text(json.dumps([str(where / f"step_{k}.vtu") for k in range(4)]))
+    (tmp_path / "write.py").write_text(PVBATCH_WRITE)
+    clean = {k: v for k, v in __import__("os").environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+    made = subprocess.run([pvbatch, "--force-offscreen-rendering", str(tmp_path / "write.py"),
+                           str(tmp_path / "files.json"), str(tmp_path / "pv" / "run.pvd")], env=clean,
+                          capture_output=True, text=True, timeout=180)
+    if not (tmp_path / "pv" / "run.pvd").is_file():
+        pytest.skip(f"pvbatch could not write the series here: {(made.stdout + made.stderr).strip()[-300:]}")
+    from multigpu.scene.series import find_series
+
+    assert len(find_series(str(tmp_path / "pv" / "run.pvd"))) == 4
+    flags = ["--color-by", "height", "--steps-per-second", RATE, "--late-step", "wait"]
+    wall = walk(tmp_path / "wall", tmp_path / "pv" / "run.pvd", (2, 2), (48, 40), flags, path)
+    one = walk(tmp_path / "one", tmp_path / "pv" / "run.pvd", (1, 1), (96, 80), flags, path)
+    assert wall.returncode == 0 and one.returncode == 0, (wall.stderr + one.stderr)[-3000:]
+    assert steps_shown(tmp_path / "wall") == WANTED
+    for f in range(0, FRAMES, 5):
+        got, want = (read_png(tmp_path / d / "mosaic" / f"frame_{f:05d}.png") for d in ("wall", "one"))
+        assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"
