@@ -10,8 +10,9 @@ and on the wall (docs/USAGE.md, "A running simulation"):
     launch/walkthrough --model adios2:heat --color-by temperature --range 0,1 --path-kind orbit
 
 Each step holds ``points`` (N*N, 3), ``quad`` (cells, 4) point indices, the ``temperature`` per
-point, the ``source`` distance per cell, the step's ``time`` and when it was ``written``: what ``multigpu/scene/stream_mesh.py``
-reads. The writer never waits for a reader (SST's queue drops the oldest step when the wall is slow).
+point, the ``source`` distance per cell, the step's ``time`` and when it was ``written``: what
+``multigpu/scene/stream_mesh.py`` reads. The writer never waits for a reader (SST's queue drops
+the oldest step when the wall is slow).
 """
 
 from __future__ import annotations
