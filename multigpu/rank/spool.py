@@ -29,8 +29,8 @@ from multigpu.errors import InputError
 PREFIX = "adios2:"
 #: the series file of step k in the spool
 NAME = "step_{:06d}.vtu"
-#: seconds a read of a BP5 file waits for a step before looking again (and at ``close``)
-POLL = 0.1
+#: seconds between asks for the next step (the stream's reader waits in Python, the GIL free)
+POLL = 0.005
 
 
 def is_stream(model: str | None) -> bool:
@@ -106,13 +106,14 @@ class Spool:
             self.error = f"cannot open as {self.engine} ({_first_line(exc)})"
             return
         ok, not_ready = adios2.bindings.StepStatus.OK, adios2.bindings.StepStatus.NotReady
-        # SST waits for the next step (the 2.12 wheel crashed here after short timeouts' NotReady: measured);
-        # a BP5 file is looked at again every POLL seconds as it grows
-        wait = -1.0 if self.engine == "SST" else POLL
+        # the wheel's BeginStep holds the GIL while it waits (measured: a thread blocked in it left rank 0's
+        # frame loop running only when a step came), and the SST reader crashed after 0.1 s timeouts: so it
+        # is asked without waiting, and this thread sleeps between asks (the GIL free)
         try:
             while not self._closed:
-                status = stream.begin_step(timeout=wait)
+                status = stream.begin_step(timeout=0.0)
                 if status == not_ready:
+                    time.sleep(POLL)
                     continue
                 if status != ok:
                     break
