@@ -11,15 +11,20 @@ from multigpu.errors import InputError
 MONITOR_BESIDE = (-1, -1)
 
 
-def read_vec3(text: str) -> tuple[float, float, float]:
-    """'X,Y,Z' as three floats."""
+def read_numbers(text: str, n: int, looks: str) -> tuple[float, ...]:
+    """``n`` numbers separated by commas, or one line saying what the value must look like (``looks``)."""
     try:
         v = tuple(float(t) for t in str(text).split(","))
     except ValueError:
         v = ()
-    if len(v) != 3:
-        raise InputError(f"must look like X,Y,Z (three numbers), got '{text}'")
+    if len(v) != n:
+        raise InputError(f"must look like {looks}, got '{text}'")
     return v
+
+
+def read_vec3(text: str) -> tuple[float, float, float]:
+    """'X,Y,Z' as three floats."""
+    return read_numbers(text, 3, "X,Y,Z (three numbers)")
 
 
 def read_pair(text: str, sep: str = "x") -> tuple[int, int]:

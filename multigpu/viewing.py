@@ -14,13 +14,9 @@ DEFAULT_PITCH_MM = 0.5
 
 def read_size_m(text: str) -> tuple[float, float]:
     """``--screen-size W,H`` in metres."""
-    try:
-        v = tuple(float(t) for t in str(text).split(","))
-    except ValueError:
-        v = ()
-    if len(v) != 2:
-        raise InputError(f"must look like W,H (the wall's width and height in metres), got '{text}'")
-    return v
+    from multigpu.readers import read_numbers
+
+    return read_numbers(text, 2, "W,H (the wall's width and height in metres)")
 
 
 def read_tracker(text: str) -> tuple[str, int]:
