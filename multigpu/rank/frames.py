@@ -8,7 +8,6 @@ Built by ``walkthrough.run`` once setup has been agreed on every rank; every wai
 from __future__ import annotations
 
 import itertools
-import sys
 from time import process_time
 
 import numpy as np
@@ -29,7 +28,7 @@ from multigpu.rank.frame_setup import FrameSetup, planned_frames
 from multigpu.rank.framelog import FrameLog
 from multigpu.rank.moving import Moving
 from multigpu.rank.rows import Rows
-from multigpu.rank.series import series_stepping
+from multigpu.rank.series import series_stepping, swap_in
 from multigpu.rank.showing import Showing
 from multigpu.rank.timer import Timer
 from multigpu.records.record import run_title
@@ -70,7 +69,6 @@ class Frames:
         self.moving = None if motion is None else Moving(scene, motion, cfg.scene.anim_speed, self.planner,
                                                          self.projection, self.draw.culler, self.fidelity.chooser,
                                                          renderer, spheres=self.fidelity.chooser.levels > 1)
-        self.said = None  # the stream's state last said (``_step_note``)
         self.stepping = series_stepping(scene, cfg.scene, self.rank, cfg.timeout, setup.spool)  # rank/series.py
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
@@ -90,31 +88,6 @@ class Frames:
         """``--partition broadcast``: rank 0 computes the partition, every rank receives it."""
         part = partition() if self.rank == 0 else None
         return broadcast_partition(self.comm, part, self.K, self.scene.n_objects, self.cfg.timeout)
-
-    def rescene(self, scene, shared, ready=None) -> None:
-        """A series' next step drawn and planned from this frame on, on every rank at once (its
-        geometry in the renderer, its bounds and objects in the planner, culler and level chooser;
-        the frames in flight keep theirs)."""
-        from multigpu.core.culling import PartCuller
-        from multigpu.core.lod import LevelChooser
-        from multigpu.scene.moves import movers_of
-
-        eyes = 1 if self.stereo is None else 2  # submits a frame
-        self.renderer.rescene(scene, shared, keep=(self.latency + 2) * eyes, ready=ready)
-        light = scene.without_geometry()  # the GL buffers hold its geometry now
-        light.movers = movers_of(light, self.cfg.scene)
-        self.planner.rescene(light)
-        self.draw.culler = PartCuller(light) if self.renderer.draws.parts else None
-        self.fidelity.chooser = LevelChooser(light, self.canvas.size[1])
-        self.scene = light
-
-    def _step_note(self, note: str | None) -> None:
-        """Rank 0: a stream's state (waited for, ended) said once as it changes, and on the panel."""
-        if note is not None and note != self.said:
-            print(f"multigpu: {note}", file=sys.stderr, flush=True)
-        self.said = note
-        if self.live is not None and self.live.panel is not None:
-            self.live.panel.step_note = note
 
     # -- phases of one frame
 
@@ -148,10 +121,10 @@ class Frames:
             with t.phase("animate"):  # the scene's own work: a step swapped in
                 swap = self.stepping.frame(when)
                 if swap is not None:
-                    self.rescene(*swap)
+                    self.scene = swap_in(self, *swap)
             step = (self.stepping.shown, self.stepping.want != self.stepping.shown)
             if self.rank == 0:
-                self._step_note(self.stepping.note())
+                self.stepping.say_note(None if self.live is None else self.live.panel)
         view, proj, light, rects = self.projection.project(f, camera, t)  # the bounds' rects (project, sync)
         with t.phase("choose"):  # the frame's quality: every rank the same from the same camera and rows
             quality, levels, tris = self.fidelity.frame(f, camera, rects, self.moving is not None or

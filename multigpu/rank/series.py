@@ -8,7 +8,7 @@ while the others wait on a file lock); each rank's timing row says which step it
 (``step_ready``), and once every rank's row of a frame has landed (the same frame on every rank)
 each one knows whether all hold the same step. If that step is on the way to the wanted one, every
 rank swaps it in at its next frame: the renderer's buffers, the planner's bounds and
-decompositions, the part culler and the level chooser (``Frames.rescene``). A step that is late
+decompositions, the part culler and the level chooser (``swap_in``). A step that is late
 leaves the wall on the step it shows (``step_late`` in the row), unless ``--late-step wait`` asks every
 rank to wait for it at the frame that wants it (every step at its own frames, as a recording wants;
 no agreement is needed then). A step that cannot be read is said once, and the series plays on past
@@ -192,6 +192,7 @@ class Stepping:
         self.posted: deque[int] = deque()  # the ready steps of this rank's rows not landed yet
         self.last_shown = self.shown  # the step of the last frame shown (``row``: a stream's delay)
         self.swaps = 0
+        self.said = None  # the stream's state last said (``say_note``)
         if spool is not None:  # rank 0 of a stream's run: each kept step's cache built as it comes
             spool.prepare = lambda k, path: load_step(self.reader.spec, k, path)
 
@@ -275,8 +276,36 @@ class Stepping:
             return f"waiting for step {self.spool.count}"
         return None
 
+    def say_note(self, panel=None) -> None:
+        """Rank 0: the stream's state (``note``) said once as it changes, and on the page (``panel``)."""
+        note = self.note()
+        if note is not None and note != self.said:
+            print(f"multigpu: {note}", file=sys.stderr, flush=True)
+        self.said = note
+        if panel is not None:
+            panel.step_note = note
+
     def close(self) -> None:
         self.reader.close()
+
+
+def swap_in(frames, scene, shared, ready=None):
+    """A series' next step drawn and planned by ``frames`` (``rank/frames.Frames``) from this frame
+    on, on every rank at once: its geometry in the renderer, its bounds and objects in the planner,
+    culler and level chooser (the frames in flight keep theirs). Returns the scene without its
+    geometry, the frame loop's from now on."""
+    from multigpu.core.culling import PartCuller
+    from multigpu.core.lod import LevelChooser
+    from multigpu.scene.moves import movers_of
+
+    eyes = 1 if frames.stereo is None else 2  # submits a frame
+    frames.renderer.rescene(scene, shared, keep=(frames.latency + 2) * eyes, ready=ready)
+    light = scene.without_geometry()  # the GL buffers hold its geometry now
+    light.movers = movers_of(light, frames.cfg.scene)
+    frames.planner.rescene(light)
+    frames.draw.culler = PartCuller(light) if frames.renderer.draws.parts else None
+    frames.fidelity.chooser = LevelChooser(light, frames.canvas.size[1])
+    return light
 
 
 def series_stepping(scene, spec, rank: int, timeout: float = 60.0, spool=None) -> Stepping | None:
