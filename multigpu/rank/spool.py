@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from multigpu.errors import InputError
+from multigpu.scene.stream_mesh import PREFIX  # ``--model adios2:NAME``
 
-PREFIX = "adios2:"
 #: the series file of step k in the spool
 NAME = "step_{:06d}.vtu"
 #: seconds between asks for the next step (the stream's reader waits in Python, the GIL free)

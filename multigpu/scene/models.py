@@ -42,6 +42,7 @@ from multigpu.scene.series import ENDS, find_series, is_series, series_range
 from multigpu.scene.series import describe as describe_series
 from multigpu.scene.simulation import FORMATS as SIMULATION
 from multigpu.scene.simulation import Coloring
+from multigpu.scene.stream_mesh import PREFIX as STREAM
 from multigpu.scene.textures import image_files
 
 __all__ = ["BUILTIN", "FORMATS", "SceneSpec", "axis_name", "axis_vector", "cache_dir", "load_model", "load_scene"]
@@ -168,7 +169,7 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
     """The scene for ``spec`` and load facts (seconds, whether the cache was hit): of a series
     (``scene/series.py``), its step ``spec.step``, coloured over every step (a bad input's line
     names the step)."""
-    if str(spec.model).startswith("adios2:"):
+    if str(spec.model).startswith(STREAM):
         raise InputError.of("model", f"{spec.model}: a stream is read by a walkthrough's rank 0 as it runs "
                                      "(its kept steps, steps/step_*.vtu in the run's outputs, are a series)")
     if not is_series(spec.model):

@@ -16,6 +16,8 @@ import numpy as np
 
 from multigpu.errors import InputError
 
+#: ``--model``'s prefix of a stream (``rank/spool.py`` reads it)
+PREFIX = "adios2:"
 #: the cell kinds a stream may hold, by the variable's name: corners a cell
 CELLS = {"triangle": 3, "quad": 4, "tetra": 4, "hexahedron": 8, "wedge": 6, "pyramid": 5}
 #: the most points or cells one step may hold (a bound on what a door reads)
