@@ -144,9 +144,10 @@ class WalkConfig:
                                    help="pixels per display tile (default: {default})")
     mullion: tuple[int, int] = option(
         (0, 0), group=WALL, metavar="MXxMY", read=read_mullion, show=_pair,
-        valid=lambda v: len(v) == 2 and 0 <= min(v) and max(v) <= 4096, must="must be two pixel counts 0..4096",
+        valid=lambda v: len(v) == 2 and -16384 < min(v) and max(v) <= 4096,
+        must="must be two pixel counts 0..4096 (a projector wall's overlap, from its mpcdi file: negative)",
         help="pixels hidden behind the bezels between tiles: the camera spans them, nobody renders them "
-             "(default: {default})")
+             "(default: {default}; a projector wall's tiles overlap as its mpcdi file's regions do)")
     wall: str | None = option(None, group=WALL, metavar="FILE", help=(
         "wall file (JSON): grid, tile, mullions, each rank's X display and window position; flags override it "
         "(docs/USAGE.md: On a real wall)"))
@@ -331,6 +332,9 @@ class WalkConfig:
         if self.path == INTERACTIVE and self.present != "window" and self.panel is None:
             raise InputError.of("path", "interactive needs --present window or --panel: the keyboard and mouse are "
                                 f"read from rank 0's window or the panel's page (got --present {self.present})")
+        if self.mpcdi is not None and self.stereo != "mono":
+            raise InputError.of("stereo", f"{self.stereo}: a projector wall (the wall file's mpcdi) shows one eye: "
+                                          "--stereo mono")
         if self.monitor is not None and self.present != "window":
             raise InputError.of("monitor", f"needs --present window (got --present {self.present})")
         if any(not 0 <= k < self.ranks for k in self.dark) or len(set(self.dark)) >= self.ranks:
@@ -376,7 +380,7 @@ class WalkConfig:
     @property
     def size(self) -> tuple[int, int]:
         """The visible pixels (W, H): where partitions are planned."""
-        return self.grid[1] * self.tile[0], self.grid[0] * self.tile[1]
+        return self.canvas.visible
 
     @property
     def canvas(self) -> Canvas:

@@ -105,6 +105,11 @@ def walk_config(a):
                              "python -m multigpu.launcher.mpirun, or place them with your mpiexec's own flags")
     wall = load_wall(a.wall) if a.wall else Wall("")
     given = from_flags(WalkConfig, a)
+    if wall.mpcdi is not None:  # a projector wall: its tiles are the regions of its MPCDI file
+        for name in ("grid", "tile", "mullion"):
+            if given.get(name) is not None:
+                raise InputError.of(name, f"a projector wall's tiles are its mpcdi file's regions ({wall.file}): "
+                                          "leave it out")
     grid = given.pop("grid", None) or wall.grid or WalkConfig.grid
     check_ranks(wall, grid[0] * grid[1])
     ranks = range(grid[0] * grid[1])

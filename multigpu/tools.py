@@ -212,7 +212,8 @@ def warp_make(a) -> int:
                        aspect=None if canvas is None else canvas[0] / canvas[1])
     except ValueError as exc:
         raise InputError.of("canvas", str(exc)) from None
-    out = mpcdi.write(Path(a.out), canvas or make.buffer_size(rig), make.outputs(rig))
+    buffer = canvas or make.buffer_size(rig)
+    out = mpcdi.write(Path(a.out), buffer, make.outputs(rig, buffer))
     print(f"wrote {out}: {a.projectors} projectors of {w}x{h} on a {a.screen} screen, {a.overlap:.0%} overlap")
     return 0
 

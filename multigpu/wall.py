@@ -173,29 +173,40 @@ def load_wall(path: str) -> Wall:
     if corners and len(corners) != len(displays):
         raise InputError(f"{where}: corners_m: give every display's corners or none (ranks "
                          f"{', '.join(str(r) for r in sorted(set(displays) - set(corners)))} have none)")
+    mpcdi_file, grid, tile, mullion = _projectors(doc, path, where, grid, tile, mullion)
     monitor = tuple(doc["monitor"]["position"]) if "monitor" in doc else None
     on = {k: v for k, v in doc.get("monitor", {}).items() if k in ("host", "display", "address")}
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
                 on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]),
                 None if "screen_m" not in doc else tuple(float(v) for v in doc["screen_m"]), doc.get("stereo", {}),
-                corners, right_eye, _mpcdi(doc, path, where), _outputs(doc, path, where))
+                corners, right_eye, mpcdi_file, _outputs(doc, path, where))
 
 
-def _mpcdi(doc: dict, path: str, where: str) -> str | None:
-    """The wall file's MPCDI file (relative to the wall file), read once here: a bad one ends the
-    job at the door, in one line."""
+def _projectors(doc: dict, path: str, where: str, grid, tile, mullion) -> tuple:
+    """The wall file's MPCDI file (relative to the wall file), read once here, and the wall its
+    regions make (``warp/layout.py``): (file, grid, tile, mullion), the file None and the rest as
+    given without one. A bad file, or a grid or tile that is not its regions', ends the job at the
+    door, in one line."""
     if "mpcdi" not in doc:
-        return None
+        return None, grid, tile, mullion
     from multigpu.warp import mpcdi
+    from multigpu.warp.layout import layout
 
     file = Path(path).parent / doc["mpcdi"]
     if not file.is_file():
         raise InputError(f"{where}: mpcdi: {file}: no such file")
+    if "mullion" in doc or "bezel" in doc:
+        raise InputError(f"{where}: a projector wall's tiles overlap as its mpcdi file's regions do: give no "
+                         "mullion or bezel")
     try:
-        mpcdi.read(file)
+        lay = layout(file, *mpcdi.read(file))
     except InputError as exc:
         raise InputError(f"{where}: mpcdi: {exc}") from None
-    return str(file)
+    for name, given, made in (("grid", grid, lay.grid), ("tile", tile, lay.tile)):
+        if given is not None and tuple(given) != made:
+            raise InputError(f"{where}: {name} {given[0]}x{given[1]}: the mpcdi file's regions make a "
+                             f"{made[0]}x{made[1]} {name} (leave {name} out)")
+    return str(file), lay.grid, lay.tile, lay.mullion
 
 
 def _outputs(doc: dict, path: str, where: str) -> dict:

@@ -16,7 +16,8 @@ from multigpu.wall import Wall, bezel_mullion, check_ranks, hosts_of, load_wall,
 
 def windows(wall: Wall, grid, tile, mullion) -> list[tuple[str, str, int, int, int, int]]:
     """Every rank's window as (host, display, x, y, width, height), top-left on its display: the
-    file's position, or the tile's place on one screen holding the canvas. A passive stereo
+    file's position, or the tile's place on one screen holding the canvas (a projector wall's:
+    its output's size, the outputs side by side, ``warp.layout.places``). A passive stereo
     wall's right-eye windows follow, rank by rank (``right_eye_position``, else beside the wall:
     ``core.stereo.right_eye_place``)."""
     from multigpu.core.canvas import Canvas
@@ -24,10 +25,16 @@ def windows(wall: Wall, grid, tile, mullion) -> list[tuple[str, str, int, int, i
 
     c = Canvas(grid, tile, mullion)
     H = c.size[1]
+    sizes, at = [tile] * (grid[0] * grid[1]), [(int(x0), int(H - y1)) for x0, _, _, y1 in c.tiles()]
+    if wall.mpcdi is not None:  # a projector's window: its output's size, the outputs side by side
+        from multigpu.warp.layout import outputs_by_tile, places
+
+        outs = outputs_by_tile(wall.mpcdi)
+        sizes, at = [o.size for o in outs], places(grid, outs)
     out = []
-    for k, (x0, _, _, y1) in enumerate(c.tiles()):  # K tiles
-        x, y = (0, 0) if k in wall.fullscreen else wall.positions.get(k, (int(x0), int(H - y1)))
-        out.append((wall.hosts.get(k, "this machine"), wall.displays.get(k) or "$DISPLAY", x, y, tile[0], tile[1]))
+    for k, (w, h) in enumerate(sizes):  # K tiles
+        x, y = (0, 0) if k in wall.fullscreen else wall.positions.get(k, at[k])
+        out.append((wall.hosts.get(k, "this machine"), wall.displays.get(k) or "$DISPLAY", x, y, w, h))
     if wall.stereo.get("mode") == "passive":
         out += [(h, d, *wall.right_eye.get(k, right_eye_place(c, (x, y))), w, ht)
                 for k, (h, d, x, y, w, ht) in enumerate(list(out))]  # K tiles
@@ -131,7 +138,8 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
     c = Canvas(grid, tile, mullion)
     W, H = c.size
     order = tile_order(wall, grid[0] * grid[1])
-    lines = [f"{wall.file}: {grid[0]}x{grid[1]} wall of {tile[0]}x{tile[1]} tiles, mullions {mullion[0]}x{mullion[1]}",
+    seams = (f"overlapping {-mullion[0]}x{-mullion[1]}" if min(mullion) < 0 else f"mullions {mullion[0]}x{mullion[1]}")
+    lines = [f"{wall.file}: {grid[0]}x{grid[1]} wall of {tile[0]}x{tile[1]} tiles, {seams}",
              f"canvas {W}x{H} pixels ({c.visible[0]}x{c.visible[1]} visible)",
              *([f"MPI processes drive the tiles {', '.join(map(str, order))} in turn (each host's tiles together)"]
                if order != sorted(order) else []),
@@ -159,10 +167,13 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         lines.append(f"--monitor: the operator's view at {wall.monitor[0]},{wall.monitor[1]} {where}")
     if wall.mpcdi is not None:
         from multigpu.warp import mpcdi
+        from multigpu.warp.layout import outputs_by_tile
 
         size, outs = mpcdi.read(Path(wall.mpcdi))
-        lines.append(f"mpcdi {wall.mpcdi}: {len(outs)} projector outputs ({', '.join(o.name for o in outs)}) on a "
-                     f"{size[0]}x{size[1]} buffer: each one's picture in the mosaics (mosaic/outputs/NAME/)")
+        by_tile = enumerate(outputs_by_tile(wall.mpcdi))
+        each = ", ".join(f"rank {k} {o.name} {o.size[0]}x{o.size[1]}" for k, o in by_tile)
+        lines.append(f"mpcdi {wall.mpcdi}: {len(outs)} projector outputs on a {size[0]}x{size[1]} buffer, each "
+                     f"driven by the rank of its region's tile, its picture in mosaic/outputs/NAME/: {each}")
         for name, c in wall.outputs.items():  # a few outputs
             how = [*(["a colour matrix"] if "matrix" in c else []), *([f"the LUT {Path(c['lut']).name}"]
                                                                         if "lut" in c else [])]

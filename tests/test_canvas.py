@@ -180,3 +180,20 @@ def test_bad_display_flags_are_refused_at_the_door(flags, needle):
 
     with pytest.raises(InputError, match=needle):
         walk_config(build_parser().parse_args(["walkthrough", *flags]))
+
+
+def test_overlapping_tiles_share_pixels_and_plan_on_the_canvas_itself():
+    """A projector wall's tiles (a negative mullion): the canvas is the visible space, nothing is
+    hidden, each tile is its region; with a dark tile, the pixels a live one shares stay shown."""
+    c = Canvas((1, 3), (100, 50), (-30, 0))
+    assert c.size == (240, 50) and c.visible == c.size and c.overlapping and not c.bezels and not c.cuts
+    assert c.tiles().tolist() == [[0, 0, 100, 50], [70, 0, 170, 50], [140, 0, 240, 50]]
+    assert not c.hidden().any()
+    rects = np.array([[0.1, 0.0, 0.5, 1.0]])
+    assert c.to_visible(rects) is rects  # no bezels: nothing to squeeze
+    dark = Canvas((1, 3), (100, 50), (-30, 0), dark=(2,))
+    hidden = dark.hidden()
+    assert not hidden[:, :170].any() and hidden[:, 170:].all()
+    for bad in (((0, 0), (-30, 10)), ((100, 50), (-100, 0))):
+        with pytest.raises(ValueError):
+            Canvas((1, 3), (100, 50) if bad[0] == (0, 0) else bad[0], bad[1])

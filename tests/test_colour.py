@@ -9,6 +9,7 @@ import re
 import numpy as np
 import pytest
 
+from multigpu.core.canvas import Canvas
 from multigpu.core.warpblend import blend
 from multigpu.errors import InputError
 from multigpu.warp import mpcdi
@@ -91,10 +92,10 @@ def test_the_matrix_acts_in_linear_light_before_the_blend_and_the_lut_on_the_sig
 def test_a_wall_file_gives_each_output_its_colour_and_refuses_a_bad_one_at_the_door(tmp_path, capsys):
     from multigpu.wall import load_wall
 
-    mpcdi.write(tmp_path / "rig.mpcdi", (400, 100), outputs(flat_rig(2, 0.2, size=(64, 48))))
+    mpcdi.write(tmp_path / "rig.mpcdi", (400, 100), outputs(flat_rig(2, 0.2, size=(64, 48)), (400, 100)))
     cube_3d(tmp_path / "p2.cube", n=3)
     wall = tmp_path / "wall.json"
-    doc = {"grid": "1x2", "tile": "200x100", "mpcdi": "rig.mpcdi",
+    doc = {"mpcdi": "rig.mpcdi",
            "outputs": {"p1": {"color_matrix": SWAP}, "p2": {"lut": "p2.cube"}}}
     wall.write_text(json.dumps(doc))
     got = load_wall(str(wall)).outputs
@@ -118,16 +119,43 @@ def test_a_wall_file_gives_each_output_its_colour_and_refuses_a_bad_one_at_the_d
         load_wall(str(wall))
 
 
-def test_the_outputs_pictures_are_coloured_and_unblended_with_blend_off(tmp_path):
-    from multigpu.records.outputs import OutputPictures
+def pictures(path, canvas, colors=None, blend=True) -> dict:
+    """Every output's picture of ``canvas`` (top row first) as the ranks' GPU pass makes it."""
+    from multigpu.gpu.context import create_context
+    from multigpu.rank.outputs import Projector
+    from multigpu.warp.layout import layout, outputs_by_tile
 
-    mpcdi.write(tmp_path / "rig.mpcdi", (400, 100), outputs(flat_rig(2, 0.2, size=(64, 48))))
+    ctx, _ = create_context()
+    lay = layout(path, *mpcdi.read(path))
+    tiles = Canvas(lay.grid, lay.tile, lay.mullion).tiles()
+    out = {}
+    for k, o in enumerate(outputs_by_tile(str(path))):
+        x0, y0, x1, y1 = tiles[k]
+        p = Projector(ctx, str(path), k, lay.tile, colors or {}, blend)
+        out[o.name] = p.run(np.ascontiguousarray(canvas[::-1][y0:y1, x0:x1]))[::-1].copy()
+        p.release()
+    ctx.release()
+    return out
+
+
+def test_the_outputs_pictures_are_coloured_and_unblended_with_blend_off(tmp_path):
+    from projected import reference
+
+    path = tmp_path / "rig.mpcdi"
+    mpcdi.write(path, (400, 100), outputs(flat_rig(2, 0.2, size=(64, 48)), (400, 100)))
     canvas = np.zeros((100, 400, 3), dtype=np.uint8)
     canvas[..., 0] = 200  # a red canvas
-    plain = dict(OutputPictures(str(tmp_path / "rig.mpcdi")).pictures(canvas))
-    coloured = dict(OutputPictures(str(tmp_path / "rig.mpcdi"), {"p1": {"matrix": SWAP}}).pictures(canvas))
+    canvas[:, ::7, 2] = 90  # with blue lines
+    plain = pictures(path, canvas)
+    coloured = pictures(path, canvas, {"p1": {"matrix": SWAP}})
     assert (coloured["p1"] == plain["p1"][..., ::-1]).all() and (coloured["p2"] == plain["p2"]).all()
-    whole = dict(OutputPictures(str(tmp_path / "rig.mpcdi"), blend=False).pictures(canvas))
+    whole = pictures(path, canvas, blend=False)
     lit = whole["p1"][..., 0] > 0
     assert lit.mean() > 0.5 and (whole["p1"][..., 0][lit] >= 190).all()  # no fade in the overlap
     assert (plain["p1"][..., 0][lit] < 150).any()  # where the blend fades it out
+    # the GPU's pass is the numpy reference's arithmetic (its bilinear weights 8-bit: a level or two)
+    for got, want in ((plain, reference(canvas, path)), (whole, reference(canvas, path, blend=False)),
+                      (coloured, reference(canvas, path, {"p1": {"matrix": SWAP}}))):
+        for name in ("p1", "p2"):
+            d = np.abs(got[name].astype(int) - want[name])
+            assert d.max() <= 2 and d.mean() < 0.5, (name, d.max(), d.mean())

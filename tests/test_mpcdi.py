@@ -21,7 +21,7 @@ from multigpu.warp.rig import flat_rig
 @pytest.mark.parametrize("kind", ["flat", "cylinder"])
 def test_a_rig_written_and_read_back_projects_as_the_rig(tmp_path, kind):
     rig = flat_rig(3, 0.18, kind=kind)
-    made = outputs(rig)
+    made = outputs(rig, (1600, 600))
     path = mpcdi.write(tmp_path / "wall.mpcdi", (1600, 600), made)
     size, got = mpcdi.read(path)
     assert size == (1600, 600) and [o.name for o in got] == ["p1", "p2", "p3"]
@@ -182,14 +182,58 @@ def test_a_wall_file_names_its_mpcdi_file_and_a_bad_one_ends_it_at_the_door(tmp_
     from multigpu.cli import main
     from multigpu.wall import load_wall
 
-    mpcdi.write(tmp_path / "rig.mpcdi", (400, 100), outputs(flat_rig(2, 0.2, size=(64, 48))))
+    mpcdi.write(tmp_path / "rig.mpcdi", (400, 100), outputs(flat_rig(2, 0.2, size=(64, 48)), (400, 100)))
     wall = tmp_path / "wall.json"
-    wall.write_text(json.dumps({"grid": "1x2", "tile": "200x100", "mpcdi": "rig.mpcdi"}))
-    assert load_wall(str(wall)).mpcdi == str(tmp_path / "rig.mpcdi")
+    wall.write_text(json.dumps({"mpcdi": "rig.mpcdi"}))
+    got = load_wall(str(wall))
+    assert got.mpcdi == str(tmp_path / "rig.mpcdi")
+    # the tiles are the regions: two overlapping tiles across the buffer
+    (rows, cols), (tw, th), (mx, my) = got.grid, got.tile, got.mullion
+    assert (rows, cols, th, my) == (1, 2, 100, 0) and mx < 0 and 2 * tw + mx == 400
     assert main(["wall", "check", str(wall), "--offline"]) == 0
-    assert "2 projector outputs (p1, p2) on a 400x100 buffer" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "2 projector outputs on a 400x100 buffer" in said and "rank 0 p1 64x48, rank 1 p2 64x48" in said
     (tmp_path / "bad.mpcdi").write_bytes(b"PK\x03\x04 not a zip")
     for name, why in (("bad.mpcdi", "not a complete MPCDI (ZIP) file"), ("none.mpcdi", "no such file")):
-        wall.write_text(json.dumps({"grid": "1x2", "tile": "200x100", "mpcdi": name}))
+        wall.write_text(json.dumps({"mpcdi": name}))
         with pytest.raises(InputError, match=re.escape(f"--wall {wall}: mpcdi: ") + f".*{re.escape(f'{name}: {why}')}"):
             load_wall(str(wall))
+
+
+def test_a_projector_walls_tiles_are_its_regions_and_others_are_refused(tmp_path):
+    import json
+
+    from multigpu.flags import walk_config, walkthrough_parser
+    from multigpu.wall import load_wall
+    from multigpu.warp.layout import layout
+
+    lay = layout("x", *mpcdi.read(spec_file(tmp_path)))  # another tool's: 0..704 and 576..1280 of 1280
+    got = (lay.grid, lay.tile, lay.mullion, lay.labels, lay.overlap)
+    assert got == ((1, 2), (704, 480), (-128, 0), (0, 1), (128, 0))
+    for region, says in (('x="0.45" y="0.0" xSize="0.5"', "region 'right' is 640 pixels in x, 'left' 704"),
+                         ('x="0.5" y="0.0" xSize="0.55"', "region 'right' spans 640.00..1344.00 of the buffer's 1280"),
+                         ('x="0.4501" y="0.0" xSize="0.55"', "region 'right' spans 576.13..1280.13")):
+        xml = SPEC_XML.replace('x="0.45" y="0.0" xSize="0.55"', region)
+        with pytest.raises(InputError, match=re.escape(says)):
+            layout("f.mpcdi", *mpcdi.read(spec_file(tmp_path, xml)))
+    apart = SPEC_XML.replace('xSize="0.55" ySize="1.0" xResolution="64" yResolution="48"/>\n      <region id="right" '
+                             'x="0.45"', 'xSize="0.4" ySize="1.0" xResolution="64" yResolution="48"/>\n      <region '
+                             'id="right" x="0.6"')
+    apart = apart.replace('x="0.6" y="0.0" xSize="0.55"', 'x="0.6" y="0.0" xSize="0.4"')
+    with pytest.raises(InputError, match="leave 256 pixels between them in x"):
+        layout("f.mpcdi", *mpcdi.read(spec_file(tmp_path, apart)))
+    # a wall file: its grid and tile come from the regions; others, or a mullion, are refused at the door
+    spec_file(tmp_path)
+    wall = tmp_path / "wall.json"
+    for doc, says in (({"tile": "640x480"}, "tile 640x480: the mpcdi file's regions make a 704x480 tile"),
+                      ({"grid": "2x1"}, "grid 2x1: the mpcdi file's regions make a 1x2 grid"),
+                      ({"mullion": "0x0"}, "give no mullion or bezel")):
+        wall.write_text(json.dumps({"mpcdi": "other.mpcdi", **doc}))
+        with pytest.raises(InputError, match=re.escape(says)):
+            load_wall(str(wall))
+    wall.write_text(json.dumps({"mpcdi": "other.mpcdi", "grid": "1x2"}))
+    assert load_wall(str(wall)).tile == (704, 480)
+    with pytest.raises(InputError, match=re.escape("--tile a projector wall's tiles are its mpcdi file's regions")):
+        walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--tile", "320x240"]))
+    with pytest.raises(InputError, match=re.escape("--stereo side-by-side: a projector wall")):
+        walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--stereo", "side-by-side"]))

@@ -1,46 +1,108 @@
-"""A three-projector blended wall, headless: the wall file names an MPCDI file (``warp make``'s),
-and the run keeps each projector output's final picture beside its mosaics; those pictures are
-the canvas warped and blended, and their simulated projection shows the canvas (each job under a
-hard timeout)."""
+"""A three-projector blended wall driven by three ranks: the wall file names an MPCDI file
+(``warp make``'s), each rank's tile is its projector's region of the canvas (neighbours
+overlap), the composed canvas equals one rank's render of it bit for bit (screen, db, hybrid),
+each rank's picture (warped, blended, coloured on its GPU) is the numpy reference's within the
+GPU's filtering, their simulated projection shows the canvas, and the windows on an X server
+show those pictures at their places (each job under a hard timeout)."""
 
 import json
 
 import numpy as np
 import pytest
-from mpirun import read_png, run_mpi
+from mpirun import SMALL, read_png, run_mpi, start_mpi
+from projected import reference
+from xserver import Xvfb, escape, screenshot, wait_for, windows
 
 from multigpu.core.warpblend import decode, sample
-from multigpu.records.outputs import OutputPictures
 from multigpu.warp import mpcdi
 from multigpu.warp.make import buffer_size, outputs
 from multigpu.warp.rig import flat_rig
 
 pytestmark = pytest.mark.mpi
+RIG = flat_rig(3, 0.18, size=(96, 72))
+NAMES = ("p1", "p2", "p3")
 
 
-def test_a_projector_wall_keeps_each_outputs_picture_and_projects_its_canvas(tmp_path):
-    rig = flat_rig(3, 0.18, size=(96, 72))
-    bw, bh = buffer_size(rig)
-    mpcdi.write(tmp_path / "wall.mpcdi", (bw, bh), outputs(rig))
-    wall = tmp_path / "wall.json"
-    wall.write_text(json.dumps({"grid": "1x3", "tile": f"{-(-bw // 3)}x{bh}", "mpcdi": "wall.mpcdi"}))
-    out = tmp_path / "out"
-    res = run_mpi(3, ["walkthrough", "--wall", str(wall), "--frames", "2", "--mosaic-every", "1", "--no-overlay",
-                      "--no-progress", "--out", str(out)])
+@pytest.fixture(scope="module")
+def wall(tmp_path_factory):
+    """The rig's MPCDI file and a wall file naming it; and one rank's render of its canvas."""
+    d = tmp_path_factory.mktemp("projectors")
+    bw, bh = buffer_size(RIG)
+    mpcdi.write(d / "wall.mpcdi", (bw, bh), outputs(RIG, (bw, bh)))
+    (d / "wall.json").write_text(json.dumps({"mpcdi": "wall.mpcdi"}))
+    one = d / "one"
+    res = run_mpi(1, ["walkthrough", *SMALL, "--grid", "1x1", "--tile", f"{bw}x{bh}", "--frames", "2",
+                      "--mosaic-every", "1", "--no-overlay", "--out", str(one)])
     assert res.returncode == 0, res.stderr[-3000:]
-    made = OutputPictures(str(tmp_path / "wall.mpcdi"))
+    return d
+
+
+def close_to(got: np.ndarray, want: np.ndarray, name: str) -> None:
+    """The GPU's pass against the numpy reference: its bilinear weights are 8-bit (a level or two)."""
+    d = np.abs(got.astype(int) - want)
+    assert got.shape == want.shape and d.max() <= 2 and d.mean() < 0.5, (name, d.max(), d.mean())
+
+
+@pytest.mark.parametrize("decomposition", ["screen", "db", "hybrid"])
+def test_a_projector_wall_composes_its_overlaps_exactly_and_keeps_each_outputs_picture(wall, tmp_path, decomposition):
+    out = tmp_path / "out"
+    res = run_mpi(3, ["walkthrough", *SMALL, "--wall", str(wall / "wall.json"), "--frames", "2", "--mosaic-every",
+                      "1", "--no-overlay", "--decomposition", decomposition, "--out", str(out)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["config"]["grid"] == [1, 3] and s["config"]["tile"][1] == buffer_size(RIG)[1]
     for f in range(2):
         canvas = read_png(out / "mosaic" / f"frame_{f:05d}.png")
-        pictures = [read_png(out / "mosaic" / "outputs" / name / f"frame_{f:05d}.png") for name in ("p1", "p2", "p3")]
-        for got, (name, want) in zip(pictures, made.pictures(canvas)):
-            assert got.shape == (72, 96, 3) and np.array_equal(got, want), name
+        assert np.array_equal(canvas, read_png(wall / "one" / "mosaic" / f"frame_{f:05d}.png")), f
+        want = reference(canvas, wall / "wall.mpcdi")
+        pictures = [read_png(out / "mosaic" / "outputs" / name / f"frame_{f:05d}.png") for name in NAMES]
+        for name, got in zip(NAMES, pictures):
+            assert got.shape == (72, 96, 3)
+            close_to(got, want[name], name)
+    if decomposition != "screen":
+        return
     # the simulated projection of the last frame's pictures against the canvas shown straight
     s, t = np.meshgrid(np.linspace(0.02, 0.98, 240), np.linspace(0.05, 0.95, 60))
-    light = rig.light(pictures, s, t).mean(axis=-1)
-    straight = rig.most() * rig.black + (1 - rig.black) * decode(sample(canvas, np.stack([s, t], -1))).mean(axis=-1)
+    light = RIG.light(pictures, s, t).mean(axis=-1)
+    straight = RIG.most() * RIG.black + (1 - RIG.black) * decode(sample(canvas, np.stack([s, t], -1))).mean(axis=-1)
     assert np.corrcoef(light.ravel(), straight.ravel())[0, 1] > 0.95
     # the overlaps neither dim nor brighten the picture (against where one projector alone shows it: the
     # resampling's own softening falls alike on both)
-    n = rig.covering(rig.screen.point(s, t))
+    n = RIG.covering(RIG.screen.point(s, t))
     ratio = [light[m].mean() / straight[m].mean() for m in (n == 2, n == 1)]
     assert abs(ratio[0] / ratio[1] - 1) < 0.03
+
+
+def test_the_projectors_windows_show_their_pictures_side_by_side(wall, tmp_path):
+    """Each rank's window is its projector's output (96x72), the three side by side on one X
+    screen; a still path: what is on screen is the run's recorded pictures, bit for bit."""
+    import subprocess
+    import sys
+
+    from mpirun import ROOT
+
+    path = tmp_path / "walk.json"
+    subprocess.run([sys.executable, "-m", "multigpu", "path", "make", "walkthrough", *SMALL[:2], "--frames", "60",
+                    "--out", str(path)], cwd=ROOT, check=True, capture_output=True, timeout=120)
+    doc = json.loads(path.read_text())
+    doc["cameras"] = [doc["cameras"][40]] * 600
+    path.write_text(json.dumps(doc))
+    out = tmp_path / "win"
+    with Xvfb((3 * 96, 72)) as x:
+        proc, kill = start_mpi(3, ["walkthrough", *SMALL, "--wall", str(wall / "wall.json"), "--path", str(path),
+                                   "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out)],
+                               env={"DISPLAY": x.name})
+        try:
+            wait_for(lambda: len(windows(x.name)) == 3 and (out / "mosaic" / "outputs" / "p3").is_dir())
+            shot = screenshot(x.name)
+            escape(x.name, windows(x.name)[0])
+            _, err = proc.communicate(timeout=120)
+        finally:
+            kill() if proc.poll() is None else None
+    assert proc.returncode == 0, err[-2000:]
+    canvas = read_png(out / "mosaic" / "frame_00000.png")
+    want = reference(canvas, wall / "wall.mpcdi")
+    for k, name in enumerate(NAMES):
+        got = read_png(out / "mosaic" / "outputs" / name / "frame_00000.png")
+        close_to(got, want[name], name)
+        assert np.array_equal(shot[:, 96 * k:96 * (k + 1)], got), name

@@ -15,6 +15,11 @@ becomes invisible). ``to_canvas`` cuts a frame's work at the tile borders and mo
 onto the canvas, so hidden pixels are never rendered. With zero mullions both are identities
 and are skipped.
 
+**Overlapping tiles** (a projector wall's, ``warp/layout.py``): a negative mullion is the
+pixels neighbours share (the blend zone). The canvas is then the visible space itself (every pixel
+is shown, some by two projectors): plans are made on it whole, each pixel rendered once, and the
+exchange delivers a piece's part to every tile it meets.
+
 **Dark tiles** (``dark``: the labels of tiles whose PC is gone, ``records/recovery.py``) hide
 like mullions: an object that reaches no live tile is invisible, the parts of a plan on dark
 tiles are cut away, and the mosaic shows them black; the balancers, planning loads of visible
@@ -48,9 +53,22 @@ class Canvas:
     mullion: tuple[int, int] = (0, 0)
     dark: tuple[int, ...] = ()  # tile labels shown black, drawn by nobody
 
+    def __post_init__(self):
+        if min(self.mullion) < 0 and max(self.mullion) > 0:
+            raise ValueError(f"a wall's tiles overlap or stand apart, not both (mullion {self.mullion})")
+        if self.tile[0] + self.mullion[0] <= 0 or self.tile[1] + self.mullion[1] <= 0:
+            raise ValueError(f"tiles of {self.tile} cannot overlap by {self.mullion}: each must start past the last")
+
+    @property
+    def overlapping(self) -> bool:
+        """Whether neighbouring tiles share pixels (a projector wall's blend zones)."""
+        return min(self.mullion) < 0
+
     @property
     def visible(self) -> tuple[int, int]:
-        """(W, H) of the visible pixels: where every plan is made."""
+        """(W, H) of the visible pixels: where every plan is made (overlapping tiles: the canvas)."""
+        if self.overlapping:
+            return self.size
         return self.grid[1] * self.tile[0], self.grid[0] * self.tile[1]
 
     @property
@@ -62,7 +80,7 @@ class Canvas:
     @cached_property
     def bezels(self) -> bool:
         """Whether any pixels hide behind bezels (asked every frame: computed once)."""
-        return any(self.mullion)
+        return max(self.mullion) > 0
 
     @cached_property
     def cuts(self) -> bool:
@@ -88,13 +106,18 @@ class Canvas:
         W, H = self.size
         mask = np.ones((H, W), dtype=bool)
         for k, (x0, y0, x1, y1) in enumerate(self.tiles()):  # K tiles
-            mask[H - y1:H - y0, x0:x1] = k in self.dark
+            if k not in self.dark:  # a pixel a live tile shows is shown, though a dark one shares it
+                mask[H - y1:H - y0, x0:x1] = False
         return mask
 
     def _live_visible(self) -> np.ndarray:
         """(L, 4) normalized visible rects of the live tiles."""
         (VW, VH), live = self.visible, [k for k in range(self.grid[0] * self.grid[1]) if k not in self.dark]
-        return tile_regions(self.grid[0], self.grid[1], *self.tile)[live] / np.array([VW, VH, VW, VH], dtype=float)
+        return self._visible_tiles()[live] / np.array([VW, VH, VW, VH], dtype=float)
+
+    def _visible_tiles(self) -> np.ndarray:
+        """(K, 4) every tile's rect in the visible space (overlapping: the canvas's)."""
+        return self.tiles() if self.overlapping else tile_regions(self.grid[0], self.grid[1], *self.tile)
 
     def to_visible(self, rects: np.ndarray) -> np.ndarray:
         """(N, 4) normalized canvas rects -> normalized visible rects (NaN: no visible pixel)."""
@@ -137,8 +160,8 @@ class Canvas:
         ``vrects`` are this frame's normalized visible object rects. Parts on dark tiles go."""
         if not self.cuts:
             return work
-        vtiles = tile_regions(self.grid[0], self.grid[1], *self.tile)
-        shift = self._shift()
+        vtiles = self._visible_tiles()
+        shift = np.zeros_like(self._shift()) if self.overlapping else self._shift()
         spans = None
         rects, masks, loads = [], [], np.zeros(work.ranks, dtype=np.int64)
         front = None if work.front is None else [0] * work.ranks

@@ -46,6 +46,7 @@ class FrameSetup:
     live: object = None  # parallel.live.Live
     head: object = None  # rank.head_link.HeadLink: the tracked head (--head-tracker)
     spool: object = None  # rank 0 of a stream's run: its reader (``rank/spool.py``)
+    projector: object = None  # a projector wall's output of this rank (``rank/outputs.py``)
 
     def release(self, collective: bool) -> None:
         """Let the shared segments and the live state go; ``collective``: every rank finished the
@@ -56,7 +57,9 @@ class FrameSetup:
                 part.close(collective)
         if self.spool is not None:
             self.spool.close()
-        self.exchange = self.live = self.projection = self.head = self.spool = None
+        if self.projector is not None:
+            self.projector.release()
+        self.exchange = self.live = self.projection = self.head = self.spool = self.projector = None
 
 
 def clear_colour(renderer, n_objects: int) -> np.ndarray:
@@ -134,10 +137,10 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
             setup.record = RunRecord(out, comm.Get_size(), n_frames, doc, planner.report, cfg.video, cfg.progress,
                                      cfg.overlay, cfg.record, cfg.resume_at)
             setup.record.legend(scene.meta)  # a simulation's colour bar, on the annotated mosaics
-            if cfg.mpcdi is not None:  # a projector wall's outputs, each one's picture beside the mosaics
-                from multigpu.records.outputs import OutputPictures
+        if cfg.mpcdi is not None:  # a projector wall: this rank's output, its picture made every frame
+            from multigpu.rank.outputs import Projector
 
-                setup.record.outputs = OutputPictures(cfg.mpcdi, cfg.output_colors, cfg.blend == "on")
+            setup.projector = Projector(renderer.ctx, cfg.mpcdi, rank, cfg.tile, cfg.output_colors, cfg.blend == "on")
     except BaseException:
         setup.release(collective=False)
         raise

@@ -54,6 +54,11 @@ class FrameLog:
         self.stereo = make_stereo(cfg.stereo, self.canvas)  # a stereo wall gathers composed tiles (both eyes)
         tw, th = cfg.tile if self.stereo is None else self.stereo.composed.tile
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
+        self.outputs = None  # a projector wall's outputs by tile (name, size): rank 0 keeps their pictures
+        if cfg.mpcdi is not None and self.rank == 0:
+            from multigpu.warp.layout import outputs_by_tile
+
+            self.outputs = outputs_by_tile(cfg.mpcdi)
         self.shown_at = None  # when this rank's last frame was shown (perf_counter): the frame period
         self._beat_cpu = job.thread_cpu
         self.timeline = deque(maxlen=TIMELINE_FRAMES) if cfg.timeline else None  # (frame, phase spans)
@@ -123,20 +128,22 @@ class FrameLog:
         self.write(self.record.rows, f, rows)
         return rows
 
-    def show(self, f: int, work, back: np.ndarray) -> None:
-        """Mosaic PNGs and video frames: every rank joins the gather on the same frames."""
+    def show(self, f: int, work, back: np.ndarray, picture: np.ndarray | None = None) -> None:
+        """Mosaic PNGs and video frames: every rank joins the gather on the same frames (and
+        that of its projector output's ``picture``, on a projector wall)."""
         cfg = self.cfg
         last = self.n_frames is not None and f == self.n_frames - 1
         mosaic_due = bool(cfg.mosaic_every) and (f % cfg.mosaic_every == 0 or last)
         if not (mosaic_due or cfg.video):
             return
         self._gather(f, back)
+        pictures = None if picture is None or not mosaic_due else self._pictures(picture)
         if self.rank != 0:
             return
         st = self.stereo
         if st is None:
             self.write(self.record.image, f, stitch(self.gathered, self.tiles, self.canvas.size, self.canvas.dark),
-                       work.rects, mosaic_due)
+                       work.rects, mosaic_due, None, pictures)
             return
         # the wall as its displays show it, and each eye's own mosaic (the partition over the left eye's)
         shown = np.stack([st.pack(g) for g in self.gathered])  # tiles, not objects
@@ -166,6 +173,18 @@ class FrameLog:
             packed, _, _ = decoded(boxes[k], back.nbytes, f"rank 0: frame {f}: the tile of rank {k}",
                                    statuses[k - 1].Get_count())
             self.gathered[k].reshape(-1)[:] = packed
+
+    def _pictures(self, picture: np.ndarray) -> list | None:
+        """Every projector output's picture at rank 0, (name, image top row first) by tile: one
+        message each (raw: mosaic frames only)."""
+        if self.rank != 0:
+            wait_all([self.comm.Isend(np.ascontiguousarray(picture), dest=0, tag=MOSAIC_TAG + 1)], self.cfg.timeout,
+                     "mosaic gather")
+            return None
+        boxes = [np.empty((o.size[1], o.size[0], 3), dtype=np.uint8) for o in self.outputs[1:]]
+        wait_all([self.comm.Irecv(b, source=k, tag=MOSAIC_TAG + 1) for k, b in enumerate(boxes, 1)], self.cfg.timeout,
+                 "mosaic gather")
+        return [(o.name, img[::-1]) for o, img in zip(self.outputs, [picture, *boxes])]
 
     def close(self, complete: bool, stopped_by: str | None, loop: tuple[float, int], head, panel,
               served: float) -> dict:

@@ -79,7 +79,7 @@ class Frames:
         self.learn: list = []  # (frame, times) of landed rows: observed at the next submit
         self.stopping, self.stop_flags = False, None  # a landed row's stop flags, kept from the first
         self.window = presenter.mode == "window"
-        self.showing = Showing(comm, presenter, self.stereo, self.live, self.window, cfg.timeout)
+        self.showing = Showing(comm, presenter, self.stereo, self.live, self.window, cfg.timeout, setup.projector)
         self.flight: dict[int, InFlight] = {}  # the frames between their stages (``loop``)
         self.log = FrameLog(cfg, comm, job, self.record, self.col, self.n_frames, self.window,
                             self.exchange.links)
@@ -191,7 +191,7 @@ class Frames:
             values.update(self.stepping.row(*x.step))
         for landed in self.rows.post(x.f, values, self.log.stop_flag(stop), x.recorded):
             self.landed(*landed)
-        self.log.show(x.f, work, self.back)
+        self.log.show(x.f, work, self.back, self.showing.picture)
 
     def landed(self, f: int, every: np.ndarray, recorded) -> None:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""

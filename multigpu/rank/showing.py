@@ -20,11 +20,17 @@ SWAP_POLL = 1e-4
 class Showing:
     """Rank ``comm``'s display: ``presenter`` (``display.make_presenter``), ``stereo`` packing
     (None: mono), ``live`` (a window run's overlays and monitor, or None); ``window``: whether
-    tiles swap in step (the barrier, bounded by ``timeout``)."""
+    tiles swap in step (the barrier, bounded by ``timeout``); ``projector``: a projector wall's
+    output of this rank (``rank/outputs.py``), whose picture of the tile is what is shown."""
 
-    def __init__(self, comm, presenter, stereo, live, window: bool, timeout: float):
+    def __init__(self, comm, presenter, stereo, live, window: bool, timeout: float, projector=None):
         self.comm, self.presenter, self.stereo, self.live = comm, presenter, stereo, live
-        self.window, self.timeout = window, timeout
+        self.window, self.timeout, self.projector = window, timeout, projector
+
+    @property
+    def picture(self) -> np.ndarray | None:
+        """The last frame's picture of a projector output (row 0 at the bottom), else None."""
+        return None if self.projector is None else self.projector.picture
 
     def present(self, t: Timer, back: np.ndarray, work: Work, control, rows) -> tuple[float, int]:
         """Display: the composed tile ``back`` (and the overlays that are on) into the back buffer, the
@@ -34,6 +40,8 @@ class Showing:
         with t.phase("display"):
             tile = back if self.stereo is None else self.stereo.pack(back)  # what the display shows
             shown = tile if self.live is None else self.live.tile(tile, work, control, rows)
+            if self.projector is not None:  # warped, blended and coloured for its projector
+                shown = self.projector.run(shown)
             self.presenter.show(shown)
         if self.window:
             with t.phase("swap_wait"):

@@ -325,7 +325,12 @@ def _presenter(cfg: WalkConfig, rank: int):
     from multigpu.display import make_presenter
 
     x0, _, x1, y1 = (int(v) for v in cfg.canvas.tiles()[rank])
-    place = (x0, cfg.canvas.size[1] - y1)  # top-left of the tile on a screen holding the canvas
+    place, size = (x0, cfg.canvas.size[1] - y1), cfg.tile  # top-left of the tile on a screen holding the canvas
+    if cfg.mpcdi is not None:  # a projector's window: its output's picture, the outputs side by side
+        from multigpu.warp.layout import outputs_by_tile, places
+
+        outs = outputs_by_tile(cfg.mpcdi)
+        place, size = places(cfg.grid, outs)[rank], outs[rank].size
     pos = cfg.positions[rank] if cfg.positions and cfg.positions[rank] is not None else place
     display = screen_of(cfg.displays[rank] if cfg.displays else None, cfg.gpus[rank] if cfg.gpus else None)
     where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"
@@ -336,7 +341,7 @@ def _presenter(cfg: WalkConfig, rank: int):
 
         right = cfg.right_eye[rank] if cfg.right_eye and cfg.right_eye[rank] is not None else right_eye_place(
             cfg.canvas, place if pos is None else pos)
-    return make_presenter("headless" if rank in cfg.dark else cfg.present, rank, cfg.tile, pos, display, where, full,
+    return make_presenter("headless" if rank in cfg.dark else cfg.present, rank, size, pos, display, where, full,
                           right)
 
 

@@ -100,7 +100,6 @@ class RunRecord:
         self.failed: WriteFailed | None = None  # the first output that could not be written
         self.extra: dict = {}  # figures the frame loop adds to summary.json at the end
         self.key: np.ndarray | None = None  # a simulation's colour bar (``legend``), on the annotated mosaics
-        self.outputs = None  # a projector wall's outputs (``records.outputs``): their pictures beside the mosaics
         self.done = resume_at
         self.recovery = Recovery.resumed(resume_at)  # a restarted run goes on with the same files
         if not resume_at:
@@ -167,21 +166,23 @@ class RunRecord:
 
             self.key = color_bar(got, lookup(got["colormap"]))
 
-    def image(self, f: int, img: np.ndarray, rects, mosaic: bool, eyes: list | None = None) -> None:
+    def image(self, f: int, img: np.ndarray, rects, mosaic: bool, eyes: list | None = None,
+              outputs: list | None = None) -> None:
         """The stitched wall of frame ``f``: a mosaic PNG (and its partition overlay) when
         ``mosaic``, a video frame when recording one. A stereo wall's ``eyes`` (left, right)
-        go beside it, in ``mosaic/left`` and ``mosaic/right``, the partition over the left eye's."""
+        go beside it, in ``mosaic/left`` and ``mosaic/right``, the partition over the left eye's; a
+        projector wall's ``outputs`` (name, picture) in ``mosaic/outputs/NAME``, as sent to each."""
         if mosaic:
             folder = self.out.path / "mosaic"
             save_png(img, folder / f"frame_{f:05d}.png")
-            if self.outputs is not None:  # each projector's picture, warped and blended
-                self.outputs.write(folder, f, img)
-            for name, eye in zip(("left", "right"), eyes or ()):  # eyes
+            kept = [(name, eye) for name, eye in zip(("left", "right"), eyes or ())]  # eyes
+            kept += [(f"outputs/{name}", picture) for name, picture in outputs or ()]  # projectors
+            for name, picture in kept:
                 try:
-                    (folder / name).mkdir(exist_ok=True)
+                    (folder / name).mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
                     raise WriteFailed.of(folder / name, exc) from None
-                save_png(eye, folder / name / f"frame_{f:05d}.png")
+                save_png(picture, folder / name / f"frame_{f:05d}.png")
             if self.overlay:
                 marked = overlay(img if eyes is None else eyes[0], rects)
                 marked = marked if self.key is None else stamp(marked, self.key)  # a simulation's colour bar

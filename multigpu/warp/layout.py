@@ -1,0 +1,123 @@
+"""A projector wall's tiles, from its MPCDI file: each region of the buffer is the content one
+output shows, and the rank that drives the output composes exactly that region.
+
+The regions must form a grid of equal tiles, a whole number of buffer pixels apart: neighbours
+overlap (the blend zone, a negative mullion of ``core/canvas.py``) or touch, and the grid's
+canvas is the buffer. ``warp make`` writes such files; a calibration tool's regions are laid out
+so when it is told the wall's content areas. Each tile is a rank's (column-major labels, row 0 on
+top, as every wall here), so every output has its rank; the overlap's pixels are rendered once
+and the exchange delivers them to every tile that holds them. Pure: no MPI, no GL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from multigpu.errors import InputError
+
+#: how far (buffer pixels) a region's edge may lie from a whole pixel and still be one
+SNAP = 0.01
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The wall an MPCDI file's regions make: its ``grid`` (rows, cols), ``tile`` (w, h) and
+    ``mullion`` (mx, my: negative where tiles overlap), and ``labels``: each output's tile (its
+    rank), in the file's order of regions."""
+
+    grid: tuple[int, int]
+    tile: tuple[int, int]
+    mullion: tuple[int, int]
+    labels: tuple[int, ...]
+
+    @property
+    def overlap(self) -> tuple[int, int]:
+        """(ox, oy): pixels neighbours share each way (0 where they touch)."""
+        return max(-self.mullion[0], 0), max(-self.mullion[1], 0)
+
+
+def _edges(where, name: str, lo: float, size: float, full: int, axis: str) -> tuple[int, int]:
+    """A region's first and end pixel along ``axis`` of a ``full``-pixel buffer; refused where
+    they are not whole pixels inside the buffer."""
+    a, b = lo * full, (lo + size) * full
+    ia, ib = int(round(a)), int(round(b))
+    if abs(a - ia) > SNAP or abs(b - ib) > SNAP or ia < 0 or ib > full or ib <= ia:
+        raise InputError(f"{where}: region '{name}' spans {a:.2f}..{b:.2f} of the buffer's {full} pixels in {axis}: "
+                         "a projector wall's regions must lie on whole pixels inside the buffer")
+    return ia, ib
+
+
+def _axis(where, starts: np.ndarray, lengths: np.ndarray, full: int, names, axis: str) -> tuple[int, int, np.ndarray]:
+    """(tiles, length, gap) along one axis and each region's index there: the regions' starts
+    ``step`` pixels apart from 0, every length the same, the last ending at the buffer's edge."""
+    firsts = np.unique(starts)
+    n = len(firsts)
+    length = int(lengths[0])
+    odd = np.flatnonzero(lengths != length)
+    if len(odd):
+        k = int(odd[0])
+        raise InputError(f"{where}: region '{names[k]}' is {int(lengths[k])} pixels in {axis}, '{names[0]}' {length}: "
+                         "a projector wall's regions must form a grid of equal tiles")
+    step = int(firsts[1] - firsts[0]) if n > 1 else length
+    want = np.arange(n) * step
+    if firsts[0] != 0 or not np.array_equal(firsts, want) or want[-1] + length != full:
+        raise InputError(f"{where}: the regions start at {', '.join(str(int(v)) for v in firsts)} of {full} pixels in "
+                         f"{axis}: a projector wall's regions must form a grid of equal tiles, evenly apart, "
+                         "covering the buffer")
+    if step > length:
+        raise InputError(f"{where}: the regions leave {step - length} pixels between them in {axis}: a projector "
+                         "wall's regions touch or overlap")
+    return n, step - length, np.searchsorted(firsts, starts)
+
+
+def layout(where, buffer: tuple[int, int], outputs) -> Layout:
+    """The wall of an MPCDI file's ``outputs`` (``mpcdi.Output``) on a ``buffer`` (w, h);
+    InputError naming ``where`` (the file) and the region that does not fit."""
+    W, H = buffer
+    names = [o.name for o in outputs]
+    xs = np.array([_edges(where, o.name, o.area[0], o.area[2], W, "x") for o in outputs], dtype=np.int64)
+    ys = np.array([_edges(where, o.name, o.area[1], o.area[3], H, "y") for o in outputs], dtype=np.int64)
+    cols, mx, col = _axis(where, xs[:, 0], xs[:, 1] - xs[:, 0], W, names, "x")
+    rows, my, row = _axis(where, ys[:, 0], ys[:, 1] - ys[:, 0], H, names, "y")
+    labels = col * rows + row
+    if len(set(labels.tolist())) != len(labels) or len(labels) != rows * cols:
+        raise InputError(f"{where}: {len(labels)} regions on a {rows}x{cols} grid of tiles: a projector wall has "
+                         "one region for every tile")
+    return Layout((rows, cols), (int(xs[0, 1] - xs[0, 0]), int(ys[0, 1] - ys[0, 0])), (mx, my),
+                  tuple(int(v) for v in labels))
+
+
+
+@dataclass(frozen=True)
+class Projected:
+    """What an output is: its ``name`` (the MPCDI region's) and ``size`` (w, h) in pixels."""
+
+    name: str
+    size: tuple[int, int]
+
+
+def outputs_by_tile(path: str) -> list[Projected]:
+    """Every output of the MPCDI file at ``path``, in the order of the tiles (ranks) that drive them."""
+    from multigpu.warp import mpcdi
+
+    buffer, outs = mpcdi.read(Path(path))
+    labels = layout(path, buffer, outs).labels
+    by_tile = [outs[labels.index(k)] for k in range(len(outs))]
+    return [Projected(o.name, o.size) for o in by_tile]
+
+
+def places(grid: tuple[int, int], outputs: list[Projected]) -> list[tuple[int, int]]:
+    """Each tile's output window's top-left on one X screen spanning the projectors, by default:
+    the outputs side by side as their tiles are (a row's widths to its left, a column's heights
+    above it)."""
+    rows = grid[0]
+    out = []
+    for k in range(len(outputs)):  # tiles, a few dozen
+        row, col = k % rows, k // rows
+        x = sum(outputs[c * rows + row].size[0] for c in range(col))
+        y = sum(outputs[col * rows + r].size[1] for r in range(row))
+        out.append((x, y))
+    return out
