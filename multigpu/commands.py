@@ -79,7 +79,9 @@ COMMANDS: tuple[Command, ...] = (
             group_help={"wall": "wall file tools"}),
     Command(("wall", "test"), "show the calibration pattern on the wall (under mpiexec: launch/wall-test FILE)",
             "multigpu.tools:wall_test",
-            (arg("file", help="wall file (JSON)"), frames("stop after N frames (default: at Escape)"))),
+            (arg("file", help="wall file (JSON)"), frames("stop after N frames (default: at Escape)"),
+             arg("--blend", default="on", choices=("on", "off"), help="a projector wall's outputs blended in their "
+                 "overlaps, or not (each projector's whole picture, for aligning by eye; default on)"))),
     Command(("warp", "make"), "write an MPCDI file (2D media) for a described projector rig: projectors side by "
             "side on a flat or cylindrical screen, their warps and blends", "multigpu.tools:warp_make",
             (arg("out", help="MPCDI file to write (.mpcdi)"),

@@ -10,7 +10,7 @@ from multigpu.flags import spec
 def wall_test(a) -> int:
     from multigpu.rank.walltest import main as wall_test
 
-    return wall_test(a.file, a.frames)
+    return wall_test(a.file, a.frames, a.blend == "on")
 
 
 def monitor_view(a) -> int:

@@ -23,7 +23,11 @@ GRID, TILE, MULLION = (1, 2), (64, 48), (6, 0)
 
 
 def _start(wall, env):
-    return start_launcher(["-n", "2", "wall", "test", str(wall)], env)
+    return _start_n(2, wall, env)
+
+
+def _start_n(n, wall, env):
+    return start_launcher(["-n", str(n), "wall", "test", str(wall)], env)
 
 
 def _expected(frame, mullion, host):
@@ -121,3 +125,64 @@ def test_fullscreen_windows_fill_their_screens(tmp_path):
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGKILL)
     assert proc.returncode == 0, err[-2000:]
+
+
+def test_a_projector_wall_shows_the_pattern_through_each_outputs_warp_and_blend(tmp_path):
+    """Three projectors (``warp make``'s rig): each window is its output (96x72, side by side),
+    showing its tile's part of the pattern (a grey ramp across the canvas, its output's name)
+    warped and blended as a run's pictures are (the numpy reference, within the GPU's filtering)."""
+    import socket
+
+    from multigpu.core.warpblend import output, upsample
+    from multigpu.warp import mpcdi
+    from multigpu.warp.layout import layout
+    from multigpu.warp.make import buffer_size, outputs
+    from multigpu.warp.rig import flat_rig
+
+    need_tools()
+    rig = flat_rig(3, 0.18, size=(96, 72))
+    buffer = buffer_size(rig)
+    mpcdi.write(tmp_path / "wall.mpcdi", buffer, outputs(rig, buffer))
+    size, outs = mpcdi.read(tmp_path / "wall.mpcdi")
+    lay = layout("wall.mpcdi", size, outs)
+    c = Canvas(lay.grid, lay.tile, lay.mullion)
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"mpcdi": "wall.mpcdi"}))
+    host = socket.gethostname()
+
+    def expected(f, k, display):
+        x0, _, _, y1 = (int(v) for v in c.tiles()[k])
+        tile = tile_pattern(c.size, (x0, c.size[1] - y1), lay.tile, f,
+                            [f"rank {k}", f"output p{k + 1}", f"host {host}", display, "96x72"], ramp=True)
+        o = outs[k]
+        return output(tile, upsample(o.warp, o.size), o.alpha, o.beta)
+
+    def frame_of(shot, display):
+        for f in range(0, int((time.monotonic() - since + 1) * PACE) + 10):  # the frames shown so far
+            got = shot[:, :96].astype(int)
+            if np.abs(got - expected(f, 0, display)).max() <= 2:
+                return f
+        return None
+
+    with Xvfb((3 * 96, 72)) as x:
+        since = time.monotonic()
+        proc = _start_n(3, wall, {"DISPLAY": x.name})
+        try:
+            wait_for(lambda: len(windows(x.name)) == 3, timeout=60)
+            found = {}
+
+            def shown():
+                found["shot"] = shot = screenshot(x.name)
+                found["f"] = frame_of(shot, x.name)
+                return found["f"] is not None
+            wait_for(shown, timeout=30, every=0.1)
+            escape(x.name, windows(x.name, "multigpu tile 0")[0])
+            _, err = end_launcher(proc)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err[-2000:]
+    shot, f = found["shot"], found["f"]
+    for k in (1, 2):  # the same frame on every output (the swap lock), each through its own warp
+        d = np.abs(shot[:, 96 * k:96 * (k + 1)].astype(int) - expected(f, k, x.name))
+        assert d.max() <= 2 and d.mean() < 0.5, (k, d.max(), d.mean())

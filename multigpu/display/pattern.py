@@ -21,10 +21,12 @@ BAR = (255, 60, 60)
 
 
 def tile_pattern(canvas_size: tuple[int, int], origin: tuple[int, int], tile: tuple[int, int], frame: int,
-                 label: list[str]) -> np.ndarray:
+                 label: list[str], ramp: bool = False) -> np.ndarray:
     """The (th, tw, 3) uint8 part of the canvas pattern a tile shows, top row first: the tile's
     top-left corner at canvas pixel ``origin`` (x right, y down) of a ``canvas_size`` canvas
-    (mullions included); ``label``: the lines of type drawn in the tile's middle."""
+    (mullions included); ``label``: the lines of type drawn in the tile's middle. ``ramp``: a
+    grey ramp from black to white across the canvas in a band above the middle (a projector
+    wall's: through the blend it must run on smoothly where projectors overlap)."""
     W, H = canvas_size
     tw, th = tile
     x = np.arange(origin[0], origin[0] + tw, dtype=np.float64)[None, :] + 0.5  # pixel centres
@@ -41,6 +43,10 @@ def tile_pattern(canvas_size: tuple[int, int], origin: tuple[int, int], tile: tu
     for a, b in (((0.0, 0.0), (W, H)), ((W, 0.0), (0.0, H))):  # the canvas's two diagonals
         d = np.abs((b[0] - a[0]) * (a[1] - y) - (a[0] - x) * (b[1] - a[1])) / diag
         img[d < 1.0] = DIAGONALS
+    if ramp:
+        band = (y >= 0.2 * H) & (y < 0.3 * H)
+        grey = np.broadcast_to(np.round(255.0 * (x - 0.5) / max(W - 1, 1)), (th, tw))
+        img[np.broadcast_to(band, (th, tw))] = np.repeat(grey[np.broadcast_to(band, (th, tw))][:, None], 3, axis=1)
     bar_x = (frame * 8) % max(W, 1)  # the moving bar: 8 pixels a frame across the canvas
     img[np.broadcast_to((x >= bar_x) & (x < bar_x + 12), (th, tw))] = BAR
     return _type(img, [*label, f"frame {frame}"])

@@ -10,6 +10,13 @@ Rank 0's window takes the arrow keys: Left/Right take one pixel from or add one 
 between rows, every rank redraws with the new value at the same frame, and rank 0 prints the
 line to put in the wall file. Escape or a closed window on any rank ends it (or
 ``--frames N``). Every wait is bounded, as in the frame loop.
+
+A projector wall (the wall file's ``mpcdi``) shows the pattern through each output's warp, blend
+and colour (``rank/outputs.py``) in the output's window, as a run shows its pictures: the tiles
+overlap as the regions do, each names its output, and a grey ramp runs across the canvas, so
+the grid and the ramp must run on through the overlaps when the calibration is right
+(``blend=False``: each projector's whole picture, for aligning by eye). Its overlaps come from
+the file, so the arrow keys move nothing there.
 """
 
 from __future__ import annotations
@@ -28,7 +35,8 @@ from multigpu.rank.exchange import agree, barrier, wait_all
 PACE = 60.0  # frames a second at most: the bar moves at one speed a person can follow on any machine
 
 
-def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tuple[int, int] | None:
+def run(path: str, comm, frames: int | None = None, timeout: float = 60.0,
+        blend: bool = True) -> tuple[int, int] | None:
     """Show the pattern until Escape, a closed window or ``frames``; rank 0 returns the mullion
     values it ended with."""
     from mpi4py import MPI
@@ -49,31 +57,45 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
                             f"has {k} (launch/wall-test {path} starts the right number)")
     check_ranks(wall, k)
     host = socket.gethostname()
-    presenter, error = None, None
+    presenter, projector, error = None, None, None
+    size, label = tile, [f"rank {rank}", f"host {host}"]
     try:
         x0, _, _, y1 = (int(v) for v in Canvas(grid, tile, mullion).tiles()[rank])
-        place = wall.positions.get(rank, (x0, Canvas(grid, tile, mullion).size[1] - y1))
+        place = (x0, Canvas(grid, tile, mullion).size[1] - y1)
+        if wall.mpcdi is not None:  # a projector's window: its output, the outputs side by side
+            from multigpu.warp.layout import outputs_by_tile, places
+
+            outs = outputs_by_tile(wall.mpcdi)
+            place, size = places(grid, outs)[rank], outs[rank].size
+            label.insert(1, f"output {outs[rank].name}")
+        place = wall.positions.get(rank, place)
         where = f"wall file {path}, rank {rank} on host {host}"
         right = None
         if stereo == "passive":  # a window per eye (display/passive.py)
             from multigpu.core.stereo import right_eye_place
 
             right = wall.right_eye.get(rank, right_eye_place(Canvas(grid, tile, mullion), place))
-        presenter = make_presenter("window", rank, tile, place, wall.displays.get(rank), where,
+        presenter = make_presenter("window", rank, size, place, wall.displays.get(rank), where,
                                    rank in wall.fullscreen, right)
+        if wall.mpcdi is not None:
+            from multigpu.rank.outputs import Projector
+
+            projector = Projector(presenter.context, wall.mpcdi, rank, tile, wall.outputs, blend)
     except InputError as exc:
         error = str(exc)
     error = agree(comm, error, timeout, "setup")
     if error:
+        if projector is not None:
+            projector.release()
         if presenter is not None:
             presenter.close()
         raise InputError(error)
     nudges = None
-    if rank == 0:
+    if rank == 0 and projector is None:
         from multigpu.display import take_arrows
 
         nudges = take_arrows(presenter)
-    label = [f"rank {rank}", f"host {host}", presenter.display, f"{tile[0]}x{tile[1]}"]
+    label += [presenter.display, f"{size[0]}x{size[1]}"]
     state = np.array([*mullion, 0], dtype=np.int64)  # rank 0's mullions and stop flag, for everyone
     stop = np.zeros(1, dtype=np.int64)
     start = time.monotonic()
@@ -92,8 +114,9 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
                 presenter.show(stereo_tile_pattern(Stereo(stereo, c), rank, f, label))
             else:
                 x0, _, _, y1 = (int(v) for v in c.tiles()[rank])
-                img = tile_pattern(c.size, (x0, c.size[1] - y1), tile, f, label)
-                presenter.show(img[::-1])  # bottom row first
+                img = tile_pattern(c.size, (x0, c.size[1] - y1), tile, f, label, ramp=projector is not None)
+                shown = np.ascontiguousarray(img[::-1])  # bottom row first
+                presenter.show(shown if projector is None else projector.run(shown))
             barrier(comm, timeout)  # every tile drawn before any swaps: the swap lock
             presenter.swap()
             mine = np.array([1 if presenter.poll() else 0], dtype=np.int64)
@@ -101,11 +124,13 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0) -> tu
             if stop[0]:
                 break
     finally:
+        if projector is not None:
+            projector.release()
         presenter.close()
-    return (int(state[0]), int(state[1])) if rank == 0 else None
+    return (int(state[0]), int(state[1])) if rank == 0 and projector is None else None
 
 
-def main(path: str, frames: int | None) -> int:
+def main(path: str, frames: int | None, blend: bool = True) -> int:
     """The CLI's ``wall test`` under MPI: one line and exit 2 for bad input on every rank."""
     from mpi4py import MPI
 
@@ -114,7 +139,7 @@ def main(path: str, frames: int | None) -> int:
 
     try:
         comm = tile_comm(MPI.COMM_WORLD, path)
-        got = run(path, comm, frames)
+        got = run(path, comm, frames, blend=blend)
     except InputError as exc:
         if MPI.COMM_WORLD.Get_rank() == 0:
             print(f"multigpu: error: {exc}", file=sys.stderr, flush=True)
