@@ -22,16 +22,14 @@ void main() { gl_Position = vec4(in_pos, 0.0, 1.0); }
 """
 
 FRAGMENT = """
-#version 330
 uniform sampler2D content;   // the composed tile, row 0 at the bottom
-uniform sampler2D coords;    // every output pixel's tile coordinates (x right, y down), row 0 on top
-uniform sampler2D alpha;     // linear, rgb (a grey map in all three)
-uniform sampler2D beta;
+uniform sampler2D maps;      // every output pixel's tile coordinates (x right, y down), alpha, beta; row 0 on top
+uniform sampler2D alpha3;    // colour alpha and beta maps (rgb), where the file's are not grey
+uniform sampler2D beta3;
 uniform sampler3D lut3;      // a 3D .cube table, [blue][green][red]
 uniform sampler2D lut1;      // a 1D .cube table, n x 1
 uniform float gamma;
 uniform mat3 matrix;
-uniform int lut_dims;        // 0: none, 1 or 3
 uniform vec3 lut_lo;
 uniform vec3 lut_hi;
 uniform float lut_n;
@@ -39,27 +37,36 @@ uniform int height;
 out vec4 f_color;
 
 vec3 signal_of(vec3 coded) {
-    if (lut_dims == 0) return coded;
     vec3 x = clamp((coded - lut_lo) / (lut_hi - lut_lo), 0.0, 1.0);
     vec3 at = (x * (lut_n - 1.0) + 0.5) / lut_n;  // sample centres: linear between entries
-    if (lut_dims == 1)
-        return vec3(texture(lut1, vec2(at.r, 0.5)).r, texture(lut1, vec2(at.g, 0.5)).g, texture(lut1, vec2(at.b, 0.5)).b);
+#if LUT_DIMS == 1
+    return vec3(texture(lut1, vec2(at.r, 0.5)).r, texture(lut1, vec2(at.g, 0.5)).g, texture(lut1, vec2(at.b, 0.5)).b);
+#else
     return texture(lut3, at).rgb;
+#endif
 }
 
 void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
-    ivec2 row = ivec2(px.x, height - 1 - px.y);
-    vec2 c = texelFetch(coords, row, 0).xy;
-    vec3 a = texelFetch(alpha, row, 0).rgb;
-    vec3 b = texelFetch(beta, row, 0).rgb;
-    bool inside = !(isnan(c.x) || isnan(c.y)) && all(greaterThanEqual(c, vec2(0.0))) && all(lessThanEqual(c, vec2(1.0)));
-    vec3 p = inside ? texture(content, vec2(c.x, 1.0 - c.y)).rgb : vec3(0.0);
+    ivec2 row = ivec2(int(gl_FragCoord.x), height - 1 - int(gl_FragCoord.y));
+    vec4 m = texelFetch(maps, row, 0);
+    vec3 a = vec3(m.z);
+    vec3 b = vec3(m.w);
+#if COLOUR_MAPS
+    a = texelFetch(alpha3, row, 0).rgb;
+    b = texelFetch(beta3, row, 0).rgb;
+#endif
+    bool inside = !(isnan(m.x) || isnan(m.y)) && all(greaterThanEqual(m.xy, vec2(0.0))) && all(lessThanEqual(m.xy, vec2(1.0)));
+    vec3 p = inside ? texture(content, vec2(m.x, 1.0 - m.y)).rgb : vec3(0.0);
     vec3 light = pow(p, vec3(gamma));
+#if MATRIX
     light = clamp(matrix * light, 0.0, 1.0);
+#endif
     light = light * a * (1.0 - b) + b;
     vec3 coded = pow(clamp(light, 0.0, 1.0), vec3(1.0 / gamma));
-    f_color = vec4(clamp(signal_of(coded), 0.0, 1.0), 1.0);
+#if LUT_DIMS != 0
+    coded = signal_of(coded);
+#endif
+    f_color = vec4(clamp(coded, 0.0, 1.0), 1.0);
 }
 """
 
@@ -85,26 +92,38 @@ class OutputPass:
 
         self.ctx, self.size = ctx, size
         w, h = size
-        self.prog = ctx.program(vertex_shader=VERTEX, fragment_shader=FRAGMENT)
+        grey = all(v is None or np.ndim(v) == 2 for v in (alpha, beta))
+        # one program made for this output's colour: llvmpipe runs a branch not taken at the full cost of
+        # its texture reads (an unused LUT's lookup doubled the pass), so what is not used is not compiled
+        head = (f"#version 330\n#define LUT_DIMS {0 if lut is None else lut.dims}\n#define COLOUR_MAPS {int(not grey)}\n"
+                f"#define MATRIX {int(matrix is not None)}\n")
+        self.prog = ctx.program(vertex_shader=VERTEX, fragment_shader=head + FRAGMENT)
         self.content = ctx.texture(tile, 3, dtype="f1")
         self.content.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.content.repeat_x = self.content.repeat_y = False  # clamped to the edge pixels
-        self.maps = [ctx.texture(size, 2, np.ascontiguousarray(coords, dtype=np.float32), dtype="f4"),
-                     ctx.texture(size, 3, _rgb(alpha, size, 1.0), dtype="f4"),
-                     ctx.texture(size, 3, _rgb(beta, size, 0.0), dtype="f4")]
+        packed = np.empty((h, w, 4), dtype=np.float32)  # coordinates, grey alpha and beta: one fetch a pixel
+        packed[..., :2] = coords
+        packed[..., 2] = 1.0 if alpha is None or not grey else alpha
+        packed[..., 3] = 0.0 if beta is None or not grey else beta
+        self.maps = [ctx.texture(size, 4, packed, dtype="f4")]
+        self.maps += [ctx.texture(size, 3, _rgb(v if not grey else None, size, d), dtype="f4")
+                      for v, d in ((alpha, 1.0), (beta, 0.0))]  # colour maps (a stand-in where grey)
         for m in self.maps:
             m.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.luts = self._luts(ctx, lut)
-        for i, name in enumerate(("content", "coords", "alpha", "beta", "lut3", "lut1")):
-            self.prog[name] = i
-        self.prog["gamma"] = float(gamma)
-        self.prog["height"] = h
+        for i, name in enumerate(("content", "maps", "alpha3", "beta3", "lut3", "lut1")):
+            if name in self.prog:
+                self.prog[name] = i
+        values = {"gamma": float(gamma), "height": h,
+                  "lut_n": 2.0 if lut is None else float(lut.table.shape[0]),
+                  "lut_lo": (0.0, 0.0, 0.0) if lut is None else tuple(float(v) for v in lut.lo),
+                  "lut_hi": (1.0, 1.0, 1.0) if lut is None else tuple(float(v) for v in lut.hi)}
+        for name, value in values.items():
+            if name in self.prog:  # the compiler drops what the shader does not use
+                self.prog[name] = value
         m = np.eye(3) if matrix is None else np.asarray(matrix, dtype=np.float64).reshape(3, 3)
-        self.prog["matrix"].write(np.ascontiguousarray(m.T, dtype=np.float32))  # GLSL's mat3 is column-major
-        self.prog["lut_dims"] = 0 if lut is None else lut.dims
-        self.prog["lut_n"] = 2.0 if lut is None else float(lut.table.shape[0])
-        self.prog["lut_lo"] = (0.0, 0.0, 0.0) if lut is None else tuple(float(v) for v in lut.lo)
-        self.prog["lut_hi"] = (1.0, 1.0, 1.0) if lut is None else tuple(float(v) for v in lut.hi)
+        if "matrix" in self.prog:
+            self.prog["matrix"].write(np.ascontiguousarray(m.T, dtype=np.float32))  # GLSL's mat3 is column-major
         quad = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype=np.float32)
         self.vbo = ctx.buffer(quad)
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f", "in_pos")])

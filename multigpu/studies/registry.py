@@ -32,6 +32,7 @@ BENCHES = {
     "network": ("network_bench:bench_network", "pixels between PCs on a simulated network: codecs, MB per frame"),
     "panel": ("panel_bench:bench_panel", "the operator's page: its cost to the frame, closed and open"),
     "stereo": ("stereo_bench:bench_stereo", "a stereo frame beside a mono frame of the same wall, per mode"),
+    "projectors": ("projectors_bench:bench_projectors", "a projector wall's warp and blend pass beside monitors"),
     "onepass": ("onepass_bench:bench_onepass", "both eyes in one pass (instanced, geometry shader) against two"),
     "head": ("head_bench:bench_head", "a tracked head over UDP: motion to photon at latency 0, 1, 2"),
     "memory": ("memory_bench:bench_memory", "memory per rank and per host"),

@@ -101,11 +101,11 @@ class Run:
         return self.col("rendering_cpu_ms").max(axis=1)
 
 
-def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str], timeout: float,
+def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int] | None, args: list[str], timeout: float,
          env: dict | None = None, launcher=None, as_run: bool = False,
          hosts: list[tuple[str, int]] | None = None) -> Run:
     """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``, in the studies'
-    environment (``study_env``; ``as_run``: the walkthrough's own, each rank choosing its raster
+    environment (``study_env``; ``tile`` None: the wall file in ``args`` gives grid and tile; ``as_run``: the walkthrough's own, each rank choosing its raster
     threads as a user's run does, for studies of what a user's wall time is; ``env`` over either)
     under ``launcher`` (None: the one found), on ``hosts`` [(host, ranks)] where given (simulated
     hosts: ``simhosts.py``); kill it on timeout. Every study's walkthrough job goes through here."""
@@ -113,8 +113,8 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int], args: list[str
 
     k = grid[0] * grid[1]
     out.mkdir(parents=True, exist_ok=True)
-    args = ["walkthrough", "--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}", "--out", str(out),
-            "--no-progress", *args]
+    shape = [] if tile is None else ["--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}"]
+    args = ["walkthrough", *shape, "--out", str(out), "--no-progress", *args]
     try:
         done = job(k, args, timeout, env={**({} if as_run else study_env()), **(env or {})}, launcher=launcher,
                    merge_stderr=True, hosts=hosts)
