@@ -105,10 +105,11 @@ def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int] | None, args: l
          env: dict | None = None, launcher=None, as_run: bool = False,
          hosts: list[tuple[str, int]] | None = None) -> Run:
     """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``, in the studies'
-    environment (``study_env``; ``tile`` None: the wall file in ``args`` gives grid and tile; ``as_run``: the walkthrough's own, each rank choosing its raster
+    environment (``study_env``; ``as_run``: the walkthrough's own, each rank choosing its raster
     threads as a user's run does, for studies of what a user's wall time is; ``env`` over either)
     under ``launcher`` (None: the one found), on ``hosts`` [(host, ranks)] where given (simulated
-    hosts: ``simhosts.py``); kill it on timeout. Every study's walkthrough job goes through here."""
+    hosts: ``simhosts.py``); kill it on timeout; ``tile`` None: the wall file in ``args`` gives the
+    grid and tile. Every study's walkthrough job goes through here."""
     import json
 
     k = grid[0] * grid[1]
