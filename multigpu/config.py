@@ -189,8 +189,9 @@ class WalkConfig:
     eyes: str = option("auto", group=STEREO, choices=lambda: _eye_plans(), help=(
         "how the ranks share a stereo wall's eyes: joint (every rank renders its region for both eyes), split "
         "(eye decomposition: half the ranks render the left eye, half the right, each over twice the pixels; "
-        "--decomposition screen, an even number of columns or rows), auto: split where the wall can, else joint "
-        "(docs/BENCHMARKS.md measures both)"))
+        "--decomposition screen, an even number of columns or rows), own (--stereo passive: a rank for each eye of "
+        "each tile, 2K ranks for K tiles, each showing its eye's projector), auto: split where the wall can, else "
+        "joint (docs/BENCHMARKS.md measures them)"))
     head: tuple[float, float, float] | None = option(None, group=STEREO, metavar="X,Y,Z", read=read_vec3, help=(
         "the viewer's head in metres from the wall's centre (x right, y up, z out of the wall): each tile shows "
         "the scene through the wall from there (default: on the wall's axis, where the wall spans the camera's "
@@ -375,7 +376,13 @@ class WalkConfig:
 
     @property
     def ranks(self) -> int:
+        """The wall's tiles (a rank each)."""
         return self.grid[0] * self.grid[1]
+
+    @property
+    def processes(self) -> int:
+        """The job's ranks: a rank a tile, or a rank for each eye of each tile (``--eyes own``)."""
+        return 2 * self.ranks if self.eyes == "own" else self.ranks
 
     @property
     def size(self) -> tuple[int, int]:

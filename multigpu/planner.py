@@ -138,11 +138,11 @@ class Planner:
     def __init__(self, cfg, scene, rank: int | None = None):
         self.cfg, self.scene, self.rank = cfg, scene, rank
         # a stereo wall plans on one eye's canvas and both eyes render the plan (core/stereo.py)
-        self.stereo = make_stereo(cfg.stereo, cfg.canvas)
+        self.stereo = make_stereo(cfg.stereo, cfg.canvas, cfg.eyes == "own")
         self.plan_cfg = cfg if self.stereo is None else eye_config(cfg, self.stereo)
         # eye decomposition (``--eyes``, ``WalkConfig.eyes_split``): half the ranks a screen plan, each eye's half
         # drawing it
-        self.halves = halved(cfg.grid) if cfg.eyes_split else None
+        self.halves = None if not cfg.eyes_split else cfg.grid if cfg.eyes == "own" else halved(cfg.grid)
         self._split: set[int] = set()  # the strategies (``balances`` indices) built for half the ranks
         self.canvas = self.plan_cfg.canvas
         self.viewer = cfg.viewer  # None: the camera's own frustum
@@ -188,7 +188,7 @@ class Planner:
         if d is None:
             name, balance = mode_of(self.cfg, self.balances[self.using])
             if self.halves is not None and name == "screen":  # one eye's half of the ranks (``stereo.doubled``)
-                half = self.cfg.ranks // 2
+                half = self.halves[0] * self.halves[1]  # one eye's ranks
                 d = REGISTRY[name].from_config(self.plan_cfg, self.scene, balance,
                                                None if self.rank is None else self.rank % half, grid=self.halves)
                 self._split.add(self.using)

@@ -70,10 +70,12 @@ def check_viewer(cfg) -> None:
     tw, th = cfg.tile
     from multigpu.core.stereo import splits
 
-    if cfg.eyes == "split":
-        why = splits(cfg.stereo, cfg.grid, cfg.decomposition, cfg.partition)
+    if cfg.eyes in ("split", "own"):
+        why = splits(cfg.stereo, cfg.grid, cfg.decomposition, cfg.partition, own=cfg.eyes == "own")
         if why:
             raise InputError.of("eyes", why)
+        if cfg.eyes == "own" and cfg.dark:
+            raise InputError.of("eyes", "own: a wall without some of its PCs (--dark-tiles) draws both eyes a rank")
     if cfg.stereo == "side-by-side" and tw % 2:
         raise InputError.of("tile", f"{tw}x{th}: side-by-side stereo needs an even tile width (each eye half)")
     if cfg.stereo == "top-bottom" and th % 2:
@@ -121,6 +123,8 @@ def splits_by_eye(cfg) -> bool:
     tiles need not halve, so every rank then draws both eyes of its region."""
     from multigpu.core.stereo import splits
 
+    if cfg.eyes == "own":  # a rank for each eye of each tile (checked at the door)
+        return True
     return (cfg.eyes != "joint" and not cfg.dark
             and splits(cfg.stereo, cfg.grid, cfg.decomposition, cfg.partition) is None)
 

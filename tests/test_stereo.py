@@ -183,7 +183,10 @@ def test_a_head_at_home_with_no_separation_sees_what_the_camera_sees():
     ({"stereo": "anaglyph", "eyes": "split", "decomposition": "db"}, "--eyes split works with --decomposition screen"),
     ({"stereo": "anaglyph", "eyes": "split", "grid": (3, 3)}, "--eyes split needs an even number of columns"),
     ({"stereo": "anaglyph", "eyes": "split", "partition": "broadcast"}, "--eyes split plans every rank's partition"),
-    ({"stereo": "anaglyph", "eyes": "both"}, "--eyes must be one of auto, joint, split"),
+    ({"stereo": "anaglyph", "eyes": "both"}, "--eyes must be one of auto, joint, split, own"),
+    ({"stereo": "anaglyph", "eyes": "own"}, "--eyes own (a rank for each eye of each tile) drives a passive wall's"),
+    ({"stereo": "passive", "eyes": "own", "decomposition": "hybrid"}, "--eyes own works with --decomposition screen"),
+    ({"stereo": "passive", "eyes": "own", "dark": (1,)}, "--eyes own: a wall without some of its PCs"),
 ])
 def test_bad_stereo_input_is_one_line_naming_the_flag(fields, words):
     with pytest.raises(InputError) as got:
@@ -244,7 +247,7 @@ def _walk(out, grid, tile, mullion=(0, 0), frames=FRAMES, **fields) -> list:
     cfg = WalkConfig(scene=SceneSpec(triangles=20_000), frames=frames, grid=grid, tile=tile, mullion=mullion,
                      mosaic_every=1, overlay=False, progress=False, exchange=fields.pop("exchange", "messages"),
                      out=str(out), timeout=60.0, screen_m=SCREEN, **fields)
-    run_ranks(grid[0] * grid[1], lambda comm: walkthrough.run(cfg, comm, _Job()))
+    run_ranks(cfg.processes, lambda comm: walkthrough.run(cfg, comm, _Job()))
     eyes = ("left/", "right/") if cfg.stereo != "mono" else ()
     return [[read_png(out / "mosaic" / f"{d}frame_{f:05d}.png") for d in ("", *eyes)] for f in range(frames)]
 
@@ -293,6 +296,8 @@ CASES = {
     "top-bottom bins": ("top-bottom", {"decomposition": "bins", "bin_size": 16}),
     "anaglyph split by eye latency 2": ("anaglyph", {"eyes": "split", "latency": 2}),
     "side-by-side split by eye cross": ("side-by-side", {"eyes": "split", "balance": "cross", "latency": 3}),
+    "passive a rank an eye": ("passive", {"eyes": "own"}),
+    "passive a rank an eye cross latency 3": ("passive", {"eyes": "own", "balance": "cross", "latency": 3}),
 }
 
 

@@ -19,11 +19,11 @@ FRAMES = 3
 STEREO = ["--screen-size", "1.2,0.96"]
 
 
-def _walk(out, grid, tile, mode, extra=()):
+def _walk(out, grid, tile, mode, extra=(), ranks=None):
     args = ["walkthrough", *SMALL, "--frames", str(FRAMES), "--grid", f"{grid[0]}x{grid[1]}",
             "--tile", f"{tile[0]}x{tile[1]}", "--mosaic-every", "1", "--no-overlay", "--out", str(out),
             "--stereo", mode, *STEREO, *extra]
-    res = run_mpi(grid[0] * grid[1], args)
+    res = run_mpi(ranks or grid[0] * grid[1], args)
     assert res.returncode == 0, res.stderr[-3000:]
     return [[read_png(out / "mosaic" / f"{d}frame_{f:05d}.png") for d in ("", "left/", "right/")]
             for f in range(FRAMES)]
@@ -41,6 +41,47 @@ def test_a_stereo_wall_under_mpiexec_composes_each_eye_bit_for_bit(tmp_path, mod
     assert (got[0][1] != got[0][2]).any()  # the eyes see differently
     s = json.loads((tmp_path / "four" / "summary.json").read_text())
     assert s["config"]["stereo"] == mode and s["complete"]
+
+
+def test_passive_stereo_with_a_rank_for_each_eye_composes_each_eye_bit_for_bit(tmp_path):
+    """``--eyes own``: 2K ranks for K tiles, ranks 0..K-1 the left eyes', K..2K-1 the right eyes':
+    each eye's mosaic is one rank's render of that eye, the wall the left eyes beside the right."""
+    want = _walk(tmp_path / "one", (1, 1), (120, 48), "passive")
+    got = _walk(tmp_path / "own", (1, 2), (60, 48), "passive", ["--eyes", "own"], ranks=4)
+    for f, (g, w) in enumerate(zip(got, want)):
+        assert (g[1] == w[1]).all() and (g[2] == w[2]).all(), f"frame {f}: an eye differs from one rank's"
+        assert (g[0] == np.concatenate([w[1], w[2]], axis=1)).all(), f"frame {f}: the wall differs"
+    assert (got[0][1] != got[0][2]).any()  # the eyes see differently
+    s = json.loads((tmp_path / "own" / "summary.json").read_text())
+    assert s["config"]["eyes"] == "own" and len(s["config"]["ranks"]) == 4 and s["complete"]
+    res = run_mpi(2, ["walkthrough", *SMALL, "--frames", "1", "--grid", "1x2", "--tile", "60x48", "--stereo",
+                      "passive", "--eyes", "own", *STEREO, "--out", str(tmp_path / "two")])
+    assert res.returncode == 2 and "1x2 needs 4 ranks (a rank for each eye of each tile: --eyes own) but the job " \
+        "has 2" in res.stderr, res.stderr[-2000:]
+
+
+def test_a_rank_for_each_eye_shows_its_eye_in_a_window_of_its_own(tmp_path, still_path):  # noqa: F811
+    """``--eyes own`` in windows: four windows for a 1x2 wall, the right eyes' beside the left
+    eyes' on one screen, as the mosaic shows them."""
+    with Xvfb((240, 48)) as x:
+        out = tmp_path / "win"
+        args = ["walkthrough", *SMALL, "--path", str(still_path), "--grid", "1x2", "--tile", "60x48",
+                "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out),
+                "--stereo", "passive", "--eyes", "own", *STEREO]
+        proc, kill = start_mpi(4, args, env={"DISPLAY": x.name})
+        try:
+            wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4)
+            shot = screenshot(x.name)
+            escape(x.name, windows(x.name)[0])
+            _, err = finish(proc, kill)
+        finally:
+            kill() if proc.poll() is None else None
+    assert proc.returncode == 0, err[-2000:]
+    mosaic = read_png(out / "mosaic" / "frame_00000.png")
+    assert shot.shape == mosaic.shape == (48, 240, 3)
+    assert (shot == mosaic).all(), f"{(shot != mosaic).any(axis=2).sum()} screen pixels differ from the wall"
+    left, right = (read_png(out / "mosaic" / d / "frame_00000.png") for d in ("left", "right"))
+    assert (mosaic == np.concatenate([left, right], axis=1)).all() and (left != right).any()
 
 
 @pytest.mark.parametrize("mode", ["side-by-side", "passive"])

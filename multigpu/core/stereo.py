@@ -20,7 +20,11 @@ for both eyes (one plan of K regions); ``split``, eye decomposition as Equalizer
 do: the first half of the ranks (labels below K/2) renders the left eye, the second half the
 right, each half the same K/2 regions of one plan (``halved``, ``doubled``), so a rank draws one
 pass a frame over twice the pixels. ``auto`` (the default) splits where a wall can
-(``splits``): measured faster in per-rank CPU time (docs/BENCHMARKS.md, "bench stereo").
+(``splits``): measured faster in per-rank CPU time (docs/BENCHMARKS.md, "bench stereo"). ``own``, a
+passive wall's Equalizer way: 2K ranks for K tiles, a rank for each eye of each tile (ranks 0..K-1
+the left eyes', K..2K-1 the right eyes'), each eye's K ranks sharing one plan of K regions; the
+composed space is then the left eyes' wall beside the right eyes' (``composed``), so each rank
+composes and shows exactly its own eye's tile (its projector), about a mono frame's work.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ UNSHOWN = {"quad": "frame-sequential stereo needs a quad-buffered GL visual, whi
                    "server offers (use side-by-side, top-bottom or anaglyph)"}
 EYES = ("left", "right")
 #: how a stereo wall's ranks share the eyes (``--eyes``; see the module)
-EYE_PLANS = ("auto", "joint", "split")
+EYE_PLANS = ("auto", "joint", "split", "own")
 
 
 def halved(grid: tuple[int, int]) -> tuple[int, int] | None:
@@ -53,17 +57,23 @@ def halved(grid: tuple[int, int]) -> tuple[int, int] | None:
     return (rows // 2, 1) if rows % 2 == 0 else None
 
 
-def splits(stereo: str, grid: tuple[int, int], decomposition: str, partition: str) -> str | None:
+def splits(stereo: str, grid: tuple[int, int], decomposition: str, partition: str,
+           own: bool = False) -> str | None:
     """Why a wall cannot split its ranks by eye (None: it can): it needs stereo, the screen
     decomposition (each eye's half of the ranks splits the screen), an even count of columns (or,
-    in one column, of rows), and a partition every rank plans itself."""
+    in one column, of rows), and a partition every rank plans itself. ``own`` (a rank for each eye
+    of each tile): passive stereo, its ranks already two walls."""
+    if own and stereo != "passive":
+        return (f"own (a rank for each eye of each tile) drives a passive wall's projectors: --stereo passive, "
+                f"not {stereo}")
+    name = "own" if own else "split"
     if stereo == "mono":
-        return "split needs a stereo wall (--stereo), got --stereo mono"
+        return f"{name} needs a stereo wall (--stereo), got --stereo mono"
     if decomposition != "screen":
-        return f"split works with --decomposition screen, got --decomposition {decomposition}"
+        return f"{name} works with --decomposition screen, got --decomposition {decomposition}"
     if partition == "broadcast":
-        return "split plans every rank's partition itself: use --partition redundant (got --partition broadcast)"
-    if halved(grid) is None:
+        return f"{name} plans every rank's partition itself: use --partition redundant (got --partition broadcast)"
+    if not own and halved(grid) is None:
         return (f"split needs an even number of columns (or, in one column, of rows) to halve the ranks, got "
                 f"--grid {grid[0]}x{grid[1]}")
     return None
@@ -81,10 +91,12 @@ def doubled(work: Work) -> Work:
 
 @dataclass(frozen=True)
 class Stereo:
-    """A ``mode`` (not mono) on ``canvas`` (the displays' wall)."""
+    """A ``mode`` (not mono) on ``canvas`` (the displays' wall); ``own``: a rank for each eye of
+    each tile (``--eyes own``: 2K ranks)."""
 
     mode: str
     canvas: Canvas
+    own: bool = False
 
     @cached_property
     def eye_tile(self) -> tuple[int, int]:
@@ -107,14 +119,20 @@ class Stereo:
 
     @cached_property
     def composed(self) -> Canvas:
-        """The composed space: every tile's eye tiles side by side."""
+        """The composed space: every tile's eye tiles side by side (``own``: the left eyes' wall
+        beside the right eyes', a rank's tile one eye's)."""
         ew, eh = self.eye_tile
+        if self.own:
+            rows, cols = self.canvas.grid
+            return Canvas((rows, 2 * cols), (ew, eh), (0, 0), self.canvas.dark)
         return Canvas(self.canvas.grid, (2 * ew, eh), (0, 0), self.canvas.dark)
 
     @cached_property
     def _shifts(self) -> np.ndarray:
         """(2, K, 2) offset from each eye tile on the eye canvas to its place in the composed space."""
         eye, comp = self.eye.tiles()[:, :2], self.composed.tiles()[:, :2]
+        if self.own:  # tile t's left eye is composed tile t, its right eye tile K + t
+            return np.stack([comp[:len(eye)] - eye, comp[len(eye):] - eye])
         return np.stack([comp - eye, comp - eye + np.array([self.eye_tile[0], 0])])
 
     def compose(self, work: Work) -> tuple[Work, list]:
@@ -192,9 +210,10 @@ def right_eye_place(canvas: Canvas, place: tuple[int, int]) -> tuple[int, int]:
     return place[0] + canvas.size[0], place[1]
 
 
-def make_stereo(mode: str, canvas: Canvas) -> Stereo | None:
-    """The stereo of ``--stereo`` on ``canvas`` (None: mono). The door has checked the mode."""
-    return None if mode == "mono" else Stereo(mode, canvas)
+def make_stereo(mode: str, canvas: Canvas, own: bool = False) -> Stereo | None:
+    """The stereo of ``--stereo`` on ``canvas`` (None: mono); ``own``: ``--eyes own``. The door
+    has checked the mode."""
+    return None if mode == "mono" else Stereo(mode, canvas, own)
 
 
 def eye_canvas(mode: str, canvas: Canvas) -> Canvas:

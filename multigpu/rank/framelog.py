@@ -51,7 +51,8 @@ class FrameLog:
         self.n_frames, self.window = n_frames, window
         self.canvas = cfg.canvas
         self.tiles = self.canvas.tiles()
-        self.stereo = make_stereo(cfg.stereo, self.canvas)  # a stereo wall gathers composed tiles (both eyes)
+        # a stereo wall gathers composed tiles (both eyes; with a rank for each eye, each eye's)
+        self.stereo = make_stereo(cfg.stereo, self.canvas, cfg.eyes == "own")
         tw, th = cfg.tile if self.stereo is None else self.stereo.composed.tile
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
         self.outputs = None  # a projector wall's outputs by tile (name, size): rank 0 keeps their pictures
@@ -146,13 +147,16 @@ class FrameLog:
                        work.rects, mosaic_due, None, pictures)
             return
         # the wall as its displays show it, and each eye's own mosaic (the partition over the left eye's)
-        shown = np.stack([st.pack(g) for g in self.gathered])  # tiles, not objects
-        ew = st.eye_tile[0]
-        eyes = [stitch(self.gathered[:, :, e * ew:(e + 1) * ew], st.eye.tiles(), st.eye.size, self.canvas.dark)
-                for e in range(2)]  # eyes
+        ew, K = st.eye_tile[0], self.canvas.grid[0] * self.canvas.grid[1]
+        if st.own:  # a rank for each eye of each tile: the left eyes' tiles, then the right eyes'
+            eyes = [stitch(self.gathered[e * K:(e + 1) * K], st.eye.tiles(), st.eye.size, self.canvas.dark)
+                    for e in range(2)]  # eyes
+        else:
+            eyes = [stitch(self.gathered[:, :, e * ew:(e + 1) * ew], st.eye.tiles(), st.eye.size, self.canvas.dark)
+                    for e in range(2)]  # eyes
         # a passive wall's outputs: the left eyes' beside the right eyes', as one X screen spanning both shows them
         wall = (np.concatenate(eyes, axis=1) if st.outputs == 2 else
-                stitch(shown, self.tiles, self.canvas.size, self.canvas.dark))
+                stitch(np.stack([st.pack(g) for g in self.gathered]), self.tiles, self.canvas.size, self.canvas.dark))
         self.write(self.record.image, f, wall, work.rects, mosaic_due, eyes)
 
     def _gather(self, f: int, back: np.ndarray) -> None:

@@ -191,9 +191,10 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
     """Render the walkthrough on this rank; rank 0 returns the summary. ``ready``: what a
     standby set up while it waited (the same on every rank: all have it, or none)."""
     rank, K = comm.Get_rank(), comm.Get_size()
-    if K != cfg.ranks:
-        raise InputError.of("grid", f"{cfg.grid[0]}x{cfg.grid[1]} needs {cfg.ranks} ranks but the job has {K} "
-                         f"(start it with mpiexec -n {cfg.ranks})")
+    if K != cfg.processes:
+        own = " (a rank for each eye of each tile: --eyes own)" if cfg.eyes == "own" else ""
+        raise InputError.of("grid", f"{cfg.grid[0]}x{cfg.grid[1]} needs {cfg.processes} ranks{own} but the job has "
+                            f"{K} (start it with mpiexec -n {cfg.processes})")
     wait = setup_timeout(cfg)
     # -- setup: rank 0 takes the output directory and builds the scene cache first (a stream's first step first)
     error, out, scene, path, load_info, shared, spool = _first(cfg, ready) if rank == 0 else (None,) * 7
@@ -321,9 +322,12 @@ def warn_once(cfg: WalkConfig, scene) -> None:
 
 def _presenter(cfg: WalkConfig, rank: int):
     """This rank's presenter: headless, or a window at its tile's place (or the wall file's);
-    headless where its tile is dark (it stands in for a PC that is gone)."""
+    headless where its tile is dark (it stands in for a PC that is gone). With a rank for each eye
+    of each tile (``--eyes own``), ranks K.. show the right eyes' outputs, one window each."""
     from multigpu.display import make_presenter
 
+    if cfg.eyes == "own":
+        return _eye_presenter(cfg, rank)
     x0, _, x1, y1 = (int(v) for v in cfg.canvas.tiles()[rank])
     place, size = (x0, cfg.canvas.size[1] - y1), cfg.tile  # top-left of the tile on a screen holding the canvas
     if cfg.mpcdi is not None:  # a projector's window: its output's picture, the outputs side by side
@@ -343,6 +347,26 @@ def _presenter(cfg: WalkConfig, rank: int):
             cfg.canvas, place if pos is None else pos)
     return make_presenter("headless" if rank in cfg.dark else cfg.present, rank, size, pos, display, where, full,
                           right)
+
+
+def _eye_presenter(cfg: WalkConfig, rank: int):
+    """A passive wall's output of one eye of one tile (``--eyes own``): rank k < K the left eye of
+    tile k, at the tile's place; rank K + k its right eye, where the wall file says, else beside
+    the wall (``core.stereo.right_eye_place``). Both on tile k's display."""
+    from multigpu.core.stereo import right_eye_place
+    from multigpu.display import make_presenter
+
+    K = cfg.ranks
+    tile, eye = rank % K, rank // K
+    x0, _, _, y1 = (int(v) for v in cfg.canvas.tiles()[tile])
+    pos = cfg.positions[tile] if cfg.positions and cfg.positions[tile] is not None else (x0, cfg.canvas.size[1] - y1)
+    if eye:
+        pos = cfg.right_eye[tile] if cfg.right_eye and cfg.right_eye[tile] is not None else right_eye_place(cfg.canvas,
+                                                                                                             pos)
+    display = screen_of(cfg.displays[tile] if cfg.displays else None, cfg.gpus[tile] if cfg.gpus else None)
+    where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"
+    return make_presenter(cfg.present, rank, cfg.tile, pos, display, where,
+                          bool(cfg.fullscreen and cfg.fullscreen[tile]) and not eye)  # the right eye: at its place
 
 
 def screen_of(display: str | None, gpu: int | None) -> str | None:

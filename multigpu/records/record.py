@@ -293,7 +293,7 @@ def config_doc(cfg, scene, load_info, n_frames, placement, renderer_method) -> d
             "dark": list(cfg.dark),
             "monitor": cfg.monitor is not None,
             "stereo": cfg.stereo, "viewer": _viewer_doc(cfg),
-            "eyes": None if cfg.stereo == "mono" else "split" if cfg.eyes_split else "joint",  # who draws which eye
+            "eyes": _eyes_doc(cfg),
             "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
             "kernel": {"compiled": jit.available(),
                        "warm_seconds": round(load_info.get("kernel_seconds", 0.0), 3)}}
@@ -325,3 +325,11 @@ def run_title(cfg, scene) -> str:
     return (f"multigpu walkthrough: {scene.name}, {scene.n_triangles} triangles in {scene.n_objects} objects, "
             f"{rows}x{cols} wall ({rows} row(s) x {cols} column(s) of {tw}x{th} tiles, canvas {W}x{H}), {what}"
             + ("" if cfg.stereo == "mono" else f", stereo {cfg.stereo}"))
+
+
+def _eyes_doc(cfg) -> str | None:
+    """Who draws which eye: every rank both (joint), half the ranks each (split), or a rank for
+    each eye of each tile (own)."""
+    if cfg.stereo == "mono":
+        return None
+    return "own" if cfg.eyes == "own" else "split" if cfg.eyes_split else "joint"

@@ -103,16 +103,17 @@ class Run:
 
 def walk(out: Path, grid: tuple[int, int], tile: tuple[int, int] | None, args: list[str], timeout: float,
          env: dict | None = None, launcher=None, as_run: bool = False,
-         hosts: list[tuple[str, int]] | None = None) -> Run:
+         hosts: list[tuple[str, int]] | None = None, ranks: int | None = None) -> Run:
     """Run ``multigpu walkthrough`` on ``rows*cols`` ranks into ``out``, in the studies'
     environment (``study_env``; ``as_run``: the walkthrough's own, each rank choosing its raster
     threads as a user's run does, for studies of what a user's wall time is; ``env`` over either)
     under ``launcher`` (None: the one found), on ``hosts`` [(host, ranks)] where given (simulated
     hosts: ``simhosts.py``); kill it on timeout; ``tile`` None: the wall file in ``args`` gives the
-    grid and tile. Every study's walkthrough job goes through here."""
+    grid and tile; ``ranks``: the job's, where not a rank a tile (``--eyes own``). Every study's
+    walkthrough job goes through here."""
     import json
 
-    k = grid[0] * grid[1]
+    k = ranks or grid[0] * grid[1]
     out.mkdir(parents=True, exist_ok=True)
     shape = [] if tile is None else ["--grid", f"{grid[0]}x{grid[1]}", "--tile", f"{tile[0]}x{tile[1]}"]
     args = ["walkthrough", *shape, "--out", str(out), "--no-progress", *args]

@@ -7,8 +7,10 @@ rendering, exchange, display), averaged over ranks and frames; the emulated fram
 rank's phase CPU time; wall is the wall-clock frame. Each stereo row gives its ratio to mono
 (the issue's goal: at most 1.7x in per-rank CPU time). The modes run as a user runs them (``--eyes
 auto``: on this wall the ranks split by eye); the ``joint`` arms give every rank both eyes of its
-region instead (``--eyes joint``), so the two ways of sharing the eyes meet in one run. Figures
-only, no asserts.
+region instead (``--eyes joint``), so the two ways of sharing the eyes meet in one run; ``passive
+own`` gives each eye of each tile a rank of its own (``--eyes own``: 8 ranks, each drawing one
+eye of one tile, as a passive wall's projectors each get a GPU), its per-rank CPU against mono's
+4 ranks. Figures only, no asserts.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ import numpy as np
 
 from multigpu.studies.tables import Columns, write_csv
 
-ARMS = ("mono", "side-by-side", "top-bottom", "anaglyph", "passive", "side-by-side joint", "anaglyph joint")
+ARMS = ("mono", "side-by-side", "top-bottom", "anaglyph", "passive", "passive own", "side-by-side joint",
+        "anaglyph joint")
 #: where the results go (stereo.csv); docs/results/stereo/ holds the published ones
 OUT = Path("out/stereo")
 PHASES = ("load_balancing_cpu_ms", "rendering_cpu_ms", "frame_exchange_cpu_ms", "display_cpu_ms")
@@ -30,8 +33,8 @@ def _one(out: Path, arm: str, frames: int, scene: list[str]) -> dict:
 
     args = ["--frames", str(frames), "--mosaic-every", "0", "--screen-size", "1.6,1.6", *scene,
             *(["--stereo", arm.split()[0]] if arm != "mono" else []),
-            *(["--eyes", "joint"] if arm.endswith(" joint") else [])]
-    run = walk(out, (2, 2), (256, 256), args, 1800)
+            *(["--eyes", arm.split()[1]] if " " in arm else [])]
+    run = walk(out, (2, 2), (256, 256), args, 1800, ranks=8 if arm.endswith(" own") else None)
     s = run.summary
     cpu = s["cpu"]
     return {"cpu_ms": sum(cpu[k] for k in PHASES), "render_cpu_ms": cpu["rendering_cpu_ms"],
@@ -85,7 +88,8 @@ def exp_stereo(s, out: Path) -> str:
     by = {r["arm"]: r for r in rows}
     return prose("stereo", "stereo", frames=frames, rounds=rounds, triangles=s.triangles,
                  sbs=by["side-by-side"]["ratio"], tb=by["top-bottom"]["ratio"], ana=by["anaglyph"]["ratio"],
-                 passive=by["passive"]["ratio"], sbs_joint=by["side-by-side joint"]["ratio"],
+                 passive=by["passive"]["ratio"], own=by["passive own"]["ratio"],
+                 sbs_joint=by["side-by-side joint"]["ratio"],
                  ana_joint=by["anaglyph joint"]["ratio"],
                  table=md_table(rows, [("arm", "Stereo", ""), ("cpu_ms", "Per-rank CPU ms", ".2f"),
                                        ("ratio", "x mono", ".2f"), ("render_cpu_ms", "Render ms", ".2f"),
