@@ -106,3 +106,32 @@ def test_the_projectors_windows_show_their_pictures_side_by_side(wall, tmp_path)
         got = read_png(out / "mosaic" / "outputs" / name / "frame_00000.png")
         close_to(got, want[name], name)
         assert np.array_equal(shot[:, 96 * k:96 * (k + 1)], got), name
+
+
+@pytest.mark.parametrize("present", ["headless", "window"])
+def test_the_example_three_projector_wall_runs(tmp_path, present):
+    """``examples/walls/three-projectors.json`` as shipped (three 1920x1080 projectors, its MPCDI
+    file made by ``warp make``): headless, and in windows on one X screen spanning the three."""
+    from mpirun import ROOT
+
+    wall = ROOT / "examples" / "walls" / "three-projectors.json"
+    out = tmp_path / "out"
+    args = ["walkthrough", *SMALL, "--wall", str(wall), "--frames", "2", "--mosaic-every", "1", "--no-overlay",
+            "--present", present, "--out", str(out)]
+    if present == "window":
+        with Xvfb((5760, 1080)) as x:
+            doc = json.loads(wall.read_text())  # the file's displays on this X server
+            doc["mpcdi"] = str(wall.parent / doc["mpcdi"])
+            for e in doc["displays"]:
+                e["display"] = x.name
+            (tmp_path / "wall.json").write_text(json.dumps(doc))
+            args[args.index(str(wall))] = str(tmp_path / "wall.json")
+            res = run_mpi(3, args, env={"DISPLAY": x.name}, timeout=300)
+    else:
+        res = run_mpi(3, args, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    canvas = read_png(out / "mosaic" / "frame_00001.png")
+    assert canvas.shape == (1080, 5760, 3)
+    want = reference(canvas, ROOT / "examples" / "walls" / "three-projectors.mpcdi")
+    for name in NAMES:
+        close_to(read_png(out / "mosaic" / "outputs" / name / "frame_00001.png"), want[name], name)
