@@ -54,7 +54,8 @@ def test_every_choice_and_switch_reaches_its_field():
                     with pytest.raises(InputError, match=f"--stereo {value}: "):
                         _walk(flag_of(f.name, opt), value)
                     continue
-                with_stereo = ["--stereo", "anaglyph"] if f.name == "eyes" else []  # how stereo eyes are shared
+                # how stereo eyes are shared (a rank for each eye: a passive wall's)
+                with_stereo = ["--stereo", "passive" if value == "own" else "anaglyph"] if f.name == "eyes" else []
                 assert getattr(_walk(flag_of(f.name, opt), value, *with_stereo), f.name) == value
         elif opt.switch or opt.negate:
             cfg = _walk(flag_of(f.name, opt))

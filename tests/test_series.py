@@ -197,3 +197,38 @@ def test_a_negative_first_number_is_a_flag_value_not_a_flag():
 
     got = joined_negatives(["walkthrough", "--range", "-1,1", "--offset", "-5,0,0", "--anim-speed", "-2", "-h"])
     assert got == ["walkthrough", "--range=-1,1", "--offset=-5,0,0", "--anim-speed", "-2", "-h"]
+
+
+def test_an_xdmf_time_series_plays_its_steps_at_their_times(tmp_path, monkeypatch):
+    """One ``.xdmf`` file (its data in HDF5) whose grid is a temporal collection, as meshio's
+    TimeSeriesWriter (and FEniCS, ParaView) write it: a series of its steps at their own times, each
+    step the scene of that step's data alone; unpacked once (a second look reads the cache)."""
+    from multigpu.scene.models import SceneSpec, load_scene
+
+    monkeypatch.setenv("MULTIGPU_CACHE", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)  # meshio's writer puts the HDF5 file in the working directory
+    steps = [surface(k) for k in range(3)]
+    with meshio.xdmf.TimeSeriesWriter(str(tmp_path / "run.xdmf")) as w:
+        w.write_points_cells(steps[0].points, steps[0].cells)
+        for k, m in enumerate(steps):  # the same grid, each step's heights as a field
+            w.write_data(0.25 * k, point_data={"height": m.point_data["height"]})
+    meshio.write(tmp_path / "plain.xdmf", steps[0])  # one mesh, no time: not a series
+    assert is_series(str(tmp_path / "run.xdmf")) and not is_series(str(tmp_path / "plain.xdmf"))
+    got = find_series(str(tmp_path / "run.xdmf"))
+    assert len(got) == 3 and got.times == (0.0, 0.25, 0.5) and got.name == "run"
+    made = [p.stat().st_mtime_ns for p in got.paths]
+    assert [p.stat().st_mtime_ns for p in find_series(str(tmp_path / "run.xdmf")).paths] == made  # the cache's
+    lo, hi, _ = series_range(got, "height")
+    assert lo == pytest.approx(min(m.point_data["height"].min() for m in steps))
+    for k in range(3):
+        step, _ = load_scene(SceneSpec(model=str(tmp_path / "run.xdmf"), color_by="height", step=k))
+        meshio.write(tmp_path / f"alone_{k}.vtu", meshio.Mesh(steps[0].points, steps[0].cells,
+                                                              point_data={"height": steps[k].point_data["height"]}))
+        alone, _ = load_scene(SceneSpec(model=str(tmp_path / f"alone_{k}.vtu"), color_by="height",
+                                        color_range=(lo, hi)))
+        assert step.meta["series"]["time"] == 0.25 * k
+        assert np.array_equal(step.vertex_colors, alone.vertex_colors)
+    (tmp_path / "broken.xdmf").write_text((tmp_path / "run.xdmf").read_text().replace("run.h5", "gone.h5"))
+    with pytest.raises(InputError, match="broken.xdmf: not a readable XDMF time series") as err:
+        find_series(str(tmp_path / "broken.xdmf"))
+    assert "\n" not in str(err.value)

@@ -189,7 +189,7 @@ def test_a_gpu_per_rank_reaches_the_configuration(tmp_path):
     path = _wall(tmp_path, {"grid": "1x2", "displays": [{"rank": 0, "gpu": 1}, {"rank": 1}]})
     cfg = walk_config(build_parser().parse_args(["walkthrough", "--wall", path]))
     assert cfg.gpus == (1, None)
-    from multigpu.rank.walkthrough import screen_of
+    from multigpu.rank.presenters import screen_of
 
     assert screen_of(":0", 1) == ":0.1" and screen_of(":0.2", 1) == ":0.2" and screen_of(":3", None) == ":3"
 

@@ -44,7 +44,6 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0,
     from multigpu.config import WalkConfig
     from multigpu.core.canvas import Canvas
     from multigpu.core.stereo import Stereo
-    from multigpu.display import make_presenter
     from multigpu.display.pattern import nudge, stereo_tile_pattern, tile_pattern
     from multigpu.wall import check_ranks, load_wall
 
@@ -57,32 +56,12 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0,
                             f"has {k} (launch/wall-test {path} starts the right number)")
     check_ranks(wall, k)
     host = socket.gethostname()
-    presenter, projector, error = None, None, None
-    size, label = tile, [f"rank {rank}", f"host {host}"]
+    shown, error = [None, None, tile, [f"rank {rank}", f"host {host}"]], None
     try:
-        x0, _, _, y1 = (int(v) for v in Canvas(grid, tile, mullion).tiles()[rank])
-        place = (x0, Canvas(grid, tile, mullion).size[1] - y1)
-        if wall.mpcdi is not None:  # a projector's window: its output, the outputs side by side
-            from multigpu.warp.layout import outputs_by_tile, places
-
-            outs = outputs_by_tile(wall.mpcdi)
-            place, size = places(grid, outs)[rank], outs[rank].size
-            label.insert(1, f"output {outs[rank].name}")
-        place = wall.positions.get(rank, place)
-        where = f"wall file {path}, rank {rank} on host {host}"
-        right = None
-        if stereo == "passive":  # a window per eye (display/passive.py)
-            from multigpu.core.stereo import right_eye_place
-
-            right = wall.right_eye.get(rank, right_eye_place(Canvas(grid, tile, mullion), place))
-        presenter = make_presenter("window", rank, size, place, wall.displays.get(rank), where,
-                                   rank in wall.fullscreen, right)
-        if wall.mpcdi is not None:
-            from multigpu.rank.outputs import Projector
-
-            projector = Projector(presenter.context, wall.mpcdi, rank, tile, wall.outputs, blend)
+        _open(wall, path, rank, (grid, tile, mullion), stereo, blend, shown)
     except InputError as exc:
         error = str(exc)
+    presenter, projector, size, label = shown
     error = agree(comm, error, timeout, "setup")
     if error:
         if projector is not None:
@@ -128,6 +107,37 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0,
             projector.release()
         presenter.close()
     return (int(state[0]), int(state[1])) if rank == 0 and projector is None else None
+
+
+def _open(wall, path: str, rank: int, shape: tuple, stereo: str, blend: bool, shown: list) -> None:
+    """Rank ``rank``'s window into ``shown`` = [presenter, projector, size, label] as each is made
+    (what was made is closed if a later step fails): at its tile's place, or its projector output's
+    (``shape``: the wall's grid, tile and mullion)."""
+    from multigpu.core.canvas import Canvas
+    from multigpu.display import make_presenter
+
+    grid, tile, mullion = shape
+    x0, _, _, y1 = (int(v) for v in Canvas(grid, tile, mullion).tiles()[rank])
+    place = (x0, Canvas(grid, tile, mullion).size[1] - y1)
+    if wall.mpcdi is not None:  # a projector's window: its output, the outputs side by side
+        from multigpu.warp.layout import outputs_by_tile, places
+
+        outs = outputs_by_tile(wall.mpcdi)
+        place, shown[2] = places(grid, outs)[rank], outs[rank].size
+        shown[3].insert(1, f"output {outs[rank].name}")
+    place = wall.positions.get(rank, place)
+    where = f"wall file {path}, rank {rank} on host {socket.gethostname()}"
+    right = None
+    if stereo == "passive":  # a window per eye (display/passive.py)
+        from multigpu.core.stereo import right_eye_place
+
+        right = wall.right_eye.get(rank, right_eye_place(Canvas(grid, tile, mullion), place))
+    shown[0] = make_presenter("window", rank, shown[2], place, wall.displays.get(rank), where,
+                              rank in wall.fullscreen, right)
+    if wall.mpcdi is not None:
+        from multigpu.rank.outputs import Projector
+
+        shown[1] = Projector(shown[0].context, wall.mpcdi, rank, tile, wall.outputs, blend)
 
 
 def main(path: str, frames: int | None, blend: bool = True) -> int:

@@ -26,16 +26,15 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
-import os
 import re
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from multigpu.errors import InputError, check_file
 from multigpu.options import check, option, register
 from multigpu.scene import lod as scene_lod
 from multigpu.scene import parts as scene_parts
+from multigpu.scene.cachedir import cache_dir  # noqa: F401 (the cache's folder, read from here too)
 from multigpu.scene.files import FORMATS, axis_name, axis_vector, load_model
 from multigpu.scene.layout import FORMAT_VERSION, Scene
 from multigpu.scene.series import ENDS, find_series, is_series, series_range
@@ -79,7 +78,8 @@ class SceneSpec:
     model: str | None = option(None, group="scene", metavar="FILE|'GLOB'|SERIES.pvd|adios2:NAME",
                                help="model file (OBJ, PLY, STL, OFF, glTF/GLB; a simulation's VTU, VTK, XDMF, "
                                     "Exodus, Gmsh, ... through meshio) instead of --scene; a simulation's time "
-                                    "series as a quoted glob of its step files or ParaView's .pvd; a running "
+                                    "series as a quoted glob of its step files, ParaView's .pvd or an XDMF time "
+                                    "series; a running "
                                     "code's steps as adios2:STREAM (SST) or adios2:FILE.bp (BP5, followed as it "
                                     "grows)")
     split: str = option("auto", group="scene", metavar="auto|components|grid:N",
@@ -153,10 +153,6 @@ class SceneSpec:
 
 
 register(SceneSpec)
-
-
-def cache_dir() -> Path:
-    return Path(os.environ.get("MULTIGPU_CACHE", Path.home() / ".cache" / "multigpu"))
 
 
 def _key(*parts) -> str:

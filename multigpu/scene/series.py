@@ -2,8 +2,9 @@
 colour range over every step.
 
 ``--model`` names a series as a glob (``'run/step_*.vtu'``: the files in natural order, numbers by
-value) or ParaView's ``.pvd`` collection (its ``DataSet`` entries: ``timestep`` and ``file``, one
-file a step; a step's further parts are named in a warning). Each step is read as one model file
+value), ParaView's ``.pvd`` collection (its ``DataSet`` entries: ``timestep`` and ``file``, one
+file a step; a step's further parts are named in a warning) or an XDMF time series (one file, its
+steps unpacked once into the cache: ``scene/xdmf_series.py``). Each step is read as one model file
 (``scene/simulation.py``), cached as its own scene. A step plays at ``--steps-per-second`` of scene
 time (``core.motion.scene_time``: the frame's, so every rank, a replay and a restart agree), looping
 or holding the last step at the end (``--at-end``). The colour range of ``--color-by`` is taken over
@@ -48,14 +49,17 @@ class Series:
 
     @property
     def name(self) -> str:
-        """The series' name in titles: the ``.pvd``'s stem, or the glob's file pattern."""
+        """The series' name in titles: the ``.pvd``'s or XDMF file's stem, or the glob's file pattern."""
         kind, _, where = self.source.partition(" ")
-        return Path(where).stem if kind == "pvd" else Path(where).name
+        return Path(where).stem if kind in ("pvd", "xdmf") else Path(where).name
 
 
 def is_series(model: str | None) -> bool:
-    """Whether ``--model`` names a series (a glob or a ``.pvd``), not one file."""
-    return model is not None and (bool(GLOB.search(str(model))) or str(model).lower().endswith(".pvd"))
+    """Whether ``--model`` names a series (a glob, a ``.pvd`` or an XDMF time series), not one file."""
+    from multigpu.scene.xdmf_series import is_temporal
+
+    return model is not None and (bool(GLOB.search(str(model))) or str(model).lower().endswith(".pvd")
+                                  or is_temporal(str(model)))
 
 
 def _natural(path: str) -> list:
@@ -69,6 +73,11 @@ def find_series(model: str) -> Series:
     text = str(model)
     if text.lower().endswith(".pvd") and not GLOB.search(text):
         return _pvd(Path(text).expanduser())
+    from multigpu.scene.xdmf_series import is_temporal, unpack
+
+    if is_temporal(text):
+        paths, times = unpack(Path(text))
+        return Series(tuple(paths), tuple(times), f"xdmf {text}")
     found = sorted((p for p in glob.glob(str(Path(text).expanduser())) if Path(p).is_file()), key=_natural)
     if not found:
         raise InputError.of("model", f"{text}: no file matches this series pattern")
