@@ -76,7 +76,7 @@ class SceneSpec:
 
     scene: str = option("plant", group="scene", metavar=lambda: "|".join(BUILTIN), help="a built-in scene")
     model: str | None = option(None, group="scene", metavar="FILE|'GLOB'|SERIES.pvd|adios2:NAME",
-                               help="model file (OBJ, PLY, STL, OFF, glTF/GLB; a simulation's VTU, VTK, XDMF, "
+                               help="model file (OBJ, PLY, STL, OFF, glTF/GLB; a simulation's VTU, VTP, VTK, XDMF, "
                                     "Exodus, Gmsh, ... through meshio) instead of --scene; a simulation's time "
                                     "series as a quoted glob of its step files, ParaView's .pvd or an XDMF time "
                                     "series; a running "

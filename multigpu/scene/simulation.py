@@ -2,8 +2,8 @@
 coloured by one of its fields.
 
 meshio reads the formats simulation codes write (``FORMATS``: VTU, legacy VTK, XDMF, Exodus,
-Gmsh, Abaqus, ...). Volume cells (tetrahedra, hexahedra, wedges, pyramids; the corners of their
-quadratic kinds) are shown as their boundary: the faces no two cells share, wound outwards (away
+Gmsh, Abaqus, ...; VTP by way of ``scene/vtp.py``). Volume cells (tetrahedra, hexahedra, wedges,
+pyramids; the corners of their quadratic kinds) are shown as their boundary: the faces no two cells share, wound outwards (away
 from their cell's centre); triangles, quads and polygons are kept. Every face is fanned into
 triangles. Lines and vertices are not drawn; other cell kinds are named in a warning.
 
@@ -26,7 +26,7 @@ import numpy as np
 from multigpu.errors import InputError
 
 #: the extensions read through meshio (the others trimesh reads: ``files.FORMATS``)
-FORMATS = {".vtu", ".vtk", ".xdmf", ".xmf", ".exo", ".e", ".ex2", ".msh", ".inp", ".mesh", ".med", ".cgns",
+FORMATS = {".vtu", ".vtp", ".vtk", ".xdmf", ".xmf", ".exo", ".e", ".ex2", ".msh", ".inp", ".mesh", ".med", ".cgns",
            ".su2", ".ugrid", ".dat", ".f3grid", ".avs", ".vol"}
 #: a volume cell's faces, by its corners (any winding: ``surface`` turns them outwards)
 VOLUME = {"tetra": (4, [[0, 1, 2], [0, 1, 3], [1, 2, 3], [0, 2, 3]]),
@@ -57,9 +57,12 @@ class Coloring:
 
 
 def read(path: Path):
-    """``path`` through meshio, or one line naming why not."""
+    """``path`` through meshio, or one line naming why not; a ``.vtp`` (which meshio does not
+    read) as the UnstructuredGrid it is rewritten to (``scene/vtp.py``)."""
     import meshio
 
+    if Path(path).suffix.lower() == ".vtp":
+        return _read_vtp(Path(path))
     said = io.StringIO()
     try:  # meshio prints a reader's ReadError and exits: its words kept, the exit caught
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
@@ -70,6 +73,34 @@ def read(path: Path):
                else exc.__class__.__name__)
         raise InputError.of("model", f"{path}: cannot read as {path.suffix.lstrip('.').upper()} (meshio: {why})") \
             from None
+
+
+def _read_vtp(path: Path):
+    """A VTK XML PolyData file through meshio, by way of a rewritten ``.vtu`` (what it leaves out:
+    ``mesh.info["notes"]``)."""
+    import os
+    import tempfile
+
+    from multigpu.scene.vtp import as_unstructured
+
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError.of("model", f"{path}: cannot read it ({exc.__class__.__name__})") from None
+    text, notes = as_unstructured(data, str(path))
+    fd, tmp = tempfile.mkstemp(suffix=".vtu", prefix="multigpu-vtp-")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(text)
+        try:
+            mesh = read(Path(tmp))
+        except InputError as exc:
+            raise InputError.of("model", f"{path}: cannot read as VTP (meshio: "
+                                         f"{exc.message.split('(meshio: ', 1)[-1]}") from None
+    finally:
+        os.unlink(tmp)
+    mesh.info = {"notes": notes}
+    return mesh
 
 
 def _kind(cell_type: str) -> str:
@@ -244,6 +275,7 @@ def load(path: Path, color_by: str | None = None, colormap: str = "viridis",
 
     mesh = read(path)
     faces, owner, warnings = surface(mesh, path)
+    warnings = [*(mesh.info or {}).get("notes", []), *warnings] if isinstance(mesh.info, dict) else warnings
     points = _pad3(np.asarray(mesh.points, dtype=np.float64))
     meta = {"fields": describe(mesh), "warnings": warnings}
     rgba = None
