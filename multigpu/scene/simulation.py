@@ -4,8 +4,8 @@ coloured by one of its fields.
 meshio reads the formats simulation codes write (``FORMATS``: VTU, legacy VTK, XDMF, Exodus,
 Gmsh, Abaqus, ...; VTP by way of ``scene/vtp.py``). Volume cells (tetrahedra, hexahedra, wedges,
 pyramids; the corners of their quadratic kinds) are shown as their boundary: the faces no two
-cells share, wound outwards (away from their cell's centre); triangles, quads and polygons are kept. Every face is fanned into
-triangles. Lines and vertices are not drawn; other cell kinds are named in a warning.
+cells share, wound outwards (away from their cell's centre); triangles, quads and polygons are
+kept. Every face is fanned into triangles. Lines and vertices are not drawn; other cell kinds are named in a warning.
 
 ``--color-by NAME`` colours the surface by a point field (per vertex, blended across faces) or a
 cell field (per face: its vertices unshared, flat); a vector field by its magnitude, or one
