@@ -3,6 +3,7 @@ refusal one line naming the step and the variable), and the reader that keeps ea
 file of a series, from a BP5 file written here by the example simulation's code (skipped, naming why,
 only where the adios2 wheel cannot be imported)."""
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -98,3 +99,55 @@ def test_a_stream_that_cannot_be_opened_or_sends_nothing_is_one_line(tmp_path):
     with pytest.raises(InputError) as got:
         spool.first()
     assert str(got.value).startswith(f"--model adios2:{tmp_path / 'none.bp'}: ") and "\n" not in str(got.value)
+
+
+# -- the door, fuzzed: whatever a stream's step holds, one line or a surface
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_any_step_is_a_surface_or_one_line(tmp_path_factory):
+    """A step's variables of any names, kinds, shapes and values (NaN, infinities, negative or huge
+    indices, empty arrays, complex numbers, fields of no column): ``step_mesh`` refuses it in one line naming the step,
+    or gives a mesh that the wall's loader turns into a surface or refuses in one line (never
+    another exception: the stream's reader says the line and the wall holds its last step)."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+    from hypothesis.extra import numpy as hnp
+
+    from multigpu.scene.simulation import load
+    from multigpu.scene.stream_mesh import step_mesh
+
+    where = tmp_path_factory.mktemp("fuzz")
+    names = st.sampled_from(["time", "temperature", "velocity", "v", "quad"])  # fields mostly; a cell kind
+    kinds = st.sampled_from([np.float64, np.float32, np.int64, np.int32, np.uint8, np.bool_, np.complex64])
+    arrays = kinds.flatmap(lambda k: hnp.arrays(k, hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=6)))
+    floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
+
+    @settings(max_examples=int(os.environ.get("MULTIGPU_FUZZ", "200")), deadline=None, suppress_health_check=list(HealthCheck))
+    @given(data=st.data(), extra=st.dictionaries(names, arrays, max_size=3))
+    def check(data, extra):
+        n = data.draw(st.integers(0, 8), "points")
+        values = {"points": data.draw(hnp.arrays(np.float64, (n, data.draw(st.sampled_from([3, 2, 4]))),
+                                                 elements=st.one_of(st.floats(-5, 5), floats)))}
+        if data.draw(st.booleans()):  # a step's cells, mostly in range
+            values["triangle"] = data.draw(hnp.arrays(np.int64, (data.draw(st.integers(0, 6)), 3),
+                                                      elements=st.integers(-1, max(n, 1))))
+        if data.draw(st.booleans()):  # a field of one value a point, of any kind
+            values["temperature"] = data.draw(hnp.arrays(data.draw(kinds), (n,)))
+        values.update(extra)
+        try:
+            mesh, _, notes = step_mesh(values, 3, "adios2:sim")
+        except InputError as exc:
+            assert "\n" not in str(exc) and "adios2:sim: step 3" in str(exc)
+            return
+        assert all("\n" not in n for n in notes)
+        import meshio
+
+        path = where / "step.vtu"
+        meshio.write(path, mesh, binary=True)
+        try:
+            load(path, next(iter(mesh.point_data), None))
+        except InputError as exc:  # what the door let through is read back (a field of no column was not)
+            assert "\n" not in str(exc) and "cannot read as" not in str(exc), str(exc)
+
+    check()

@@ -5,7 +5,7 @@ A step holds ``points`` (P, 3) or (P, 2) floats, one or more cell arrays named a
 (``triangle`` (n, 3), ``quad`` (n, 4), ``tetra`` (n, 4), ``hexahedron`` (n, 8), ``wedge`` (n, 6),
 ``pyramid`` (n, 5): integer point indices), optionally a scalar ``time``, and fields: an array of P
 rows is a point field, one of as many rows as the cells (a single cell kind) a cell field. A step
-without points or cells, with indices outside its points or with non-finite or out-of-range
+without points or cells (or whose cell variables hold none), with indices outside its points or with non-finite or out-of-range
 values where indices belong is refused in one line; a variable that fits neither the points nor
 the cells is named and left out. Pure: no ADIOS2, no MPI, no GL.
 """
@@ -53,6 +53,9 @@ def step_mesh(values: dict[str, np.ndarray], step: int, source: str):
     if not cells:
         raise InputError.of("model", f"{where}: no cell variable ({', '.join(CELLS)}; the step has: {have})")
     n_cells = sum(len(c) for _, c in cells)
+    if not n_cells:
+        raise InputError.of("model", f"{where}: its cell variables hold no cell "
+                                     f"({', '.join(f'{k} {c.shape}' for k, c in cells)})")
     point_data, cell_data, notes = {}, {}, []
     time = None
     for name, v in values.items():
@@ -63,7 +66,7 @@ def step_mesh(values: dict[str, np.ndarray], step: int, source: str):
             if a.size == 1 and a.dtype.kind in "fiu" and np.isfinite(a).all():
                 time = float(a.reshape(-1)[0])
                 continue
-        if a.dtype.kind not in "fiu" or a.ndim not in (1, 2):
+        if a.dtype.kind not in "fiu" or a.ndim not in (1, 2) or (a.ndim == 2 and a.shape[1] == 0):
             notes.append(f"{where}: variable '{name}' ({a.dtype}, shape {a.shape}) is no field: left out")
         elif len(a) == len(points):
             point_data[name] = a
