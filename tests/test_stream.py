@@ -123,7 +123,9 @@ def test_any_step_is_a_surface_or_one_line(tmp_path_factory):
     arrays = kinds.flatmap(lambda k: hnp.arrays(k, hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=6)))
     floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
 
-    @settings(max_examples=int(os.environ.get("MULTIGPU_FUZZ", "200")), deadline=None, suppress_health_check=list(HealthCheck))
+    fuzz = int(os.environ.get("MULTIGPU_FUZZ", "200"))  # examples (more: MULTIGPU_FUZZ=2000)
+
+    @settings(max_examples=fuzz, deadline=None, suppress_health_check=list(HealthCheck))
     @given(data=st.data(), extra=st.dictionaries(names, arrays, max_size=3))
     def check(data, extra):
         n = data.draw(st.integers(0, 8), "points")

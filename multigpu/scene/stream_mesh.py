@@ -5,9 +5,9 @@ A step holds ``points`` (P, 3) or (P, 2) floats, one or more cell arrays named a
 (``triangle`` (n, 3), ``quad`` (n, 4), ``tetra`` (n, 4), ``hexahedron`` (n, 8), ``wedge`` (n, 6),
 ``pyramid`` (n, 5): integer point indices), optionally a scalar ``time``, and fields: an array of P
 rows is a point field, one of as many rows as the cells (a single cell kind) a cell field. A step
-without points or cells (or whose cell variables hold none), with indices outside its points or with non-finite or out-of-range
-values where indices belong is refused in one line; a variable that fits neither the points nor
-the cells is named and left out. Pure: no ADIOS2, no MPI, no GL.
+without points or cells (or whose cell variables hold none), with indices outside its points or
+with non-finite or out-of-range values where indices belong is refused in one line; a variable
+that fits neither the points nor the cells (or of no column) is named and left out. Pure: no ADIOS2, no MPI, no GL.
 """
 
 from __future__ import annotations
