@@ -159,3 +159,31 @@ def test_the_outputs_pictures_are_coloured_and_unblended_with_blend_off(tmp_path
         for name in ("p1", "p2"):
             d = np.abs(got[name].astype(int) - want[name])
             assert d.max() <= 2 and d.mean() < 0.5, (name, d.max(), d.mean())
+
+
+def test_the_gpu_pass_takes_colour_alpha_and_beta_maps_and_a_1d_lut(tmp_path):
+    """Maps of three channels (MPCDI's componentDepth 3: each primary its own blend) and a 1D
+    table: the GPU's picture is the numpy reference's within two levels."""
+    from multigpu.core.warpblend import output
+    from multigpu.gpu.context import create_context
+    from multigpu.gpu.outputs import OutputPass
+
+    rng = np.random.default_rng(5)
+    h, w = 24, 32
+    yy, xx = np.mgrid[0:h, 0:w]
+    coords = np.stack([(xx + 0.5) / w * 0.9 + 0.05, (yy + 0.5) / h * 0.8 + 0.1], axis=-1)
+    coords[0, 0] = np.nan  # a pixel that shows nothing (beta still lifts it)
+    alpha = rng.uniform(0.2, 1.0, (h, w, 3))
+    beta = rng.uniform(0.0, 0.05, (h, w, 3))
+    tile = rng.integers(0, 256, (40, 50, 3), dtype=np.uint8)  # top row first
+    (tmp_path / "one.cube").write_text("LUT_1D_SIZE 4\n0 0 0\n0.4 0.3 0.2\n0.7 0.6 0.5\n1 1 1\n")
+    lut = read_cube(tmp_path / "one.cube")
+    ctx, _ = create_context()
+    p = OutputPass(ctx, (w, h), (50, 40), coords, alpha, beta, lut=lut)
+    got = p.run(np.ascontiguousarray(tile[::-1]))[::-1].copy()
+    p.release()
+    ctx.release()
+    want = output(tile, coords, alpha, beta, signal=lambda v: apply_lut(v, lut))
+    d = np.abs(got.astype(int) - want)
+    assert d.max() <= 2 and d.mean() < 0.5, (d.max(), d.mean())
+    assert got[0, 0].max() > 0  # beta's lift where nothing is shown

@@ -44,6 +44,20 @@ def finish(proc, kill, timeout=120):
         kill() if proc.poll() is None else None
 
 
+def shown(n, args, x, wins, out):
+    """A window job of ``n`` ranks on the X server ``x``: once ten frames are in and ``wins``
+    windows open, the screen taken and Escape pressed; (screenshot, exit code, stderr)."""
+    proc, kill = start_mpi(n, args, env={"DISPLAY": x.name})
+    try:
+        wait_for(lambda: rows_written(out) and len(windows(x.name)) == wins)
+        shot = screenshot(x.name)
+        escape(x.name, windows(x.name)[0])
+        _, err = finish(proc, kill)
+    finally:
+        kill() if proc.poll() is None else None
+    return shot, proc.returncode, err
+
+
 def window_args(out, path, extra=()):
     return ["walkthrough", *SMALL, "--path", str(path), "--grid", "2x2", "--tile", "60x48", "--mullion", "7x5",
             "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out), *extra]
@@ -51,17 +65,10 @@ def window_args(out, path, extra=()):
 
 @pytest.mark.parametrize("latency", ["0", "2"])
 def test_screen_shows_the_composite_and_escape_ends_the_run(tmp_path, still_path, latency):
+    out = tmp_path / "win"
     with Xvfb(CANVAS) as x:
-        out = tmp_path / "win"
-        proc, kill = start_mpi(4, window_args(out, still_path, ["--latency", latency]), env={"DISPLAY": x.name})
-        try:
-            wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4)
-            shot = screenshot(x.name)
-            escape(x.name, windows(x.name)[0])
-            _, err = finish(proc, kill)
-        finally:
-            kill() if proc.poll() is None else None
-    assert proc.returncode == 0, err[-2000:]
+        shot, code, err = shown(4, window_args(out, still_path, ["--latency", latency]), x, 4, out)
+    assert code == 0, err[-2000:]
     mosaic = read_png(out / "mosaic" / "frame_00000.png")
     assert shot.shape == mosaic.shape == (CANVAS[1], CANVAS[0], 3)
     assert (shot == mosaic).all(), f"{(shot != mosaic).any(axis=2).sum()} screen pixels differ from the composite"

@@ -7,10 +7,10 @@ import json
 
 import numpy as np
 import pytest
-from mpirun import SMALL, read_png, run_mpi, start_mpi
-from test_present_mpi import finish, rows_written, still_path  # noqa: F401 (a fixture)
+from mpirun import SMALL, read_png, run_mpi
+from test_present_mpi import shown, still_path  # noqa: F401 (a fixture)
 from test_stereo import _packed
-from xserver import Xvfb, escape, screenshot, wait_for, windows
+from xserver import Xvfb
 
 from multigpu.core.canvas import Canvas
 
@@ -63,20 +63,13 @@ def test_passive_stereo_with_a_rank_for_each_eye_composes_each_eye_bit_for_bit(t
 def test_a_rank_for_each_eye_shows_its_eye_in_a_window_of_its_own(tmp_path, still_path):  # noqa: F811
     """``--eyes own`` in windows: four windows for a 1x2 wall, the right eyes' beside the left
     eyes' on one screen, as the mosaic shows them."""
+    out = tmp_path / "win"
+    args = ["walkthrough", *SMALL, "--path", str(still_path), "--grid", "1x2", "--tile", "60x48",
+            "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out),
+            "--stereo", "passive", "--eyes", "own", *STEREO]
     with Xvfb((240, 48)) as x:
-        out = tmp_path / "win"
-        args = ["walkthrough", *SMALL, "--path", str(still_path), "--grid", "1x2", "--tile", "60x48",
-                "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out),
-                "--stereo", "passive", "--eyes", "own", *STEREO]
-        proc, kill = start_mpi(4, args, env={"DISPLAY": x.name})
-        try:
-            wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4)
-            shot = screenshot(x.name)
-            escape(x.name, windows(x.name)[0])
-            _, err = finish(proc, kill)
-        finally:
-            kill() if proc.poll() is None else None
-    assert proc.returncode == 0, err[-2000:]
+        shot, code, err = shown(4, args, x, 4, out)
+    assert code == 0, err[-2000:]
     mosaic = read_png(out / "mosaic" / "frame_00000.png")
     assert shot.shape == mosaic.shape == (48, 240, 3)
     assert (shot == mosaic).all(), f"{(shot != mosaic).any(axis=2).sum()} screen pixels differ from the wall"
@@ -89,20 +82,13 @@ def test_a_stereo_wall_in_windows_shows_the_packed_tiles(tmp_path, still_path, m
     """Side by side: each tile's window its packed tile. Passive: a window per eye, the right eyes'
     beside the left eyes' on one screen, as the mosaic shows them."""
     outputs = 2 if mode == "passive" else 1
+    out = tmp_path / "win"
+    args = ["walkthrough", *SMALL, "--path", str(still_path), "--grid", "2x2", "--tile", "60x48",
+            "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out),
+            "--stereo", mode, *STEREO]
     with Xvfb((120 * outputs, 96)) as x:
-        out = tmp_path / "win"
-        args = ["walkthrough", *SMALL, "--path", str(still_path), "--grid", "2x2", "--tile", "60x48",
-                "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out),
-                "--stereo", mode, *STEREO]
-        proc, kill = start_mpi(4, args, env={"DISPLAY": x.name})
-        try:
-            wait_for(lambda: rows_written(out) and len(windows(x.name)) == 4 * outputs)
-            shot = screenshot(x.name)
-            escape(x.name, windows(x.name)[0])
-            _, err = finish(proc, kill)
-        finally:
-            kill() if proc.poll() is None else None
-    assert proc.returncode == 0, err[-2000:]
+        shot, code, err = shown(4, args, x, 4 * outputs, out)
+    assert code == 0, err[-2000:]
     mosaic = read_png(out / "mosaic" / "frame_00000.png")
     assert shot.shape == mosaic.shape == (96, 120 * outputs, 3)
     assert (shot == mosaic).all(), f"{(shot != mosaic).any(axis=2).sum()} screen pixels differ from the packed wall"

@@ -106,8 +106,9 @@ class OutputPass:
         packed[..., 2] = 1.0 if alpha is None or not grey else alpha
         packed[..., 3] = 0.0 if beta is None or not grey else beta
         self.maps = [ctx.texture(size, 4, packed, dtype="f4")]
-        self.maps += [ctx.texture(size, 3, _rgb(v if not grey else None, size, d), dtype="f4")
-                      for v, d in ((alpha, 1.0), (beta, 0.0))]  # colour maps (a stand-in where grey)
+        for v, d in ((alpha, 1.0), (beta, 0.0)):  # colour maps (where grey, a pixel's stand-in: never read)
+            self.maps.append(ctx.texture(size, 3, _rgb(v, size, d), dtype="f4") if not grey else
+                             ctx.texture((1, 1), 3, np.full(3, d, dtype=np.float32), dtype="f4"))
         for m in self.maps:
             m.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.luts = self._luts(ctx, lut)

@@ -17,6 +17,7 @@ region), a PFM that is no warp; an alpha or beta map of another size than its ou
 
 from __future__ import annotations
 
+import functools
 import io
 import xml.etree.ElementTree as ET
 import zipfile
@@ -61,8 +62,24 @@ def _number(elem, name: str, path, kind=float):
 
 
 def read(path: Path) -> tuple[tuple[int, int], list[Output]]:
-    """((w, h) of the buffer, its outputs) from an ``.mpcdi`` file."""
+    """((w, h) of the buffer, its outputs) from an ``.mpcdi`` file; read once per version of the
+    file in a process (the wall file, the rank's output, its window and the records all ask: the
+    maps of three 1080p outputs take most of a second to read). The outputs are shared: read only."""
     path = Path(path)
+    try:
+        st = path.stat()
+    except OSError:
+        return _read(path)
+    return _read_cached(path, str(path.resolve()), st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=4)
+def _read_cached(path: Path, _where: str, _mtime: int, _size: int) -> tuple[tuple[int, int], list[Output]]:
+    return _read(path)
+
+
+def _read(path: Path) -> tuple[tuple[int, int], list[Output]]:
+    """``read`` itself."""
     try:
         with zipfile.ZipFile(path) as z:
             files = {n: z.read(n) for n in z.namelist()}
