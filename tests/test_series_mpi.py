@@ -2,8 +2,8 @@
 wait``), every step's composite equal to one rank's render of that step's file alone (the colour
 range of the whole series given), for screen, db and hybrid; a live wall (``hold``) never waits and
 shows one step on every rank at every frame; a first step that cannot be read ends the job with one
-line (exit 2), a later one is said once and the run plays on past it. Each job runs under a hard
-timeout."""
+line (exit 2), a later one is said once and the run plays on past it; a recorded run replays frame
+for frame. Each job runs under a hard timeout."""
 
 import csv
 import json
@@ -181,4 +181,25 @@ def test_a_series_paraview_wrote_plays_as_one_rank_renders_it(tmp_path, series):
     assert steps_shown(tmp_path / "wall") == WANTED
     for f in range(0, FRAMES, 5):
         got, want = (read_png(tmp_path / d / "mosaic" / f"frame_{f:05d}.png") for d in ("wall", "one"))
+        assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"
+
+
+def test_a_recorded_series_run_replays_frame_for_frame(tmp_path, series):
+    """``--record`` keeps each frame's scene time; played back (``--path`` the recording, the
+    series waiting for each step as it did), every frame shows the same step and the same pixels:
+    the recorded times rule (recorded at twice the speed, replayed without saying so)."""
+    from multigpu.scene.paths import load_path
+
+    where, path, _ = series
+    flags = ["--color-by", "height", "--steps-per-second", RATE, "--late-step", "wait"]
+    first = walk(tmp_path / "first", where / "run.pvd", (2, 2), (48, 40),
+                 [*flags, "--anim-speed", "2", "--record", str(tmp_path / "rec.json")], path, frames=25)
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert len(load_path(tmp_path / "rec.json")) == 25
+    again = walk(tmp_path / "again", where / "run.pvd", (2, 2), (48, 40), flags, tmp_path / "rec.json", frames=25)
+    assert again.returncode == 0, again.stderr[-3000:]
+    twice = [(f // 5) % 4 for f in range(25)]  # a step every 5 frames at twice the speed
+    assert steps_shown(tmp_path / "again") == steps_shown(tmp_path / "first") == twice
+    for f in range(25):
+        got, want = (read_png(tmp_path / d / "mosaic" / f"frame_{f:05d}.png") for d in ("again", "first"))
         assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"
