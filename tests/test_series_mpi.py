@@ -203,3 +203,32 @@ def test_a_recorded_series_run_replays_frame_for_frame(tmp_path, series):
     for f in range(25):
         got, want = (read_png(tmp_path / d / "mosaic" / f"frame_{f:05d}.png") for d in ("again", "first"))
         assert (got == want).all(), f"frame {f}: {(got != want).any(axis=2).sum()} pixels differ"
+
+
+def test_a_recorded_live_run_replays_the_steps_it_showed(tmp_path, series):
+    """A wall that never waits (``hold``) shows a step once every rank holds it, maybe frames after
+    its time; ``--record`` keeps the step each frame showed, and the replay shows those steps at
+    those frames (waiting for them where it must), not the steps of the frames' times: here a
+    recording whose step 1 came three frames late (its cameras are still: the late frames show
+    step 0's picture)."""
+    from multigpu.scene.paths import load_path
+
+    where, path, refs = series
+    flags = ["--color-by", "height", "--steps-per-second", RATE, "--latency", "1"]
+    first = walk(tmp_path / "first", where / "run.pvd", (2, 2), (48, 40),
+                 [*flags, "--record", str(tmp_path / "rec.json")], path, frames=30)
+    assert first.returncode == 0, first.stderr[-3000:]
+    shown = steps_shown(tmp_path / "first")
+    assert load_path(tmp_path / "rec.json").steps.tolist() == shown and len(set(shown)) >= 2
+    doc = json.loads((tmp_path / "rec.json").read_text())
+    late = [c["step"] for c in doc["cameras"]]
+    late[10:13] = [0, 0, 0]  # step 1 three frames late
+    for c, k in zip(doc["cameras"], late):
+        c["step"] = k
+    (tmp_path / "late.json").write_text(json.dumps(doc))
+    again = walk(tmp_path / "again", where / "run.pvd", (2, 2), (48, 40), flags, tmp_path / "late.json", frames=30)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert steps_shown(tmp_path / "again") == late
+    for f, k in enumerate(late):
+        got = read_png(tmp_path / "again" / "mosaic" / f"frame_{f:05d}.png")
+        assert (got == refs[k]).all(), f"frame {f} (step {k}): {(got != refs[k]).any(axis=2).sum()} pixels differ"

@@ -28,7 +28,7 @@ from multigpu.rank.frame_setup import FrameSetup, planned_frames
 from multigpu.rank.framelog import FrameLog
 from multigpu.rank.moving import Moving
 from multigpu.rank.rows import Rows
-from multigpu.rank.series import series_stepping, swap_in
+from multigpu.rank.series import replayed_step, series_stepping, swap_in
 from multigpu.rank.showing import Showing
 from multigpu.rank.timer import Timer
 from multigpu.records.record import run_title
@@ -119,7 +119,7 @@ class Frames:
             steered = control is not None and control.scene_time is not None
             when = control.scene_time if steered else self.stepping.time_of(f, self.path)
             with t.phase("animate"):  # the scene's own work: a step swapped in
-                swap = self.stepping.frame(when)
+                swap = self.stepping.frame(when, replayed_step(self.path, f))
                 if swap is not None:
                     self.scene = swap_in(self, *swap)
             step = (self.stepping.shown, self.stepping.want != self.stepping.shown)
@@ -145,7 +145,8 @@ class Frames:
         recorded = None
         if (self.cfg.record or self.cfg.panel) and self.rank == 0:  # the frame's camera, in path-file coordinates
             live = self.live.recorded() if self.live is not None and self.interactive else None
-            recorded = (live if live is not None else unshifted(camera, self.cfg.offset), when)
+            camera = live if live is not None else unshifted(camera, self.cfg.offset)
+            recorded = (camera, when, step[0] if step else None)  # and a series' step shown (its replay's)
         return InFlight(f, t, control, work, plan, pending, self.draw.drawn, work.objects(self.rank),
                         self.balance_ids[self.planner.using], recorded, quality, composed, picks, head_at, step)
 

@@ -179,9 +179,9 @@ class PanelLink:
         self.state.add_row(plot_rows(rows[None], col)[0])
         self.step = (int(rows[0, col["step"]]), bool(rows[0, col["step_late"]]))  # a series' step, if one plays
         if self.recording is not None and recorded is not None:
-            cam, when = recorded
+            cam, when, step = recorded
             self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far,
-                                 float("nan") if when is None else when])
+                                 float("nan") if when is None else when, float("nan") if step is None else step])
             if len(self.cameras) >= 100:
                 self._flush()
 

@@ -208,16 +208,21 @@ class Stepping:
             return float(times[f])
         return scene_time(f, self.speed)
 
-    def frame(self, when: float) -> tuple | None:
+    def frame(self, when: float, replayed: int | None = None) -> tuple | None:
         """The step scene time ``when`` wants: the (scene, buffers file) to swap in now where every
-        rank holds one on the way to it (None: the wall keeps its step); the next step asked for."""
+        rank holds one on the way to it (None: the wall keeps its step); the next step asked for.
+        ``replayed``: the step a recorded run showed at this frame (its replay waits for it)."""
         if self.live:  # the newest step rank 0 named (``landed``): a stream's steps as they come
             want, self.n = self.want, max(self.n, self.want + 1)
+        elif replayed is not None and 0 <= replayed < self.n:
+            self.want = want = int(replayed)
+            self.past_end = when * self.rate >= self.n
         else:
             self.want = want = step_at(when, self.rate, self.n, self.end)
             self.past_end = when * self.rate >= self.n
         swap = None
-        if self.wait and want != self.shown and want not in self.reader.bad:  # every rank waits for it here
+        waits = self.wait or replayed is not None  # a replay shows what was shown, waiting if it must
+        if waits and want != self.shown and want not in self.reader.bad:  # every rank waits for it here
             swap = self.reader.wait_for(want, self.timeout)
             if swap is not None:
                 self.shown, self.swaps = want, self.swaps + 1
@@ -306,6 +311,12 @@ def swap_in(frames, scene, shared, ready=None):
     frames.draw.culler = PartCuller(light) if frames.renderer.draws.parts else None
     frames.fidelity.chooser = LevelChooser(light, frames.canvas.size[1])
     return light
+
+
+def replayed_step(path, f: int) -> int | None:
+    """The step a recorded run showed at frame ``f`` (its path file's ``step``), else None."""
+    steps = getattr(path, "steps", None)
+    return int(steps[f]) if steps is not None and 0 <= f < len(steps) else None
 
 
 def series_stepping(scene, spec, rank: int, timeout: float = 60.0, spool=None) -> Stepping | None:

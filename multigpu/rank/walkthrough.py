@@ -56,9 +56,8 @@ def make_path(cfg: WalkConfig, scene) -> CameraPath:
         if cfg.frames is not None:
             if cfg.frames > len(path):
                 raise InputError.of("frames", f"{cfg.frames}: the path file {cfg.path} has only {len(path)} frames")
-            path = CameraPath(*(a[:cfg.frames] for a in (path.position, path.target, path.up, path.fov,
-                                                           path.near, path.far)),
-                              None if path.times is None else path.times[:cfg.frames])  # a steered scene's times
+            path = CameraPath(*(None if a is None else a[:cfg.frames] for a in (  # a scene's times, a series' steps
+                path.position, path.target, path.up, path.fov, path.near, path.far, path.times, path.steps)))
         return path
     return generate(cfg.path_kind, modelled(cfg, scene), None if cfg.path == INTERACTIVE else cfg.frames)
 

@@ -125,11 +125,11 @@ class RunRecord:
         """Frames in the path file on disk."""
         return self.path.frames if self.path is not None else 0
 
-    def camera(self, cam, time: float | None = None) -> None:
-        """The next frame's camera (path-file coordinates) and a moving scene's time, kept for
-        ``--record``."""
+    def camera(self, cam, time: float | None = None, step: int | None = None) -> None:
+        """The next frame's camera (path-file coordinates), a moving scene's time and a series'
+        step shown, kept for ``--record``."""
         self.cameras.append([*cam.position, *cam.target, *cam.up, cam.fov, cam.near, cam.far,
-                             float("nan") if time is None else time])
+                             float("nan") if time is None else time, float("nan") if step is None else step])
 
     def _save_path(self) -> None:
         """Append the cameras of the frames written since the last time to the ``--record`` file."""

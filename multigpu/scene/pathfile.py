@@ -29,12 +29,14 @@ class PathAppender:
 
     def append(self, cams: np.ndarray) -> None:
         """``cams``: (F, 12) rows of position, target, up, fov, near, far, or (F, 13) with a
-        moving scene's time last (NaN: none; written as each camera's ``time``)."""
+        moving scene's time next (NaN: none; written as each camera's ``time``), or (F, 14) with
+        a series' step shown last (NaN: none; each camera's ``step``)."""
         if len(cams) == 0:
             return
         text = ",\n".join(json.dumps({"position": c[0:3].tolist(), "target": c[3:6].tolist(), "up": c[6:9].tolist(),
                                       "fov": float(c[9]), "near": float(c[10]), "far": float(c[11]),
-                                      **({"time": float(c[12])} if len(c) > 12 and np.isfinite(c[12]) else {})})
+                                      **({"time": float(c[12])} if len(c) > 12 and np.isfinite(c[12]) else {}),
+                                      **({"step": int(c[13])} if len(c) > 13 and np.isfinite(c[13]) else {})})
                            for c in cams)
         if self.fd is not None:
             return self._write((",\n" + text).encode(), len(cams))

@@ -34,7 +34,9 @@ MAX_COORD = 1e15  # world coordinates beyond this lose all float64 precision bel
 class CameraPath:
     """Per-frame cameras as arrays: position, target, up (F, 3); fov, near, far (F,); ``times``
     (F,): a moving scene's time at each frame where the file gives one (a steered run's
-    recording), else None (the frame's own: ``core.motion.scene_time``)."""
+    recording), else None (the frame's own: ``core.motion.scene_time``); ``steps`` (F,): the
+    step of a series each frame showed where the file gives it (a recorded run: its replay shows
+    the same steps, late ones included), else None."""
 
     position: np.ndarray
     target: np.ndarray
@@ -43,6 +45,7 @@ class CameraPath:
     near: np.ndarray
     far: np.ndarray
     times: np.ndarray | None = None
+    steps: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.position.shape[0])
@@ -54,7 +57,8 @@ class CameraPath:
     def translated(self, offset) -> "CameraPath":
         """The same path moved by ``offset`` world units."""
         off = np.asarray(offset, dtype=np.float64).reshape(3)
-        return CameraPath(self.position + off, self.target + off, self.up, self.fov, self.near, self.far, self.times)
+        return CameraPath(self.position + off, self.target + off, self.up, self.fov, self.near, self.far, self.times,
+                          self.steps)
 
     def to_json(self) -> dict:
         cams = [{"position": self.position[i].tolist(), "target": self.target[i].tolist(),
@@ -181,8 +185,12 @@ def load_path(path: str | Path) -> CameraPath:
         times = [c.get("time") for c in doc["cameras"]]
         if any(t is not None for t in times):  # a scene's time per frame: every camera's, finite
             times = [_number(t, f"{path}: cameras[{i}].time", -1e15, 1e15) for i, t in enumerate(times)]
+        steps = [c.get("step") for c in doc["cameras"]]
+        if any(k is not None for k in steps):  # a series' step per frame: every camera's, a whole number
+            steps = [_number(k, f"{path}: cameras[{i}].step", -1, 1e9) // 1 for i, k in enumerate(steps)]
         return CameraPath(arr("position"), arr("target"), arr("up"), arr("fov"), arr("near"), arr("far"),
-                          None if times[0] is None else np.asarray(times, dtype=np.float64))
+                          None if times[0] is None else np.asarray(times, dtype=np.float64),
+                          None if steps[0] is None else np.asarray(steps, dtype=np.int64))
     if "keyframes" not in doc:
         raise InputError(f"{path}: needs a field 'keyframes' or 'cameras'")
     keys = doc["keyframes"]
