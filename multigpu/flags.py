@@ -106,8 +106,8 @@ def walk_config(a):
     wall = load_wall(a.wall) if a.wall else Wall("")
     given = from_flags(WalkConfig, a)
     if wall.mpcdi is not None:  # a projector wall: its tiles are the regions of its MPCDI file
-        for name in ("grid", "tile", "mullion"):
-            if given.get(name) is not None:
+        for name in ("grid", "tile", "mullion"):  # (the same as the file's: launch/walkthrough passes the grid)
+            if given.get(name) is not None and tuple(given[name]) != tuple(getattr(wall, name)):
                 raise InputError.of(name, f"a projector wall's tiles are its mpcdi file's regions ({wall.file}): "
                                           "leave it out")
     grid = given.pop("grid", None) or wall.grid or WalkConfig.grid

@@ -233,6 +233,7 @@ def test_a_projector_walls_tiles_are_its_regions_and_others_are_refused(tmp_path
             load_wall(str(wall))
     wall.write_text(json.dumps({"mpcdi": "other.mpcdi", "grid": "1x2"}))
     assert load_wall(str(wall)).tile == (704, 480)
+    assert walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--grid", "1x2"])).tile == (704, 480)
     with pytest.raises(InputError, match=re.escape("--tile a projector wall's tiles are its mpcdi file's regions")):
         walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--tile", "320x240"]))
     with pytest.raises(InputError, match=re.escape("--stereo side-by-side: a projector wall")):
