@@ -14,7 +14,7 @@ from PIL import Image
 from multigpu.core.warpblend import decode, output, upsample
 from multigpu.errors import InputError
 from multigpu.warp import mpcdi, pfm
-from multigpu.warp.make import content_coords, outputs
+from multigpu.warp.make import outputs
 from multigpu.warp.rig import flat_rig
 
 
@@ -35,6 +35,12 @@ def test_a_rig_written_and_read_back_projects_as_the_rig(tmp_path, kind):
     s, t = np.meshgrid(np.linspace(0.01, 0.99, 300), np.linspace(0.02, 0.98, 120))
     light = rig.light(pictures, s, t)[..., 0]
     assert np.abs(light / (rig.most() * rig.black + 1 - rig.black) - 1).max() <= 0.02
+
+
+def content_coords(o, warp: np.ndarray) -> np.ndarray:
+    """A region's warp coordinates (..., 2) as coordinates across the whole buffer."""
+    x, y, w, h = o.area
+    return np.stack([x + warp[..., 0] * w, y + warp[..., 1] * h], axis=-1)
 
 
 def big_endian_pfm(grid: np.ndarray) -> bytes:

@@ -145,8 +145,8 @@ class Frames:
         recorded = None
         if (self.cfg.record or self.cfg.panel) and self.rank == 0:  # the frame's camera, in path-file coordinates
             live = self.live.recorded() if self.live is not None and self.interactive else None
-            camera = live if live is not None else unshifted(camera, self.cfg.offset)
-            recorded = (camera, when, step[0] if step else None)  # and a series' step shown (its replay's)
+            kept = live if live is not None else unshifted(camera, self.cfg.offset)
+            recorded = (kept, when, step[0] if step else None)  # and a series' step shown (its replay's)
         return InFlight(f, t, control, work, plan, pending, self.draw.drawn, work.objects(self.rank),
                         self.balance_ids[self.planner.using], recorded, quality, composed, picks, head_at, step)
 

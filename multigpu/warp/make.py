@@ -71,12 +71,6 @@ def regions(boxes: list, buffer: tuple[int, int]) -> list[tuple[float, float, fl
     return [(float(k * step / W), 0.0, float(tw / W), 1.0) for k in i]
 
 
-def content_coords(o: Output, warp: np.ndarray) -> np.ndarray:
-    """A region's warp coordinates (..., 2) as coordinates across the whole buffer."""
-    x, y, w, h = o.area
-    return np.stack([x + warp[..., 0] * w, y + warp[..., 1] * h], axis=-1)
-
-
 def buffer_size(rig: Rig) -> tuple[int, int]:
     """(w, h) of a buffer (the wall's canvas) that holds the screen's content at about the
     projectors' own pixel density."""
