@@ -99,7 +99,7 @@ class Reader:
                     return
                 k = self.asked
             try:
-                got = load_step(self.spec, k, None if self.path_of is None else self.path_of(k))
+                got = load_step(self.spec, k, *(() if self.path_of is None else (self.path_of(k), self.path_of(0))))
             except Exception as exc:  # noqa: BLE001 (a thread's failure must never reach the frame loop)
                 why = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
                 with self._cv:
@@ -119,23 +119,25 @@ class Reader:
                 self._cv.notify_all()
 
 
-def load_step(spec, k: int, path=None) -> tuple:
+def load_step(spec, k: int, path=None, first=None) -> tuple:
     """Step ``k`` of ``spec``'s series: its scene (the cache's), buffers file and what the renderer
     takes of them (``gpu.render.ready_step``), built by one rank of the host at a time (a file lock
     beside the cache: the others then map what it wrote).
-    ``path``: the step's file, found already (then loaded as that one file, its colours over
-    ``spec``'s fixed range: the same cached scene, without looking for the series again)."""
+    ``path``: the step's file, found already, and ``first`` the series' first step's (then loaded
+    as ``scene.models.load_step_file`` does, its colours over ``spec``'s fixed range: the same cached
+    scene, without looking for the series again)."""
     from multigpu.gpu.buffers import ensure_buffers
-    from multigpu.scene.models import cache_dir, load_scene
+    from multigpu.scene.models import cache_dir, load_scene, load_step_file
 
-    step = dataclasses.replace(spec, step=k) if path is None else dataclasses.replace(spec, model=str(path), step=0)
+    load = (lambda: load_scene(dataclasses.replace(spec, step=k))) if path is None else \
+        (lambda: load_step_file(spec, path, path if first is None else first))
     where = cache_dir()
     where.mkdir(parents=True, exist_ok=True)
     name = hashlib.sha1(f"{spec.model}\0{k}".encode()).hexdigest()[:16]
     with open(where / f".series-{name}.lock", "a+") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released by the kernel if this process dies
         try:
-            scene, info = load_scene(step)
+            scene, info = load()
             shared = ensure_buffers(info.get("cache"), scene)
         except InputError as exc:
             if path is None:
@@ -194,7 +196,7 @@ class Stepping:
         self.swaps = 0
         self.said = None  # the stream's state last said (``say_note``)
         if spool is not None:  # rank 0 of a stream's run: each kept step's cache built as it comes
-            spool.prepare = lambda k, path: load_step(self.reader.spec, k, path)
+            spool.prepare = lambda k, path: load_step(self.reader.spec, k, path, self.reader.path_of(0))
 
     def _say(self, k: int, why: str) -> None:
         """A step that cannot be read, once (rank 0; every rank finds the same)."""

@@ -59,11 +59,12 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64,
     if path.suffix.lower() in (".gltf", ".glb"):
         check_animations(path)
     warnings: list[str] = []
-    sim = None
+    sim = sources = None
     if path.suffix.lower() in simulation.FORMATS:
         coloring = coloring or simulation.Coloring()
         loaded, sim = simulation.load(path, coloring.color_by, coloring.colormap, coloring.range)
         warnings += sim.pop("warnings")
+        sources = sim.pop("sources")
     else:
         try:
             with np.errstate(all="ignore"):
@@ -109,7 +110,7 @@ def load_model(path: Path, split: str = "auto", merge_below: int = 64,
     faces = _clean_faces(verts, faces, path, warnings)
     split = "components" if split == "auto" else split
     look = Look(rgba, normals, None, {"colors": colors_from, "materials": int(colors_from == "material")},
-                texcoords, layers.pack(warnings), morph, skin)
+                texcoords, layers.pack(warnings), morph, skin, sources)
     scene = _from_labels(verts, faces, face_labels(verts, faces, split, merge_below), path, warnings,
                          {"split": split}, look)
     if sim is not None:
@@ -272,6 +273,7 @@ class Look:
     textures: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # ``textures.Layers.pack``
     morph: np.ndarray | None = None  # (V, T, 3) a glTF's morph target deltas (``gltf_load.mesh_deltas``)
     skin: tuple | None = None  # (V, 4) joints and weights of a glTF's skins (``gltf_load.mesh_skins``)
+    sources: np.ndarray | None = None  # (V, 2) a simulation's point and cell of each vertex (``simulation.load``)
 
 
 def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None = None) -> Scene:
@@ -292,6 +294,7 @@ def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None =
         uvl = uvl[source] if uvl is not None else None
         look.morph = look.morph[source] if look.morph is not None else None
         look.skin = None if look.skin is None else tuple(a[source] for a in look.skin)
+        look.sources = None if look.sources is None else look.sources[source]
     else:
         looked["normals"] = "from the file"
     order = np.argsort(labels, kind="stable")
@@ -334,6 +337,7 @@ def _from_labels(verts, faces, labels, path, warnings, meta, look: Look | None =
                  bmin=bmin, bmax=bmax, centers=centers, radii=radii, colors=colors, origin=origin,
                  vertex_colors=None if vertex_colors is None else np.ascontiguousarray(vertex_colors[used]),
                  texcoords=None if uvl is None else np.ascontiguousarray(uvl[used], dtype=np.float32),
+                 sources=None if look.sources is None else np.ascontiguousarray(look.sources[used], dtype=np.int64),
                  **({} if uvl is None else dict(zip(("texels", "texture_levels", "texture_modes"), look.textures))),
                  **({} if look.morph is None else pack_morphs(look.morph, used, sorted_blocks, n)),
                  **({} if look.skin is None else skin_pack(*look.skin, verts, used, sorted_blocks)),

@@ -19,10 +19,10 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-#: 10: a glTF model's morph targets and skins; 9: each object's body (the modelled object it was cut from)
+#: 11: a simulation's point and cell of each vertex; 10: a glTF model's morph targets and skins; 9: each object's body (the modelled object it was cut from)
 #: 7: the model's own colours and normals (vertex colours, materials, crease-angle normals); 6: levels of
 #: detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
-FORMAT_VERSION = 10
+FORMAT_VERSION = 11
 
 
 @dataclass
@@ -65,6 +65,9 @@ class Scene:
         the palette and their weights (0: not skinned); skin_pairs (P, 2) int64 (body, joint) and
         skin_boxes (P, 6) float64 world min and max of the body's vertices leaning on the joint
         (None: no skins; ``scene/gltf_load.py``)
+    sources : (V, 2) int64  a simulation's point and cell (-1: none) of each vertex in its file
+        (``scene/simulation.py``): a later step with the same cells fills this layout from its own
+        points and field (``scene/same_cells.py``; None: not a simulation)
     movers : (N,) bool  the objects a run's motion moves where some stand still (``scene/moves.py``:
         set by the run, never cached): the order they are drawn in (``core.drawlist.drawn_order``)
     """
@@ -103,6 +106,7 @@ class Scene:
     skin_weights: np.ndarray | None = None
     skin_pairs: np.ndarray | None = None
     skin_boxes: np.ndarray | None = None
+    sources: np.ndarray | None = None
     movers: np.ndarray | None = None
 
     @property
@@ -134,7 +138,7 @@ class Scene:
 
     #: a model's look beyond its objects' colours (None where it has none)
     PER_VERTEX = ("vertex_colors", "texcoords", "texels", "texture_levels", "texture_modes", "morph_rows",
-                  "morph_deltas", "skin_joints", "skin_weights", "skin_pairs", "skin_boxes")
+                  "morph_deltas", "skin_joints", "skin_weights", "skin_pairs", "skin_boxes", "sources")
 
     #: the parts' arrays (``part_start`` indexes the others)
     PARTS = ("part_start", "part_count", "part_bmin", "part_bmax")
@@ -190,7 +194,8 @@ class Scene:
         frame loop once the GL buffers hold them: bounds, draw ranges, colours and meta stay.
         Dropping the last reference to a mapped buffer unmaps it, so its pages leave the rank."""
         empty = {"vertices": np.empty((0, 6), dtype=np.float32), "indices": np.empty(0, dtype=np.uint32)}
-        for k in ("vertex_colors", "texcoords", "texels", "morph_rows", "morph_deltas", "skin_joints", "skin_weights"):
+        for k in ("vertex_colors", "texcoords", "texels", "morph_rows", "morph_deltas", "skin_joints", "skin_weights",
+                  "sources"):
             a = getattr(self, k)
             if a is not None:
                 empty[k] = np.empty((0, *a.shape[1:]), dtype=a.dtype)

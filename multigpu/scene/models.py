@@ -179,14 +179,60 @@ def load_scene(spec: SceneSpec, use_cache: bool = True) -> tuple[Scene, dict]:
         lo, hi, left_out = series_range(series, spec.color_by, cache_dir() if use_cache else None)
         fixed = (lo, hi)
     try:
-        scene, info = _load_scene(dataclasses.replace(spec, model=str(series.paths[k]), color_range=fixed, step=0),
-                                  use_cache)
+        scene, info = load_step_file(dataclasses.replace(spec, color_range=fixed), series.paths[k], series.paths[0],
+                                     use_cache)
     except InputError as exc:
         raise InputError.of(exc.field or "model", f"step {k} of the series: {exc.message}") from None
     scene.meta["series"] = {**describe_series(series), "step": k, "time": series.times[k]}
     scene.meta["warnings"] = [*scene.meta.get("warnings", []), *series.warnings, *left_out]
     scene.name = series.name
     return scene, info
+
+
+def load_step_file(spec: SceneSpec, path, first, use_cache: bool = True) -> tuple[Scene, dict]:
+    """The step of a series in file ``path`` whose first step is file ``first``, coloured over
+    ``spec``'s range (the series'): where its cells are the first step's, that step's layout with
+    this step's points and colours (``scene/same_cells.py``), else built alone; cached either way."""
+    from pathlib import Path
+
+    alone = dataclasses.replace(spec, model=str(path), step=0)
+    src = Path(path)
+    if Path(first) == src or src.suffix.lower() not in SIMULATION:
+        return _load_scene(alone, use_cache)
+    t0 = time.perf_counter()
+    base, base_info = _load_scene(dataclasses.replace(spec, model=str(first), step=0, up=None), use_cache)
+    st = check_file(path, "model", "model file").stat()
+    key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, "cells of", base_info.get("cache") or str(first))
+    cache = cache_dir() / f"{src.stem}-{key}.npz"
+    marker = cache.with_suffix(".alone")  # its cells differ: built alone (found without reading it again)
+    if use_cache and marker.is_file():
+        return _load_scene(alone, use_cache)
+    scene = None
+    if use_cache and cache.is_file():
+        try:
+            scene, cached = Scene.load(cache), True
+        except InputError:
+            cache.unlink(missing_ok=True)
+    if scene is None:
+        from multigpu.scene.same_cells import derive
+        from multigpu.scene.simulation import cells_key, read
+
+        mesh, cached = read(src), False
+        same = base.meta.get("simulation", {}).get("cells") == cells_key(mesh)
+        scene = derive(base, mesh, Coloring(spec.color_by, spec.colormap, spec.color_range), src) if same else None
+        if scene is None:
+            if use_cache:
+                marker.touch()
+            return _load_scene(alone, use_cache)
+        if use_cache:
+            try:
+                scene.save(cache)
+                scene = Scene.load(cache)
+            except OSError:
+                pass
+    if spec.up is not None:
+        scene.meta["up"], scene.meta["up_source"] = axis_vector(spec.up), "--up"
+    return scene, {"seconds": time.perf_counter() - t0, "cached": cached, "cache": str(cache) if use_cache else None}
 
 
 def _load_scene(spec: SceneSpec, use_cache: bool) -> tuple[Scene, dict]:

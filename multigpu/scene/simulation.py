@@ -278,13 +278,18 @@ def load(path: Path, color_by: str | None = None, colormap: str = "viridis",
     warnings = [*(mesh.info or {}).get("notes", []), *warnings] if isinstance(mesh.info, dict) else warnings
     points = _pad3(np.asarray(mesh.points, dtype=np.float64))
     meta = {"fields": describe(mesh), "warnings": warnings}
+    meta["cells"] = cells_key(mesh)
     rgba = None
     table = lookup(colormap) if color_by is not None else None
+    # each vertex's point and cell in the file (-1: a point's vertex, shared by its cells): a later
+    # step with these cells fills the same layout from its own points (``scene/same_cells.py``)
+    sources = np.stack([np.arange(len(points)), np.full(len(points), -1)], axis=1)
     if color_by is not None:
         values, where, label = field(mesh, color_by, path)
         lo, hi = value_range(values, fixed)
         meta["color_by"] = {"field": label, "where": where, "range": [lo, hi], "colormap": colormap}
         if where == "cell":  # flat per face: each triangle its own three vertices
+            sources = np.stack([faces.ravel(), np.repeat(owner, 3)], axis=1)
             points, faces = points[faces].reshape(-1, 3), np.arange(3 * len(faces), dtype=np.int64).reshape(-1, 3)
             rgba = np.repeat(colours(values[owner], table, lo, hi), 3, axis=0)
         else:
@@ -293,10 +298,24 @@ def load(path: Path, color_by: str | None = None, colormap: str = "viridis",
     if len(used) < len(points):  # only the points the surface uses
         remap = np.full(len(points), -1, dtype=np.int64)
         remap[used] = np.arange(len(used))
-        points, faces = points[used], remap[faces]
+        points, faces, sources = points[used], remap[faces], sources[used]
         rgba = None if rgba is None else rgba[used]
     out = trimesh.Trimesh(points, faces, vertex_colors=rgba, process=False)
+    meta["sources"] = sources  # popped by ``files.load_model`` (an array, not for ``scene info``)
     return out, meta
+
+
+def cells_key(mesh) -> str:
+    """A digest of ``mesh``'s cells and point count: two steps with the same key have the same
+    surface, vertex for vertex (``scene/same_cells.py``)."""
+    import hashlib
+
+    h = hashlib.sha1(str(len(mesh.points)).encode())
+    for block in mesh.cells:
+        data = np.ascontiguousarray(block.data, dtype=np.int64)
+        h.update(f"{block.type}:{data.shape}".encode())
+        h.update(data.tobytes())
+    return h.hexdigest()
 
 
 def describe(mesh) -> list[dict]:
