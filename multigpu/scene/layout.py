@@ -19,7 +19,8 @@ import numpy as np
 
 from multigpu.errors import InputError
 
-#: 11: a simulation's point and cell of each vertex; 10: a glTF model's morph targets and skins; 9: each object's body (the modelled object it was cut from)
+#: 11: a simulation's point and cell of each vertex; 10: a glTF model's morph targets and skins;
+#: 9: each object's body (the modelled object it was cut from)
 #: 7: the model's own colours and normals (vertex colours, materials, crease-angle normals); 6: levels of
 #: detail; 5: parts (objects cut inside themselves for culling); 4: objects/up decisions, routes
 FORMAT_VERSION = 11
