@@ -1,6 +1,6 @@
 """A simulation's time series played on a 2x2 wall: every step at its own frames (``--late-step
-wait``), every step's composite equal to one rank's render of that step's file alone (the colour
-range of the whole series given), for screen, db and hybrid; a live wall (``hold``) never waits and
+wait``), every step's composite equal to one rank's render of that step (a recording's step at its
+one frame), for screen, db and hybrid; a live wall (``hold``) never waits and
 shows one step on every rank at every frame; a first step that cannot be read ends the job with one
 line (exit 2), a later one is said once and the run plays on past it; a recorded run replays frame
 for frame. Each job runs under a hard timeout."""
@@ -57,19 +57,18 @@ def steps_shown(out) -> list[int]:
 
 @pytest.fixture(scope="module")
 def series(tmp_path_factory):
-    """Four steps (the third with a third fewer cells), a still camera, and one rank's render of each
-    step's file alone (the series' range given): the references."""
+    """Four steps (the third with a third fewer cells: built alone; the others in the first step's
+    layout), a still camera, and one rank's render of each step: the references."""
     where = write_series(tmp_path_factory.mktemp("series"), 4, drop=2)
     cams = [{"position": [0.5, -1.1, 1.2], "target": [0.5, 0.45, 0.0], "up": [0, 0, 1], "fov": 50.0,
              "near": 0.05, "far": 20.0}] * FRAMES
     path = where / "still.json"
     path.write_text(json.dumps({"version": 1, "cameras": cams}))
-    heights = np.concatenate([surface(k).point_data["height"] for k in range(4)])
-    rng = f"{float(heights.min())!r},{float(heights.max())!r}"
     refs = []
-    for k in range(4):
-        res = walk(where / f"ref{k}", where / f"step_{k}.vtu", (1, 1), (96, 80), ["--color-by", "height", "--range",
-                                                                                  rng], path, frames=1)
+    for k in range(4):  # one rank shows step k at its one frame (a recording's step)
+        at = where / f"at{k}.json"
+        at.write_text(json.dumps({"version": 1, "cameras": [{**cams[0], "step": k}]}))
+        res = walk(where / f"ref{k}", where / "run.pvd", (1, 1), (96, 80), ["--color-by", "height"], at, frames=1)
         assert res.returncode == 0, res.stderr[-3000:]
         refs.append(read_png(where / f"ref{k}" / "mosaic" / "frame_00000.png"))
     assert all((refs[k] != refs[k + 1]).any() for k in range(3))  # the steps differ

@@ -1,6 +1,6 @@
 """A running simulation on the wall through ADIOS2: the example's heat plate streamed live (SST) and
 recorded (a BP5 file the wall follows); every rank shows the same step at every frame, each frame
-equals one rank's render of the step it shows (its kept file), the kept steps are the series the
+equals one rank's render of the step it shows (of its kept series), the kept steps are the series the
 run leaves in its outputs, ``--at-end stop`` ends the run with the stream; a stream whose first step
 the wall cannot use ends the job in one line (exit 2), a later one is said once. Every job, and the
 simulation, runs under a hard timeout and is ended by process id (skipped, naming why, only where
@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -54,13 +55,16 @@ def shown(out) -> list[int]:
 
 
 def check_frames(tmp_path, out, steps: list[int], path) -> None:
-    """The first frame showing each step (three at most) equals one rank's render of its kept file."""
+    """The first frame showing each step (three at most) equals one rank's render of that step of the
+    kept series (a recording's step at its one frame)."""
     firsts = {k: steps.index(k) for k in dict.fromkeys(steps)}
+    camera = json.loads(Path(path).read_text())["cameras"][0]
     for k in list(firsts)[-3:]:
-        ref = tmp_path / f"ref{k}"
-        res = run_mpi(1, ["walkthrough", "--model", str(out / "steps" / f"step_{k:06d}.vtu"), "--grid", "1x1",
+        ref, at = tmp_path / f"ref{k}", tmp_path / f"at{k}.json"
+        at.write_text(json.dumps({"version": 1, "cameras": [{**camera, "step": k}]}))
+        res = run_mpi(1, ["walkthrough", "--model", str(out / "steps" / "step_*.vtu"), "--grid", "1x1",
                           "--tile", "96x64", "--frames", "1", "--mosaic-every", "1", "--no-overlay", "--no-progress",
-                          "--path", str(path), "--out", str(ref), "--color-by", "temperature", "--range", "0,1"])
+                          "--path", str(at), "--out", str(ref), "--color-by", "temperature", "--range", "0,1"])
         assert res.returncode == 0, res.stderr[-2000:]
         want = read_png(ref / "mosaic" / "frame_00000.png")
         got = read_png(out / "mosaic" / f"frame_{firsts[k]:05d}.png")

@@ -248,8 +248,9 @@ class Stepping:
         kept = self.spool.count - 1 if self.spool is not None else -1  # rank 0 of a stream's run: its newest
         row = {"step": shown, "step_ready": ready, "step_late": int(late), "step_wanted": kept}
         if self.spool is not None and shown != self.last_shown and shown in self.spool.stamps:  # first shown now
-            written, came = self.spool.stamps[shown]
-            row.update(step_delay_ms=(time.time() - written) * 1e3, step_transfer_ms=(came - written) * 1e3)
+            written, came, kept = self.spool.stamps[shown]
+            row.update(step_delay_ms=(time.time() - written) * 1e3, step_transfer_ms=(came - written) * 1e3,
+                       step_kept_ms=(kept - written) * 1e3)
         self.last_shown = shown
         return row
 

@@ -9,7 +9,8 @@ kept beside the mosaics, readable by ParaView), which the wall plays as any seri
 at the same frame. A step the wall cannot use is said in one line and left out; a variable that
 fits nothing is named once. A step stamped ``written`` (the writer's ``time.time()``) gives the
 delay from its write to the first frame that shows it (``step_delay_ms`` in the timings; the
-``step_transfer_ms`` of it until rank 0 had read it). The reader is a daemon thread: nothing from
+``step_transfer_ms`` of it until rank 0 had read it, ``step_kept_ms`` until it had kept it and
+named it to the wall). The reader is a daemon thread: nothing from
 the stream raises in the frame loop. The ``adios2`` wheel is imported here only.
 """
 
@@ -62,7 +63,7 @@ class Spool:
         # made ready for the wall as it is kept (the frame loop sets it: ``rank/series.py``'s cache build),
         # so every rank maps a step rank 0 names rather than each building it
         self.prepare = None
-        self.stamps: dict[int, tuple[float, float]] = {}  # kept step -> (written, came), where stamped
+        self.stamps: dict[int, tuple[float, float, float]] = {}  # kept step -> (written, came, kept), where stamped
         self._noted: set[str] = set()
         self._closed = False
         self.engine = "BP5" if self.name.lower().rstrip("/").endswith(".bp") else "SST"
@@ -186,7 +187,7 @@ class Spool:
             self._note(n.split(": step ", 1)[0] + ": " + n.split(": ", 2)[-1])
         path = self.where / NAME.format(self.count)
         tmp = path.with_name(f".{path.stem}-{os.getpid()}.vtu")
-        meshio.write(tmp, mesh, binary=True)
+        meshio.write(tmp, mesh, binary=True, compression=None)  # zlib: 21 ms for a 96x96 plate, raw 3
         tmp.replace(path)
         if self.prepare is not None:
             try:
@@ -194,7 +195,7 @@ class Spool:
             except Exception as exc:  # noqa: BLE001 (the wall's own reader says it again, once, if it must)
                 self._note(f"{self.model}: step {self.count + self.refused}: {_first_line(exc)}")
         if written is not None and np.size(written) == 1 and np.isfinite(written).all():
-            self.stamps[self.count] = (float(np.ravel(written)[0]), came)
+            self.stamps[self.count] = (float(np.ravel(written)[0]), came, time.time())
         self.count += 1
         self.arrived = time.monotonic()
 

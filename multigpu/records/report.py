@@ -60,8 +60,8 @@ COLUMNS = ["frame", "rank", "triangles", "x0", "y0", "x1", "y1",
            "latency_ms", "load_balancing_waited_ms", "rendering_waited_ms", "synchronization_waited_ms",
            "frame_exchange_waited_ms", "display_waited_ms", "render_scale", "lod_error_px", "choosing_cpu_ms",
            "wire_bytes", "compress_cpu_ms", "decompress_cpu_ms", "lossy_bits", "posing_cpu_ms", "animating_cpu_ms",
-           "step", "step_ready", "step_late", "step_wanted", "step_delay_ms", "step_transfer_ms", "balance",
-           "restarts"]
+           "step", "step_ready", "step_late", "step_wanted", "step_delay_ms", "step_transfer_ms", "step_kept_ms",
+           "balance", "restarts"]
 #: the load balancing CPU time's phases (learn, pose, project, choose, plan), adding up to it
 BALANCE_CPU = ("learning_cpu_ms", "posing_cpu_ms", "projection_cpu_ms", "choosing_cpu_ms", "planning_cpu_ms")
 COMPONENTS = ["load_balancing_ms", "rendering_ms", "synchronization_ms", "frame_exchange_ms", "display_ms"]

@@ -70,7 +70,8 @@ class PathAppender:
         try:
             cams = json.loads(self.path.read_text())["cameras"][:frames]
             rows = np.array([[*c["position"], *c["target"], *c["up"], c["fov"], c["near"], c["far"],
-                              c.get("time", np.nan)] for c in cams], dtype=np.float64).reshape(-1, 13)
+                              c.get("time", np.nan), c.get("step", np.nan)] for c in cams],
+                            dtype=np.float64).reshape(-1, 14)
         except (OSError, ValueError, KeyError, TypeError):
             return
         self.append(rows)

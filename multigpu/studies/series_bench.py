@@ -208,15 +208,22 @@ def live(frames: int) -> list[dict]:
         finally:
             end(sim)  # its whole session
     sr = run.summary["series"]
-    transfer = run.col("step_transfer_ms")[:, 0]
-    transfer = float(np.median(transfer[transfer > 0])) if (transfer > 0).any() else 0.0
+    transfer, kept = (_median_stamped(run.col(c)[:, 0]) for c in ("step_transfer_ms", "step_kept_ms"))
     period = run.summary["frame_ms_median"]
     after = (sr["delay_ms_median"] - transfer) / period
     print(f"  live (SST, heat.py 96x96, a step every 0.1 s): {sr['delays']} steps shown; write to first frame "
-          f"{sr['delay_ms_median']:.0f} ms median, of which the transfer {transfer:.1f} ms; the rest "
-          f"{after:.1f} frames of {period:.1f} ms")
+          f"{sr['delay_ms_median']:.0f} ms median, of which the transfer {transfer:.1f} ms and the keeping (rank 0 "
+          f"has it in the wall's layout and names it) {kept - transfer:.1f} ms; after the transfer "
+          f"{after:.1f} frames of {period:.1f} ms, after the naming {(sr['delay_ms_median'] - kept) / period:.1f}")
     return [{"part": "live", "arm": "sst", "steps_shown": sr["delays"], "delay_ms": sr["delay_ms_median"],
-             "transfer_ms": transfer, "frame_ms": period, "delay_frames_after_transfer": after}]
+             "transfer_ms": transfer, "kept_ms": kept, "frame_ms": period, "delay_frames_after_transfer": after,
+             "delay_frames_after_naming": (sr["delay_ms_median"] - kept) / period}]
+
+
+def _median_stamped(values: np.ndarray) -> float:
+    """The median of a stamped step's figures (0 where no step was stamped)."""
+    got = values[values > 0]
+    return float(np.median(got)) if got.size else 0.0
 
 
 def _step_mib(data: Path, frames: int, lo: float, hi: float) -> float:
