@@ -115,6 +115,11 @@ class Frames:
             steered = control is not None and control.scene_time is not None
             when = control.scene_time if steered else self.moving.time_of(f, self.path)
             self.moving.pose(t, when)
+        if self.stepping is not None and self.stepping.live:  # a stream: the last frame's rows name its newest step
+            with t.phase("sync"):  # now (every rank at this frame), not a frame later (``rows.later``)
+                early = self.rows.land()
+            for landed in early:
+                self.landed(*landed)
         if self.stepping is not None:  # the series' step the frame's scene time wants, where every rank holds it
             steered = control is not None and control.scene_time is not None
             when = control.scene_time if steered else self.stepping.time_of(f, self.path)

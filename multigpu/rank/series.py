@@ -73,6 +73,13 @@ class Reader:
                 return self.loaded[k]
             return None
 
+    def offer(self, k: int, got: tuple) -> None:
+        """Step ``k`` loaded elsewhere (rank 0's stream keeper made it): held as if read here."""
+        with self._cv:
+            if not self._closed:
+                self.loaded[k], self.newest = got, max(self.newest, k)
+                self._cv.notify_all()
+
     def take(self, k: int) -> tuple:
         """Step ``k``'s (scene, buffers file, its renderer's part): loaded (every rank said so)."""
         with self._cv:
@@ -196,7 +203,8 @@ class Stepping:
         self.swaps = 0
         self.said = None  # the stream's state last said (``say_note``)
         if spool is not None:  # rank 0 of a stream's run: each kept step's cache built as it comes
-            spool.prepare = lambda k, path: load_step(self.reader.spec, k, path, self.reader.path_of(0))
+            spool.prepare = lambda k, path: self.reader.offer(k, load_step(self.reader.spec, k, path,
+                                                                           self.reader.path_of(0)))
 
     def _say(self, k: int, why: str) -> None:
         """A step that cannot be read, once (rank 0; every rank finds the same)."""
