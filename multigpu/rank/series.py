@@ -33,14 +33,20 @@ from multigpu.scene.series import after, on_the_way, step_at
 
 #: seconds a rank waits for another rank of its host to build a step before building it itself
 LOCK_WAIT = 600.0
+#: seconds between a live reader's looks for the next kept step
+FOLLOW = 0.005
 
 
 class Reader:
     """Loads the steps of ``spec``'s series in a daemon thread, the one asked for last first:
-    ``newest`` is the last one loaded, and every loaded step stays until ``keep`` lets it go."""
+    ``newest`` is the last one loaded, and every loaded step stays until ``keep`` lets it go.
+    ``follow`` (a live stream's, from step ``follow``): the next step is loaded as soon as its file
+    is there (rank 0 keeps it), before any rank is told of it, so the frame that shows it waits on
+    no read."""
 
-    def __init__(self, spec, n: int, say=None, path_of=None):
+    def __init__(self, spec, n: int, say=None, path_of=None, follow: int | None = None):
         self.spec, self.n, self.say, self.path_of = spec, n, say, path_of
+        self.followed = follow  # the last step the live reader loaded or was asked for (None: not live)
         self.loaded: dict[int, tuple] = {}  # step -> (scene, buffers file)
         self.newest = -1
         self.bad: dict[int, str] = {}  # steps that could not be read, and why
@@ -59,6 +65,8 @@ class Reader:
             if k in self.bad or k == self.asked:
                 return
             self.asked = k
+            if self.followed is not None:
+                self.followed = max(self.followed, k)
             self._cv.notify()
 
     def wait_for(self, k: int, timeout: float) -> tuple | None:
@@ -78,6 +86,8 @@ class Reader:
         with self._cv:
             if not self._closed:
                 self.loaded[k], self.newest = got, max(self.newest, k)
+                if self.followed is not None:
+                    self.followed = max(self.followed, k)
                 self._cv.notify_all()
 
     def take(self, k: int) -> tuple:
@@ -97,11 +107,24 @@ class Reader:
             self.loaded.clear()
             self._cv.notify()
 
+    def _arrived(self) -> bool:
+        """A live reader: the step after the last it followed is there (its file, rank 0's kept
+        step): asked for now (under the lock)."""
+        if self.followed is None:
+            return False
+        k = self.followed + 1
+        if k in self.loaded or k in self.bad or not self.path_of(k).exists():
+            return False
+        self.asked = self.followed = k
+        return True
+
     def _run(self) -> None:
         while True:
             with self._cv:
                 while self.asked is None and not self._closed:
-                    self._cv.wait()
+                    if self._arrived():
+                        break
+                    self._cv.wait(None if self.followed is None else FOLLOW)
                 if self._closed:
                     return
                 k = self.asked
@@ -196,7 +219,7 @@ class Stepping:
             self.end = "hold"
         self.rank = rank
         self.reader = Reader(reader_spec(spec, scene), self.n, self._say if rank == 0 else None,
-                             step_paths(spec, scene))
+                             step_paths(spec, scene), self.shown if self.live and rank != 0 else None)
         self.agreed = -1  # the step every rank held ready in the last landed rows (-1: none)
         self.posted: deque[int] = deque()  # the ready steps of this rank's rows not landed yet
         self.last_shown = self.shown  # the step of the last frame shown (``row``: a stream's delay)

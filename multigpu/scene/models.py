@@ -24,6 +24,7 @@ Loaded and generated scenes are cached as ``.npz`` in ``$MULTIGPU_CACHE`` (defau
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import math
 import re
@@ -200,7 +201,9 @@ def load_step_file(spec: SceneSpec, path, first, use_cache: bool = True) -> tupl
     if Path(first) == src or src.suffix.lower() not in SIMULATION:
         return _load_scene(alone, use_cache)
     t0 = time.perf_counter()
-    base, base_info = _load_scene(dataclasses.replace(spec, model=str(first), step=0, up=None), use_cache)
+    fst = check_file(first, "model", "model file").stat()
+    base, base_info = _first_step(dataclasses.replace(spec, model=str(first), step=0, up=None), use_cache,
+                                  (fst.st_size, fst.st_mtime_ns))
     st = check_file(path, "model", "model file").stat()
     key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, "cells of", base_info.get("cache") or str(first))
     cache = cache_dir() / f"{src.stem}-{key}.npz"
@@ -233,6 +236,13 @@ def load_step_file(spec: SceneSpec, path, first, use_cache: bool = True) -> tupl
     if spec.up is not None:
         scene.meta["up"], scene.meta["up_source"] = axis_vector(spec.up), "--up"
     return scene, {"seconds": time.perf_counter() - t0, "cached": cached, "cache": str(cache) if use_cache else None}
+
+
+@functools.lru_cache(maxsize=1)
+def _first_step(spec: SceneSpec, use_cache: bool, version: tuple) -> tuple[Scene, dict]:
+    """A series' first step (``load_step_file``), kept while its later steps load (``version``: its
+    file's size and time)."""
+    return _load_scene(spec, use_cache)
 
 
 def _load_scene(spec: SceneSpec, use_cache: bool) -> tuple[Scene, dict]:

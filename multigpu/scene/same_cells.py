@@ -52,27 +52,48 @@ def derive(base: Scene, mesh, coloring: Coloring, path: Path) -> Scene | None:
         values, where, label = field(mesh, coloring.color_by, path)
         if where != sim.get("color_by", {}).get("where") or (where == "cell" and (cell < 0).any()):
             return None
-        lo, hi = sim["color_by"]["range"] if coloring.range is None else coloring.range
-        rgba = colours(values[cell if where == "cell" else point], lookup(coloring.colormap), lo, hi)
-        meta["color_by"] = {**sim["color_by"], "field": label, "range": [float(lo), float(hi)]}
-    tri, obj = triangle_objects(base)
+        vmin, vmax = sim["color_by"]["range"] if coloring.range is None else coloring.range
+        rgba = colours(values[cell if where == "cell" else point], lookup(coloring.colormap), vmin, vmax)
+        meta["color_by"] = {**sim["color_by"], "field": label, "range": [float(vmin), float(vmax)]}
+    tri, obj, part = _triangles(base)
     origin = (pos.min(axis=0) + pos.max(axis=0)) / 2  # a build's: the centre of the step's bounds
     vertices = np.empty((len(pos), 6), dtype=np.float32)
     vertices[:, :3] = pos - origin
     corners = vertices[:, :3][tri].astype(np.float64) + origin  # (T, 3, 3) world, as drawn
-    vertices[:, 3:] = vertex_normals(pos[tri], tri, len(pos))
-    n, parts = base.n_objects, base.part_start is not None
-    bmin, bmax, radii = np.full((n, 3), np.inf), np.full((n, 3), -np.inf), np.zeros(n)
-    per_object(np.minimum, corners.min(axis=1), obj, bmin)
-    per_object(np.maximum, corners.max(axis=1), obj, bmax)
+    vertices[:, 3:] = vertex_normals(corners, tri, len(pos))
+    n = base.n_objects
+    bmin, bmax, far = np.full((n, 3), np.inf), np.full((n, 3), -np.inf), np.zeros(n)
+    c0, c1, c2 = corners[:, 0], corners[:, 1], corners[:, 2]
+    lo, hi = np.minimum(np.minimum(c0, c1), c2), np.maximum(np.maximum(c0, c1), c2)  # each triangle's box
+    per_object(np.minimum, lo, obj, bmin)
+    per_object(np.maximum, hi, obj, bmax)
     centers = (bmin + bmax) / 2
-    per_object(np.maximum, np.linalg.norm(corners - centers[obj][:, None, :], axis=2).max(axis=1), obj, radii)
+    at = centers[obj]
+    square = lambda c: np.einsum("ij,ij->i", c - at, c - at)
+    per_object(np.maximum, np.maximum(np.maximum(square(c0), square(c1)), square(c2)), obj, far)
+    radii = np.sqrt(far)
     changed = {"vertices": vertices, "bmin": bmin, "bmax": bmax, "centers": centers, "radii": radii,
                "origin": origin, "vertex_colors": rgba}
-    if parts:
-        changed["part_bmin"], changed["part_bmax"] = part_boxes(base, corners)
+    if part is not None:
+        p = len(base.part_count)
+        changed["part_bmin"], changed["part_bmax"] = np.full((p, 3), np.inf), np.full((p, 3), -np.inf)
+        per_object(np.minimum, lo, part, changed["part_bmin"])
+        per_object(np.maximum, hi, part, changed["part_bmax"])
     return Scene(**{**base._arrays(), **changed}, name=base.name,
                  meta={**base.meta, "simulation": meta, "source": str(path)})
+
+
+#: the last first step's triangles (``triangle_objects``), kept with it: its later steps share them
+_LAST: dict[int, tuple] = {}
+
+
+def _triangles(base: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    got = _LAST.get(id(base))
+    if got is None:  # (threads: a race computes them twice, never reads a half-made entry)
+        got = (base, *triangle_objects(base), part_of_triangles(base))  # the scene held: its id is not reused
+        _LAST.clear()
+        _LAST[id(base)] = got
+    return got[1:]
 
 
 def vertex_normals(corners: np.ndarray, tri: np.ndarray, n: int) -> np.ndarray:
@@ -85,15 +106,13 @@ def vertex_normals(corners: np.ndarray, tri: np.ndarray, n: int) -> np.ndarray:
     return np.where(length > 0, normals / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
 
 
-def part_boxes(base: Scene, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each part's box from ``corners`` (``triangle_objects``' order: objects by first index, each
-    object's parts back to back from its first index)."""
+def part_of_triangles(base: Scene) -> np.ndarray | None:
+    """Each triangle's part (``triangle_objects``' order: objects by first index, each object's
+    parts back to back from its first index); None: the scene has no parts."""
+    if base.part_start is None:
+        return None
     order = np.argsort(base.first_index, kind="stable")
     n_parts = np.diff(base.part_start)[order]
     rows = np.repeat(base.part_start[:-1][order] - np.concatenate([[0], np.cumsum(n_parts)[:-1]]), n_parts) \
         + np.arange(int(n_parts.sum()))
-    label = np.repeat(rows, base.part_count[rows] // 3)  # each triangle's part
-    lo, hi = np.full((len(base.part_count), 3), np.inf), np.full((len(base.part_count), 3), -np.inf)
-    per_object(np.minimum, corners.min(axis=1), label, lo)
-    per_object(np.maximum, corners.max(axis=1), label, hi)
-    return lo, hi
+    return np.repeat(rows, base.part_count[rows] // 3)

@@ -17,6 +17,7 @@ and meshio: no MPI, no GL.
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 from dataclasses import dataclass
 from pathlib import Path
@@ -236,6 +237,7 @@ def field(mesh, name: str, path: Path) -> tuple[np.ndarray, str, str]:
     return values[:, index], where, f"{base} ({part})"
 
 
+@functools.lru_cache(maxsize=8)
 def lookup(colormap: str) -> np.ndarray:
     """(256, 4) uint8: matplotlib's ``colormap`` sampled at 256 evenly spaced values."""
     import matplotlib
@@ -246,7 +248,9 @@ def lookup(colormap: str) -> np.ndarray:
         some = ", ".join(n for n in ("viridis", "plasma", "inferno", "magma", "cividis", "turbo", "coolwarm",
                                      "jet", "gray"))
         raise InputError.of("colormap", f"unknown colour map '{colormap}' (matplotlib's names: {some}, ...)") from None
-    return np.round(cmap(np.linspace(0.0, 1.0, 256)) * 255).astype(np.uint8)
+    table = np.round(cmap(np.linspace(0.0, 1.0, 256)) * 255).astype(np.uint8)
+    table.flags.writeable = False  # one table a map, shared by its callers
+    return table
 
 
 def colours(values: np.ndarray, table: np.ndarray, lo: float, hi: float) -> np.ndarray:
