@@ -88,7 +88,11 @@ def test_a_recorded_run_is_followed_to_its_end(tmp_path):
     check_frames(tmp_path, out, steps, path)
 
 
-def test_a_live_stream_plays_as_it_comes(tmp_path):
+@pytest.mark.parametrize("late", ["hold", "wait"])
+def test_a_live_stream_plays_as_it_comes(tmp_path, late):
+    """Every rank shows the same step at every frame, forward, each as one rank renders it; with
+    ``--late-step wait`` every step first shows two frames after the frame whose row named it
+    (``--latency 1``: the row lands before the next frame decides its step)."""
     sim = subprocess.Popen([sys.executable, str(HEAT), "--name", str(tmp_path / "heat"), "--steps", "400", "--size",
                             "24", "--every", "0.05"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            start_new_session=True)
@@ -99,7 +103,8 @@ def test_a_live_stream_plays_as_it_comes(tmp_path):
             subprocess.run(["sleep", "0.05"], check=True)
         path = still(tmp_path, 150)
         out = tmp_path / "o"
-        res = wall(out, f"adios2:{tmp_path / 'heat'}", path, timeout=120)
+        res = wall(out, f"adios2:{tmp_path / 'heat'}", path, extra=("--late-step", late, "--latency", "1"),
+                   timeout=120)
         assert res.returncode == 0, res.stderr[-3000:]
     finally:
         if sim.poll() is None:
@@ -109,6 +114,13 @@ def test_a_live_stream_plays_as_it_comes(tmp_path):
     assert summary["complete"] and summary["frames"] == 150
     steps = shown(out)
     assert len(set(steps)) >= 2 and steps == sorted(steps), steps  # it played, forward
+    if late == "wait":
+        named = {}
+        for r in csv.DictReader(open(out / "timings.csv")):
+            if r["rank"] == "0":
+                named.setdefault(int(float(r["step_wanted"])), int(r["frame"]))
+        firsts = {k: steps.index(k) for k in dict.fromkeys(steps) if k > steps[0]}
+        assert firsts and all(f - named[k] == 2 for k, f in firsts.items()), (firsts, named)
     check_frames(tmp_path, out, steps, path)
 
 
