@@ -108,8 +108,8 @@ def walk_config(a):
     if wall.mpcdi is not None:  # a projector wall: its tiles are the regions of its MPCDI file
         for name in ("grid", "tile", "mullion"):  # (the same as the file's: launch/walkthrough passes the grid)
             if given.get(name) is not None and tuple(given[name]) != tuple(getattr(wall, name)):
-                raise InputError.of(name, f"a projector wall's tiles are its mpcdi file's regions ({wall.file}): "
-                                          "leave it out")
+                raise InputError.of(name, f"a projector wall's tiles are its wall file's grid of its mpcdi file's "
+                                          f"regions ({wall.file}): leave it out")
     grid = given.pop("grid", None) or wall.grid or WalkConfig.grid
     check_ranks(wall, grid[0] * grid[1])
     ranks = range(grid[0] * grid[1])

@@ -185,8 +185,9 @@ def load_wall(path: str) -> Wall:
 def _projectors(doc: dict, path: str, where: str, grid, tile, mullion) -> tuple:
     """The wall file's MPCDI file (relative to the wall file), read once here, and the wall its
     regions make (``warp/layout.py``): (file, grid, tile, mullion), the file None and the rest as
-    given without one. A bad file, or a grid or tile that is not its regions', ends the job at the
-    door, in one line."""
+    given without one. The file's ``grid`` of ranks may be coarser than its regions' (a rank a
+    block of them: a PC driving several projectors). A bad file, a grid that does not divide the
+    regions', or a tile that is not the one they make, ends the job at the door, in one line."""
     if "mpcdi" not in doc:
         return None, grid, tile, mullion
     from multigpu.warp import mpcdi
@@ -199,10 +200,10 @@ def _projectors(doc: dict, path: str, where: str, grid, tile, mullion) -> tuple:
         raise InputError(f"{where}: a projector wall's tiles overlap as its mpcdi file's regions do: give no "
                          "mullion or bezel")
     try:
-        lay = layout(file, *mpcdi.read(file))
+        lay = layout(file, *mpcdi.read(file), grid)
     except InputError as exc:
         raise InputError(f"{where}: mpcdi: {exc}") from None
-    for name, given, made in (("grid", grid, lay.grid), ("tile", tile, lay.tile)):
+    for name, given, made in (("tile", tile, lay.tile),):
         if given is not None and tuple(given) != made:
             raise InputError(f"{where}: {name} {given[0]}x{given[1]}: the mpcdi file's regions make a "
                              f"{made[0]}x{made[1]} {name} (leave {name} out)")

@@ -27,10 +27,10 @@ def windows(wall: Wall, grid, tile, mullion) -> list[tuple[str, str, int, int, i
     H = c.size[1]
     sizes, at = [tile] * (grid[0] * grid[1]), [(int(x0), int(H - y1)) for x0, _, _, y1 in c.tiles()]
     if wall.mpcdi is not None:  # a projector's window: its output's size, the outputs side by side
-        from multigpu.warp.layout import outputs_by_tile, places
+        from multigpu.warp.layout import outputs_by_tile, picture_size, places
 
-        outs = outputs_by_tile(wall.mpcdi)
-        sizes, at = [o.size for o in outs], places(grid, outs)
+        outs = outputs_by_tile(wall.mpcdi, grid)
+        sizes, at = [picture_size(outs, k) for k in range(grid[0] * grid[1])], places(grid, outs)
     out = []
     for k, (w, h) in enumerate(sizes):  # K tiles
         x, y = (0, 0) if k in wall.fullscreen else wall.positions.get(k, at[k])
@@ -170,8 +170,7 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         from multigpu.warp.layout import outputs_by_tile
 
         size, outs = mpcdi.read(Path(wall.mpcdi))
-        by_tile = enumerate(outputs_by_tile(wall.mpcdi))
-        each = ", ".join(f"rank {k} {o.name} {o.size[0]}x{o.size[1]}" for k, o in by_tile)
+        each = ", ".join(f"rank {o.tile} {o.name} {o.size[0]}x{o.size[1]}" for o in outputs_by_tile(wall.mpcdi, grid))
         lines.append(f"mpcdi {wall.mpcdi}: {len(outs)} projector outputs on a {size[0]}x{size[1]} buffer, each "
                      f"driven by the rank of its region's tile, its picture in mosaic/outputs/NAME/: {each}")
         for name, c in wall.outputs.items():  # a few outputs

@@ -14,7 +14,7 @@ from multigpu.core.warpblend import blend
 from multigpu.errors import InputError
 from multigpu.warp import mpcdi
 from multigpu.warp.colour import apply_lut, read_cube, read_matrix
-from multigpu.warp.make import outputs
+from multigpu.warp.make import buffer_size, outputs
 from multigpu.warp.rig import flat_rig
 
 SWAP = [[0, 0, 1], [0, 1, 0], [1, 0, 0]]  # red and blue trade places
@@ -119,23 +119,59 @@ def test_a_wall_file_gives_each_output_its_colour_and_refuses_a_bad_one_at_the_d
         load_wall(str(wall))
 
 
-def pictures(path, canvas, colors=None, blend=True) -> dict:
-    """Every output's picture of ``canvas`` (top row first) as the ranks' GPU pass makes it."""
+def pictures(path, canvas, colors=None, blend=True, grid=None) -> dict:
+    """Every output's picture of ``canvas`` (top row first) as the ranks' GPU pass makes it, on a
+    wall of ``grid`` ranks (None: a rank a region)."""
     from multigpu.gpu.context import create_context
     from multigpu.rank.outputs import Projector
     from multigpu.warp.layout import layout, outputs_by_tile
 
     ctx, _ = create_context()
-    lay = layout(path, *mpcdi.read(path))
+    lay = layout(path, *mpcdi.read(path), grid)
     tiles = Canvas(lay.grid, lay.tile, lay.mullion).tiles()
+    everyone = outputs_by_tile(str(path), grid)
     out = {}
-    for k, o in enumerate(outputs_by_tile(str(path))):
-        x0, y0, x1, y1 = tiles[k]
-        p = Projector(ctx, str(path), k, lay.tile, colors or {}, blend)
-        out[o.name] = p.run(np.ascontiguousarray(canvas[::-1][y0:y1, x0:x1]))[::-1].copy()
+    for k, (x0, y0, x1, y1) in enumerate(tiles):
+        p = Projector(ctx, str(path), k, lay.grid, lay.tile, colors or {}, blend)
+        top = p.run(np.ascontiguousarray(canvas[::-1][y0:y1, x0:x1]))[::-1].copy()
+        for o in (o for o in everyone if o.tile == k):
+            out[o.name] = top[o.at[1]:o.at[1] + o.size[1], o.at[0]:o.at[0] + o.size[0]]
         p.release()
     ctx.release()
     return out
+
+
+def test_a_rank_driving_several_projectors_makes_each_ones_picture(tmp_path):
+    """Four projectors on two ranks (a block of two regions a tile, overlapping inside it as
+    across it) or on one: each output's picture is the numpy reference's of its own region, as
+    when each has a rank of its own; the rank's picture holds them side by side."""
+    from projected import reference
+
+    from multigpu.warp.layout import layout, outputs_by_tile, picture_size
+
+    rig = flat_rig(4, 0.2, size=(64, 48))
+    bw, bh = buffer_size(rig)
+    path = tmp_path / "rig.mpcdi"
+    mpcdi.write(path, (bw, bh), outputs(rig, (bw, bh)))
+    canvas = np.zeros((bh, bw, 3), dtype=np.uint8)
+    canvas[..., 1] = (np.arange(bw) * 255 // bw)[None, :]  # a ramp across, lines down
+    canvas[::5, :, 0] = 220
+    lay = layout(path, *mpcdi.read(path), (1, 2))
+    region = layout(path, *mpcdi.read(path)).tile
+    assert lay.per == (1, 2) and lay.region == region and lay.labels == (0, 0, 1, 1)
+    assert lay.tile == (2 * region[0] + lay.mullion[0], region[1]) and lay.offsets[1] == (region[0] + lay.mullion[0], 0)
+    outs = outputs_by_tile(str(path), (1, 2))
+    assert [(o.name, o.tile, o.at) for o in outs] == [("p1", 0, (0, 0)), ("p2", 0, (64, 0)), ("p3", 1, (0, 0)),
+                                                      ("p4", 1, (64, 0))]
+    assert picture_size(outs, 1) == (128, 48)
+    want = reference(canvas, path)
+    for grid in ((1, 2), (1, 1), None):
+        got = pictures(path, canvas, grid=grid)
+        for name in ("p1", "p2", "p3", "p4"):
+            d = np.abs(got[name].astype(int) - want[name])
+            assert d.max() <= 2 and d.mean() < 0.5, (grid, name, d.max(), d.mean())
+    with pytest.raises(InputError, match="its regions make a 1x4 grid: a wall of 1x3 ranks must divide it"):
+        layout(path, *mpcdi.read(path), (1, 3))
 
 
 def test_the_outputs_pictures_are_coloured_and_unblended_with_blend_off(tmp_path):

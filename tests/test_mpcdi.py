@@ -232,7 +232,7 @@ def test_a_projector_walls_tiles_are_its_regions_and_others_are_refused(tmp_path
     spec_file(tmp_path)
     wall = tmp_path / "wall.json"
     for doc, says in (({"tile": "640x480"}, "tile 640x480: the mpcdi file's regions make a 704x480 tile"),
-                      ({"grid": "2x1"}, "grid 2x1: the mpcdi file's regions make a 1x2 grid"),
+                      ({"grid": "2x1"}, "its regions make a 1x2 grid: a wall of 2x1 ranks must divide it"),
                       ({"mullion": "0x0"}, "give no mullion or bezel")):
         wall.write_text(json.dumps({"mpcdi": "other.mpcdi", **doc}))
         with pytest.raises(InputError, match=re.escape(says)):
@@ -240,7 +240,8 @@ def test_a_projector_walls_tiles_are_its_regions_and_others_are_refused(tmp_path
     wall.write_text(json.dumps({"mpcdi": "other.mpcdi", "grid": "1x2"}))
     assert load_wall(str(wall)).tile == (704, 480)
     assert walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--grid", "1x2"])).tile == (704, 480)
-    with pytest.raises(InputError, match=re.escape("--tile a projector wall's tiles are its mpcdi file's regions")):
+    with pytest.raises(InputError, match=re.escape("--tile a projector wall's tiles are its wall file's grid of its "
+                                                   "mpcdi file's regions")):
         walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--tile", "320x240"]))
     with pytest.raises(InputError, match=re.escape("--stereo side-by-side: a projector wall")):
         walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--stereo", "side-by-side"]))

@@ -135,3 +135,49 @@ def test_the_example_three_projector_wall_runs(tmp_path, present):
     want = reference(canvas, ROOT / "examples" / "walls" / "three-projectors.mpcdi")
     for name in NAMES:
         close_to(read_png(out / "mosaic" / "outputs" / name / "frame_00001.png"), want[name], name)
+
+
+def test_a_rank_driving_two_projectors_shows_both_side_by_side(tmp_path):
+    """Four projectors on two ranks (the wall file's grid 1x2: each rank a block of two regions,
+    overlapping inside its tile as across tiles): the canvas equals one rank's render, each
+    output's picture is the numpy reference's of its region, and each rank's window shows its two
+    pictures side by side (a still path: bit for bit what the run recorded)."""
+    import subprocess
+    import sys
+
+    from mpirun import ROOT
+
+    rig = flat_rig(4, 0.18, size=(96, 72))
+    bw, bh = buffer_size(rig)
+    mpcdi.write(tmp_path / "four.mpcdi", (bw, bh), outputs(rig, (bw, bh)))
+    (tmp_path / "wall.json").write_text(json.dumps({"mpcdi": "four.mpcdi", "grid": "1x2"}))
+    path = tmp_path / "walk.json"
+    subprocess.run([sys.executable, "-m", "multigpu", "path", "make", "walkthrough", *SMALL[:2], "--frames", "60",
+                    "--out", str(path)], cwd=ROOT, check=True, capture_output=True, timeout=120)
+    doc = json.loads(path.read_text())
+    doc["cameras"] = [doc["cameras"][40]] * 600
+    path.write_text(json.dumps(doc))
+    one = tmp_path / "one"
+    res = run_mpi(1, ["walkthrough", *SMALL, "--grid", "1x1", "--tile", f"{bw}x{bh}", "--path", str(path), "--frames",
+                      "1", "--mosaic-every", "1", "--no-overlay", "--out", str(one)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = tmp_path / "win"
+    with Xvfb((4 * 96, 72)) as x:
+        proc, kill = start_mpi(2, ["walkthrough", *SMALL, "--wall", str(tmp_path / "wall.json"), "--path", str(path),
+                                   "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out)],
+                               env={"DISPLAY": x.name})
+        try:
+            wait_for(lambda: len(windows(x.name)) == 2 and (out / "mosaic" / "outputs" / "p4").is_dir())
+            shot = screenshot(x.name)
+            escape(x.name, windows(x.name)[0])
+            _, err = proc.communicate(timeout=120)
+        finally:
+            kill() if proc.poll() is None else None
+    assert proc.returncode == 0, err[-2000:]
+    canvas = read_png(out / "mosaic" / "frame_00000.png")
+    assert np.array_equal(canvas, read_png(one / "mosaic" / "frame_00000.png"))
+    want = reference(canvas, tmp_path / "four.mpcdi")
+    for k, name in enumerate(("p1", "p2", "p3", "p4")):
+        got = read_png(out / "mosaic" / "outputs" / name / "frame_00000.png")
+        close_to(got, want[name], name)
+        assert np.array_equal(shot[:, 96 * k:96 * (k + 1)], got), name

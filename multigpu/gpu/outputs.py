@@ -34,6 +34,8 @@ uniform vec3 lut_lo;
 uniform vec3 lut_hi;
 uniform float lut_n;
 uniform int height;
+uniform vec2 rect_lo;        // the output's region in the tile: its first and last pixel centres
+uniform vec2 rect_hi;
 out vec4 f_color;
 
 vec3 signal_of(vec3 coded) {
@@ -56,7 +58,8 @@ void main() {
     b = texelFetch(beta3, row, 0).rgb;
 #endif
     bool inside = !(isnan(m.x) || isnan(m.y)) && all(greaterThanEqual(m.xy, vec2(0.0))) && all(lessThanEqual(m.xy, vec2(1.0)));
-    vec3 p = inside ? texture(content, vec2(m.x, 1.0 - m.y)).rgb : vec3(0.0);
+    vec2 at = clamp(m.xy, rect_lo, rect_hi);  // bilinear within the region, clamped at its edges
+    vec3 p = inside ? texture(content, vec2(at.x, 1.0 - at.y)).rgb : vec3(0.0);
     vec3 light = pow(p, vec3(gamma));
 #if MATRIX
     light = clamp(matrix * light, 0.0, 1.0);
@@ -82,16 +85,24 @@ def _rgb(values, size: tuple[int, int], default: float) -> np.ndarray:
 
 class OutputPass:
     """The pass of one output of ``size`` (w, h) on ``ctx`` from a tile of ``tile`` (w, h):
-    ``coords`` (h, w, 2) its pixels' tile coordinates (rows top first), ``alpha`` and ``beta``
+    ``coords`` (h, w, 2) its pixels' content coordinates (rows top first), ``alpha`` and ``beta``
     its linear maps (None: 1 and 0), ``gamma``, ``matrix`` (3x3 or None), ``lut``
-    (``warp.colour.Lut`` or None)."""
+    (``warp.colour.Lut`` or None); ``rect`` (x, y, w, h): its content, the region of the tile it
+    shows (top-left origin; None: the whole tile)."""
 
     def __init__(self, ctx, size: tuple[int, int], tile: tuple[int, int], coords: np.ndarray, alpha=None,
-                 beta=None, gamma: float = 2.2, matrix=None, lut=None):
+                 beta=None, gamma: float = 2.2, matrix=None, lut=None, rect=None):
         import moderngl
 
         self.ctx, self.size = ctx, size
         w, h = size
+        tw, th = tile
+        x0, y0, rw, rh = (0, 0, tw, th) if rect is None else rect
+        if (x0, y0, rw, rh) != (0, 0, tw, th):  # the region's coordinates as the tile's (outside it: nothing)
+            coords = np.asarray(coords, dtype=np.float64)
+            outside = (coords < 0).any(axis=2) | (coords > 1).any(axis=2)
+            coords = np.stack([(x0 + coords[..., 0] * rw) / tw, (y0 + coords[..., 1] * rh) / th], axis=2)
+            coords[outside] = np.nan
         grey = all(v is None or np.ndim(v) == 2 for v in (alpha, beta))
         # one program made for this output's colour: llvmpipe runs a branch not taken at the full cost of
         # its texture reads (an unused LUT's lookup doubled the pass), so what is not used is not compiled
@@ -115,7 +126,8 @@ class OutputPass:
         for i, name in enumerate(("content", "maps", "alpha3", "beta3", "lut3", "lut1")):
             if name in self.prog:
                 self.prog[name] = i
-        values = {"gamma": float(gamma), "height": h,
+        values = {"gamma": float(gamma), "height": h, "rect_lo": ((x0 + 0.5) / tw, (y0 + 0.5) / th),
+                  "rect_hi": ((x0 + rw - 0.5) / tw, (y0 + rh - 0.5) / th),
                   "lut_n": 2.0 if lut is None else float(lut.table.shape[0]),
                   "lut_lo": (0.0, 0.0, 0.0) if lut is None else tuple(float(v) for v in lut.lo),
                   "lut_hi": (1.0, 1.0, 1.0) if lut is None else tuple(float(v) for v in lut.hi)}

@@ -140,7 +140,8 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
         if cfg.mpcdi is not None:  # a projector wall: this rank's output, its picture made every frame
             from multigpu.rank.outputs import Projector
 
-            setup.projector = Projector(renderer.ctx, cfg.mpcdi, rank, cfg.tile, cfg.output_colors, cfg.blend == "on")
+            setup.projector = Projector(renderer.ctx, cfg.mpcdi, rank, cfg.grid, cfg.tile, cfg.output_colors,
+                                        cfg.blend == "on")
     except BaseException:
         setup.release(collective=False)
         raise

@@ -55,11 +55,12 @@ class FrameLog:
         self.stereo = make_stereo(cfg.stereo, self.canvas, cfg.eyes == "own")
         tw, th = cfg.tile if self.stereo is None else self.stereo.composed.tile
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
-        self.outputs = None  # a projector wall's outputs by tile (name, size): rank 0 keeps their pictures
+        self.outputs = None  # a projector wall's outputs by tile (``Projected``): rank 0 keeps their pictures
         if cfg.mpcdi is not None and self.rank == 0:
-            from multigpu.warp.layout import outputs_by_tile
+            from multigpu.warp.layout import outputs_by_tile, picture_size
 
-            self.outputs = outputs_by_tile(cfg.mpcdi)
+            self.outputs = outputs_by_tile(cfg.mpcdi, cfg.grid)
+            self.picture_sizes = [picture_size(self.outputs, k) for k in range(self.K)]
         self.shown_at = None  # when this rank's last frame was shown (perf_counter): the frame period
         self._beat_cpu = job.thread_cpu
         self.timeline = deque(maxlen=TIMELINE_FRAMES) if cfg.timeline else None  # (frame, phase spans)
@@ -179,16 +180,17 @@ class FrameLog:
             self.gathered[k].reshape(-1)[:] = packed
 
     def _pictures(self, picture: np.ndarray) -> list | None:
-        """Every projector output's picture at rank 0, (name, image top row first) by tile: one
-        message each (raw: mosaic frames only)."""
+        """Every projector output's picture at rank 0, (name, image top row first) by tile: each
+        rank's picture (its outputs side by side) one message (raw: mosaic frames only)."""
         if self.rank != 0:
             wait_all([self.comm.Isend(np.ascontiguousarray(picture), dest=0, tag=MOSAIC_TAG + 1)], self.cfg.timeout,
                      "mosaic gather")
             return None
-        boxes = [np.empty((o.size[1], o.size[0], 3), dtype=np.uint8) for o in self.outputs[1:]]
+        boxes = [np.empty((h, w, 3), dtype=np.uint8) for w, h in self.picture_sizes[1:]]
         wait_all([self.comm.Irecv(b, source=k, tag=MOSAIC_TAG + 1) for k, b in enumerate(boxes, 1)], self.cfg.timeout,
                  "mosaic gather")
-        return [(o.name, img[::-1]) for o, img in zip(self.outputs, [picture, *boxes])]
+        tops = [img[::-1] for img in (picture, *boxes)]
+        return [(o.name, tops[o.tile][o.at[1]:o.at[1] + o.size[1], o.at[0]:o.at[0] + o.size[0]]) for o in self.outputs]
 
     def close(self, complete: bool, stopped_by: str | None, loop: tuple[float, int], head, panel,
               served: float) -> dict:

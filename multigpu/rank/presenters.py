@@ -21,10 +21,10 @@ def rank_presenter(cfg: WalkConfig, rank: int):
     x0, _, x1, y1 = (int(v) for v in cfg.canvas.tiles()[rank])
     place, size = (x0, cfg.canvas.size[1] - y1), cfg.tile  # top-left of the tile on a screen holding the canvas
     if cfg.mpcdi is not None:  # a projector's window: its output's picture, the outputs side by side
-        from multigpu.warp.layout import outputs_by_tile, places
+        from multigpu.warp.layout import outputs_by_tile, picture_size, places
 
-        outs = outputs_by_tile(cfg.mpcdi)
-        place, size = places(cfg.grid, outs)[rank], outs[rank].size
+        outs = outputs_by_tile(cfg.mpcdi, cfg.grid)
+        place, size = places(cfg.grid, outs)[rank], picture_size(outs, rank)
     pos = cfg.positions[rank] if cfg.positions and cfg.positions[rank] is not None else place
     display = screen_of(cfg.displays[rank] if cfg.displays else None, cfg.gpus[rank] if cfg.gpus else None)
     where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"

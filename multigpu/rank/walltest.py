@@ -120,11 +120,12 @@ def _open(wall, path: str, rank: int, shape: tuple, stereo: str, blend: bool, sh
     x0, _, _, y1 = (int(v) for v in Canvas(grid, tile, mullion).tiles()[rank])
     place = (x0, Canvas(grid, tile, mullion).size[1] - y1)
     if wall.mpcdi is not None:  # a projector's window: its output, the outputs side by side
-        from multigpu.warp.layout import outputs_by_tile, places
+        from multigpu.warp.layout import outputs_by_tile, picture_size, places
 
-        outs = outputs_by_tile(wall.mpcdi)
-        place, shown[2] = places(grid, outs)[rank], outs[rank].size
-        shown[3].insert(1, f"output {outs[rank].name}")
+        outs = outputs_by_tile(wall.mpcdi, grid)
+        place, shown[2] = places(grid, outs)[rank], picture_size(outs, rank)
+        names = [o.name for o in outs if o.tile == rank]
+        shown[3].insert(1, f"output{'s' if len(names) > 1 else ''} {', '.join(names)}")
     place = wall.positions.get(rank, place)
     where = f"wall file {path}, rank {rank} on host {socket.gethostname()}"
     right = None
@@ -137,7 +138,7 @@ def _open(wall, path: str, rank: int, shape: tuple, stereo: str, blend: bool, sh
     if wall.mpcdi is not None:
         from multigpu.rank.outputs import Projector
 
-        shown[1] = Projector(shown[0].context, wall.mpcdi, rank, tile, wall.outputs, blend)
+        shown[1] = Projector(shown[0].context, wall.mpcdi, rank, grid, tile, wall.outputs, blend)
 
 
 def main(path: str, frames: int | None, blend: bool = True) -> int:

@@ -24,14 +24,19 @@ SNAP = 0.01
 
 @dataclass(frozen=True)
 class Layout:
-    """The wall an MPCDI file's regions make: its ``grid`` (rows, cols), ``tile`` (w, h) and
-    ``mullion`` (mx, my: negative where tiles overlap), and ``labels``: each output's tile (its
-    rank), in the file's order of regions."""
+    """The wall an MPCDI file's regions make: its ``grid`` (rows, cols) of tiles, ``tile`` (w, h)
+    and ``mullion`` (mx, my: negative where tiles overlap); ``labels``: each output's tile (its
+    rank) and ``offsets`` its region's top-left in that tile (pixels), in the file's order of
+    regions; ``per`` (rows, cols): the regions a tile holds (a rank driving several projectors)."""
 
     grid: tuple[int, int]
     tile: tuple[int, int]
     mullion: tuple[int, int]
     labels: tuple[int, ...]
+    offsets: tuple[tuple[int, int], ...] = ()
+    per: tuple[int, int] = (1, 1)
+    cells: tuple[tuple[int, int], ...] = ()  # each output's (row, col) in its tile's block
+    region: tuple[int, int] = (0, 0)  # (w, h) of each region: of the content each output shows
 
     @property
     def overlap(self) -> tuple[int, int]:
@@ -73,51 +78,76 @@ def _axis(where, starts: np.ndarray, lengths: np.ndarray, full: int, names, axis
     return n, step - length, np.searchsorted(firsts, starts)
 
 
-def layout(where, buffer: tuple[int, int], outputs) -> Layout:
-    """The wall of an MPCDI file's ``outputs`` (``mpcdi.Output``) on a ``buffer`` (w, h);
-    InputError naming ``where`` (the file) and the region that does not fit."""
+def layout(where, buffer: tuple[int, int], outputs, grid: tuple[int, int] | None = None) -> Layout:
+    """The wall of an MPCDI file's ``outputs`` (``mpcdi.Output``) on a ``buffer`` (w, h): a tile
+    a region, or on a ``grid`` of ranks that divides the regions' each tile a block of them (its
+    outputs side by side, overlapping as the regions do). InputError naming ``where`` (the file)
+    and the region or grid that does not fit."""
     W, H = buffer
     names = [o.name for o in outputs]
     xs = np.array([_edges(where, o.name, o.area[0], o.area[2], W, "x") for o in outputs], dtype=np.int64)
     ys = np.array([_edges(where, o.name, o.area[1], o.area[3], H, "y") for o in outputs], dtype=np.int64)
     cols, mx, col = _axis(where, xs[:, 0], xs[:, 1] - xs[:, 0], W, names, "x")
     rows, my, row = _axis(where, ys[:, 0], ys[:, 1] - ys[:, 0], H, names, "y")
-    labels = col * rows + row
-    if len(set(labels.tolist())) != len(labels) or len(labels) != rows * cols:
-        raise InputError(f"{where}: {len(labels)} regions on a {rows}x{cols} grid of tiles: a projector wall has "
+    if len(set((row * cols + col).tolist())) != len(names) or len(names) != rows * cols:
+        raise InputError(f"{where}: {len(names)} regions on a {rows}x{cols} grid of tiles: a projector wall has "
                          "one region for every tile")
-    return Layout((rows, cols), (int(xs[0, 1] - xs[0, 0]), int(ys[0, 1] - ys[0, 0])), (mx, my),
-                  tuple(int(v) for v in labels))
-
+    grid = (rows, cols) if grid is None else tuple(int(v) for v in grid)
+    if rows % grid[0] or cols % grid[1]:
+        raise InputError(f"{where}: its regions make a {rows}x{cols} grid: a wall of {grid[0]}x{grid[1]} ranks must "
+                         "divide it (each rank a block of regions)")
+    a, b = rows // grid[0], cols // grid[1]
+    w, h = int(xs[0, 1] - xs[0, 0]), int(ys[0, 1] - ys[0, 0])
+    labels = (col // b) * grid[0] + row // a  # column-major, row 0 on top
+    offsets = tuple(((int(c) % b) * (w + mx), (int(r) % a) * (h + my)) for r, c in zip(row, col))
+    return Layout(grid, (b * w + (b - 1) * mx, a * h + (a - 1) * my), (mx, my), tuple(int(v) for v in labels),
+                  offsets, (a, b), tuple((int(r) % a, int(c) % b) for r, c in zip(row, col)), (w, h))
 
 
 @dataclass(frozen=True)
 class Projected:
-    """What an output is: its ``name`` (the MPCDI region's) and ``size`` (w, h) in pixels."""
+    """What an output is: its ``name`` (the MPCDI region's), ``size`` (w, h) in pixels, ``tile``
+    (the rank that drives it), ``offset``: its region's top-left in that tile (content pixels),
+    ``at``: its picture's top-left in the rank's picture (the rank's outputs side by side as their
+    regions are, as one window, or one X screen spanning the rank's projectors, shows them)."""
 
     name: str
     size: tuple[int, int]
+    tile: int = 0
+    offset: tuple[int, int] = (0, 0)
+    at: tuple[int, int] = (0, 0)
 
 
-def outputs_by_tile(path: str) -> list[Projected]:
-    """Every output of the MPCDI file at ``path``, in the order of the tiles (ranks) that drive them."""
+def outputs_by_tile(path: str, grid: tuple[int, int] | None = None) -> list[Projected]:
+    """Every output of the MPCDI file at ``path`` on a wall of ``grid`` ranks (None: a rank a
+    region), in the order of the tiles (ranks) that drive them, a tile's by their offsets."""
     from multigpu.warp import mpcdi
 
     buffer, outs = mpcdi.read(Path(path))
-    labels = layout(path, buffer, outs).labels
-    by_tile = [outs[labels.index(k)] for k in range(len(outs))]
-    return [Projected(o.name, o.size) for o in by_tile]
+    lay = layout(path, buffer, outs, grid)
+    cell = {(t, rc): o.size for o, t, rc in zip(outs, lay.labels, lay.cells)}  # a tile's block of outputs
+    at = [(sum(cell[t, (r, c)][0] for c in range(cc)), sum(cell[t, (rr, cc)][1] for rr in range(r)))
+          for t, (r, cc) in zip(lay.labels, lay.cells)]
+    got = [Projected(o.name, o.size, t, off, xy) for o, t, off, xy in zip(outs, lay.labels, lay.offsets, at)]
+    return sorted(got, key=lambda o: (o.tile, o.at[1], o.at[0]))
+
+
+def picture_size(outputs: list[Projected], tile: int) -> tuple[int, int]:
+    """(w, h) of rank ``tile``'s picture: its outputs side by side (their offsets and sizes)."""
+    mine = [o for o in outputs if o.tile == tile]
+    return max(o.at[0] + o.size[0] for o in mine), max(o.at[1] + o.size[1] for o in mine)
 
 
 def places(grid: tuple[int, int], outputs: list[Projected]) -> list[tuple[int, int]]:
     """Each tile's output window's top-left on one X screen spanning the projectors, by default:
-    the outputs side by side as their tiles are (a row's widths to its left, a column's heights
-    above it)."""
+    the ranks' pictures side by side as their tiles are (a row's widths to its left, a column's
+    heights above it)."""
     rows = grid[0]
+    sizes = [picture_size(outputs, k) for k in range(grid[0] * grid[1])]
     out = []
-    for k in range(len(outputs)):  # tiles, a few dozen
+    for k in range(len(sizes)):  # tiles, a few dozen
         row, col = k % rows, k // rows
-        x = sum(outputs[c * rows + row].size[0] for c in range(col))
-        y = sum(outputs[col * rows + r].size[1] for r in range(row))
+        x = sum(sizes[c * rows + row][0] for c in range(col))
+        y = sum(sizes[col * rows + r][1] for r in range(row))
         out.append((x, y))
     return out
