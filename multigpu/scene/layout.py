@@ -235,8 +235,9 @@ class Scene:
         return cls(name=head["name"], meta=head["meta"], **arrays)
 
 
-#: the buffers ``Scene.load`` maps from the file (the bulk of a scene; read only after loading)
-MAPPED = ("vertices", "indices", "vertex_colors", "texcoords", "texels")
+#: the buffers ``Scene.load`` maps from the file (the bulk of a scene; read only after loading, and a
+#: simulation's vertex sources only where a later step is made from it: never a rank's own copy)
+MAPPED = ("vertices", "indices", "vertex_colors", "texcoords", "texels", "sources")
 
 
 def _map_members(path: Path, names) -> dict[str, np.ndarray]:
