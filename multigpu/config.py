@@ -166,6 +166,7 @@ class WalkConfig:
     right_eye: tuple = ()  # per rank label: a passive tile's right-eye window position, or None (wall file)
     mpcdi: str | None = None  # the wall file's MPCDI file: each projector output's picture in the mosaics
     output_colors: dict = field(default_factory=dict)  # the wall file's colour of each output (``warp/colour.py``)
+    mpcdi_right: str | None = None  # a passive projector wall's right eyes' MPCDI file (the wall file's)
     blend: str = option("on", group=WALL, choices=lambda: ("on", "off"), help=(
         "a projector wall's outputs (the wall file's mpcdi): blended in their overlaps, or not (each projector's "
         "whole picture, for aligning them by eye)"))
@@ -333,9 +334,13 @@ class WalkConfig:
         if self.path == INTERACTIVE and self.present != "window" and self.panel is None:
             raise InputError.of("path", "interactive needs --present window or --panel: the keyboard and mouse are "
                                 f"read from rank 0's window or the panel's page (got --present {self.present})")
-        if self.mpcdi is not None and self.stereo != "mono":
-            raise InputError.of("stereo", f"{self.stereo}: a projector wall (the wall file's mpcdi) shows one eye: "
-                                          "--stereo mono")
+        if self.mpcdi_right is not None and (self.stereo != "passive" or self.eyes != "own"):
+            raise InputError.of("stereo", f"{self.stereo}: the wall file's mpcdi_right (the right eyes' projectors) "
+                                          "needs --stereo passive --eyes own (an eye's projector a rank)")
+        if self.mpcdi is not None and self.stereo != "mono" and (self.mpcdi_right is None or self.eyes != "own"):
+            raise InputError.of("stereo", f"{self.stereo}: a projector wall (the wall file's mpcdi) shows one eye, "
+                                          "unless its file gives the right eyes' projectors (mpcdi_right) and each "
+                                          "eye has its ranks (--stereo passive --eyes own)")
         if self.monitor is not None and self.present != "window":
             raise InputError.of("monitor", f"needs --present window (got --present {self.present})")
         if any(not 0 <= k < self.ranks for k in self.dark) or len(set(self.dark)) >= self.ranks:

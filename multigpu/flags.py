@@ -148,7 +148,7 @@ def walk_config(a):
                       gpus=tuple(wall.gpus.get(r) for r in ranks) if wall.gpus else (),
                       corners=tuple(wall.corners.get(r) for r in ranks) if wall.corners else (),
                       right_eye=tuple(wall.right_eye.get(r) for r in ranks) if wall.right_eye else (),
-                      mpcdi=wall.mpcdi, output_colors=wall.outputs)
+                      mpcdi=wall.mpcdi, output_colors=wall.outputs, mpcdi_right=wall.mpcdi_right)
 
 
 def screen_of_bezel(wall, grid, tile, mullion) -> tuple[float, float] | None:

@@ -58,6 +58,7 @@ class Wall:
     right_eye: dict[int, tuple[int, int]] = field(default_factory=dict)  # rank -> its passive right-eye output's place
     mpcdi: str | None = None  # the projector outputs' warps and blends (an MPCDI file, checked when read)
     outputs: dict = field(default_factory=dict)  # output name -> {"matrix": (3, 3), "lut": .cube path}: its colour
+    mpcdi_right: str | None = None  # a passive projector wall's right eyes' projectors (``mpcdi`` the left eyes')
 
 
 def rectangle_problem(corners) -> str | None:
@@ -179,7 +180,7 @@ def load_wall(path: str) -> Wall:
     return Wall(path, grid, tile, mullion, displays, positions, hosts, frozenset(full), gpus, doc.get("bezel"), monitor,
                 on, doc.get("compress"), None if doc.get("panel") is None else str(doc["panel"]),
                 None if "screen_m" not in doc else tuple(float(v) for v in doc["screen_m"]), doc.get("stereo", {}),
-                corners, right_eye, mpcdi_file, _outputs(doc, path, where))
+                corners, right_eye, mpcdi_file, _outputs(doc, path, where), _right_eyes(doc, path, where, grid))
 
 
 def _projectors(doc: dict, path: str, where: str, grid, tile, mullion) -> tuple:
@@ -210,6 +211,31 @@ def _projectors(doc: dict, path: str, where: str, grid, tile, mullion) -> tuple:
     return str(file), lay.grid, lay.tile, lay.mullion
 
 
+def _right_eyes(doc: dict, path: str, where: str, grid) -> str | None:
+    """A passive projector wall's right eyes' MPCDI file (``mpcdi_right``, beside ``mpcdi``, the left
+    eyes'): its regions must make the left eyes' wall, tile for tile."""
+    if "mpcdi_right" not in doc:
+        return None
+    from multigpu.warp import mpcdi
+    from multigpu.warp.layout import layout
+
+    if "mpcdi" not in doc:
+        raise InputError(f"{where}: mpcdi_right: give mpcdi too (the left eyes' projectors)")
+    left, right = Path(path).parent / doc["mpcdi"], Path(path).parent / doc["mpcdi_right"]
+    if not right.is_file():
+        raise InputError(f"{where}: mpcdi_right: {right}: no such file")
+    try:
+        a, b = layout(left, *mpcdi.read(left), grid), layout(right, *mpcdi.read(right), grid)
+    except InputError as exc:
+        raise InputError(f"{where}: mpcdi_right: {exc}") from None
+    if (a.grid, a.tile, a.mullion) != (b.grid, b.tile, b.mullion):
+        raise InputError(f"{where}: mpcdi_right: {right.name}'s regions make a {b.grid[0]}x{b.grid[1]} wall of "
+                         f"{b.tile[0]}x{b.tile[1]} tiles overlapping {-b.mullion[0]}x{-b.mullion[1]}, "
+                         f"{left.name}'s {a.grid[0]}x{a.grid[1]} of {a.tile[0]}x{a.tile[1]} overlapping "
+                         f"{-a.mullion[0]}x{-a.mullion[1]}: the eyes' walls must be the same")
+    return str(right)
+
+
 def _outputs(doc: dict, path: str, where: str) -> dict:
     """Each projector output's colour (``warp/colour.py``), its LUT read once here: an output the
     MPCDI file does not name, a bad matrix or LUT ends the job at the door, in one line."""
@@ -219,7 +245,8 @@ def _outputs(doc: dict, path: str, where: str) -> dict:
 
     if "mpcdi" not in doc:
         raise InputError(f"{where}: outputs: give the mpcdi file whose regions they name")
-    names = [o.name for o in mpcdi.read(Path(path).parent / doc["mpcdi"])[1]]
+    names = [o.name for key in ("mpcdi", "mpcdi_right") if key in doc
+             for o in mpcdi.read(Path(path).parent / doc[key])[1]]  # both eyes' (a stereo wall's), by name
     out = {}
     for name, e in doc["outputs"].items():  # a few outputs
         if name not in names:

@@ -35,7 +35,14 @@ def windows(wall: Wall, grid, tile, mullion) -> list[tuple[str, str, int, int, i
     for k, (w, h) in enumerate(sizes):  # K tiles
         x, y = (0, 0) if k in wall.fullscreen else wall.positions.get(k, at[k])
         out.append((wall.hosts.get(k, "this machine"), wall.displays.get(k) or "$DISPLAY", x, y, w, h))
-    if wall.stereo.get("mode") == "passive":
+    if wall.mpcdi_right is not None:  # the right eyes' projectors: their pictures right of the left eyes'
+        from multigpu.warp.layout import outputs_by_tile, picture_size, places
+
+        right = outputs_by_tile(wall.mpcdi_right, grid)
+        span = max(x + w for _, _, x, _, w, _ in out)
+        out += [(h, d, *wall.right_eye.get(k, (span + x, y)), *picture_size(right, k))
+                for k, ((h, d, _, _, _, _), (x, y)) in enumerate(zip(list(out), places(grid, right)))]  # K tiles
+    elif wall.stereo.get("mode") == "passive":
         out += [(h, d, *wall.right_eye.get(k, right_eye_place(c, (x, y))), w, ht)
                 for k, (h, d, x, y, w, ht) in enumerate(list(out))]  # K tiles
     return out
@@ -167,10 +174,11 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
         lines.append(f"--monitor: the operator's view at {wall.monitor[0]},{wall.monitor[1]} {where}")
     if wall.mpcdi is not None:
         from multigpu.warp import mpcdi
-        from multigpu.warp.layout import outputs_by_tile
+        from multigpu.warp.layout import eye_outputs
 
         size, outs = mpcdi.read(Path(wall.mpcdi))
-        each = ", ".join(f"rank {o.tile} {o.name} {o.size[0]}x{o.size[1]}" for o in outputs_by_tile(wall.mpcdi, grid))
+        each = ", ".join(f"rank {o.tile} {o.name} {o.size[0]}x{o.size[1]}"
+                         for o in eye_outputs(wall.mpcdi, grid, wall.mpcdi_right))
         lines.append(f"mpcdi {wall.mpcdi}: {len(outs)} projector outputs on a {size[0]}x{size[1]} buffer, each "
                      f"driven by the rank of its region's tile, its picture in mosaic/outputs/NAME/: {each}")
         for name, c in wall.outputs.items():  # a few outputs

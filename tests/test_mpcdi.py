@@ -245,3 +245,34 @@ def test_a_projector_walls_tiles_are_its_regions_and_others_are_refused(tmp_path
         walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--tile", "320x240"]))
     with pytest.raises(InputError, match=re.escape("--stereo side-by-side: a projector wall")):
         walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--stereo", "side-by-side"]))
+
+
+def test_a_stereo_projector_walls_right_eyes_file_makes_the_same_wall_or_is_refused(tmp_path):
+    """``mpcdi_right`` (the right eyes' projectors): read beside ``mpcdi`` where its regions make the
+    same wall; another wall, no ``mpcdi`` beside it or no such file end the job at the door, in one
+    line; a run needs ``--stereo passive --eyes own``."""
+    import json
+
+    from multigpu.flags import walk_config, walkthrough_parser
+    from multigpu.wall import load_wall
+    from multigpu.warp.make import buffer_size
+
+    for name, n, overlap in (("two", 2, 0.2), ("other", 2, 0.2), ("three", 3, 0.2), ("wide", 2, 0.3)):
+        rig = flat_rig(n, overlap, size=(64, 48))
+        mpcdi.write(tmp_path / f"{name}.mpcdi", buffer_size(rig), outputs(rig, buffer_size(rig)))
+    wall = tmp_path / "wall.json"
+    wall.write_text(json.dumps({"mpcdi": "two.mpcdi", "mpcdi_right": "other.mpcdi"}))
+    assert load_wall(str(wall)).mpcdi_right == str(tmp_path / "other.mpcdi")
+    cfg = walk_config(walkthrough_parser().parse_args(["--wall", str(wall), "--stereo", "passive", "--eyes", "own",
+                                                       "--screen-size", "1.2,0.4"]))
+    assert cfg.mpcdi_right == str(tmp_path / "other.mpcdi") and cfg.processes == 4
+    with pytest.raises(InputError, match=re.escape("mono: the wall file's mpcdi_right (the right eyes' projectors) "
+                                                   "needs --stereo passive --eyes own")):
+        walk_config(walkthrough_parser().parse_args(["--wall", str(wall)]))
+    for doc, says in (({"mpcdi": "two.mpcdi", "mpcdi_right": "three.mpcdi"}, "three.mpcdi: its regions make a 1x3"),
+                      ({"mpcdi": "two.mpcdi", "mpcdi_right": "wide.mpcdi"}, "wide.mpcdi's regions make a 1x2 wall of "),
+                      ({"mpcdi_right": "two.mpcdi"}, "mpcdi_right: give mpcdi too"),
+                      ({"mpcdi": "two.mpcdi", "mpcdi_right": "gone.mpcdi"}, "gone.mpcdi: no such file")):
+        wall.write_text(json.dumps(doc))
+        with pytest.raises(InputError, match=re.escape(says)):
+            load_wall(str(wall))

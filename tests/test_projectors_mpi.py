@@ -181,3 +181,38 @@ def test_a_rank_driving_two_projectors_shows_both_side_by_side(tmp_path):
         got = read_png(out / "mosaic" / "outputs" / name / "frame_00000.png")
         close_to(got, want[name], name)
         assert np.array_equal(shot[:, 96 * k:96 * (k + 1)], got), name
+
+
+def test_a_passive_stereo_projector_wall_drives_each_eyes_projectors_on_their_ranks(tmp_path):
+    """Two tiles, a projector for each eye of each (the wall file's mpcdi and mpcdi_right, the
+    right eyes' rig calibrated apart), four ranks (``--stereo passive --eyes own``): each eye's
+    canvas equals one rank's render of that eye, and each projector's picture is the numpy
+    reference's of its eye's region through its own file."""
+    left_rig, right_rig = flat_rig(2, 0.18, size=(96, 72)), flat_rig(2, 0.18, size=(96, 72), black=0.01)
+    bw, bh = buffer_size(left_rig)
+    assert buffer_size(right_rig) == (bw, bh)
+    for name, rig in (("left", left_rig), ("right", right_rig)):
+        mpcdi.write(tmp_path / f"{name}.mpcdi", (bw, bh), outputs(rig, (bw, bh)))
+    (tmp_path / "wall.json").write_text(json.dumps({"mpcdi": "left.mpcdi", "mpcdi_right": "right.mpcdi"}))
+    stereo = ["--stereo", "passive", "--screen-size", "1.2,0.4", "--frames", "2", "--mosaic-every", "1",
+              "--no-overlay"]
+    one = tmp_path / "one"
+    res = run_mpi(1, ["walkthrough", *SMALL, "--grid", "1x1", "--tile", f"{bw}x{bh}", *stereo, "--out", str(one)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = tmp_path / "own"
+    res = run_mpi(4, ["walkthrough", *SMALL, "--wall", str(tmp_path / "wall.json"), "--eyes", "own", *stereo,
+                      "--out", str(out)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    for f in range(2):
+        for eye in ("left", "right"):
+            canvas = read_png(out / "mosaic" / eye / f"frame_{f:05d}.png")
+            assert np.array_equal(canvas, read_png(one / "mosaic" / eye / f"frame_{f:05d}.png")), (f, eye)
+            want = reference(canvas, tmp_path / f"{eye}.mpcdi")
+            for name in ("p1", "p2"):
+                close_to(read_png(out / "mosaic" / "outputs" / eye / name / f"frame_{f:05d}.png"), want[name],
+                         f"{eye} {name}")
+    lw, rw = (read_png(out / "mosaic" / "outputs" / e / "p1" / "frame_00001.png") for e in ("left", "right"))
+    assert (lw != rw).any()  # the eyes' projectors show their own pictures
+    res = run_mpi(2, ["walkthrough", *SMALL, "--wall", str(tmp_path / "wall.json"), *stereo[:2], "--frames", "1",
+                      "--out", str(tmp_path / "joint")])
+    assert res.returncode == 2 and "needs --stereo passive --eyes own" in res.stderr, res.stderr[-2000:]

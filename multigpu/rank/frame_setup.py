@@ -137,11 +137,12 @@ def build(cfg: WalkConfig, comm, scene, path, renderer, presenter, out: OutputDi
             setup.record = RunRecord(out, comm.Get_size(), n_frames, doc, planner.report, cfg.video, cfg.progress,
                                      cfg.overlay, cfg.record, cfg.resume_at)
             setup.record.legend(scene.meta)  # a simulation's colour bar, on the annotated mosaics
-        if cfg.mpcdi is not None:  # a projector wall: this rank's output, its picture made every frame
+        if cfg.mpcdi is not None:  # a projector wall: this rank's outputs, their picture made every frame
             from multigpu.rank.outputs import Projector
 
-            setup.projector = Projector(renderer.ctx, cfg.mpcdi, rank, cfg.grid, cfg.tile, cfg.output_colors,
-                                        cfg.blend == "on")
+            K = cfg.ranks  # a stereo projector wall's ranks K.. drive the right eyes' projectors (``--eyes own``)
+            setup.projector = Projector(renderer.ctx, cfg.mpcdi if rank < K else cfg.mpcdi_right, rank % K, cfg.grid,
+                                        cfg.tile, cfg.output_colors, cfg.blend == "on")
     except BaseException:
         setup.release(collective=False)
         raise

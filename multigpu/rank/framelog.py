@@ -57,9 +57,9 @@ class FrameLog:
         self.gathered = np.zeros((self.K, th, tw, 3), dtype=np.uint8) if self.rank == 0 else None
         self.outputs = None  # a projector wall's outputs by tile (``Projected``): rank 0 keeps their pictures
         if cfg.mpcdi is not None and self.rank == 0:
-            from multigpu.warp.layout import outputs_by_tile, picture_size
+            from multigpu.warp.layout import eye_outputs, picture_size
 
-            self.outputs = outputs_by_tile(cfg.mpcdi, cfg.grid)
+            self.outputs = eye_outputs(cfg.mpcdi, cfg.grid, cfg.mpcdi_right)
             self.picture_sizes = [picture_size(self.outputs, k) for k in range(self.K)]
         self.shown_at = None  # when this rank's last frame was shown (perf_counter): the frame period
         self._beat_cpu = job.thread_cpu
@@ -158,7 +158,7 @@ class FrameLog:
         # a passive wall's outputs: the left eyes' beside the right eyes', as one X screen spanning both shows them
         wall = (np.concatenate(eyes, axis=1) if st.outputs == 2 else
                 stitch(np.stack([st.pack(g) for g in self.gathered]), self.tiles, self.canvas.size, self.canvas.dark))
-        self.write(self.record.image, f, wall, work.rects, mosaic_due, eyes)
+        self.write(self.record.image, f, wall, work.rects, mosaic_due, eyes, pictures)
 
     def _gather(self, f: int, back: np.ndarray) -> None:
         """Every rank's composed tile into rank 0's ``gathered``: one message each, compressed from

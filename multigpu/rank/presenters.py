@@ -49,13 +49,22 @@ def _eye_presenter(cfg: WalkConfig, rank: int):
     K = cfg.ranks
     tile, eye = rank % K, rank // K
     x0, _, _, y1 = (int(v) for v in cfg.canvas.tiles()[tile])
-    pos = cfg.positions[tile] if cfg.positions and cfg.positions[tile] is not None else (x0, cfg.canvas.size[1] - y1)
+    place, size, beside = (x0, cfg.canvas.size[1] - y1), cfg.tile, None
+    if cfg.mpcdi is not None:  # an eye's projectors: the rank's picture, the left eyes' side by side
+        from multigpu.warp.layout import outputs_by_tile, picture_size, places
+
+        walls = [outputs_by_tile(f, cfg.grid) for f in (cfg.mpcdi, cfg.mpcdi_right)]  # the left eyes', the right's
+        at, sizes = places(cfg.grid, walls[eye]), [picture_size(walls[eye], k) for k in range(K)]
+        place, size = at[tile], sizes[tile]
+        left = zip(places(cfg.grid, walls[0]), (picture_size(walls[0], k) for k in range(K)))
+        beside = (place[0] + max(x + w for (x, _), (w, _) in left), place[1])  # right of the left eyes' pictures
+    pos = cfg.positions[tile] if cfg.positions and cfg.positions[tile] is not None else place
     if eye:
-        pos = cfg.right_eye[tile] if cfg.right_eye and cfg.right_eye[tile] is not None else right_eye_place(cfg.canvas,
-                                                                                                             pos)
+        pos = cfg.right_eye[tile] if cfg.right_eye and cfg.right_eye[tile] is not None else \
+            beside if beside is not None and not cfg.positions else right_eye_place(cfg.canvas, pos)
     display = screen_of(cfg.displays[tile] if cfg.displays else None, cfg.gpus[tile] if cfg.gpus else None)
     where = f"wall file {cfg.wall}, rank {rank} on host {socket.gethostname()}" if cfg.wall and display else "$DISPLAY"
-    return make_presenter(cfg.present, rank, cfg.tile, pos, display, where,
+    return make_presenter(cfg.present, rank, size, pos, display, where,
                           bool(cfg.fullscreen and cfg.fullscreen[tile]) and not eye)  # the right eye: at its place
 
 

@@ -51,6 +51,9 @@ def run(path: str, comm, frames: int | None = None, timeout: float = 60.0,
     wall = load_wall(path)
     grid, tile, mullion = wall.grid or WalkConfig.grid, wall.tile or WalkConfig.tile, wall.mullion or (0, 0)
     stereo = wall.stereo.get("mode", "mono")  # a stereo wall: each eye's mark and a depth test
+    if wall.mpcdi_right is not None:
+        raise InputError.of("wall", f"{path}: the pattern through a stereo projector wall's right eyes' warps is not "
+                                    "shown yet: test each eye's projectors with a wall file of its own mpcdi")
     if k != grid[0] * grid[1]:
         raise InputError.of("wall", f"{path}: a {grid[0]}x{grid[1]} wall needs {grid[0] * grid[1]} ranks but the job "
                             f"has {k} (launch/wall-test {path} starts the right number)")

@@ -132,6 +132,18 @@ def outputs_by_tile(path: str, grid: tuple[int, int] | None = None) -> list[Proj
     return sorted(got, key=lambda o: (o.tile, o.at[1], o.at[0]))
 
 
+def eye_outputs(path: str, grid: tuple[int, int], right: str | None = None) -> list[Projected]:
+    """``outputs_by_tile``; on a stereo projector wall (the right eyes' file ``right``) the left
+    eyes' outputs named ``left/NAME`` and the right eyes' ``right/NAME``, their tiles ranks K.."""
+    if right is None:
+        return outputs_by_tile(path, grid)
+    import dataclasses
+
+    K = grid[0] * grid[1]
+    return [dataclasses.replace(o, name=f"{eye}/{o.name}", tile=o.tile + e * K)
+            for e, (eye, file) in enumerate((("left", path), ("right", right))) for o in outputs_by_tile(file, grid)]
+
+
 def picture_size(outputs: list[Projected], tile: int) -> tuple[int, int]:
     """(w, h) of rank ``tile``'s picture: its outputs side by side (their offsets and sizes)."""
     mine = [o for o in outputs if o.tile == tile]
