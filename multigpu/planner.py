@@ -115,11 +115,11 @@ def cut_at(work: Work, screens: np.ndarray) -> Work:
 
 def eye_config(cfg, stereo):
     """``cfg`` as one eye's wall: its tile and bezels at the eye's pixels, mono (what the
-    decompositions plan from)."""
+    decompositions plan from; a stereo projector wall's warps are the display's, not the plan's)."""
     import dataclasses
 
     return dataclasses.replace(cfg, tile=stereo.eye.tile, mullion=stereo.eye.mullion, stereo="mono", eyes="joint",
-                               head=None, head_poses=None, poses=())
+                               head=None, head_poses=None, poses=(), mpcdi=None, mpcdi_right=None)
 
 
 def focus_of(scene) -> tuple[np.ndarray, np.ndarray]:
