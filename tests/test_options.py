@@ -38,7 +38,7 @@ def test_every_declared_field_has_its_one_flag(cls):
         assert a.option_strings == [flag_of(f.name, opt)] and a.help
     undeclared = {f.name for f in dataclasses.fields(cls)} - {f.name for f, _ in declared(cls)}
     assert undeclared == ({"scene", "displays", "positions", "fullscreen", "gpus", "poses", "corners", "right_eye",
-                           "mpcdi", "focus", "output_colors"}
+                           "mpcdi", "focus", "output_colors", "mpcdi_right"}
                           if cls is WalkConfig
                           else {"ranks", "lods", "step", "live"})
 

@@ -246,9 +246,12 @@ def test_a_recovered_series_run_resumes_at_the_step_of_its_frame(tmp_path, serie
 
     where, path, refs = series
     frames, out = 120, tmp_path / "o"
+    still = tmp_path / "still.json"  # the fixture's still camera, for every frame
+    doc = json.loads(path.read_text())
+    still.write_text(json.dumps({**doc, "cameras": doc["cameras"][:1] * frames}))
     args = ["-n", "2", *arguments(out, where / "run.pvd", (1, 2), (48, 80), ["--color-by", "height",
                                   "--steps-per-second", RATE, "--late-step", "wait", "--recover", "1", "--liveness",
-                                  "3"], path, frames)]
+                                  "3"], still, frames)]
     proc = start_launcher(args, {"LP_NUM_THREADS": "1"})
     try:
         wait_rows(proc, out, 2 * 25)
