@@ -5,13 +5,10 @@ change with the camera held still."""
 
 import json
 import os
-import signal
 
 import numpy as np
 import pytest
-from mpirun import end_launcher, mpi_named, read_png, run_mpi, start_launcher
-
-from multigpu.studies.recovery_bench import rank_pids
+from mpirun import mpi_named, read_png, run_mpi
 
 pytestmark = pytest.mark.mpi
 FRAMES = 5
@@ -90,17 +87,10 @@ def test_a_recovered_wall_resumes_at_the_same_scene_time(tmp_path):
     out = tmp_path / "o"
     args = ["-n", "2", "walkthrough", *SWARM, "--grid", "1x2", "--tile", "48x48", "--frames", str(frames),
             "--mosaic-every", "1", "--no-overlay", "--out", str(out), "--recover", "1", "--liveness", "3"]
-    proc = start_launcher(args, {"LP_NUM_THREADS": "1"})
-    try:
-        from test_recovery_mpi import wait_rows
+    from test_recovery_mpi import killed_once
 
-        wait_rows(proc, out, 2 * 40)
-        os.kill(rank_pids(out)[-1], signal.SIGKILL)
-        _, err = end_launcher(proc, 150)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 0, err[-3000:]
+    code, err = killed_once(args, out, 2 * 40)
+    assert code == 0, err[-3000:]
     s = json.loads((out / "summary.json").read_text())
     assert s["complete"] is True and s["recovery_count"] == 1
     resumed = s["recoveries"][0]["resumed_at"]

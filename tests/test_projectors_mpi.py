@@ -37,6 +37,40 @@ def wall(tmp_path_factory):
     return d
 
 
+def still_path(where):
+    """A path file of the walkthrough's 41st camera, held for 600 frames (what a window shows is
+    then what the run recorded)."""
+    import subprocess
+    import sys
+
+    from mpirun import ROOT
+
+    path = where / "walk.json"
+    subprocess.run([sys.executable, "-m", "multigpu", "path", "make", "walkthrough", *SMALL[:2], "--frames", "60",
+                    "--out", str(path)], cwd=ROOT, check=True, capture_output=True, timeout=120)
+    doc = json.loads(path.read_text())
+    doc["cameras"] = [doc["cameras"][40]] * 600
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def in_windows(ranks: int, wall_file, path, screen: tuple[int, int], out, last: str) -> tuple:
+    """``ranks`` ranks of the wall file in windows on an X server of ``screen`` pixels, until every
+    window is up and output ``last`` has a picture on disk: (the screen, exit code, stderr)."""
+    with Xvfb(screen) as x:
+        proc, kill = start_mpi(ranks, ["walkthrough", *SMALL, "--wall", str(wall_file), "--path", str(path),
+                                       "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out",
+                                       str(out)], env={"DISPLAY": x.name})
+        try:
+            wait_for(lambda: len(windows(x.name)) == ranks and (out / "mosaic" / "outputs" / last).is_dir())
+            shot = screenshot(x.name)
+            escape(x.name, windows(x.name)[0])
+            _, err = proc.communicate(timeout=120)
+        finally:
+            kill() if proc.poll() is None else None
+    return shot, proc.returncode, err
+
+
 def close_to(got: np.ndarray, want: np.ndarray, name: str) -> None:
     """The GPU's pass against the numpy reference: its bilinear weights are 8-bit (a level or two)."""
     d = np.abs(got.astype(int) - want)
@@ -76,30 +110,10 @@ def test_a_projector_wall_composes_its_overlaps_exactly_and_keeps_each_outputs_p
 def test_the_projectors_windows_show_their_pictures_side_by_side(wall, tmp_path):
     """Each rank's window is its projector's output (96x72), the three side by side on one X
     screen; a still path: what is on screen is the run's recorded pictures, bit for bit."""
-    import subprocess
-    import sys
-
-    from mpirun import ROOT
-
-    path = tmp_path / "walk.json"
-    subprocess.run([sys.executable, "-m", "multigpu", "path", "make", "walkthrough", *SMALL[:2], "--frames", "60",
-                    "--out", str(path)], cwd=ROOT, check=True, capture_output=True, timeout=120)
-    doc = json.loads(path.read_text())
-    doc["cameras"] = [doc["cameras"][40]] * 600
-    path.write_text(json.dumps(doc))
+    path = still_path(tmp_path)
     out = tmp_path / "win"
-    with Xvfb((3 * 96, 72)) as x:
-        proc, kill = start_mpi(3, ["walkthrough", *SMALL, "--wall", str(wall / "wall.json"), "--path", str(path),
-                                   "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out)],
-                               env={"DISPLAY": x.name})
-        try:
-            wait_for(lambda: len(windows(x.name)) == 3 and (out / "mosaic" / "outputs" / "p3").is_dir())
-            shot = screenshot(x.name)
-            escape(x.name, windows(x.name)[0])
-            _, err = proc.communicate(timeout=120)
-        finally:
-            kill() if proc.poll() is None else None
-    assert proc.returncode == 0, err[-2000:]
+    shot, code, err = in_windows(3, wall / "wall.json", path, (3 * 96, 72), out, "p3")
+    assert code == 0, err[-2000:]
     canvas = read_png(out / "mosaic" / "frame_00000.png")
     want = reference(canvas, wall / "wall.mpcdi")
     for k, name in enumerate(NAMES):
@@ -142,38 +156,18 @@ def test_a_rank_driving_two_projectors_shows_both_side_by_side(tmp_path):
     overlapping inside its tile as across tiles): the canvas equals one rank's render, each
     output's picture is the numpy reference's of its region, and each rank's window shows its two
     pictures side by side (a still path: bit for bit what the run recorded)."""
-    import subprocess
-    import sys
-
-    from mpirun import ROOT
-
     rig = flat_rig(4, 0.18, size=(96, 72))
     bw, bh = buffer_size(rig)
     mpcdi.write(tmp_path / "four.mpcdi", (bw, bh), outputs(rig, (bw, bh)))
     (tmp_path / "wall.json").write_text(json.dumps({"mpcdi": "four.mpcdi", "grid": "1x2"}))
-    path = tmp_path / "walk.json"
-    subprocess.run([sys.executable, "-m", "multigpu", "path", "make", "walkthrough", *SMALL[:2], "--frames", "60",
-                    "--out", str(path)], cwd=ROOT, check=True, capture_output=True, timeout=120)
-    doc = json.loads(path.read_text())
-    doc["cameras"] = [doc["cameras"][40]] * 600
-    path.write_text(json.dumps(doc))
+    path = still_path(tmp_path)
     one = tmp_path / "one"
     res = run_mpi(1, ["walkthrough", *SMALL, "--grid", "1x1", "--tile", f"{bw}x{bh}", "--path", str(path), "--frames",
                       "1", "--mosaic-every", "1", "--no-overlay", "--out", str(one)])
     assert res.returncode == 0, res.stderr[-3000:]
     out = tmp_path / "win"
-    with Xvfb((4 * 96, 72)) as x:
-        proc, kill = start_mpi(2, ["walkthrough", *SMALL, "--wall", str(tmp_path / "wall.json"), "--path", str(path),
-                                   "--mosaic-every", "100", "--no-overlay", "--present", "window", "--out", str(out)],
-                               env={"DISPLAY": x.name})
-        try:
-            wait_for(lambda: len(windows(x.name)) == 2 and (out / "mosaic" / "outputs" / "p4").is_dir())
-            shot = screenshot(x.name)
-            escape(x.name, windows(x.name)[0])
-            _, err = proc.communicate(timeout=120)
-        finally:
-            kill() if proc.poll() is None else None
-    assert proc.returncode == 0, err[-2000:]
+    shot, code, err = in_windows(2, tmp_path / "wall.json", path, (4 * 96, 72), out, "p4")
+    assert code == 0, err[-2000:]
     canvas = read_png(out / "mosaic" / "frame_00000.png")
     assert np.array_equal(canvas, read_png(one / "mosaic" / "frame_00000.png"))
     want = reference(canvas, tmp_path / "four.mpcdi")

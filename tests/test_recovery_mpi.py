@@ -61,6 +61,23 @@ def wait_rows(proc, out: Path, rows: int, timeout: float = 90) -> None:
         time.sleep(0.1)
 
 
+def killed_once(args: list[str], out: Path, rows: int, env: dict | None = None) -> tuple[int, str]:
+    """``python -m multigpu.launcher.mpirun ARGS`` (outputs in ``out``) with its last rank killed
+    once ``rows`` timing rows are written: its exit code and stderr (its process group killed if
+    it outlives the wait)."""
+    from multigpu.studies.recovery_bench import rank_pids
+
+    proc = start_launcher(args, {"LP_NUM_THREADS": "1", **(env or {})})
+    try:
+        wait_rows(proc, out, rows)
+        os.kill(rank_pids(out)[-1], signal.SIGKILL)
+        _, err = end_launcher(proc, 150)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    return proc.returncode, err
+
+
 @pytest.mark.parametrize("how", ["SIGKILL", "SIGSTOP"])
 def test_a_killed_or_frozen_rank_and_the_wall_comes_back(tmp_path, mpiexec, how):
     before = segments()

@@ -236,13 +236,7 @@ def test_a_recorded_live_run_replays_the_steps_it_showed(tmp_path, series):
 def test_a_recovered_series_run_resumes_at_the_step_of_its_frame(tmp_path, series):
     """A rank killed mid-run (``--recover 1``, ``--late-step wait``): the restarted job shows at
     every frame the step the first would have, each frame equal to one rank's render of it."""
-    import os
-    import signal
-
-    from mpirun import end_launcher, start_launcher
-    from test_recovery_mpi import wait_rows
-
-    from multigpu.studies.recovery_bench import rank_pids
+    from test_recovery_mpi import killed_once
 
     where, path, refs = series
     frames, out = 120, tmp_path / "o"
@@ -252,15 +246,8 @@ def test_a_recovered_series_run_resumes_at_the_step_of_its_frame(tmp_path, serie
     args = ["-n", "2", *arguments(out, where / "run.pvd", (1, 2), (48, 80), ["--color-by", "height",
                                   "--steps-per-second", RATE, "--late-step", "wait", "--recover", "1", "--liveness",
                                   "3"], still, frames)]
-    proc = start_launcher(args, {"LP_NUM_THREADS": "1"})
-    try:
-        wait_rows(proc, out, 2 * 25)
-        os.kill(rank_pids(out)[-1], signal.SIGKILL)
-        _, err = end_launcher(proc, 150)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 0, err[-3000:]
+    code, err = killed_once(args, out, 2 * 25)
+    assert code == 0, err[-3000:]
     s = json.loads((out / "summary.json").read_text())
     assert s["complete"] is True and s["recovery_count"] == 1 and 25 <= s["recoveries"][0]["resumed_at"] < frames
     wanted = [(f // 10) % 4 for f in range(frames)]
