@@ -152,18 +152,18 @@ def describe(wall: Wall, grid, tile, mullion) -> str:
                if order != sorted(order) else []),
              f"{'rank':>4} {'row':>3} {'col':>3}  {'host':<12} {'display':<10} {'gpu':>3}  {'window at':<12} "
              "canvas pixels [x0, y0) top-left"]
+    wins = windows(wall, grid, tile, mullion)  # where each window opens (a projector's: its picture's place)
+    K = grid[0] * grid[1]
     for k, (x0, y0, x1, y1) in enumerate(c.tiles()):  # K tiles
         row, col = k % grid[0], k // grid[0]
         top = H - y1
-        pos = wall.positions.get(k, (int(x0), int(top)))
+        pos = wall.positions.get(k, wins[k][2:4] if wall.mpcdi is not None else (int(x0), int(top)))
         disp = wall.displays.get(k) or "$DISPLAY"
         host = wall.hosts.get(k, "-")
         gpu = wall.gpus.get(k, "-")
         right = ""
-        if wall.stereo.get("mode") == "passive":  # its second output's window (``windows``)
-            from multigpu.core.stereo import right_eye_place
-
-            rx, ry = wall.right_eye.get(k, right_eye_place(c, pos))
+        if len(wins) > K:  # its second output's window (a passive wall's right eye: ``windows``)
+            rx, ry = wins[K + k][2:4]
             right = f", right eye's window at {rx},{ry}"
         lines.append(f"{k:>4} {row:>3} {col:>3}  {host:<12} {disp:<10} {gpu:>3}  {f'{pos[0]},{pos[1]}':<12} "
                      f"[{x0}, {top}){right}")
