@@ -165,6 +165,7 @@ def test_each_step_loads_as_the_scene_of_its_own_file_coloured_over_the_series(t
             return scene.vertices[order[np.searchsorted(scene.sources[order, 0], smooth)], 3:]
 
         assert len(smooth) > 50 and np.allclose(at(step), at(alone), atol=1e-6)
+    assert [p.name.split("-")[0] for p in (tmp_path / "cache").glob("*.alone")] == ["step_2"]  # built alone
     two, _ = load_scene(SceneSpec(model=spec.model, step=2))
     assert two.tris.sum() < step.tris.sum()  # the step with fewer cells has fewer triangles
     with pytest.raises(InputError, match="no step 4 .the series has 4."):
@@ -256,3 +257,24 @@ def test_an_xdmf_time_series_plays_its_steps_at_their_times(tmp_path, monkeypatc
     with pytest.raises(InputError, match="broken.xdmf: not a readable XDMF time series") as err:
         find_series(str(tmp_path / "broken.xdmf"))
     assert "\n" not in str(err.value)
+
+
+def test_a_step_coloured_by_a_cell_field_takes_each_vertexs_cell(tmp_path, monkeypatch):
+    """Coloured by a cell field (each triangle's vertices its own): a step with the first step's
+    cells colours each vertex by its cell's value of this step, as its own build does."""
+    from multigpu.scene.models import SceneSpec, load_scene
+    from multigpu.scene.simulation import colours, lookup
+
+    monkeypatch.setenv("MULTIGPU_CACHE", str(tmp_path / "cache"))
+    where = write_series(tmp_path / "s", 2)
+    mesh = surface(1)
+    mesh.cell_data["cell"] = [np.arange(len(mesh.cells[0].data), dtype=float)[::-1].copy()]  # other values
+    meshio.write(where / "step_1.vtu", mesh)
+    step, _ = load_scene(SceneSpec(model=str(where / "run.pvd"), color_by="cell", color_range=(0.0, 150.0), step=1))
+    alone, _ = load_scene(SceneSpec(model=str(where / "step_1.vtu"), color_by="cell", color_range=(0.0, 150.0)))
+    first, _ = load_scene(SceneSpec(model=str(where / "run.pvd"), color_by="cell", color_range=(0.0, 150.0), step=0))
+    assert np.array_equal(step.indices, first.indices) and (step.sources[:, 1] >= 0).all()
+    assert not list((tmp_path / "cache").glob("*.alone"))  # made from the first step, not built alone
+    want = colours(mesh.cell_data["cell"][0][step.sources[:, 1]], lookup("viridis"), 0.0, 150.0)
+    assert np.array_equal(step.vertex_colors, want) and np.array_equal(step.vertex_colors, alone.vertex_colors)
+    assert not np.array_equal(step.vertex_colors, first.vertex_colors)
