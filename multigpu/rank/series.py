@@ -96,10 +96,18 @@ class Reader:
             return self.loaded[k]
 
     def keep(self, steps: set[int]) -> None:
-        """Let every loaded step but ``steps`` go (the newest stays: a row may yet say it)."""
+        """Let every loaded step but ``steps`` go (the newest stays: a row may yet say it; a live
+        reader's steps loaded ahead of them, the two newest, stay too: not named yet)."""
         with self._cv:
-            for k in [k for k in self.loaded if k not in steps and k != self.newest]:
+            ahead = sorted(k for k in self.loaded if k > max(steps, default=-1))[-2:] if self.followed is not None \
+                else []
+            for k in [k for k in self.loaded if k not in steps and k != self.newest and k not in ahead]:
                 del self.loaded[k]
+
+    def held_up_to(self, k: int) -> int:
+        """The newest loaded step at or before ``k`` (-1: none)."""
+        with self._cv:
+            return max((j for j in self.loaded if j <= k), default=-1)
 
     def close(self) -> None:
         with self._cv:
@@ -274,7 +282,9 @@ class Stepping:
     def row(self, shown: int, late: bool) -> dict:
         """This rank's say in a frame's row: the step it showed (``shown``, ``late``: at the frame's
         submit) and the one it holds ready now."""
-        ready = self.reader.newest
+        # a stream's: the newest held of the steps named so far (the same on every rank once each holds it:
+        # a reader may hold a step ahead of its naming, rank 0's from its keeper, the others' as its file came)
+        ready = self.reader.held_up_to(self.want) if self.live else self.reader.newest
         self.posted.append(ready)
         kept = self.spool.count - 1 if self.spool is not None else -1  # rank 0 of a stream's run: its newest
         row = {"step": shown, "step_ready": ready, "step_late": int(late), "step_wanted": kept}
