@@ -210,32 +210,41 @@ def load_step_file(spec: SceneSpec, path, first, use_cache: bool = True) -> tupl
     marker = cache.with_suffix(".alone")  # its cells differ: built alone (found without reading it again)
     if use_cache and marker.is_file():
         return _load_scene(alone, use_cache)
-    scene = None
-    if use_cache and cache.is_file():
-        try:
-            scene, cached = Scene.load(cache), True
-        except InputError:
-            cache.unlink(missing_ok=True)
-    if scene is None:
+
+    def make() -> Scene | None:
         from multigpu.scene.same_cells import derive
         from multigpu.scene.simulation import cells_key, read
 
-        mesh, cached = read(src), False
+        mesh = read(src)
         same = base.meta.get("simulation", {}).get("cells") == cells_key(mesh)
-        scene = derive(base, mesh, Coloring(spec.color_by, spec.colormap, spec.color_range), src) if same else None
-        if scene is None:
-            if use_cache:
-                marker.touch()
-            return _load_scene(alone, use_cache)
+        return derive(base, mesh, Coloring(spec.color_by, spec.colormap, spec.color_range), src) if same else None
+    scene, cached = _through_cache(cache, make, use_cache)
+    if scene is None:
         if use_cache:
-            try:
-                scene.save(cache)
-                scene = Scene.load(cache)
-            except OSError:
-                pass
+            marker.touch()
+        return _load_scene(alone, use_cache)
     if spec.up is not None:
         scene.meta["up"], scene.meta["up_source"] = axis_vector(spec.up), "--up"
     return scene, {"seconds": time.perf_counter() - t0, "cached": cached, "cache": str(cache) if use_cache else None}
+
+
+def _through_cache(path, make, use_cache: bool) -> tuple[Scene | None, bool]:
+    """(the scene cached at ``path``, True), else (``make()``'s, False), saved there and mapped back
+    (the built arrays go; the file's pages are shared per host): a damaged file is made again, a
+    read-only cache only costs time; (None, False) where ``make`` gives none."""
+    if use_cache and path.is_file():
+        try:
+            return Scene.load(path), True
+        except InputError:
+            path.unlink(missing_ok=True)  # stale or damaged: made again
+    scene = make()
+    if scene is not None and use_cache:
+        try:
+            scene.save(path)
+            scene = Scene.load(path)
+        except OSError:
+            pass
+    return scene, False
 
 
 @functools.lru_cache(maxsize=1)
@@ -287,20 +296,7 @@ def _load_scene(spec: SceneSpec, use_cache: bool) -> tuple[Scene, dict]:
         scene = with_parts(scene)  # parts for culling, then levels of detail where the run can use them
         return scene_lod.with_lods(scene) if spec.lods else scene
     path = cache_dir() / name
-    scene, cached = None, False
-    if use_cache and path.is_file():
-        try:
-            scene, cached = Scene.load(path), True
-        except InputError:
-            path.unlink(missing_ok=True)  # stale or damaged: rebuild
-    if scene is None:
-        scene = build()
-        if use_cache:
-            try:
-                scene.save(path)
-                scene = Scene.load(path)  # the built arrays go; the file's mapped pages are shared per host
-            except OSError:
-                pass  # a read-only cache only costs time
+    scene, cached = _through_cache(path, build, use_cache)
     if spec.up is not None:
         scene.meta["up"], scene.meta["up_source"] = axis_vector(spec.up), "--up"
     info = {"seconds": time.perf_counter() - t0, "cached": cached, "cache": str(path) if use_cache else None}
