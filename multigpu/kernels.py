@@ -19,7 +19,8 @@ Each kernel sits beside the code it serves, as ``<module>_kernel.py``, with its 
 * ``strategies/adaptive_kernel.py``: ``adaptive``'s sums over the T' masks;
 * ``strategies/auto_kernel.py``: the triangles of the objects in view (``auto``'s trial load);
 * ``scene/labels_kernel.py``: connected components of a mesh's vertices (load time);
-* ``scene/parts_kernel.py``: objects cut into parts, their triangles reordered (load time).
+* ``scene/parts_kernel.py``: objects cut into parts, their triangles reordered (load time);
+* ``scene/same_cells_kernel.py``: a series' step in its first step's layout (a live stream's keeper).
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
@@ -47,6 +48,7 @@ from multigpu.core.work_kernel import _parts
 from multigpu.scene.moves_kernel import _machine
 from multigpu.scene.parts import with_parts
 from multigpu.scene.plant import generate_plant
+from multigpu.scene.same_cells import _place_compiled
 from multigpu.scene.swarm_kernel import _fly
 from multigpu.strategies import REGISTRY
 from multigpu.strategies.base_kernel import rank_pixels
@@ -59,7 +61,7 @@ MODULES = ("multigpu.core.bounds_kernel", "multigpu.core.balance_kernel", "multi
            "multigpu.core.drawlist_kernel", "multigpu.core.work_kernel", "multigpu.strategies.cross_kernel",
            "multigpu.strategies.cost_kernel", "multigpu.strategies.base_kernel",
            "multigpu.strategies.adaptive_kernel", "multigpu.strategies.auto_kernel",
-           "multigpu.scene.labels_kernel", "multigpu.scene.parts_kernel")
+           "multigpu.scene.labels_kernel", "multigpu.scene.parts_kernel", "multigpu.scene.same_cells_kernel")
 
 
 def warm() -> float:
@@ -105,6 +107,8 @@ def warm() -> float:
     _machine(0.5, idx, one, np.zeros(1), one, one, np.zeros(1), np.zeros(1), np.empty((1, 3, 3)), np.empty((1, 3)))
     _pose(np.zeros((1, 3, 3)), one, idx, idx, one, one, one, np.ones(1), np.zeros(3), 1e-12, True, np.empty((3, 1)),
           np.empty((3, 1)), np.empty((1, 3)), np.empty(1), np.empty((1, 12), dtype=np.float32), 0)
+    tri = np.zeros((1, 3), dtype=np.int64)  # a live stream's steps, made by rank 0's keeper
+    _place_compiled(np.zeros((1, 3)), idx, tri, idx, None, 1, 0)
     return time.perf_counter() - t0
 
 

@@ -80,10 +80,19 @@ def test_the_reader_keeps_each_step_of_a_bp5_file_as_a_series_file(tmp_path):
     said = []
     spool = Spool(f"adios2:{tmp_path / 'run.bp'}", tmp_path / "steps", 20.0, say=lambda *a, **k: said.append(a[0]))
     spool.first()
+    time.sleep(0.3)
+    assert spool.count == 1  # the steps after the first wait for the frame loop
+    made, sent = [], -1
+    spool.attach(lambda k, mesh, path, write: bytearray(f"{k} {len(mesh.points)} {path.name}".encode()))
     t = time.monotonic()
-    while not spool.ended and time.monotonic() - t < 30:
+    while not (spool.ended and sent == 4) and time.monotonic() - t < 30:
+        got = spool.next_made(sent)  # a file's steps: each in turn, none passed over
+        if got is not None:
+            sent = got[0]
+            made.append(got[1].decode())
         time.sleep(0.02)
     assert spool.ended and spool.count == 5 and spool.error is None and said == []
+    assert made == [f"{k} 144 step_{k:06d}.vtu" for k in range(1, 5)]
     series = find_series(str(tmp_path / "steps" / "step_*.vtu"))
     assert [p.name for p in series.paths] == [f"step_{k:06d}.vtu" for k in range(5)]
     last = meshio.read(series.paths[-1])

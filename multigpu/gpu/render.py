@@ -142,6 +142,21 @@ class RegionRenderer:
         self._load(scene, shared, ready)
         self.passes = [(p, self._array(p, False)) for p, _ in self.passes]
 
+    def restep(self, scene, keep: int = 8) -> None:
+        """Draw ``scene`` from the next frame on where only its vertices and their colours differ
+        from the scene drawn now (a series' step in its first step's layout: ``scene/same_cells.py``):
+        the index, object and colour buffers and the draw list stay; the old vertex buffers go as
+        ``rescene``'s do."""
+        if self.textured or self.mbo is not None:
+            raise ValueError("a textured or moving scene's geometry is not swapped")
+        old = (*(v for _, v in self.passes), self.vbo, self.rgba)
+        self._retired.append((self._submits + keep, old, None))  # (the file maps stay: the indices draw from them)
+        self.origin = np.asarray(scene.origin, dtype=np.float64)
+        self.vbo = upload(self.ctx, scene.vertices, 16, pack_vertices)
+        if self.per_vertex:
+            self.rgba = upload(self.ctx, scene.vertex_colors, 4)
+        self.passes = [(p, self._array(p, False)) for p, _ in self.passes]
+
     def _retire(self) -> None:
         """Let go the geometry of steps whose frames have all been read (``rescene``)."""
         while self._retired and self._retired[0][0] <= self._submits:

@@ -69,7 +69,7 @@ class Frames:
         self.moving = None if motion is None else Moving(scene, motion, cfg.scene.anim_speed, self.planner,
                                                          self.projection, self.draw.culler, self.fidelity.chooser,
                                                          renderer, spheres=self.fidelity.chooser.levels > 1)
-        self.stepping = series_stepping(scene, cfg.scene, self.rank, cfg.timeout, setup.spool)  # rank/series.py
+        self.stepping = series_stepping(scene, cfg.scene, self.rank, cfg.timeout, setup.spool, comm)  # rank/series.py
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col
@@ -115,11 +115,9 @@ class Frames:
             steered = control is not None and control.scene_time is not None
             when = control.scene_time if steered else self.moving.time_of(f, self.path)
             self.moving.pose(t, when)
-        if self.stepping is not None and self.stepping.live:  # a stream: the last frame's rows name its newest step
-            with t.phase("sync"):  # now (every rank at this frame), not a frame later (``rows.later``)
-                early = self.rows.land()
-            for landed in early:
-                self.landed(*landed)
+        if self.stepping is not None and self.stepping.live:  # a stream: rank 0's newest step, to every rank now
+            with t.phase("sync"):
+                self.stepping.hear()
         if self.stepping is not None:  # the series' step the frame's scene time wants, where every rank holds it
             steered = control is not None and control.scene_time is not None
             when = control.scene_time if steered else self.stepping.time_of(f, self.path)
@@ -203,7 +201,7 @@ class Frames:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
         self.learn.append((f, every[:, self.col["rendering_cpu_ms"]].copy()))
         if self.stepping is not None:
-            self.stepping.landed(every[:, self.col["step_ready"]], every[:, self.col["step_wanted"]])
+            self.stepping.landed(every[:, self.col["step_ready"]])
         self.fidelity.landed(f, float(every[:, self.col["frame_ms"]].mean()))  # a frame-rate target learns
         rows = self.log.landed(f, every, recorded if self.cfg.record else None)  # rank 0's records
         if self.live is not None and rows is not None:  # the page's plots (and its recording)

@@ -12,7 +12,8 @@ decompositions, the part culler and the level chooser (``swap_in``). A step that
 leaves the wall on the step it shows (``step_late`` in the row), unless ``--late-step wait`` asks every
 rank to wait for it at the frame that wants it (every step at its own frames, as a recording wants;
 no agreement is needed then). A step that cannot be read is said once, and the series plays on past
-it. A part of the frame loop with one job.
+it. A live stream's steps come otherwise: rank 0 sends each one to every rank at a frame's start
+(``rank/pushed.py``), and every rank swaps it in at that frame. A part of the frame loop with one job.
 """
 
 from __future__ import annotations
@@ -33,20 +34,14 @@ from multigpu.scene.series import after, on_the_way, step_at
 
 #: seconds a rank waits for another rank of its host to build a step before building it itself
 LOCK_WAIT = 600.0
-#: seconds between a live reader's looks for the next kept step
-FOLLOW = 0.005
 
 
 class Reader:
     """Loads the steps of ``spec``'s series in a daemon thread, the one asked for last first:
-    ``newest`` is the last one loaded, and every loaded step stays until ``keep`` lets it go.
-    ``follow`` (a live stream's, from step ``follow``): the next step is loaded as soon as its file
-    is there (rank 0 keeps it), before any rank is told of it, so the frame that shows it waits on
-    no read."""
+    ``newest`` is the last one loaded, and every loaded step stays until ``keep`` lets it go."""
 
-    def __init__(self, spec, n: int, say=None, path_of=None, follow: int | None = None):
+    def __init__(self, spec, n: int, say=None, path_of=None):
         self.spec, self.n, self.say, self.path_of = spec, n, say, path_of
-        self.followed = follow  # the last step the live reader loaded or was asked for (None: not live)
         self.loaded: dict[int, tuple] = {}  # step -> (scene, buffers file)
         self.newest = -1
         self.bad: dict[int, str] = {}  # steps that could not be read, and why
@@ -65,8 +60,6 @@ class Reader:
             if k in self.bad or k == self.asked:
                 return
             self.asked = k
-            if self.followed is not None:
-                self.followed = max(self.followed, k)
             self._cv.notify()
 
     def wait_for(self, k: int, timeout: float) -> tuple | None:
@@ -81,33 +74,16 @@ class Reader:
                 return self.loaded[k]
             return None
 
-    def offer(self, k: int, got: tuple) -> None:
-        """Step ``k`` loaded elsewhere (rank 0's stream keeper made it): held as if read here."""
-        with self._cv:
-            if not self._closed:
-                self.loaded[k], self.newest = got, max(self.newest, k)
-                if self.followed is not None:
-                    self.followed = max(self.followed, k)
-                self._cv.notify_all()
-
     def take(self, k: int) -> tuple:
         """Step ``k``'s (scene, buffers file, its renderer's part): loaded (every rank said so)."""
         with self._cv:
             return self.loaded[k]
 
     def keep(self, steps: set[int]) -> None:
-        """Let every loaded step but ``steps`` go (the newest stays: a row may yet say it; a live
-        reader's steps loaded ahead of them, the two newest, stay too: not named yet)."""
+        """Let every loaded step but ``steps`` go (the newest stays: a row may yet say it)."""
         with self._cv:
-            ahead = sorted(k for k in self.loaded if k > max(steps, default=-1))[-2:] if self.followed is not None \
-                else []
-            for k in [k for k in self.loaded if k not in steps and k != self.newest and k not in ahead]:
+            for k in [k for k in self.loaded if k not in steps and k != self.newest]:
                 del self.loaded[k]
-
-    def held_up_to(self, k: int) -> int:
-        """The newest loaded step at or before ``k`` (-1: none)."""
-        with self._cv:
-            return max((j for j in self.loaded if j <= k), default=-1)
 
     def close(self) -> None:
         with self._cv:
@@ -115,24 +91,11 @@ class Reader:
             self.loaded.clear()
             self._cv.notify()
 
-    def _arrived(self) -> bool:
-        """A live reader: the step after the last it followed is there (its file, rank 0's kept
-        step): asked for now (under the lock)."""
-        if self.followed is None:
-            return False
-        k = self.followed + 1
-        if k in self.loaded or k in self.bad or not self.path_of(k).exists():
-            return False
-        self.asked = self.followed = k
-        return True
-
     def _run(self) -> None:
         while True:
             with self._cv:
                 while self.asked is None and not self._closed:
-                    if self._arrived():
-                        break
-                    self._cv.wait(None if self.followed is None else FOLLOW)
+                    self._cv.wait()
                 if self._closed:
                     return
                 k = self.asked
@@ -197,8 +160,8 @@ def reader_spec(spec, scene):
     return dataclasses.replace(spec, color_range=(float(got["range"][0]), float(got["range"][1])))
 
 
-def step_paths(spec, scene):
-    """Step k's file: a file series' as found once, a live stream's by the name its reader gives it."""
+def step_paths(spec):
+    """Step k's file: a file series' as found once, a live stream's by the name rank 0 keeps it by."""
     from pathlib import Path
 
     if spec.live:
@@ -216,7 +179,7 @@ class Stepping:
     """The series of ``scene`` (its first step, shown now) played at ``spec``'s rate: each frame's
     step decided (``frame``), each row's say (``row``), every rank's rows heard (``landed``)."""
 
-    def __init__(self, scene, spec, rank: int, timeout: float = 60.0, spool=None):
+    def __init__(self, scene, spec, rank: int, timeout: float = 60.0, spool=None, comm=None):
         info = scene.meta["series"]
         self.wait, self.timeout = spec.late_step == "wait", float(timeout)
         self.n, self.shown, self.want = int(info["steps"]), int(info["step"]), int(info["step"])
@@ -226,16 +189,33 @@ class Stepping:
         if self.live and self.end == "loop":
             self.end = "hold"
         self.rank = rank
-        self.reader = Reader(reader_spec(spec, scene), self.n, self._say if rank == 0 else None,
-                             step_paths(spec, scene), self.shown if self.live and rank != 0 else None)
+        spec = reader_spec(spec, scene)
+        self.reader = self.pushed = self.incoming = None
+        if self.live:  # rank 0 sends each step it made to every rank (``rank/pushed.py``)
+            self.pushed = self._pushed(spec, comm)
+        else:
+            self.reader = Reader(spec, self.n, self._say if rank == 0 else None, step_paths(spec))
         self.agreed = -1  # the step every rank held ready in the last landed rows (-1: none)
         self.posted: deque[int] = deque()  # the ready steps of this rank's rows not landed yet
         self.last_shown = self.shown  # the step of the last frame shown (``row``: a stream's delay)
         self.swaps = 0
         self.said = None  # the stream's state last said (``say_note``)
-        if spool is not None:  # rank 0 of a stream's run: each kept step's cache built as it comes
-            spool.prepare = lambda k, path: self.reader.offer(k, load_step(self.reader.spec, k, path,
-                                                                           self.reader.path_of(0)))
+
+    def _pushed(self, spec, comm):
+        """A live run's steps from rank 0 (its keeper makes each one: ``spool.attach``)."""
+        from multigpu.rank.pushed import Pushed, message
+        from multigpu.scene.models import first_step
+
+        first = step_paths(spec)(0)
+        self.base = first_step(spec, first)[0]  # what each step changes (every rank maps it from the cache)
+        self.in_base = True  # the renderer draws the first step's layout (a step built alone is its own)
+        if self.spool is not None:
+            self.spool.attach(lambda k, mesh, path, write: message(spec, mesh, path, first, write))
+        return Pushed(comm, self.timeout, None if self.spool is None else self.spool.next_made)
+
+    def hear(self) -> None:
+        """A live run, at a frame's start on every rank (collective): rank 0's newest step, if new."""
+        self.incoming = self.pushed.next()
 
     def _say(self, k: int, why: str) -> None:
         """A step that cannot be read, once (rank 0; every rank finds the same)."""
@@ -253,9 +233,9 @@ class Stepping:
         """The step scene time ``when`` wants: the (scene, buffers file) to swap in now where every
         rank holds one on the way to it (None: the wall keeps its step); the next step asked for.
         ``replayed``: the step a recorded run showed at this frame (its replay waits for it)."""
-        if self.live:  # the newest step rank 0 named (``landed``): a stream's steps as they come
-            want, self.n = self.want, max(self.n, self.want + 1)
-        elif replayed is not None and 0 <= replayed < self.n:
+        if self.live:  # the step rank 0 sent at this frame's start (``hear``), on every rank
+            return self._live()
+        if replayed is not None and 0 <= replayed < self.n:
             self.want = want = int(replayed)
             self.past_end = when * self.rate >= self.n
         else:
@@ -279,12 +259,23 @@ class Stepping:
             self.reader.ask(nxt)
         return swap
 
+    def _live(self) -> tuple | None:
+        got, self.incoming = self.incoming, None
+        if got is None:
+            return None
+        from multigpu.rank.pushed import step_scene
+
+        k, msg = got
+        self.want = self.shown = k
+        self.n, self.swaps = max(self.n, k + 1), self.swaps + 1
+        restep = "changed" in msg and self.in_base  # the layout drawn now is the first step's: vertices only
+        self.in_base = "changed" in msg
+        return step_scene(self.base, msg), None, None, restep
+
     def row(self, shown: int, late: bool) -> dict:
         """This rank's say in a frame's row: the step it showed (``shown``, ``late``: at the frame's
         submit) and the one it holds ready now."""
-        # a stream's: the newest held of the steps named so far (the same on every rank once each holds it:
-        # a reader may hold a step ahead of its naming, rank 0's from its keeper, the others' as its file came)
-        ready = self.reader.held_up_to(self.want) if self.live else self.reader.newest
+        ready = self.shown if self.live else self.reader.newest  # a stream's: the step it shows (sent whole)
         self.posted.append(ready)
         kept = self.spool.count - 1 if self.spool is not None else -1  # rank 0 of a stream's run: its newest
         row = {"step": shown, "step_ready": ready, "step_late": int(late), "step_wanted": kept}
@@ -295,16 +286,14 @@ class Stepping:
         self.last_shown = shown
         return row
 
-    def landed(self, ready: np.ndarray, wanted: np.ndarray | None = None) -> None:
-        """Every rank's ``step_ready`` (and ``step_wanted``: rank 0's newest kept step of a stream) of a
-        landed frame: the same on every rank, at the same frame."""
+    def landed(self, ready: np.ndarray) -> None:
+        """Every rank's ``step_ready`` of a landed frame: the same on every rank, at the same frame."""
         if self.posted:
             self.posted.popleft()
-        if self.live and wanted is not None:
-            self.want = max(self.want, int(wanted[0]))
         first = int(ready[0])
         self.agreed = first if first >= 0 and (ready == first).all() else -1
-        self.reader.keep({self.agreed, *self.posted})
+        if self.reader is not None:
+            self.reader.keep({self.agreed, *self.posted})
 
     def ended(self) -> bool:
         """``--at-end stop``: the series' last step was shown and its time is over (a stream: the
@@ -335,20 +324,27 @@ class Stepping:
             panel.step_note = note
 
     def close(self) -> None:
-        self.reader.close()
+        if self.reader is not None:
+            self.reader.close()
 
 
-def swap_in(frames, scene, shared, ready=None):
+def swap_in(frames, scene, shared, ready=None, restep: bool = False):
     """A series' next step drawn and planned by ``frames`` (``rank/frames.Frames``) from this frame
-    on, on every rank at once: its geometry in the renderer, its bounds and objects in the planner,
-    culler and level chooser (the frames in flight keep theirs). Returns the scene without its
-    geometry, the frame loop's from now on."""
+    on, on every rank at once: its geometry in the renderer (``restep``: only its vertices, the
+    layout drawn now being its own), its bounds and objects in the planner, culler and level
+    chooser (the frames in flight keep theirs). Returns the scene without its geometry, the frame
+    loop's from now on."""
     from multigpu.core.culling import PartCuller
     from multigpu.core.lod import LevelChooser
     from multigpu.scene.moves import movers_of
 
     eyes = 1 if frames.stereo is None else 2  # submits a frame
-    frames.renderer.rescene(scene, shared, keep=(frames.latency + 2) * eyes, ready=ready)
+    if any(frames.cfg.offset):  # moved as the first step was (``walkthrough.load_world``)
+        scene = scene.translated(frames.cfg.offset)
+    if restep:
+        frames.renderer.restep(scene, keep=(frames.latency + 2) * eyes)
+    else:
+        frames.renderer.rescene(scene, shared, keep=(frames.latency + 2) * eyes, ready=ready)
     light = scene.without_geometry()  # the GL buffers hold its geometry now
     light.movers = movers_of(light, frames.cfg.scene)
     frames.planner.rescene(light)
@@ -363,10 +359,11 @@ def replayed_step(path, f: int) -> int | None:
     return int(steps[f]) if steps is not None and 0 <= f < len(steps) else None
 
 
-def series_stepping(scene, spec, rank: int, timeout: float = 60.0, spool=None) -> Stepping | None:
-    """The frame loop's series part, where the scene is a series' step (None otherwise)."""
+def series_stepping(scene, spec, rank: int, timeout: float = 60.0, spool=None, comm=None) -> Stepping | None:
+    """The frame loop's series part, where the scene is a series' step (None otherwise); ``comm``:
+    the ranks a live stream's steps go to."""
     if "series" not in scene.meta:
         return None
     if spec.moving:
         raise InputError.of("moving", "a series' steps do not move as machinery (leave --moving out)")
-    return Stepping(scene, spec, rank, timeout, spool)
+    return Stepping(scene, spec, rank, timeout, spool, comm)

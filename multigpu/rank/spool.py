@@ -4,14 +4,15 @@
 live, or replayed once written); any other name is an SST stream (the writer's ``NAME.sst`` contact
 file: a live code, its steps handed over the network). Each step's variables (``scene/stream_mesh.py``)
 are written as the next file of a series in the run's outputs (``steps/step_NNNNNN.vtu``: the steps
-kept beside the mosaics, readable by ParaView), which the wall plays as any series
-(``rank/series.py``): every rank loads the newest step rank 0 names, and it appears on every rank
-at the same frame. A step the wall cannot use is said in one line and left out; a variable that
-fits nothing is named once. A step stamped ``written`` (the writer's ``time.time()``) gives the
-delay from its write to the first frame that shows it (``step_delay_ms`` in the timings; the
-``step_transfer_ms`` of it until rank 0 had read it, ``step_kept_ms`` until it had kept it and
-named it to the wall). The reader is a daemon thread: nothing from
-the stream raises in the frame loop. The ``adios2`` wheel is imported here only.
+kept beside the mosaics, readable by ParaView, and what a replay plays), and made ready for the wall
+by the frame loop's ``make`` (``rank/pushed.message``, from the arrays as they came), which rank 0
+then sends every rank at the next frame's start (``rank/pushed.Pushed``): a step appears on every
+rank at the same frame. The steps after the first wait for the frame loop (``attach``). A step the
+wall cannot use is said in one line and left out; a variable that fits nothing is named once. A step
+stamped ``written`` (the writer's ``time.time()``) gives the delay from its write to the first frame
+that shows it (``step_delay_ms`` in the timings; the ``step_transfer_ms`` of it until rank 0 had
+read it, ``step_kept_ms`` until rank 0 had it made for the wall). The reader and the keeper are daemon
+threads: nothing from the stream raises in the frame loop. The ``adios2`` wheel is imported here only.
 """
 
 from __future__ import annotations
@@ -60,9 +61,11 @@ class Spool:
         self.where.mkdir(parents=True, exist_ok=True)
         self.count, self.ended, self.error, self.arrived = 0, False, None, time.monotonic()
         self.refused = 0  # steps that could not be used
-        # made ready for the wall as it is kept (the frame loop sets it: ``rank/series.py``'s cache build),
-        # so every rank maps a step rank 0 names rather than each building it
-        self.prepare = None
+        # ``(step, mesh, file, write) -> message``: each step after the first made ready for the wall before it
+        # is kept (``write()`` keeps it now, where the making needs its file)
+        # (the frame loop's, ``attach``); the steps made and not sent yet: (step, message)
+        self.make, self._made = None, deque()
+        self._attached = threading.Event()
         self.stamps: dict[int, tuple[float, float, float]] = {}  # kept step -> (written, came, kept), where stamped
         self._noted: set[str] = set()
         self._closed = False
@@ -87,10 +90,28 @@ class Spool:
                              f"{self.name}{'' if self.engine == 'BP5' else '.sst'}?)")
         raise InputError.of("model", f"{self.model}: {why}")
 
+    def attach(self, make) -> None:
+        """The frame loop is there: each later step is kept and made by ``make`` (``made``)."""
+        self.make = make
+        self._attached.set()
+
+    def next_made(self, after: int) -> tuple[int, bytearray] | None:
+        """The step made for the wall to send after step ``after`` was, ``(step, message)``: a live
+        stream's newest (the wall shows steps as they come), a file's next (it plays every step);
+        None: none yet."""
+        with self._cv:
+            while self._made and self._made[0][0] <= after:
+                self._made.popleft()
+                self._cv.notify_all()
+            if not self._made:
+                return None
+            return self._made[-1] if self.engine == "SST" else self._made[0]
+
     def close(self) -> None:
         with self._cv:
             self._closed = True
             self._cv.notify_all()
+        self._attached.set()
 
     def _run(self) -> None:
         try:
@@ -160,6 +181,10 @@ class Spool:
             if item is None:
                 self.ended = True
                 return
+            while self.count and not self._attached.wait(0.5) and not self._closed:
+                pass  # the steps after the first: once the frame loop makes them (``attach``)
+            if self._closed:
+                return
             try:
                 self._keep(*item)
             except Exception as exc:  # noqa: BLE001 (a step that cannot be kept is said, never raised)
@@ -185,19 +210,38 @@ class Spool:
             return
         for n in notes:
             self._note(n.split(": step ", 1)[0] + ": " + n.split(": ", 2)[-1])
-        path = self.where / NAME.format(self.count)
-        tmp = path.with_name(f".{path.stem}-{os.getpid()}.vtu")
-        meshio.write(tmp, mesh, binary=True, compression=None)  # zlib: 21 ms for a 96x96 plate, raw 3
-        tmp.replace(path)
-        if self.prepare is not None:
+        k, path = self.count, self.where / NAME.format(self.count)
+        written_to = []
+
+        def write() -> None:  # the step's file: written whole, then renamed; once
+            if not written_to:
+                tmp = path.with_name(f".{path.stem}-{os.getpid()}.vtu")
+                meshio.write(tmp, mesh, binary=True, compression=None)  # zlib: 21 ms for a 96x96 plate, raw 3
+                tmp.replace(path)
+                written_to.append(path)
+        made = None
+        if self.make is not None:  # made for the wall first (from the arrays as they came), kept after
             try:
-                self.prepare(self.count, path)
-            except Exception as exc:  # noqa: BLE001 (the wall's own reader says it again, once, if it must)
-                self._note(f"{self.model}: step {self.count + self.refused}: {_first_line(exc)}")
+                made = self.make(k, mesh, path, write)
+            except Exception as exc:  # noqa: BLE001 (a step the wall cannot make is said once and left out)
+                self.refused += 1
+                self._note(f"{self.model}: step {k + self.refused - 1}: {_first_line(exc)}; the step is left out")
+                path.unlink(missing_ok=True)
+                return
         if written is not None and np.size(written) == 1 and np.isfinite(written).all():
-            self.stamps[self.count] = (float(np.ravel(written)[0]), came, time.time())
-        self.count += 1
-        self.arrived = time.monotonic()
+            self.stamps[k] = (float(np.ravel(written)[0]), came, time.time())
+        if made is not None:
+            with self._cv:  # a live stream's newest replaces those not sent; a file's waits its turn
+                if self.engine == "SST":
+                    self._made.clear()
+                while len(self._made) >= 2 and not self._closed:
+                    self._cv.wait(0.1)
+                self._made.append((k, made))
+        try:
+            write()
+        finally:  # (a step the wall shows but could not keep is said: the keeper's note)
+            self.count += 1
+            self.arrived = time.monotonic()
 
     def _note(self, line: str) -> None:
         """``line`` once per run."""

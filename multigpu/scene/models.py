@@ -30,6 +30,7 @@ import math
 import re
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 from multigpu.errors import InputError, check_file
 from multigpu.options import check, option, register
@@ -194,16 +195,12 @@ def load_step_file(spec: SceneSpec, path, first, use_cache: bool = True) -> tupl
     """The step of a series in file ``path`` whose first step is file ``first``, coloured over
     ``spec``'s range (the series'): where its cells are the first step's, that step's layout with
     this step's points and colours (``scene/same_cells.py``), else built alone; cached either way."""
-    from pathlib import Path
-
     alone = dataclasses.replace(spec, model=str(path), step=0)
     src = Path(path)
     if Path(first) == src or src.suffix.lower() not in SIMULATION:
         return _load_scene(alone, use_cache)
     t0 = time.perf_counter()
-    fst = check_file(first, "model", "model file").stat()
-    base, base_info = _first_step(dataclasses.replace(spec, model=str(first), step=0, up=None), use_cache,
-                                  (fst.st_size, fst.st_mtime_ns))
+    base, base_info = first_step(spec, first, use_cache)
     st = check_file(path, "model", "model file").stat()
     key = _key(str(src.resolve()), st.st_size, st.st_mtime_ns, "cells of", base_info.get("cache") or str(first))
     cache = cache_dir() / f"{src.stem}-{key}.npz"
@@ -245,6 +242,29 @@ def _through_cache(path, make, use_cache: bool) -> tuple[Scene | None, bool]:
         except OSError:
             pass
     return scene, False
+
+
+def step_changes(spec: SceneSpec, mesh, path, first) -> tuple[dict, dict] | None:
+    """What the step ``mesh`` (written to ``path``; the series' first step is file ``first``)
+    changes of the first step's scene (``same_cells.changes``: made in memory, no file read), or
+    None where its cells are not the first step's (it is then built alone: ``load_step_file``)."""
+    from multigpu.scene.same_cells import changes
+    from multigpu.scene.simulation import cells_key
+
+    base, _ = first_step(spec, first)
+    if base.meta.get("simulation", {}).get("cells") != cells_key(mesh):
+        return None
+    got = changes(base, mesh, Coloring(spec.color_by, spec.colormap, spec.color_range), Path(path))
+    if got is not None and spec.up is not None:
+        got[1]["up"], got[1]["up_source"] = axis_vector(spec.up), "--up"
+    return got
+
+
+def first_step(spec: SceneSpec, first, use_cache: bool = True) -> tuple[Scene, dict]:
+    """The scene of a series' first step, file ``first`` (held while its later steps are made)."""
+    fst = check_file(first, "model", "model file").stat()
+    return _first_step(dataclasses.replace(spec, model=str(first), step=0, up=None), use_cache,
+                       (fst.st_size, fst.st_mtime_ns))
 
 
 @functools.lru_cache(maxsize=1)
