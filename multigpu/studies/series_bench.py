@@ -19,10 +19,11 @@ play of a series finds them. Headless 2x2 walls of 256x256 tiles (4 ranks) walk 
    ``--late-step wait``: every step at its frames, as ParaView shows them), alternated; wall time
    per frame (ParaView: rank 0's loop; multigpu: the frame period) and the slowest rank's CPU.
 4. **Live**: the example simulation (``examples/simulation/heat.py``, a 96x96 plate, a step every
-   0.1 s) streaming over SST to a 2x2 wall (``--late-step wait``: every rank swaps a step in at the
-   frame rank 0's naming of it lands, its cache built by then); from each step's write (the writer's
-   stamp) to the first frame that shows it (the run's own summary: ``series.delay_ms_median``), and the part of it
-   before rank 0 had read the step (the transfer), in ms and in frames of the run's median period.
+   0.1 s) streaming over SST to a 2x2 wall, at ``--latency 0`` (a window wall's) and 1 (a headless
+   run's default); from each step's write (the writer's stamp) to the first frame that shows it (the
+   run's own summary: ``series.delay_ms_median``), split into the part before rank 0 had read the
+   step (the transfer), the keeping (until rank 0 had it made for the wall, to be sent at the next
+   frame's start: ``rank/pushed.py``) and the rest, in ms and in frames of the run's median period.
 
 Results in ``out/series/`` (``series.csv``). Figures only, no asserts.
 """
@@ -126,7 +127,7 @@ def bench_series(quick: bool) -> list[dict]:
     print(f"  memory (peak PSS, host): series {mib['series']:.0f} MiB against {mib['still']:.0f} MiB still: "
           f"{extra:+.2f} steps' worth (a step: {step_mib:.0f} MiB of cached scene and GL buffers)")
     rows += against_paraview(data, frames, lo, hi, rounds)
-    rows += live(300 if quick else 900)
+    rows += [row for latency in (0, 1) for row in live(300 if quick else 900, latency)]
     OUT.mkdir(parents=True, exist_ok=True)
     keys = sorted({k for r in rows for k in r}, key=lambda k: (k not in ("part", "arm"), k))
     write_csv(OUT / "series.csv", [{k: r.get(k, "") for k in keys} for r in rows])
@@ -183,8 +184,9 @@ def against_paraview(data: Path, frames: int, lo: float, hi: float, rounds: int,
              "wall_lead": lead, "cpu_lead": cpu} for arm, m in med.items()]
 
 
-def live(frames: int) -> list[dict]:
-    """Part 4: the example simulation streamed live to a 2x2 wall; the delays from its summary."""
+def live(frames: int, latency: int) -> list[dict]:
+    """Part 4: the example simulation streamed live to a 2x2 wall at ``--latency latency``; the
+    delays from its summary and timings."""
     import subprocess
     import sys
     import tempfile
@@ -204,20 +206,20 @@ def live(frames: int) -> list[dict]:
                 time.sleep(0.05)
             run = walk(Path(tmp) / "wall", (2, 2), (256, 256),
                        ["--model", f"adios2:{tmp}/heat", "--color-by", "temperature", "--range", "0,1", "--frames",
-                        str(frames), "--path-kind", "orbit", "--mosaic-every", "0", "--late-step", "wait"], 1800)
+                        str(frames), "--path-kind", "orbit", "--mosaic-every", "0", "--latency", str(latency)], 1800)
         finally:
             end(sim)  # its whole session
     sr = run.summary["series"]
     transfer, kept = (_median_stamped(run.col(c)[:, 0]) for c in ("step_transfer_ms", "step_kept_ms"))
-    period = run.summary["frame_ms_median"]
-    after = (sr["delay_ms_median"] - transfer) / period
-    print(f"  live (SST, heat.py 96x96, a step every 0.1 s): {sr['delays']} steps shown; write to first frame "
-          f"{sr['delay_ms_median']:.0f} ms median, of which the transfer {transfer:.1f} ms and the keeping (rank 0 "
-          f"has it in the wall's layout and names it) {kept - transfer:.1f} ms; after the transfer "
-          f"{after:.1f} frames of {period:.1f} ms, after the naming {(sr['delay_ms_median'] - kept) / period:.1f}")
-    return [{"part": "live", "arm": "sst", "steps_shown": sr["delays"], "delay_ms": sr["delay_ms_median"],
-             "transfer_ms": transfer, "kept_ms": kept, "frame_ms": period, "delay_frames_after_transfer": after,
-             "delay_frames_after_naming": (sr["delay_ms_median"] - kept) / period}]
+    period, delay = run.summary["frame_ms_median"], sr["delay_ms_median"]
+    print(f"  live (SST, heat.py 96x96, a step every 0.1 s, --latency {latency}): {sr['delays']} steps shown; write "
+          f"to first frame {delay:.0f} ms median: the transfer {transfer:.1f} ms, the keeping (rank 0 has it made "
+          f"for the wall) {kept - transfer:.1f} ms, then {(delay - kept) / period:.1f} frames of {period:.1f} ms "
+          f"({(delay - transfer) / period:.1f} after the transfer)")
+    return [{"part": "live", "arm": f"sst-latency{latency}", "steps_shown": sr["delays"], "delay_ms": delay,
+             "transfer_ms": transfer, "kept_ms": kept, "frame_ms": period,
+             "delay_frames_after_transfer": (delay - transfer) / period,
+             "delay_frames_after_keeping": (delay - kept) / period}]
 
 
 def _median_stamped(values: np.ndarray) -> float:
