@@ -38,11 +38,11 @@ def still(where, frames: int):
     return path
 
 
-def wall(out, model, path, grid=(1, 2), extra=(), timeout=180):
+def wall(out, model, path, grid=(1, 2), extra=(), timeout=180, **where):
     args = ["walkthrough", "--model", str(model), "--grid", f"{grid[0]}x{grid[1]}", "--tile", "48x64",
             "--mosaic-every", "1", "--no-overlay", "--no-progress", "--path", str(path), "--out", str(out),
             "--color-by", "temperature", "--range", "0,1", *extra]
-    return run_mpi(grid[0] * grid[1], args, timeout=timeout)
+    return run_mpi(grid[0] * grid[1], args, timeout=timeout, **where)
 
 
 def shown(out) -> list[int]:
@@ -124,6 +124,27 @@ def test_a_live_stream_plays_as_it_comes(tmp_path, late):
     # kept during frame f (its row the first to say so): sent at the start of f + 1 at the latest, or
     # of f + 2 where frame f + 1 had started (--latency 1) before the keeping ended
     assert firsts and all(0 <= f - named[k] <= 2 for k, f in firsts.items() if k in named), (firsts, named)
+    check_frames(tmp_path, out, steps, path)
+
+
+def test_a_live_stream_reaches_a_pc_that_cannot_read_rank_0s_disk(tmp_path):
+    """Two simulated PCs, the run's outputs on each PC's own disk (the second sees its own, empty):
+    the second PC's ranks get the first step and every later step from rank 0, and
+    every frame equals one rank's render of the step it shows."""
+    from simhosts import SimHosts
+
+    subprocess.run([sys.executable, str(HEAT), "--file", str(tmp_path / "heat.bp"), "--steps", "8", "--size", "20",
+                    "--every", "0"], check=True, timeout=120, cwd=tmp_path)
+    out = tmp_path / "o"
+    path = still(tmp_path, 40)
+    with SimHosts(["a", "b"], tmp_path / "hosts", private={"b": [out]}) as h:
+        res = wall(out, f"adios2:{tmp_path / 'heat.bp'}", path, (2, 2), ["--at-end", "stop", "--tile", "48x32"],
+                   env=h.env, hosts=[("a", 2), ("b", 2)])
+    assert res.returncode == 0, res.stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["host"] for r in summary["config"]["ranks"]] == ["a", "a", "b", "b"]
+    steps = shown(out)
+    assert list(dict.fromkeys(steps)) == list(range(steps[0], 8)) and steps[0] <= 1, steps
     check_frames(tmp_path, out, steps, path)
 
 

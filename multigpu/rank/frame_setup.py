@@ -46,6 +46,7 @@ class FrameSetup:
     live: object = None  # parallel.live.Live
     head: object = None  # rank.head_link.HeadLink: the tracked head (--head-tracker)
     spool: object = None  # rank 0 of a stream's run: its reader (``rank/spool.py``)
+    first: object = None  # a stream's first step as rank 0 sent it (this PC cannot read its file), else None
     projector: object = None  # a projector wall's output of this rank (``rank/outputs.py``)
 
     def release(self, collective: bool) -> None:

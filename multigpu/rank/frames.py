@@ -69,7 +69,7 @@ class Frames:
         self.moving = None if motion is None else Moving(scene, motion, cfg.scene.anim_speed, self.planner,
                                                          self.projection, self.draw.culler, self.fidelity.chooser,
                                                          renderer, spheres=self.fidelity.chooser.levels > 1)
-        self.stepping = series_stepping(scene, cfg.scene, self.rank, cfg.timeout, setup.spool, comm)  # rank/series.py
+        self.stepping = series_stepping(scene, cfg.scene, self.rank, cfg.timeout, setup.spool, comm, setup.first)
         # rows land a step later in flight (no rank waits there); windows, in step at the swap lock, gather at once
         self.rows = Rows(comm, cfg.timeout, later=cfg.latency > 0 and presenter.mode != "window")
         self.col = self.rows.col

@@ -7,7 +7,9 @@ arrays the stream handed over, no file read), else the whole scene built from it
 pickled message either way. At every frame's start (every rank at the same frame) rank 0 says the
 newest step made that the wall does not show yet (a header: the step and the message's size) and
 sends it (a second broadcast), and every rank swaps it in at this very frame: no rank reads a file
-for it, no frame's rows have to land to name it, and ranks on other hosts get it the same way.
+for it, no frame's rows have to land to name it, and ranks on other hosts get it the same way. The
+first step reaches a PC that cannot read rank 0's kept file the same way, once, at setup
+(``first_step``).
 
 Both broadcasts are non-blocking, bounded by the job's timeout (``exchange.wait_all``); the header
 is two integers a frame, the message a step's changed arrays (a 96x96 plate: 0.3 MB).
@@ -35,8 +37,12 @@ def message(spec, mesh, path, first, write=None) -> bytearray:
         return bytearray(pickle.dumps({"changed": changed, "meta": meta}, protocol=pickle.HIGHEST_PROTOCOL))
     if write is not None:
         write()
-    scene, _ = load_step_file(spec, path, first)  # its cells are its own: built alone (and cached)
-    arrays = {k: np.asarray(v) for k, v in scene._arrays().items()}  # (mapped from the cache: sent as arrays)
+    return whole(load_step_file(spec, path, first)[0])  # its cells are its own: built alone (and cached)
+
+
+def whole(scene: Scene) -> bytearray:
+    """The message of a whole scene: its arrays (mapped from the cache: sent as arrays), name, meta."""
+    arrays = {k: np.asarray(v) for k, v in scene._arrays().items()}
     return bytearray(pickle.dumps({"arrays": arrays, "name": scene.name, "meta": scene.meta},
                                   protocol=pickle.HIGHEST_PROTOCOL))
 
@@ -64,19 +70,39 @@ class Pushed:
     def next(self) -> tuple[int, dict] | None:
         """Collective, every frame: ``(step, its message)`` where rank 0 has a step made to send, on
         every rank alike; None otherwise."""
-        blob = None
-        if self.rank == 0:
-            got = self.made(self.sent)
-            if got is not None:
-                k, blob = got
-                self.head[:] = (k, len(blob))
-            else:
-                self.head[:] = (-1, 0)
-        wait_all([self.comm.Ibcast(self.head, root=0)], self.timeout, "live step")
-        k, size = int(self.head[0]), int(self.head[1])
+        got = self.made(self.sent) if self.rank == 0 else None
+        k, buf = broadcast(self.comm, got, self.timeout, self.head)
         if k < 0:
             return None
-        buf = np.frombuffer(blob, dtype=np.uint8) if self.rank == 0 else np.empty(size, dtype=np.uint8)
-        wait_all([self.comm.Ibcast(buf, root=0)], self.timeout, "live step")
         self.sent = k
         return k, pickle.loads(buf)
+
+
+def broadcast(comm, got: tuple[int, bytearray] | None, timeout: float, head: np.ndarray | None = None) -> tuple:
+    """Rank 0's ``got`` ``(number, bytes)`` on every rank, ``(number, buffer)``: two non-blocking
+    broadcasts (the number and size, then the bytes), bounded by ``timeout``; ``(-1, None)`` where
+    rank 0 has none. ``head``: the two-integer buffer to reuse."""
+    head = np.zeros(2, dtype=np.int64) if head is None else head
+    root = comm.Get_rank() == 0
+    if root:
+        head[:] = (-1, 0) if got is None else (got[0], len(got[1]))
+    wait_all([comm.Ibcast(head, root=0)], timeout, "live step")
+    k, size = int(head[0]), int(head[1])
+    if k < 0:
+        return -1, None
+    buf = np.frombuffer(got[1], dtype=np.uint8) if root else np.empty(size, dtype=np.uint8)
+    wait_all([comm.Ibcast(buf, root=0)], timeout, "live step")
+    return k, buf
+
+
+def first_step(comm, scene_of, have: bool, timeout: float) -> Scene | None:
+    """A stream's first step where this rank's host cannot read it (another PC: rank 0 keeps the
+    steps on its own disk): rank 0's scene of it (``scene_of()``, called on rank 0 where some rank
+    lacks it) sent whole; None on every rank that has the file (``have``), or where all have it."""
+    from multigpu.rank.exchange import allgather_text
+
+    lacking = [t != "1" for t in allgather_text(comm, "1" if have else "0", timeout, "a stream's first step", 2)]
+    if not any(lacking):
+        return None
+    _, buf = broadcast(comm, (0, whole(scene_of())) if comm.Get_rank() == 0 else None, timeout)
+    return step_scene(None, pickle.loads(buf)) if lacking[comm.Get_rank()] else None

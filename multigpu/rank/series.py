@@ -179,7 +179,7 @@ class Stepping:
     """The series of ``scene`` (its first step, shown now) played at ``spec``'s rate: each frame's
     step decided (``frame``), each row's say (``row``), every rank's rows heard (``landed``)."""
 
-    def __init__(self, scene, spec, rank: int, timeout: float = 60.0, spool=None, comm=None):
+    def __init__(self, scene, spec, rank: int, timeout: float = 60.0, spool=None, comm=None, first=None):
         info = scene.meta["series"]
         self.wait, self.timeout = spec.late_step == "wait", float(timeout)
         self.n, self.shown, self.want = int(info["steps"]), int(info["step"]), int(info["step"])
@@ -192,7 +192,7 @@ class Stepping:
         spec = reader_spec(spec, scene)
         self.reader = self.pushed = self.incoming = None
         if self.live:  # rank 0 sends each step it made to every rank (``rank/pushed.py``)
-            self.pushed = self._pushed(spec, comm)
+            self.pushed = self._pushed(spec, comm, first)
         else:
             self.reader = Reader(spec, self.n, self._say if rank == 0 else None, step_paths(spec))
         self.agreed = -1  # the step every rank held ready in the last landed rows (-1: none)
@@ -201,13 +201,15 @@ class Stepping:
         self.swaps = 0
         self.said = None  # the stream's state last said (``say_note``)
 
-    def _pushed(self, spec, comm):
-        """A live run's steps from rank 0 (its keeper makes each one: ``spool.attach``)."""
+    def _pushed(self, spec, comm, given=None):
+        """A live run's steps from rank 0 (its keeper makes each one: ``spool.attach``); ``given``:
+        the first step as rank 0 sent it (this PC cannot read its file)."""
         from multigpu.rank.pushed import Pushed, message
         from multigpu.scene.models import first_step
 
         first = step_paths(spec)(0)
-        self.base = first_step(spec, first)[0]  # what each step changes (every rank maps it from the cache)
+        # what each step changes (mapped from the cache, one copy a host; or as rank 0 sent it)
+        self.base = given if given is not None else first_step(spec, first)[0]
         self.in_base = True  # the renderer draws the first step's layout (a step built alone is its own)
         if self.spool is not None:
             self.spool.attach(lambda k, mesh, path, write: message(spec, mesh, path, first, write))
@@ -359,11 +361,12 @@ def replayed_step(path, f: int) -> int | None:
     return int(steps[f]) if steps is not None and 0 <= f < len(steps) else None
 
 
-def series_stepping(scene, spec, rank: int, timeout: float = 60.0, spool=None, comm=None) -> Stepping | None:
+def series_stepping(scene, spec, rank: int, timeout: float = 60.0, spool=None, comm=None,
+                    first=None) -> Stepping | None:
     """The frame loop's series part, where the scene is a series' step (None otherwise); ``comm``:
-    the ranks a live stream's steps go to."""
+    the ranks a live stream's steps go to, ``first``: the stream's first step as rank 0 sent it."""
     if "series" not in scene.meta:
         return None
     if spec.moving:
         raise InputError.of("moving", "a series' steps do not move as machinery (leave --moving out)")
-    return Stepping(scene, spec, rank, timeout, spool, comm)
+    return Stepping(scene, spec, rank, timeout, spool, comm, first)

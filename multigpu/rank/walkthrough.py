@@ -73,17 +73,18 @@ def modelled(cfg: WalkConfig, scene):
     return whole.translated(cfg.offset) if any(cfg.offset) else whole
 
 
-def load_world(cfg: WalkConfig, ready: "Ready | None" = None):
+def load_world(cfg: WalkConfig, ready: "Ready | None" = None, given=None):
     """Scene, camera path and load facts, both moved by ``--offset`` (a file path too), so an
     offset run should show the same images as one at the scene's own coordinates. ``ready``: the
     scene and path a standby made while it waited (a flight's start is made now: it is where the
-    restart resumes)."""
+    restart resumes); ``given``: the scene, sent by rank 0 (a stream's first step on another PC)."""
     if ready is not None:
         scene, load_info = ready.scene, ready.load_info
         if ready.path is not None:
             return scene, ready.path, load_info
     else:
-        scene, load_info = load_scene(cfg.scene)
+        scene, load_info = load_scene(cfg.scene) if given is None else (given, {"seconds": 0.0, "cached": False,
+                                                                                "cache": None, "sent": True})
         if any(cfg.offset):
             scene = scene.translated(cfg.offset)
     path = make_path(cfg, scene)
@@ -204,12 +205,12 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
         error = agree(comm, error, wait)
         if error:
             raise InputError(error)
-        cfg = streamed(cfg)  # a stream's steps: the series rank 0 keeps of them
+        cfg, first = stream_setup(cfg, comm, wait)  # a stream's steps: the series rank 0 keeps of them
         try:
             from multigpu.gpu.render import raster_threads
 
             if rank != 0:
-                scene, path, load_info = load_world(cfg, ready)
+                scene, path, load_info = load_world(cfg, ready, first)
                 shared = ready.shared if ready is not None else ensure_buffers(load_info.get("cache"), scene)
 
             local, host_ranks = (ready.local, ready.host_ranks) if ready is not None else node_rank(comm, wait)
@@ -248,6 +249,7 @@ def run(cfg: WalkConfig, comm, job, ready: Ready | None = None) -> dict | None:
         setup = build(cfg, comm, scene, path, renderer, presenter, out, load_info, placement, monitor, panel,
                       tracker)
         setup.spool, spool = spool, None  # rank 0's stream reader: the frame loop's now
+        setup.first = first
         summary = Frames(cfg, comm, job, scene, path, renderer, presenter, setup).run()
         if panel is not None:
             panel.finish(summary)
@@ -294,16 +296,32 @@ def _first(cfg: WalkConfig, ready: Ready | None = None) -> tuple:
     return None, out, scene, path, load_info, shared, spool
 
 
-def streamed(cfg: WalkConfig) -> WalkConfig:
+def stream_setup(cfg: WalkConfig, comm, wait: float) -> tuple:
+    """Every rank's ``(cfg, first step)`` of a stream's run (``streamed``, coloured over rank 0's
+    range); the first step as rank 0 sent it where this rank's PC cannot read rank 0's kept file
+    (``rank/pushed.first_step``), else None."""
+    if not is_stream(cfg.scene.model):
+        return cfg, None
+    from multigpu.rank.pushed import first_step
+
+    rank = comm.Get_rank()
+    mine = json.dumps(streamed(cfg).scene.color_range) if rank == 0 else ""
+    live = streamed(cfg, json.loads(allgather_text(comm, mine, wait, "a stream's colours")[0]))
+    have = rank == 0 or (spool_dir(cfg.out) / STEP_FILE.format(0)).is_file()
+    return live, first_step(comm, lambda: load_scene(live.scene)[0], have, wait)
+
+
+def streamed(cfg: WalkConfig, known=None) -> WalkConfig:
     """A stream's run (``--model adios2:NAME``) as the series of the steps rank 0 keeps in its outputs
-    (every rank the same): coloured over ``--range``, else over the first step's own range."""
+    (every rank the same): coloured over ``--range``, else over the first step's own range
+    (``known``: rank 0's, found already)."""
     if not is_stream(cfg.scene.model):
         return cfg
     import dataclasses
 
     from multigpu.scene.series import first_range
 
-    spec, fixed = cfg.scene, cfg.scene.color_range
+    spec, fixed = cfg.scene, cfg.scene.color_range if known is None else tuple(known)
     if spec.color_by is not None and fixed is None:
         fixed = first_range(spool_dir(cfg.out) / STEP_FILE.format(0), spec.color_by)
     live = dataclasses.replace(spec, model=spool_glob(cfg.out), color_range=fixed, live=True)

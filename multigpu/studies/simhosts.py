@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import shlex
 import shutil
 import signal
 import socket
@@ -67,11 +68,13 @@ class SimHosts:
     """``with SimHosts(["a", "b"], tmp) as h``: hosts a and b; ``h.rsh`` is the remote shell,
     ``h.kill(name)`` kills every process on one host, ``h.down(name)`` also makes its remote
     shell fail until ``h.up(name)``. ``network``: each host on its own link of ``rate`` and
-    ``delay`` (``wire()`` counts its bytes)."""
+    ``delay`` (``wire()`` counts its bytes). ``private``: folders a host sees as its own, empty
+    (what one PC writes there the other does not see)."""
 
     def __init__(self, names: list[str], where: Path, network: bool = False, rate: str = "1gbit",
-                 delay: str = "0.1ms"):
+                 delay: str = "0.1ms", private: dict[str, list[Path]] | None = None):
         self.names, self.dir = list(names), Path(where)
+        self.private = dict(private or {})  # host -> folders it sees empty, its own (as on another PC's disk)
         self.network, self.rate, self.delay = network, rate, delay
         self.holders: dict[str, subprocess.Popen] = {}
         self.pids: dict[str, int] = {}
@@ -133,7 +136,9 @@ class SimHosts:
         pidfile = self.dir / f"{name}.pid"
         pidfile.unlink(missing_ok=True)  # a directory used before: never a stale host's id
         hosts = f"mount --bind {self.dir / 'etc-hosts'} /etc/hosts && " if self.network else ""
-        script = (f"hostname {name} && mount -t tmpfs -o size=2g tmpfs /dev/shm && {hosts}"
+        disks = "".join(f"mkdir -p {shlex.quote(str(d))} && mount -t tmpfs -o size=1g tmpfs {shlex.quote(str(d))} && "
+                        for d in self.private.get(name, ()))  # a folder of its own disk there
+        script = (f"hostname {name} && mount -t tmpfs -o size=2g tmpfs /dev/shm && {hosts}{disks}"
                   f"echo $$ > {pidfile}.part && mv {pidfile}.part {pidfile} && exec sleep 86400")
         flags = ["--uts", "--mount"] + (["--ipc", "--net"] if self.network else [])
         self.holders[name] = subprocess.Popen(
