@@ -193,9 +193,11 @@ class Frames:
         values = self.log.row(x, sent, swapped)
         if self.stepping is not None:  # the step shown, the one held ready (every rank agrees on it once landed)
             values.update(self.stepping.row(*x.step))
+        # the mosaic before the row: a frame whose row lands (the frames a restart resumes after) has its
+        # mosaic; a peer lost in the gather leaves the row unposted and the frame to the restarted job
+        self.log.show(x.f, work, self.back, self.showing.picture)
         for landed in self.rows.post(x.f, values, self.log.stop_flag(stop), x.recorded):
             self.landed(*landed)
-        self.log.show(x.f, work, self.back, self.showing.picture)
 
     def landed(self, f: int, every: np.ndarray, recorded) -> None:
         """Every rank's row of frame ``f``: to the balancer's learning, and rank 0's records."""
