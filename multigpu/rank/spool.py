@@ -33,9 +33,6 @@ from multigpu.scene.stream_mesh import PREFIX  # ``--model adios2:NAME``
 NAME = "step_{:06d}.vtu"
 #: seconds between asks for the next step (the stream's reader waits in Python, the GIL free)
 POLL = 0.005
-#: rank 0's switch interval (``sys.setswitchinterval``) while it reads a stream: a thread waiting for
-#: the GIL gets it within this many seconds of the frame loop's Python
-SWITCH = 0.0005
 
 
 def is_stream(model: str | None) -> bool:
@@ -78,9 +75,6 @@ class Spool:
         self._cv = threading.Condition()
         self.thread = threading.Thread(target=self._run, name="adios2 stream", daemon=True)
         self.keeper = threading.Thread(target=self._keeper, name="adios2 steps", daemon=True)
-        # the reader and keeper hand the GIL back and forth with rank 0's frame loop: each wait for it
-        # is bounded by the switch interval (5 ms by default), a step's keeping takes several
-        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH))
         self.thread.start()
         self.keeper.start()
 
