@@ -100,6 +100,56 @@ def test_the_reader_keeps_each_step_of_a_bp5_file_as_a_series_file(tmp_path):
     assert last.points[:, 2].max() > 0  # the plate warmed: its height is the temperature
 
 
+def test_rank_0_waits_for_a_live_step_being_made_only_as_long_as_it_says(tmp_path):
+    """A live stream's step in the making: ``next_made`` without a wait says none yet; with one, it
+    returns the step as soon as the keeper made it (the caller's GIL free meanwhile); a file's
+    steps never hold the frame loop."""
+    adios2_or_skip()
+    import signal
+    import subprocess
+    import threading
+
+    from multigpu.rank.spool import Spool
+
+    sim = subprocess.Popen([sys.executable, str(ROOT / "examples" / "simulation" / "heat.py"), "--name",
+                            str(tmp_path / "heat"), "--steps", "400", "--size", "8", "--every", "0.05"],
+                           cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        for _ in range(200):
+            if (tmp_path / "heat.sst").exists() or sim.poll() is not None:
+                break
+            time.sleep(0.05)
+        spool = Spool(f"adios2:{tmp_path / 'heat'}", tmp_path / "steps", 20.0, say=lambda *a, **k: None)
+        spool.first()
+        making = threading.Event()
+
+        def make(k, mesh, path, write):
+            making.set()
+            time.sleep(0.4)  # a slow making (no GIL held)
+            return bytearray(str(k).encode())
+
+        spool.attach(make)
+        assert making.wait(20)
+        assert spool.next_made(0) is None  # being made: not there yet, and no wait asked
+        t = time.monotonic()
+        got = spool.next_made(0, wait=5.0)
+        waited = time.monotonic() - t
+        assert got is not None and int(got[1].decode()) == got[0] >= 1 and waited < 1.0, (got, waited)
+        spool.engine = "BP5"  # (a file's steps: the wait asked for is not taken)
+        making.clear()
+        assert making.wait(20)  # a step being made (0.4 s): those before it made
+        after = got[0]
+        while (done := spool.next_made(after)) is not None:
+            after = done[0]
+        t = time.monotonic()
+        assert spool.next_made(after, wait=5.0) is None and time.monotonic() - t < 0.2
+        spool.close()
+    finally:
+        if sim.poll() is None:
+            os.killpg(sim.pid, signal.SIGKILL)
+        sim.communicate(timeout=30)
+
+
 def test_a_stream_that_cannot_be_opened_or_sends_nothing_is_one_line(tmp_path):
     adios2_or_skip()
     from multigpu.rank.spool import Spool

@@ -11,18 +11,29 @@ for it, no frame's rows have to land to name it, and ranks on other hosts get it
 first step reaches a PC that cannot read rank 0's kept file the same way, once, at setup
 (``first_step``).
 
+Where the keeper is making a step when a frame starts, rank 0 waits for it there, at most half a
+frame (``HOLD``), its GIL free: the frame loop's GL calls hold Python's lock (moderngl never lets
+it go), so the keeper, a thread of the same process, would otherwise make the step only in the
+gaps between them and it would miss this frame.
+
 Both broadcasts are non-blocking, bounded by the job's timeout (``exchange.wait_all``); the header
-is two integers a frame, the message a step's changed arrays (a 96x96 plate: 0.3 MB).
+is two integers a frame, the message a step's changed arrays (a 96x96 plate: 1 MB).
 """
 
 from __future__ import annotations
 
 import pickle
+import time
+from collections import deque
 
 import numpy as np
 
 from multigpu.rank.exchange import wait_all
 from multigpu.scene.layout import Scene
+
+#: the most rank 0 waits at a frame's start for a step being made, in frame periods (its median
+#: over the last ``PERIODS`` frames): its GIL free, the keeper makes it at once (``spool.next_made``)
+HOLD, PERIODS = 0.5, 8
 
 
 def message(spec, mesh, path, first, write=None) -> bytearray:
@@ -66,11 +77,20 @@ class Pushed:
         self.rank = comm.Get_rank()
         self.head = np.zeros(2, dtype=np.int64)  # (step, message bytes); -1: nothing new
         self.sent = -1
+        self.starts: deque[float] = deque(maxlen=PERIODS + 1)  # rank 0: when the last frames asked
+
+    def hold(self) -> float:
+        """How long rank 0 waits for a step its keeper is making (``spool.next_made``): ``HOLD`` of
+        the median of the last frames' periods (0 until there are some)."""
+        self.starts.append(time.monotonic())
+        if len(self.starts) < 3:
+            return 0.0
+        return HOLD * float(np.median(np.diff(self.starts)))
 
     def next(self) -> tuple[int, dict] | None:
         """Collective, every frame: ``(step, its message)`` where rank 0 has a step made to send, on
         every rank alike; None otherwise."""
-        got = self.made(self.sent) if self.rank == 0 else None
+        got = self.made(self.sent, self.hold()) if self.rank == 0 else None
         k, buf = broadcast(self.comm, got, self.timeout, self.head)
         if k < 0:
             return None

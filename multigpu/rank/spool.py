@@ -72,6 +72,7 @@ class Spool:
         self.engine = "BP5" if self.name.lower().rstrip("/").endswith(".bp") else "SST"
         self.passed = 0  # a live stream's steps passed over while the one before was being kept
         self._pending: deque = deque()
+        self._busy = False  # the keeper holds a step it has not made (or left out) yet
         self._cv = threading.Condition()
         self.thread = threading.Thread(target=self._run, name="adios2 stream", daemon=True)
         self.keeper = threading.Thread(target=self._keeper, name="adios2 steps", daemon=True)
@@ -95,11 +96,16 @@ class Spool:
         self.make = make
         self._attached.set()
 
-    def next_made(self, after: int) -> tuple[int, bytearray] | None:
+    def next_made(self, after: int, wait: float = 0.0) -> tuple[int, bytearray] | None:
         """The step made for the wall to send after step ``after`` was, ``(step, message)``: a live
         stream's newest (the wall shows steps as they come), a file's next (it plays every step);
-        None: none yet."""
+        None: none yet. ``wait``: where a live stream's step is being made, up to that many seconds
+        for it, the caller's GIL free (the frame loop's GL calls hold it: the keeper, a thread of the
+        same process, would otherwise make it in the gaps between them)."""
         with self._cv:
+            if wait > 0 and self.engine == "SST":
+                self._cv.wait_for(lambda: self._closed or not (self._busy or self._pending) or
+                                  (self._made and self._made[-1][0] > after), wait)
             while self._made and self._made[0][0] <= after:
                 self._made.popleft()
                 self._cv.notify_all()
@@ -177,6 +183,7 @@ class Spool:
                 if self._closed:
                     return
                 item = self._pending.popleft()
+                self._busy = item is not None
                 self._cv.notify_all()
             if item is None:
                 self.ended = True
@@ -190,6 +197,13 @@ class Spool:
             except Exception as exc:  # noqa: BLE001 (a step that cannot be kept is said, never raised)
                 self.refused += 1
                 self._note(f"{self.model}: a step could not be kept ({_first_line(exc)})")
+            finally:
+                self._made_one()
+
+    def _made_one(self) -> None:
+        with self._cv:
+            self._busy = False
+            self._cv.notify_all()
 
     def _keep(self, values: dict, skipped: list[str], came: float) -> None:
         """One step's variables as the next file of the series (written whole, then renamed); where
@@ -237,6 +251,8 @@ class Spool:
                 while len(self._made) >= 2 and not self._closed:
                     self._cv.wait(0.1)
                 self._made.append((k, made))
+                self._busy = False  # (sent from now on; its file is written after)
+                self._cv.notify_all()
         try:
             write()
         finally:  # (a step the wall shows but could not keep is said: the keeper's note)
