@@ -150,6 +150,61 @@ def test_rank_0_waits_for_a_live_step_being_made_only_as_long_as_it_says(tmp_pat
         sim.communicate(timeout=30)
 
 
+def test_a_live_steps_file_is_written_after_the_frames_that_show_it(tmp_path, monkeypatch):
+    """A live step's file: not while the frame that sends it and the next are drawn, once two more
+    frames asked (its writing kept out of the frame that shows it); a step sent just before the spool
+    closes has its file when ``close`` returns."""
+    adios2_or_skip()
+    import signal
+    import subprocess
+    import threading
+
+    from multigpu.rank import spool as spool_module
+    from multigpu.rank.spool import NAME, Spool
+
+    monkeypatch.setattr(spool_module, "FILE_WAIT", 60.0)  # (only the frames asking write it here)
+    sim = subprocess.Popen([sys.executable, str(ROOT / "examples" / "simulation" / "heat.py"), "--name",
+                            str(tmp_path / "heat"), "--steps", "400", "--size", "8", "--every", "0.05"],
+                           cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        for _ in range(200):
+            if (tmp_path / "heat.sst").exists() or sim.poll() is not None:
+                break
+            time.sleep(0.05)
+        spool = Spool(f"adios2:{tmp_path / 'heat'}", tmp_path / "steps", 20.0, say=lambda *a, **k: None)
+        spool.first()
+        making = threading.Event()
+
+        def make(k, mesh, path, write):
+            making.set()
+            time.sleep(0.5)
+            return bytearray(b"m")
+
+        spool.attach(make)
+        assert making.wait(20)
+        k, _ = spool.next_made(0, wait=5.0)  # made while this frame asked: sent now
+        file = tmp_path / "steps" / NAME.format(k)
+        time.sleep(0.3)
+        assert not file.exists()
+        spool.next_made(k)  # the frame after it: drawn without its file's writing
+        time.sleep(0.3)
+        assert not file.exists()
+        spool.next_made(k)
+        t = time.monotonic()
+        while not file.exists() and time.monotonic() - t < 20:
+            time.sleep(0.02)
+        assert file.exists()
+        making.clear()
+        assert making.wait(20)
+        last, _ = spool.next_made(k, wait=5.0)
+        spool.close()
+        assert (tmp_path / "steps" / NAME.format(last)).exists()
+    finally:
+        if sim.poll() is None:
+            os.killpg(sim.pid, signal.SIGKILL)
+        sim.communicate(timeout=30)
+
+
 def test_a_stream_that_cannot_be_opened_or_sends_nothing_is_one_line(tmp_path):
     adios2_or_skip()
     from multigpu.rank.spool import Spool

@@ -33,6 +33,9 @@ from multigpu.scene.stream_mesh import PREFIX  # ``--model adios2:NAME``
 NAME = "step_{:06d}.vtu"
 #: seconds between asks for the next step (the stream's reader waits in Python, the GIL free)
 POLL = 0.005
+#: a live step's file is written once this many more frames began after it was made (the frame that
+#: shows it drawn), or after ``FILE_WAIT`` seconds; a closing spool waits ``FILE_AT_CLOSE`` s for them
+FILE_AFTER, FILE_WAIT, FILE_AT_CLOSE = 2, 1.0, 30.0
 
 
 def is_stream(model: str | None) -> bool:
@@ -73,11 +76,15 @@ class Spool:
         self.passed = 0  # a live stream's steps passed over while the one before was being kept
         self._pending: deque = deque()
         self._busy = False  # the keeper holds a step it has not made (or left out) yet
+        self._asked = 0  # frames that asked for a made step (``next_made``: one a frame, at its start)
+        self._files: deque = deque()  # a live stream's steps sent, their files to write: (after ask, write)
         self._cv = threading.Condition()
         self.thread = threading.Thread(target=self._run, name="adios2 stream", daemon=True)
         self.keeper = threading.Thread(target=self._keeper, name="adios2 steps", daemon=True)
+        self.filer = threading.Thread(target=self._filer, name="adios2 files", daemon=True)
         self.thread.start()
         self.keeper.start()
+        self.filer.start()
 
     def first(self) -> None:
         """Wait (bounded: ``timeout``) for the first step, or raise the one line saying why none came."""
@@ -103,6 +110,8 @@ class Spool:
         for it, the caller's GIL free (the frame loop's GL calls hold it: the keeper, a thread of the
         same process, would otherwise make it in the gaps between them)."""
         with self._cv:
+            self._asked += 1
+            self._cv.notify_all()
             if wait > 0 and self.engine == "SST":
                 self._cv.wait_for(lambda: self._closed or not (self._busy or self._pending) or
                                   (self._made and self._made[-1][0] > after), wait)
@@ -114,10 +123,12 @@ class Spool:
             return self._made[-1] if self.engine == "SST" else self._made[0]
 
     def close(self) -> None:
+        """Stop reading; the files of the steps sent are written first (bounded: ``FILE_AT_CLOSE``)."""
         with self._cv:
             self._closed = True
             self._cv.notify_all()
         self._attached.set()
+        self.filer.join(FILE_AT_CLOSE)
 
     def _run(self) -> None:
         try:
@@ -244,6 +255,7 @@ class Spool:
                 return
         if written is not None and np.size(written) == 1 and np.isfinite(written).all():
             self.stamps[k] = (float(np.ravel(written)[0]), came, time.time())
+        later = made is not None and self.engine == "SST"
         if made is not None:
             with self._cv:  # a live stream's newest replaces those not sent; a file's waits its turn
                 if self.engine == "SST":
@@ -252,12 +264,33 @@ class Spool:
                     self._cv.wait(0.1)
                 self._made.append((k, made))
                 self._busy = False  # (sent from now on; its file is written after)
+                if later:  # after the frame that shows it has begun drawing (``_filer``)
+                    self._files.append((self._asked + FILE_AFTER, write))
                 self._cv.notify_all()
         try:
-            write()
+            if not later:
+                write()
         finally:  # (a step the wall shows but could not keep is said: the keeper's note)
             self.count += 1
             self.arrived = time.monotonic()
+
+    def _filer(self) -> None:
+        """Writes a live stream's sent steps' files once ``FILE_AFTER`` more frames asked for a step
+        (their CPU, some 5 ms a 96x96 plate, and the GIL kept out of the frame that shows the step),
+        or ``FILE_WAIT`` seconds passed (a paused wall); all at once when the spool closes."""
+        while True:
+            with self._cv:
+                while not self._files and not self._closed:
+                    self._cv.wait(0.5)
+                if not self._files:
+                    return
+                due, write = self._files[0]
+                self._cv.wait_for(lambda: self._closed or self._asked >= due, FILE_WAIT)
+                self._files.popleft()
+            try:
+                write()
+            except Exception as exc:  # noqa: BLE001 (said once, never raised: the wall goes on)
+                self._note(f"{self.model}: a step could not be kept ({_first_line(exc)})")
 
     def _note(self, line: str) -> None:
         """``line`` once per run."""

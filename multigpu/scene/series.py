@@ -14,6 +14,7 @@ Pure: no MPI, no GL.
 
 from __future__ import annotations
 
+import functools
 import glob
 import hashlib
 import json
@@ -190,10 +191,20 @@ def series_range(series: Series, field: str, cache: Path | None = None) -> tuple
 
 def first_range(path: Path, field: str) -> tuple[float, float]:
     """The finite values' range of ``field`` in one step's file (a live stream's first step: the
-    colours of the steps to come compare with it)."""
+    colours of the steps to come compare with it); read once while the file stays as it is (rank
+    0 asks twice at a stream's setup)."""
+    try:
+        st = Path(path).stat()
+    except OSError:  # (the reader says why, in its line)
+        return _first_range.__wrapped__(str(path), field, None)
+    return _first_range(str(path), field, (st.st_size, st.st_mtime_ns))
+
+
+@functools.lru_cache(maxsize=4)
+def _first_range(path: str, field: str, version: tuple) -> tuple[float, float]:
     from multigpu.scene import simulation
 
-    mesh = simulation.read(path)
+    mesh = simulation.read(Path(path))
     values, _, _ = simulation.field(mesh, field, path)
     return simulation.value_range(values, None)
 
