@@ -20,7 +20,8 @@ Each kernel sits beside the code it serves, as ``<module>_kernel.py``, with its 
 * ``strategies/auto_kernel.py``: the triangles of the objects in view (``auto``'s trial load);
 * ``scene/labels_kernel.py``: connected components of a mesh's vertices (load time);
 * ``scene/parts_kernel.py``: objects cut into parts, their triangles reordered (load time);
-* ``scene/same_cells_kernel.py``: a series' step in its first step's layout (a live stream's keeper).
+* ``scene/same_cells_kernel.py``: a series' step in its first step's layout (a live stream's keeper);
+* ``core/octahedral_kernel.py``: the GL vertices' normals as octahedral codes (every upload).
 
 Every kernel forms its values with the same operations in the same order as its reference, so
 results are equal bit for bit (tests/test_kernel.py, hypothesis and extremes). ``warm()``
@@ -43,6 +44,7 @@ from multigpu.core.drawlist_kernel import _commands, _part_commands
 from multigpu.core.jit import available
 from multigpu.core.lod_kernel import _choose
 from multigpu.core.motion_kernel import _pose, _pose_span, _rotations
+from multigpu.core.octahedral import encode
 from multigpu.core.tree import gpu_tree
 from multigpu.core.work_kernel import _parts
 from multigpu.scene.moves_kernel import _machine
@@ -61,7 +63,8 @@ MODULES = ("multigpu.core.bounds_kernel", "multigpu.core.balance_kernel", "multi
            "multigpu.core.drawlist_kernel", "multigpu.core.work_kernel", "multigpu.strategies.cross_kernel",
            "multigpu.strategies.cost_kernel", "multigpu.strategies.base_kernel",
            "multigpu.strategies.adaptive_kernel", "multigpu.strategies.auto_kernel",
-           "multigpu.scene.labels_kernel", "multigpu.scene.parts_kernel", "multigpu.scene.same_cells_kernel")
+           "multigpu.scene.labels_kernel", "multigpu.scene.parts_kernel", "multigpu.scene.same_cells_kernel",
+           "multigpu.core.octahedral_kernel")
 
 
 def warm() -> float:
@@ -109,6 +112,7 @@ def warm() -> float:
           np.empty((3, 1)), np.empty((1, 3)), np.empty(1), np.empty((1, 12), dtype=np.float32), 0)
     tri = np.zeros((1, 3), dtype=np.int64)  # a live stream's steps, made by rank 0's keeper
     _place_compiled(np.zeros((1, 3)), idx, tri, idx, None, 1, 0)
+    encode(np.zeros((1, 3)), compiled=True)  # every vertex upload's normals
     return time.perf_counter() - t0
 
 

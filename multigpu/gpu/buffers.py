@@ -26,12 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
+from multigpu.core.octahedral import encode
 from multigpu.errors import InputError
 
 #: the file's layout and the packing it holds (2: levels of detail in the index buffer; 3: wide objects
 #: drawn last; 4: the model's vertex colours, where it has them; 5: its texture coordinates, where it has
-#: textures); a change makes a new name
-VERSION = 5
+#: textures; 6: a normal with a coordinate that is not finite coded as +z); a change makes a new name
+VERSION = 6
 MAGIC = b"MULTIGPU-GL-BUFFERS\n"
 PAGE = mmap.PAGESIZE
 #: bytes per block when a buffer is uploaded or written
@@ -44,20 +45,9 @@ _GL_BUFFER_SIZE = 0x8764
 
 
 def pack_normals(normals: np.ndarray) -> np.ndarray:
-    """(V,) uint32 octahedral encodings of (V, 3) normals, 16 bits per coordinate (the vertex
-    shader decodes them): a third of the bytes of three floats, within 1e-4 of the normal's
-    direction, which the lighting cannot show in 8-bit colour. A zero normal reads as +z."""
-    n = np.asarray(normals, dtype=np.float64)
-    s = np.abs(n).sum(axis=1, keepdims=True)
-    n = n / np.where(s > 0, s, 1.0)
-    n[s[:, 0] == 0, 2] = 1.0
-    x, y, z = n[:, 0], n[:, 1], n[:, 2]
-    sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
-    fold = z < 0
-    x, y = np.where(fold, (1 - np.abs(y)) * sx, x), np.where(fold, (1 - np.abs(x)) * sy, y)
-    u = np.rint((x * 0.5 + 0.5) * 65535).astype(np.uint32)
-    v = np.rint((y * 0.5 + 0.5) * 65535).astype(np.uint32)
-    return u | (v << np.uint32(16))
+    """(V,) uint32 octahedral encodings of (V, 3) normals (``core/octahedral.py``: 16 bits per
+    coordinate, the vertex shader decodes them; a zero normal reads as +z)."""
+    return encode(normals)
 
 
 def pack_vertices(vertices: np.ndarray) -> np.ndarray:
