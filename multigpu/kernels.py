@@ -84,6 +84,9 @@ def warm() -> float:
     camera = Camera((0.0, -5.0, 1.0), (0.0, 0.0, 0.0))
     box.frame(camera, (64, 48))
     box.frame(camera, (64, 48), np.empty(2))
+    one = np.ones(1)  # a generated path's check of its frames
+    box.frames_seen(np.array([[0.0, -5.0, 1.0]]), np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), 60 * one, 0.1 * one,
+                    100 * one, (64, 48))
     tris, coverage, times = np.array([3, 5, 7], dtype=np.int64), np.array([0.5, 1.0, 1.0]), np.arange(1.0, 5.0)
     for cls in REGISTRY.values():  # every strategy's plans, the ones that learn from measured times too
         strategy = cls((2, 2), (64, 64), 16, compiled=True)

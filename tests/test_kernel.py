@@ -137,6 +137,32 @@ def test_compiled_frame_forms_the_reference_matrices_and_rects(data, n, s, shift
             BoxProjector(*boxes, compiled=compiled).frame(on_target, size)
 
 
+@settings(max_examples=60, deadline=None)
+@given(data=st.data(), n=st.integers(0, 20), frames=st.integers(1, 40), s=scale, size=st.tuples(st.integers(1, 900),
+                                                                                                 st.integers(1, 900)))
+def test_compiled_frames_seen_equal_the_reference_frame_by_frame(data, n, frames, s, size):
+    """``BoxProjector.frames_seen`` compiled (every camera in one call: a generated path's check)
+    against the reference's ``frame`` a camera at a time: the same frames seeing some box, none,
+    or refused (a position on its target, a camera far out of range)."""
+    from multigpu.core.bounds import BoxProjector
+
+    f = st.floats(-3.0, 3.0, allow_nan=False)
+    c = np.array(data.draw(st.lists(st.tuples(f, f, f), min_size=n, max_size=n)), dtype=np.float64).reshape(-1, 3)
+    h = np.abs(np.array(data.draw(st.lists(st.tuples(f, f, f), min_size=n, max_size=n)), dtype=np.float64)
+               ).reshape(-1, 3)
+    pos = np.array(data.draw(st.lists(st.tuples(f, f, f), min_size=frames, max_size=frames))) * 2 * s
+    tgt = pos + np.array(data.draw(st.lists(st.tuples(f, f, f), min_size=frames, max_size=frames))) * s
+    tgt[data.draw(st.integers(0, frames - 1))] = pos[0] if frames == 1 else tgt[0]  # (sometimes on its position)
+    tgt[0] = pos[0] if data.draw(st.booleans()) else tgt[0]
+    up = np.tile(data.draw(st.sampled_from([(0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (0.3, -2.0, 0.7)])), (frames, 1))
+    fov = np.array(data.draw(st.lists(st.floats(5.0, 150.0), min_size=frames, max_size=frames)))
+    near, far = np.full(frames, 0.1 * s), np.full(frames, 1e3 * s)
+    boxes = (c * s - h * s, c * s + h * s)
+    ref = BoxProjector(*boxes, compiled=False).frames_seen(pos, tgt, up, fov, near, far, size)
+    got = BoxProjector(*boxes, compiled=True).frames_seen(pos, tgt, up, fov, near, far, size)
+    assert ref.dtype == got.dtype == np.int8 and np.array_equal(ref, got), (ref, got)
+
+
 @settings(max_examples=100, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 30))
 def test_compiled_clip_matrix_and_rects_under_dense_matrices(seed, n):

@@ -23,7 +23,7 @@ import numpy as np
 
 from multigpu.core import bounds_kernel as kernel
 from multigpu.core import jit
-from multigpu.core.bounds_kernel import _project_camera, spatial_groups
+from multigpu.core.bounds_kernel import _project_camera, _seen_frames, spatial_groups
 from multigpu.core.box_tables import EDGES as _EDGES
 from multigpu.core.box_tables import FACES as _FACES
 from multigpu.core.box_tables import NEXT as _NEXT
@@ -181,6 +181,32 @@ class BoxProjector:
             raise ValueError("camera position and target coincide" if status == 1
                              else "view and projection matrices must be finite")
         return m[0], m[1], m[2, 0, :3], out.T
+
+
+    def frames_seen(self, position, target, up, fov, near, far, size) -> np.ndarray:
+        """(F,) int8 for F cameras (rows of the arrays) on a ``size`` display: 1 where some box's
+        rect reaches the display, 0 where none does, -1 where ``frame`` refuses the camera (it
+        raises why). Compiled, every frame in one call (a generated path's check at setup: 100,000
+        frames in ~0.1 s, not ~3); else ``frame`` a frame at a time."""
+        F = len(position)
+        seen = np.empty(F, dtype=np.int8)
+        if self.compiled:
+            arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (position, target, up, fov, near, far)]
+            _seen_frames(*self._boxes, self.plain, *arrays, float(size[0] / size[1]), self.widen, FAR_TOL,
+                         np.empty((4, len(self))), _NO_COVERAGE, np.zeros((3, 4, 4)), seen)
+            return seen
+        from multigpu.core.camera import Camera
+
+        for f in range(F):
+            try:
+                r = self.frame(Camera(tuple(position[f]), tuple(target[f]), tuple(up[f]), float(fov[f]),
+                                      float(near[f]), float(far[f])), size)[3]
+            except ValueError:
+                seen[f] = -1
+                continue
+            with np.errstate(invalid="ignore"):
+                seen[f] = ((r[:, 2] >= 0) & (r[:, 0] <= 1) & (r[:, 3] >= 0) & (r[:, 1] <= 1)).any()
+        return seen
 
 
 _NO_COVERAGE = np.empty(0)

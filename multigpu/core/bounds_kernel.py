@@ -399,9 +399,28 @@ def _project_camera(center, half, half64, order, groups, gbox, pcenter, phalf64,
     return 0 if ok else 2
 
 
+def _seen_frames(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, pos, tgt, up, fov, near, far,
+                 aspect, widen, far_tol, out, cov, frame, seen):
+    """``seen[f]`` for camera ``f`` (rows of ``pos``, ``tgt``, ``up``, ``fov``, ``near``, ``far``):
+    1 where ``_project_camera`` puts some box's rect on the display ([0, 1]^2), 0 where none, -1
+    where it refused the camera: a generated path's check of every frame in one call."""
+    for f in range(pos.shape[0]):
+        status = _project_camera(center, half, half64, order, groups, gbox, pcenter, phalf64, plain, pos[f, 0],
+                                 pos[f, 1], pos[f, 2], tgt[f, 0], tgt[f, 1], tgt[f, 2], up[f, 0], up[f, 1], up[f, 2],
+                                 fov[f], near[f], far[f], aspect, widen, far_tol, out, cov, False, frame)
+        if status != 0:
+            seen[f] = -1
+            continue
+        seen[f] = 0
+        for i in range(out.shape[1]):
+            if out[2, i] >= 0 and out[0, i] <= 1 and out[3, i] >= 0 and out[1, i] <= 1:
+                seen[f] = 1
+                break
+
+
 compile_all(globals(), ("_finite", "_clip_matrix", "_clip_block", "_eight", "_grow", "_rows", "_corners",
                          "_box_corners", "_face", "_coverage", "_write", "_clipped", "_block", "_groups_out",
-                         "_frame_rows", "_project", "_camera_into", "_project_camera"))
+                         "_frame_rows", "_project", "_camera_into", "_project_camera", "_seen_frames"))
 
 
 def project_boxes(grouped, plain_boxes, half, view, proj, widen, far_tol, out, coverage=None, plain: int = -1) -> bool:

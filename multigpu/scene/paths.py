@@ -318,16 +318,17 @@ CHECK_OBJECTS = 4096
 
 def look_at_something(path: CameraPath, scene, aspect: float = 1.0) -> CameraPath:
     """Turn every frame that would see none of the scene's largest objects towards the object
-    nearest its eye, so a generated path never shows an empty screen (one projection of at
-    most ``CHECK_OBJECTS`` bounds per frame, so big scenes stay quick to set up)."""
+    nearest its eye, so a generated path never shows an empty screen (at most ``CHECK_OBJECTS``
+    bounds projected a frame, every frame in one compiled call: big scenes and long paths alike)."""
     from multigpu.core.bounds import BoxProjector
     from multigpu.core.camera import frame_matrices
 
     keep = np.argsort(-scene.tris, kind="stable")[:CHECK_OBJECTS]
     project = BoxProjector(scene.bmin[keep], scene.bmax[keep])
     size = (max(int(round(256 * aspect)), 1), 256)
-    for f in range(len(path)):  # path generation, once per run: frames, not objects
-        view, proj, _ = frame_matrices(path.camera(f), size)
+    seen = project.frames_seen(path.position, path.target, path.up, path.fov, path.near, path.far, size)
+    for f in np.flatnonzero(seen < 1):  # the frames that see nothing (or whose camera the check refused)
+        view, proj, _ = frame_matrices(path.camera(f), size)  # (a refused camera: its error, raised here)
         r = project(view, proj)
         with np.errstate(invalid="ignore"):
             if ((r[:, 2] >= 0) & (r[:, 0] <= 1) & (r[:, 3] >= 0) & (r[:, 1] <= 1)).any():
