@@ -59,8 +59,7 @@ def changes(base: Scene, mesh, coloring: Coloring, path: Path,
     if points.shape[1] == 2:
         points = np.c_[points, np.zeros(len(points))]
     point, cell = base.sources[:, 0], base.sources[:, 1]
-    pos = points[point]
-    if not np.isfinite(pos).all():  # cells to drop: a build of its own says which
+    if not np.isfinite(points).all() and not np.isfinite(points[point]).all():  # cells to drop: a build says which
         return None
     meta = {**sim, "fields": describe(mesh)}
     rgba = base.vertex_colors
@@ -69,7 +68,8 @@ def changes(base: Scene, mesh, coloring: Coloring, path: Path,
         if where != sim.get("color_by", {}).get("where") or (where == "cell" and (cell < 0).any()):
             return None
         vmin, vmax = sim["color_by"]["range"] if coloring.range is None else coloring.range
-        rgba = colours(values[cell if where == "cell" else point], lookup(coloring.colormap), vmin, vmax)
+        # each point's (cell's) colour once, then each vertex's: the same colours, a quarter of the work on quads
+        rgba = colours(values, lookup(coloring.colormap), vmin, vmax)[cell if where == "cell" else point]
         meta["color_by"] = {**sim["color_by"], "field": label, "range": [float(vmin), float(vmax)]}
     tri, obj, part = _triangles(base)
     n, p = base.n_objects, 0 if part is None else len(base.part_count)
