@@ -204,7 +204,7 @@ class Stepping:
     def _pushed(self, spec, comm, given=None):
         """A live run's steps from rank 0 (its keeper makes each one: ``spool.attach``); ``given``:
         the first step as rank 0 sent it (this PC cannot read its file)."""
-        from multigpu.rank.pushed import Pushed, message
+        from multigpu.rank.pushed import Pushed, message, step_bytes
         from multigpu.scene.models import first_step
 
         first = step_paths(spec)(0)
@@ -213,7 +213,7 @@ class Stepping:
         self.in_base = True  # the renderer draws the first step's layout (a step built alone is its own)
         if self.spool is not None:
             self.spool.attach(lambda k, mesh, path, write: message(spec, mesh, path, first, write))
-        return Pushed(comm, self.timeout, None if self.spool is None else self.spool.next_made)
+        return Pushed(comm, self.timeout, None if self.spool is None else self.spool.next_made, step_bytes(self.base))
 
     def hear(self) -> None:
         """A live run, at a frame's start on every rank (collective): rank 0's newest step, if new."""
@@ -292,6 +292,8 @@ class Stepping:
         """Every rank's ``step_ready`` of a landed frame: the same on every rank, at the same frame."""
         if self.posted:
             self.posted.popleft()
+        if self.pushed is not None:  # (rank 0 reuses a board's slot once the frame that read it landed)
+            self.pushed.land()
         first = int(ready[0])
         self.agreed = first if first >= 0 and (ready == first).all() else -1
         if self.reader is not None:
