@@ -44,7 +44,7 @@ from multigpu.core.drawlist_kernel import _commands, _part_commands
 from multigpu.core.jit import available
 from multigpu.core.lod_kernel import _choose
 from multigpu.core.motion_kernel import _pose, _pose_span, _rotations
-from multigpu.core.octahedral import encode
+from multigpu.core.octahedral import encode, pack
 from multigpu.core.tree import gpu_tree
 from multigpu.core.work_kernel import _parts
 from multigpu.scene.moves_kernel import _machine
@@ -116,6 +116,7 @@ def warm() -> float:
     tri = np.zeros((1, 3), dtype=np.int64)  # a live stream's steps, made by rank 0's keeper
     _place_compiled(np.zeros((1, 3)), idx, tri, idx, None, 1, 0)
     encode(np.zeros((1, 3)), compiled=True)  # every vertex upload's normals
+    pack(np.zeros((1, 6), dtype=np.float32), compiled=True)
     return time.perf_counter() - t0
 
 

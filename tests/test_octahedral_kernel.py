@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from multigpu.core import jit
-from multigpu.core.octahedral import encode, encode_reference
+from multigpu.core.octahedral import encode, encode_reference, pack
 
 pytestmark = pytest.mark.skipif(not jit.available(), reason="numba is not installed (pip install numba)")
 
@@ -41,3 +41,16 @@ def test_unit_normals_the_fold_ties_and_extremes_code_alike():
     for normals in (unit, unit.astype(np.float32), specials, narrow):
         same(normals)
     assert encode(np.zeros((1, 3)), compiled=True)[0] == encode_reference(np.array([[0.0, 0.0, 1.0]]))[0]  # +z
+
+
+@settings(max_examples=200, deadline=None)
+@given(hnp.arrays(np.float32, st.integers(0, 40).map(lambda n: (n, 6)),
+                  elements=st.floats(width=32, allow_nan=True, allow_infinity=True)))
+def test_compiled_vertices_pack_as_the_reference_does(vertices):
+    """``pack``: the positions' float32 bits as they are (NaN payloads too) and the normals' codes."""
+    with np.errstate(all="ignore"):
+        want = pack(vertices, compiled=False)
+        got = pack(vertices, compiled=True)
+    assert got.dtype == want.dtype == np.uint32 and got.shape == want.shape == (len(vertices), 4)
+    assert np.array_equal(got, want)
+    assert np.array_equal(got[:, :3], np.ascontiguousarray(vertices[:, :3]).view(np.uint32))

@@ -29,6 +29,22 @@ def encode(normals: np.ndarray, compiled: bool | None = None) -> np.ndarray:
     return out
 
 
+def pack(vertices: np.ndarray, compiled: bool | None = None) -> np.ndarray:
+    """(V, 4) uint32 of (V, 6) float32 vertices (position, normal): the position's three float32
+    bits as they are, the normal's code (``encode``); compiled, one pass (the GL vertex layout,
+    ``gpu/buffers.pack_vertices``)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float32)
+    out = np.empty((v.shape[0], 4), dtype=np.uint32)
+    if not jit.use(compiled):
+        out[:, :3] = np.ascontiguousarray(v[:, :3]).view(np.uint32)
+        out[:, 3] = encode_reference(v[:, 3:6])
+        return out
+    from multigpu.core.octahedral_kernel import _pack
+
+    _pack(v, v.view(np.uint32), out)
+    return out
+
+
 def encode_reference(normals: np.ndarray) -> np.ndarray:
     """The numpy reference of ``encode``."""
     n = np.array(normals, dtype=np.float64)
