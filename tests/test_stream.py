@@ -3,6 +3,7 @@ refusal one line naming the step and the variable), and the reader that keeps ea
 file of a series, from a BP5 file written here by the example simulation's code (skipped, naming why,
 only where the adios2 wheel cannot be imported)."""
 
+import contextlib
 import os
 import sys
 import time
@@ -100,11 +101,11 @@ def test_the_reader_keeps_each_step_of_a_bp5_file_as_a_series_file(tmp_path):
     assert last.points[:, 2].max() > 0  # the plate warmed: its height is the temperature
 
 
-def test_rank_0_waits_for_a_live_step_being_made_only_as_long_as_it_says(tmp_path):
-    """A live stream's step in the making: ``next_made`` without a wait says none yet; with one, it
-    returns the step as soon as the keeper made it (the caller's GIL free meanwhile); a file's
-    steps never hold the frame loop."""
-    adios2_or_skip()
+@contextlib.contextmanager
+def slow_live_spool(tmp_path, seconds: float):
+    """The example simulation streaming live (SST, a step every 0.05 s), read by a spool whose
+    making of each step takes ``seconds`` (no GIL held) and sets the event yielded beside it; the
+    simulation ended by its process group after."""
     import signal
     import subprocess
     import threading
@@ -125,10 +126,24 @@ def test_rank_0_waits_for_a_live_step_being_made_only_as_long_as_it_says(tmp_pat
 
         def make(k, mesh, path, write):
             making.set()
-            time.sleep(0.4)  # a slow making (no GIL held)
+            time.sleep(seconds)
             return bytearray(str(k).encode())
 
         spool.attach(make)
+        yield spool, making
+        spool.close()
+    finally:
+        if sim.poll() is None:
+            os.killpg(sim.pid, signal.SIGKILL)
+        sim.communicate(timeout=30)
+
+
+def test_rank_0_waits_for_a_live_step_being_made_only_as_long_as_it_says(tmp_path):
+    """A live stream's step in the making: ``next_made`` without a wait says none yet; with one, it
+    returns the step as soon as the keeper made it (the caller's GIL free meanwhile); a file's
+    steps never hold the frame loop."""
+    adios2_or_skip()
+    with slow_live_spool(tmp_path, 0.4) as (spool, making):
         assert making.wait(20)
         assert spool.next_made(0) is None  # being made: not there yet, and no wait asked
         t = time.monotonic()
@@ -143,11 +158,6 @@ def test_rank_0_waits_for_a_live_step_being_made_only_as_long_as_it_says(tmp_pat
             after = done[0]
         t = time.monotonic()
         assert spool.next_made(after, wait=5.0) is None and time.monotonic() - t < 0.2
-        spool.close()
-    finally:
-        if sim.poll() is None:
-            os.killpg(sim.pid, signal.SIGKILL)
-        sim.communicate(timeout=30)
 
 
 def test_a_live_steps_file_is_written_after_the_frames_that_show_it(tmp_path, monkeypatch):
@@ -155,32 +165,11 @@ def test_a_live_steps_file_is_written_after_the_frames_that_show_it(tmp_path, mo
     frames asked (its writing kept out of the frame that shows it); a step sent just before the spool
     closes has its file when ``close`` returns."""
     adios2_or_skip()
-    import signal
-    import subprocess
-    import threading
-
     from multigpu.rank import spool as spool_module
-    from multigpu.rank.spool import NAME, Spool
+    from multigpu.rank.spool import NAME
 
     monkeypatch.setattr(spool_module, "FILE_WAIT", 60.0)  # (only the frames asking write it here)
-    sim = subprocess.Popen([sys.executable, str(ROOT / "examples" / "simulation" / "heat.py"), "--name",
-                            str(tmp_path / "heat"), "--steps", "400", "--size", "8", "--every", "0.05"],
-                           cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    try:
-        for _ in range(200):
-            if (tmp_path / "heat.sst").exists() or sim.poll() is not None:
-                break
-            time.sleep(0.05)
-        spool = Spool(f"adios2:{tmp_path / 'heat'}", tmp_path / "steps", 20.0, say=lambda *a, **k: None)
-        spool.first()
-        making = threading.Event()
-
-        def make(k, mesh, path, write):
-            making.set()
-            time.sleep(0.5)
-            return bytearray(b"m")
-
-        spool.attach(make)
+    with slow_live_spool(tmp_path, 0.5) as (spool, making):
         assert making.wait(20)
         k, _ = spool.next_made(0, wait=5.0)  # made while this frame asked: sent now
         file = tmp_path / "steps" / NAME.format(k)
@@ -199,10 +188,6 @@ def test_a_live_steps_file_is_written_after_the_frames_that_show_it(tmp_path, mo
         last, _ = spool.next_made(k, wait=5.0)
         spool.close()
         assert (tmp_path / "steps" / NAME.format(last)).exists()
-    finally:
-        if sim.poll() is None:
-            os.killpg(sim.pid, signal.SIGKILL)
-        sim.communicate(timeout=30)
 
 
 def test_a_stream_that_cannot_be_opened_or_sends_nothing_is_one_line(tmp_path):
