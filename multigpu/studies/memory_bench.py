@@ -162,7 +162,7 @@ def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
     frames of the whole scene into a 512x512 region, with llvmpipe's raster thread
     (``LP_NUM_THREADS=1``) and without it (``0``: what ranks filling a host's cores use), and
     without it with the GL buffers drawn from the host's shared buffers file (what a walkthrough
-    rank does), each in a fresh process."""
+    rank does; the file written beforehand, here), each in a fresh process."""
     import sys
 
     from multigpu.scene.models import SceneSpec, load_scene
@@ -170,7 +170,11 @@ def bench_memory_steps(quick: bool) -> list[tuple[str, float]]:
     if not os.path.exists("/proc/self/smaps_rollup"):
         raise InputError("bench memory-steps needs Linux's /proc/PID/smaps_rollup")
     spec = SceneSpec(triangles=1_000_000) if quick else SceneSpec(triangles=5_000_000, copies=4)
-    load_scene(spec)  # the cache exists before the measured load
+    _, info = load_scene(spec)  # the cache exists before the measured load
+    from multigpu.gpu.buffers import ensure_buffers
+
+    ensure_buffers(info["cache"], load_scene(spec)[0])  # and its buffers file: the measured rank maps it, as a
+    # walkthrough's ranks but the one that wrote it do (writing it packs the vertices: compiled, numba's runtime)
     steps = []
     for threads, shared in (("1", False), ("0", False), ("0", True)):
         code = (f"from multigpu.studies.memory_bench import _steps; "
