@@ -172,16 +172,18 @@ def plate_step(height: float, n: int = 8) -> dict:
     return {"points": np.c_[xy[0].ravel(), xy[1].ravel(), 0.25 * t], "quad": quads, "temperature": t}
 
 
-def test_steps_of_the_first_steps_cells_and_of_their_own_play_alike(tmp_path):
+@pytest.mark.parametrize("latency", ["0", "3"])
+def test_steps_of_the_first_steps_cells_and_of_their_own_play_alike(tmp_path, latency):
     """Steps in the first step's layout (rank 0 sends what they change, through the host's shared
     memory) and steps of cells of their own (sent whole: a 160x160 plate's too big for its slots,
     broadcast; a 20x20 plate's through them) in one stream: every step shown in turn, each first
-    frame equal to one rank's render of it."""
+    frame equal to one rank's render of it; with frames in flight (--latency 3) a slot whose frame has
+    not landed yet is not rewritten (that step is broadcast)."""
     write_bp(tmp_path / "run.bp", [plate_step(0.2), plate_step(0.4, 160), plate_step(0.6), plate_step(0.8, 20),
                                    plate_step(0.9)])
     path = still(tmp_path, 1000)  # (the run ends once the last step is shown)
     out = tmp_path / "o"
-    res = wall(out, f"adios2:{tmp_path / 'run.bp'}", path, extra=["--at-end", "stop", "--latency", "0"])
+    res = wall(out, f"adios2:{tmp_path / 'run.bp'}", path, extra=["--at-end", "stop", "--latency", latency])
     assert res.returncode == 0, res.stderr[-3000:]
     steps = shown(out)
     assert list(dict.fromkeys(steps)) == list(range(steps[0], 5)) and steps[0] <= 1, steps
