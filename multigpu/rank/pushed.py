@@ -17,7 +17,7 @@ it go), so the keeper, a thread of the same process, would otherwise make the st
 gaps between them and it would miss this frame.
 
 The broadcasts are non-blocking, bounded by the job's timeout (``exchange.wait_all``); the header
-is two or four integers a frame, the message a step's changed arrays (a 96x96 plate: 1 MB).
+is two or three integers a frame, the message a step's changed arrays (a 96x96 plate: 1 MB).
 """
 
 from __future__ import annotations
@@ -82,8 +82,8 @@ class Pushed:
         self.sent = -1
         self.starts: deque[float] = deque(maxlen=PERIODS + 1)  # rank 0: when the last frames asked
         self.board = Board.make(comm, self.timeout, size) if size else None
-        # (step, message bytes[, board slot or -1, 0]); step -1: nothing new
-        self.head = np.zeros(2 if self.board is None else 4, dtype=np.int64)
+        # (step, message bytes[, board slot or -1]); step -1: nothing new
+        self.head = np.zeros(2 if self.board is None else 3, dtype=np.int64)
         self.frames = self.landed = 0  # frames that asked (``next``), frames whose rows landed (``land``)
 
     def hold(self) -> float:
@@ -102,12 +102,11 @@ class Pushed:
         """Collective, every frame: ``(step, its message)`` where rank 0 has a step made to send, on
         every rank alike; None otherwise."""
         frame, self.frames = self.frames, self.frames + 1
+        got = self.made(self.sent, self.hold()) if self.rank == 0 else None
         if self.board is None:
-            got = self.made(self.sent, self.hold()) if self.rank == 0 else None
             k, buf = broadcast(self.comm, got, self.timeout, self.head)
         else:
-            k, buf = self.board.send(self.comm, self.made(self.sent, self.hold()) if self.rank == 0 else None,
-                                     self.timeout, self.head, frame, self.landed)
+            k, buf = self.board.send(self.comm, got, self.timeout, self.head, frame, self.landed)
         if k < 0:
             return None
         self.sent = k
@@ -152,11 +151,11 @@ class Board:
              landed: int) -> tuple:
         """``broadcast``'s ``(number, buffer)`` on every rank, the bytes through a slot where they fit."""
         if comm.Get_rank() == 0:
-            head[:] = -1, 0, -1, 0
+            head[:] = -1, 0, -1
             if got is not None:
                 slot = self.slot
                 free = len(got[1]) <= self.size and landed > self.read_at[slot]
-                head[:] = got[0], len(got[1]), slot if free else -1, 0
+                head[:] = got[0], len(got[1]), slot if free else -1
                 if free:
                     self.memory[slot * self.size:slot * self.size + len(got[1])] = np.frombuffer(got[1], np.uint8)
                     self.slot ^= 1
